@@ -1,0 +1,120 @@
+//! One error type for everything the metrology core reads or builds.
+//!
+//! Input errors name the file, the line (1-based, when it is known) and the field or column, and
+//! say what was expected: `data.csv:17: column 'C': expected a number in degrees, found "abc"`.
+
+use std::fmt;
+use std::path::PathBuf;
+
+/// Where a piece of input came from: a file name (or a label such as `<embedded XCFZ>`), a line
+/// and a field/column name.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Place {
+    /// File name or label of the input.
+    pub file: String,
+    /// 1-based line number, when known.
+    pub line: Option<usize>,
+    /// Field (TOML key path, JSON key) or column (CSV header name), when known.
+    pub field: Option<String>,
+}
+
+impl Place {
+    /// A place that is a whole file.
+    pub fn file(file: impl Into<String>) -> Self {
+        Place {
+            file: file.into(),
+            line: None,
+            field: None,
+        }
+    }
+
+    /// This place at a given 1-based line.
+    pub fn at_line(mut self, line: usize) -> Self {
+        self.line = Some(line);
+        self
+    }
+
+    /// This place at a given field or column.
+    pub fn at_field(mut self, field: impl Into<String>) -> Self {
+        self.field = Some(field.into());
+        self
+    }
+}
+
+impl fmt::Display for Place {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file)?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        if let Some(field) = &self.field {
+            write!(f, ": field '{field}'")?;
+        }
+        Ok(())
+    }
+}
+
+/// Errors of the metrology core.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// Input that does not say what it must: the place and what was expected.
+    #[error("{place}: {message}")]
+    Input {
+        /// Where the bad input is.
+        place: Place,
+        /// What is wrong and what was expected.
+        message: String,
+    },
+    /// A model that cannot be built or evaluated (inconsistent choices, wrong parameter count).
+    #[error("{0}")]
+    Model(String),
+}
+
+impl Error {
+    /// An input error at `place`.
+    pub fn input(place: Place, message: impl Into<String>) -> Self {
+        Error::Input {
+            place,
+            message: message.into(),
+        }
+    }
+}
+
+/// Result with the core's [`Error`].
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// 1-based line of a byte offset in `source`.
+pub(crate) fn line_of_offset(source: &str, offset: usize) -> usize {
+    source[..offset.min(source.len())]
+        .bytes()
+        .filter(|&b| b == b'\n')
+        .count()
+        + 1
+}
+
+/// 1-based line of the first occurrence of `needle` (as a quoted string, else bare) in `source`.
+/// Used to point semantic errors (an unknown ISO name, say) at the line that holds them.
+pub(crate) fn line_of_text(source: &str, needle: &str) -> Option<usize> {
+    let quoted = format!("\"{needle}\"");
+    source
+        .find(&quoted)
+        .or_else(|| source.find(needle))
+        .map(|off| line_of_offset(source, off))
+}
+
+/// Turns a `toml` deserialisation error into an [`Error::Input`] with file and line.
+pub(crate) fn from_toml(file: &str, source: &str, err: toml::de::Error) -> Error {
+    let mut place = Place::file(file);
+    if let Some(span) = err.span() {
+        place = place.at_line(line_of_offset(source, span.start));
+    }
+    Error::input(place, err.message().trim().to_string())
+}

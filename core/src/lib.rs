@@ -1,0 +1,41 @@
+//! # volver-core
+//!
+//! The metrology core of volver: everything about machines, errors and measurements, and no
+//! optimiser.
+//!
+//! - [`chain`]: chain notation (`XCFZ`, `FXYZ` …);
+//! - [`machine`]: the machine description (TOML) and the embedded XCFZ grinder;
+//! - [`iso`]: the ISO 230 error catalogue (EXX … ECC, X0C, B0Z);
+//! - [`basis`]: monomial, Legendre, Chebyshev-by-nodes, Fourier and sine-phase bases;
+//! - [`model`]: error models, parameter layout, linear constraints, evaluation and the exact
+//!   structured Jacobian;
+//! - [`kinematics`]: the scalar-generic forward model (eq. 11 of the paper for XCFZ);
+//! - [`measure`]: measurement files (CSV);
+//! - [`results`]: results files (JSON).
+//!
+//! Units: mm and rad everywhere; degrees only in files.
+//!
+//! ```
+//! use volver_core::model::Model;
+//! let model = Model::default_xcfz();
+//! let p = model.initial_params();
+//! let cmd = model.machine().commands_from_file_units(&[700.0, 90.0, 300.0]);
+//! let mut jac = vec![0.0; 3 * model.n_params()];
+//! let x = model.predict_with_jacobian(&cmd, 1, &p, &mut jac);
+//! assert!((x[0] + 125.0).abs() < 1e-9);
+//! // ∂x/∂tracker.x = −1: the tracker translation moves every point the other way.
+//! assert_eq!(jac[model.param_index("tracker.x").unwrap()], -1.0);
+//! ```
+#![deny(missing_docs)]
+
+pub mod basis;
+pub mod chain;
+pub mod error;
+pub mod iso;
+pub mod kinematics;
+pub mod machine;
+pub mod measure;
+pub mod model;
+pub mod results;
+
+pub use error::{Error, Place, Result};

@@ -1,0 +1,446 @@
+//! Machine description (TOML): the chain, each axis' travel range, offsets and reference (home)
+//! position, the reflectors, and where the tracker stands.
+//!
+//! ```toml
+//! name = "XCFZ grinder"
+//! chain = "XCFZ"
+//!
+//! [axes.X]
+//! range = [0.0, 1400.0]           # mm for X, Y, Z; degrees for A, B, C
+//! offset = [0.0, 0.0, 0.0]        # mm: this axis' origin in the frame of the axis it rides on
+//! reference = 0.0                 # home position; linear-axis errors vanish there
+//!
+//! [axes.C]
+//! range = [0.0, 360.0]
+//!
+//! [axes.Z]
+//! range = [0.0, 600.0]
+//! offset = [1000.0, 25.0, 1500.0]
+//!
+//! [[reflector]]
+//! id = "R1"
+//! offset = [-50.0, 50.0, -50.0]   # mm, in the frame of the last tool-side axis
+//!
+//! [tracker]
+//! mount = "workpiece"             # on the workpiece end of the chain, or "frame"
+//! position = [0.0, 0.0, 0.0]      # mm: nominal T_LT, the start of its identification
+//! orientation_deg = [0.0, 0.0, 0.0] # base rotation R0 = Rz·Ry·Rx (degrees) under the small angles
+//! ```
+//!
+//! Internally every length is in mm and every angle in rad; degrees exist only in files.
+
+use crate::chain::{Chain, MAX_AXES, Side};
+use crate::error::{Error, Place, Result, from_toml, line_of_text};
+use crate::iso::Axis;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The embedded default machine: the paper's XCFZ grinder (tables 2, 3 and 7; C 0–360°).
+pub const DEFAULT_MACHINE_TOML: &str = include_str!("../data/xcfz.toml");
+
+/// Label used in messages for the embedded default machine.
+pub const DEFAULT_MACHINE_LABEL: &str = "<embedded XCFZ machine>";
+
+/// One axis as written in the machine file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AxisSpec {
+    /// Travel `[min, max]`: mm for linear axes, degrees for rotary axes.
+    pub range: [f64; 2],
+    /// Origin of this axis in the frame of the axis it is mounted on (mm).
+    #[serde(default)]
+    pub offset: [f64; 3],
+    /// Reference (home) position, mm or degrees, inside the range. Linear-axis errors vanish here.
+    #[serde(default)]
+    pub reference: f64,
+}
+
+/// One reflector as written in the machine file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReflectorSpec {
+    /// Identifier used by the measurement file's `reflector` column.
+    pub id: String,
+    /// Position in the frame of the last tool-side axis (the frame if there is none), mm.
+    pub offset: [f64; 3],
+}
+
+/// Where the tracker stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TrackerMount {
+    /// On the workpiece end of the chain (the paper: on the turntable of XCFZ); it moves with the
+    /// workpiece-side axes and measures the tool relative to the workpiece.
+    #[default]
+    Workpiece,
+    /// On the machine frame; workpiece-side axes then do not move the measured point.
+    Frame,
+}
+
+/// The tracker as written in the machine file.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerSpec {
+    /// Where the tracker stands.
+    #[serde(default)]
+    pub mount: TrackerMount,
+    /// Nominal translation T_LT (mm): the starting value of the tracker's x, y, z parameters.
+    #[serde(default)]
+    pub position: [f64; 3],
+    /// Base orientation R0 = Rz(rz)·Ry(ry)·Rx(rx) as `[rx, ry, rz]` in degrees. The identified
+    /// small angles (eq. 9) act on top of it; the paper's set-up has it zero.
+    #[serde(default)]
+    pub orientation_deg: [f64; 3],
+}
+
+/// A machine description as written in the TOML file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineSpec {
+    /// Human-readable name.
+    pub name: String,
+    /// Chain notation, e.g. `XCFZ`.
+    pub chain: String,
+    /// One entry per axis of the chain, keyed by its letter.
+    pub axes: BTreeMap<String, AxisSpec>,
+    /// The reflectors (at least one).
+    #[serde(rename = "reflector")]
+    pub reflectors: Vec<ReflectorSpec>,
+    /// The tracker.
+    #[serde(default)]
+    pub tracker: TrackerSpec,
+}
+
+/// An axis of a validated machine, in internal units (mm, rad).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MachineAxis {
+    /// The axis letter.
+    pub axis: Axis,
+    /// Workpiece or tool side.
+    pub side: Side,
+    /// Lower travel limit (mm or rad).
+    pub min: f64,
+    /// Upper travel limit (mm or rad).
+    pub max: f64,
+    /// Reference (home) position (mm or rad).
+    pub reference: f64,
+    /// Origin in the frame of the axis it rides on (mm).
+    pub offset: [f64; 3],
+}
+
+impl MachineAxis {
+    /// Position mapped to [−1, 1] over the travel range (the argument of polynomial bases).
+    pub fn normalise(&self, position: f64) -> f64 {
+        2.0 * (position - self.min) / (self.max - self.min) - 1.0
+    }
+
+    /// Converts a position from file units (mm, or degrees for rotary axes) to internal units.
+    pub fn from_file_units(&self, value: f64) -> f64 {
+        if self.axis.is_rotary() {
+            value.to_radians()
+        } else {
+            value
+        }
+    }
+
+    /// Converts a position from internal units to file units (mm, or degrees).
+    pub fn to_file_units(&self, value: f64) -> f64 {
+        if self.axis.is_rotary() {
+            value.to_degrees()
+        } else {
+            value
+        }
+    }
+
+    /// Unit name of positions in files: `mm` or `deg`.
+    pub fn file_unit(&self) -> &'static str {
+        if self.axis.is_rotary() { "deg" } else { "mm" }
+    }
+}
+
+/// A reflector of a validated machine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Reflector {
+    /// Identifier.
+    pub id: String,
+    /// Offset in the frame of the last tool-side axis (mm).
+    pub offset: [f64; 3],
+}
+
+/// The tracker of a validated machine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackerSetup {
+    /// Where it stands.
+    pub mount: TrackerMount,
+    /// Nominal translation T_LT (mm).
+    pub position: [f64; 3],
+    /// Base rotation R0 (row-major 3×3), applied as R0ᵀ before the small rotation of eq. 9.
+    pub base_rotation: [[f64; 3]; 3],
+}
+
+/// A validated machine in internal units. Build it with [`Machine::from_toml_str`],
+/// [`Machine::load`] or [`Machine::default_xcfz`].
+///
+/// ```
+/// use volver_core::machine::Machine;
+/// let m = Machine::default_xcfz();
+/// assert_eq!(m.chain().to_string(), "XCFZ");
+/// assert_eq!(m.axes().len(), 3);
+/// assert_eq!(m.reflector_index("R2"), Some(1));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct Machine {
+    spec: MachineSpec,
+    chain: Chain,
+    axes: Vec<MachineAxis>,
+    reflectors: Vec<Reflector>,
+    tracker: TrackerSetup,
+}
+
+impl Machine {
+    /// The embedded default machine (the paper's XCFZ grinder).
+    pub fn default_xcfz() -> Machine {
+        Machine::from_toml_str(DEFAULT_MACHINE_TOML, DEFAULT_MACHINE_LABEL)
+            .expect("the embedded machine is valid")
+    }
+
+    /// Reads and validates a machine file.
+    pub fn load(path: &Path) -> Result<Machine> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Machine::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates machine TOML; `file` names the source in error messages.
+    pub fn from_toml_str(text: &str, file: &str) -> Result<Machine> {
+        let spec: MachineSpec = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
+        Machine::from_spec_located(spec, file, Some(text))
+    }
+
+    /// Validates a machine specification (e.g. one read back from a results file).
+    pub fn from_spec(spec: MachineSpec, label: &str) -> Result<Machine> {
+        Machine::from_spec_located(spec, label, None)
+    }
+
+    fn from_spec_located(spec: MachineSpec, file: &str, source: Option<&str>) -> Result<Machine> {
+        let place = |needle: &str, field: &str| {
+            let mut p = Place::file(file).at_field(field);
+            if let Some(line) = source.and_then(|s| line_of_text(s, needle)) {
+                p = p.at_line(line);
+            }
+            p
+        };
+        let chain: Chain = spec
+            .chain
+            .parse()
+            .map_err(|m: String| Error::input(place(&spec.chain, "chain"), m))?;
+        for key in spec.axes.keys() {
+            let known = key.len() == 1
+                && key
+                    .chars()
+                    .next()
+                    .and_then(Axis::from_letter)
+                    .is_some_and(|a| chain.position(a).is_some());
+            if !known {
+                return Err(Error::input(
+                    place(&format!("axes.{key}"), &format!("axes.{key}")),
+                    format!("axis '{key}' is not in the chain {chain}; expected one [axes.<letter>] table per axis of the chain"),
+                ));
+            }
+        }
+        let mut axes = Vec::with_capacity(MAX_AXES);
+        for (axis, side) in chain.axes() {
+            let key = axis.letter().to_string();
+            let field = format!("axes.{key}");
+            let Some(a) = spec.axes.get(&key) else {
+                return Err(Error::input(
+                    Place::file(file).at_field(&field),
+                    format!("the chain {chain} has axis {axis} but there is no [axes.{axis}] table with its range"),
+                ));
+            };
+            let at = || place(&format!("[axes.{key}]"), &field);
+            let finite = a.range.iter().chain(&a.offset).all(|v| v.is_finite()) && a.reference.is_finite();
+            if !finite {
+                return Err(Error::input(at(), "range, offset and reference must be finite numbers"));
+            }
+            if a.range[0] >= a.range[1] {
+                return Err(Error::input(
+                    at(),
+                    format!("range [{}, {}] must be [min, max] with min < max", a.range[0], a.range[1]),
+                ));
+            }
+            if a.reference < a.range[0] || a.reference > a.range[1] {
+                return Err(Error::input(
+                    at(),
+                    format!(
+                        "reference {} lies outside the range [{}, {}] ({})",
+                        a.reference,
+                        a.range[0],
+                        a.range[1],
+                        if axis.is_rotary() { "degrees" } else { "mm" }
+                    ),
+                ));
+            }
+            let conv = |v: f64| if axis.is_rotary() { v.to_radians() } else { v };
+            axes.push(MachineAxis {
+                axis,
+                side,
+                min: conv(a.range[0]),
+                max: conv(a.range[1]),
+                reference: conv(a.reference),
+                offset: a.offset,
+            });
+        }
+        if spec.reflectors.is_empty() {
+            return Err(Error::input(
+                Place::file(file).at_field("reflector"),
+                "at least one [[reflector]] with an id and an offset is needed",
+            ));
+        }
+        let mut reflectors: Vec<Reflector> = Vec::new();
+        for r in &spec.reflectors {
+            let at = || place(&r.id, "reflector.id");
+            if r.id.trim().is_empty() {
+                return Err(Error::input(Place::file(file).at_field("reflector.id"), "reflector id is empty"));
+            }
+            if reflectors.iter().any(|q| q.id == r.id) {
+                return Err(Error::input(at(), format!("reflector id '{}' is used twice", r.id)));
+            }
+            if !r.offset.iter().all(|v| v.is_finite()) {
+                return Err(Error::input(at(), "reflector offset must be finite numbers (mm)"));
+            }
+            reflectors.push(Reflector {
+                id: r.id.clone(),
+                offset: r.offset,
+            });
+        }
+        let t = &spec.tracker;
+        if !t.position.iter().chain(&t.orientation_deg).all(|v| v.is_finite()) {
+            return Err(Error::input(
+                place("[tracker]", "tracker"),
+                "tracker position (mm) and orientation_deg must be finite numbers",
+            ));
+        }
+        let [rx, ry, rz] = t.orientation_deg.map(f64::to_radians);
+        let tracker = TrackerSetup {
+            mount: t.mount,
+            position: t.position,
+            base_rotation: base_rotation(rx, ry, rz),
+        };
+        Ok(Machine {
+            spec,
+            chain,
+            axes,
+            reflectors,
+            tracker,
+        })
+    }
+
+    /// The specification this machine was built from (what files store).
+    pub fn spec(&self) -> &MachineSpec {
+        &self.spec
+    }
+
+    /// The chain.
+    pub fn chain(&self) -> &Chain {
+        &self.chain
+    }
+
+    /// The axes in chain order (see [`Chain::axes`]).
+    pub fn axes(&self) -> &[MachineAxis] {
+        &self.axes
+    }
+
+    /// The axis with a given letter and its chain position.
+    pub fn axis(&self, axis: Axis) -> Option<(usize, &MachineAxis)> {
+        self.axes.iter().enumerate().find(|(_, a)| a.axis == axis)
+    }
+
+    /// The reflectors.
+    pub fn reflectors(&self) -> &[Reflector] {
+        &self.reflectors
+    }
+
+    /// Index of a reflector by id.
+    pub fn reflector_index(&self, id: &str) -> Option<usize> {
+        self.reflectors.iter().position(|r| r.id == id)
+    }
+
+    /// The tracker set-up.
+    pub fn tracker(&self) -> &TrackerSetup {
+        &self.tracker
+    }
+
+    /// Commands from positions in file units (mm, degrees) given in chain order.
+    pub fn commands_from_file_units(&self, positions: &[f64]) -> Commands {
+        let mut c = Commands::default();
+        for (i, (a, &v)) in self.axes.iter().zip(positions).enumerate() {
+            c.0[i] = a.from_file_units(v);
+        }
+        c
+    }
+}
+
+/// Rz(rz)·Ry(ry)·Rx(rx), row-major.
+fn base_rotation(rx: f64, ry: f64, rz: f64) -> [[f64; 3]; 3] {
+    let (sx, cx) = rx.sin_cos();
+    let (sy, cy) = ry.sin_cos();
+    let (sz, cz) = rz.sin_cos();
+    [
+        [cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx],
+        [sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx],
+        [-sy, cy * sx, cy * cx],
+    ]
+}
+
+/// Commanded positions of one measurement in chain order, internal units (mm, rad). Unused
+/// trailing slots are zero.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Commands(pub [f64; MAX_AXES]);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_machine_is_the_paper_grinder() {
+        let m = Machine::default_xcfz();
+        assert_eq!(m.chain().to_string(), "XCFZ");
+        let (i, z) = m.axis(Axis::Z).unwrap();
+        assert_eq!(i, 2);
+        assert_eq!(z.offset, [1000.0, 25.0, 1500.0]);
+        assert_eq!(z.side, Side::Tool);
+        let (_, c) = m.axis(Axis::C).unwrap();
+        assert!((c.max - std::f64::consts::TAU).abs() < 1e-15);
+        assert_eq!(m.reflectors()[1].offset, [-10.0, 100.0, 50.0]);
+        assert_eq!(m.tracker().mount, TrackerMount::Workpiece);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_field() {
+        let bad = DEFAULT_MACHINE_TOML.replace("range = [0.0, 600.0]", "range = [600.0, 0.0]");
+        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        assert!(e.starts_with("m.toml:22: field 'axes.Z'"), "{e}");
+        assert!(e.contains("min < max"), "{e}");
+
+        let bad = DEFAULT_MACHINE_TOML.replace("chain = \"XCFZ\"", "chain = \"XCZ\"");
+        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        assert!(e.starts_with("m.toml:10: field 'chain'"), "{e}");
+
+        let bad = DEFAULT_MACHINE_TOML.replace("[axes.C]", "[axes.Y]");
+        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("axis 'Y' is not in the chain XCFZ"), "{e}");
+
+        let bad = DEFAULT_MACHINE_TOML.replace("offset = [1000.0", "ofset = [1000.0");
+        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        assert!(e.starts_with("m.toml:24"), "{e}");
+        assert!(e.contains("ofset"), "{e}");
+
+        let bad = DEFAULT_MACHINE_TOML.replace("id = \"R2\"", "id = \"R1\"");
+        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        assert!(e.contains("used twice"), "{e}");
+    }
+}

@@ -1,0 +1,283 @@
+//! Measurement files (CSV with a header).
+//!
+//! One column per machine axis named by its letter (`X`, `C`, `Z`: linear axes in mm, rotary
+//! axes in degrees), `reflector` (an id from the machine file), `meas_x`, `meas_y`, `meas_z` (mm,
+//! tracker frame); optional `t_s` (seconds since the test started) and `station` (tracker station
+//! id). Column order is free and extra columns are ignored, except a single-letter axis column for
+//! an axis the machine does not have, which is an error. Every error names the file, the line and
+//! the column.
+//!
+//! ```
+//! use volver_core::machine::Machine;
+//! use volver_core::measure::MeasurementSet;
+//! let m = Machine::default_xcfz();
+//! let csv = "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950,75,1450\n";
+//! let set = MeasurementSet::from_csv_str(&m, csv, "inline.csv").unwrap();
+//! assert_eq!(set.points.len(), 1);
+//! assert_eq!(set.points[0].measured, [950.0, 75.0, 1450.0]);
+//! ```
+
+use crate::error::{Error, Place, Result};
+use crate::iso::Axis;
+use crate::machine::{Commands, Machine};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One measured point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measurement {
+    /// Commanded positions in chain order, internal units (mm, rad).
+    pub commands: Commands,
+    /// Index of the reflector in the machine's list.
+    pub reflector: usize,
+    /// Measured position in the tracker frame (mm).
+    pub measured: [f64; 3],
+    /// Seconds since the test started, when recorded.
+    pub t_s: Option<f64>,
+    /// Tracker station id, when recorded.
+    pub station: Option<String>,
+    /// Line of the source file (1-based), for messages.
+    pub line: usize,
+}
+
+/// The measurements of one test.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeasurementSet {
+    /// The points in file order.
+    pub points: Vec<Measurement>,
+}
+
+const REQUIRED: [&str; 4] = ["reflector", "meas_x", "meas_y", "meas_z"];
+
+impl MeasurementSet {
+    /// Reads a measurement file for `machine`.
+    pub fn load(machine: &Machine, path: &Path) -> Result<MeasurementSet> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        MeasurementSet::from_csv_str(machine, &text, &path.display().to_string())
+    }
+
+    /// Parses measurement CSV for `machine`; `file` names the source in messages.
+    pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<MeasurementSet> {
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .flexible(false)
+            .from_reader(text.as_bytes());
+        let csv_err = |e: csv::Error| {
+            let line = e.position().map(|p| p.line() as usize);
+            let mut place = Place::file(file);
+            if let Some(l) = line {
+                place = place.at_line(l);
+            }
+            Error::input(place, format!("not valid CSV: {e}"))
+        };
+        let headers: Vec<String> = rdr.headers().map_err(csv_err)?.iter().map(str::to_string).collect();
+        let header_place = |field: &str| Place::file(file).at_line(1).at_field(field);
+        if headers.iter().all(|h| h.is_empty()) {
+            return Err(Error::input(Place::file(file), "empty file: expected a header line with the axis columns, reflector, meas_x, meas_y, meas_z"));
+        }
+        let find = |name: &str| -> Result<Option<usize>> {
+            let mut it = headers.iter().enumerate().filter(|(_, h)| h.as_str() == name);
+            let first = it.next().map(|(i, _)| i);
+            if it.next().is_some() {
+                return Err(Error::input(header_place(name), format!("column '{name}' appears twice in the header")));
+            }
+            Ok(first)
+        };
+        for h in &headers {
+            let mut chars = h.chars();
+            if let (Some(c), None) = (chars.next(), chars.next())
+                && let Some(a) = Axis::from_letter(c)
+                && c.is_ascii_uppercase()
+                && machine.axis(a).is_none()
+            {
+                return Err(Error::input(
+                    header_place(h),
+                    format!("column '{h}' is an axis the machine ({}) does not have", machine.chain()),
+                ));
+            }
+        }
+        let mut axis_cols = Vec::new();
+        for ax in machine.axes() {
+            let name = ax.axis.letter().to_string();
+            let Some(i) = find(&name)? else {
+                return Err(Error::input(
+                    header_place(&name),
+                    format!("missing column '{name}' (axis {name} of {}, in {})", machine.chain(), ax.file_unit()),
+                ));
+            };
+            axis_cols.push(i);
+        }
+        let mut req = [0usize; 4];
+        for (k, name) in REQUIRED.iter().enumerate() {
+            req[k] = find(name)?.ok_or_else(|| {
+                Error::input(header_place(name), format!("missing column '{name}'; required: axis letters, {}", REQUIRED.join(", ")))
+            })?;
+        }
+        let t_col = find("t_s")?;
+        let st_col = find("station")?;
+
+        let mut points = Vec::new();
+        for rec in rdr.records() {
+            let rec = rec.map_err(csv_err)?;
+            let line = rec.position().map_or(0, |p| p.line() as usize);
+            if rec.iter().all(str::is_empty) {
+                continue;
+            }
+            let at = |col: usize| Place::file(file).at_line(line).at_field(headers[col].clone());
+            let number = |col: usize, what: &str| -> Result<f64> {
+                let s = &rec[col];
+                let v: f64 = s.parse().map_err(|_| Error::input(at(col), format!("expected a number ({what}), found \"{s}\"")))?;
+                if !v.is_finite() {
+                    return Err(Error::input(at(col), format!("expected a finite number ({what}), found \"{s}\"")));
+                }
+                Ok(v)
+            };
+            let mut commands = Commands::default();
+            for (k, (&col, ax)) in axis_cols.iter().zip(machine.axes()).enumerate() {
+                let v = number(col, ax.file_unit())?;
+                let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
+                let tol = 1e-9 * (hi - lo).abs().max(1.0);
+                if v < lo - tol || v > hi + tol {
+                    return Err(Error::input(
+                        at(col),
+                        format!("{v} {} is outside the travel range [{lo}, {hi}] of axis {}", ax.file_unit(), ax.axis),
+                    ));
+                }
+                commands.0[k] = ax.from_file_units(v);
+            }
+            let id = &rec[req[0]];
+            let reflector = machine.reflector_index(id).ok_or_else(|| {
+                let known: Vec<&str> = machine.reflectors().iter().map(|r| r.id.as_str()).collect();
+                Error::input(at(req[0]), format!("reflector '{id}' is not in the machine file (known: {})", known.join(", ")))
+            })?;
+            let measured = [number(req[1], "mm")?, number(req[2], "mm")?, number(req[3], "mm")?];
+            let t_s = match t_col {
+                Some(c) if !rec[c].is_empty() => Some(number(c, "seconds")?),
+                _ => None,
+            };
+            let station = st_col.map(|c| rec[c].to_string()).filter(|s| !s.is_empty());
+            points.push(Measurement {
+                commands,
+                reflector,
+                measured,
+                t_s,
+                station,
+                line,
+            });
+        }
+        if points.is_empty() {
+            return Err(Error::input(Place::file(file), "the file has a header but no measurement rows"));
+        }
+        Ok(MeasurementSet { points })
+    }
+
+    /// Writes the set as measurement CSV (axis columns in chain order, positions in mm and
+    /// degrees, coordinates with 9 decimals; `t_s` and `station` when any point has them).
+    pub fn to_csv_string(&self, machine: &Machine) -> String {
+        let with_t = self.points.iter().any(|p| p.t_s.is_some());
+        let with_station = self.points.iter().any(|p| p.station.is_some());
+        let mut out = String::new();
+        for ax in machine.axes() {
+            let _ = write!(out, "{},", ax.axis);
+        }
+        out.push_str("reflector,meas_x,meas_y,meas_z");
+        if with_t {
+            out.push_str(",t_s");
+        }
+        if with_station {
+            out.push_str(",station");
+        }
+        out.push('\n');
+        for p in &self.points {
+            for (k, ax) in machine.axes().iter().enumerate() {
+                let _ = write!(out, "{},", round_file(ax.to_file_units(p.commands.0[k])));
+            }
+            let _ = write!(
+                out,
+                "{},{:.9},{:.9},{:.9}",
+                machine.reflectors()[p.reflector].id,
+                p.measured[0],
+                p.measured[1],
+                p.measured[2]
+            );
+            if with_t {
+                let _ = write!(out, ",{}", p.t_s.map_or(String::new(), |t| format!("{t:.3}")));
+            }
+            if with_station {
+                let _ = write!(out, ",{}", p.station.as_deref().unwrap_or(""));
+            }
+            out.push('\n');
+        }
+        out
+    }
+}
+
+/// Positions converted from radians back to degrees carry rounding noise (89.99999999999999);
+/// write them with at most 9 decimals.
+fn round_file(v: f64) -> f64 {
+    (v * 1e9).round() / 1e9
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m() -> Machine {
+        Machine::default_xcfz()
+    }
+
+    #[test]
+    fn reads_any_column_order_and_ignores_extras() {
+        let csv = "note,meas_z,Z,reflector,C,X,meas_y,meas_x,t_s,station\n\
+                   a,1450,0,R1,90,700,75,950,12.5,S1\n\
+                   b,1,600,R2,360,1400,2,3,,\n";
+        let s = MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap();
+        assert_eq!(s.points.len(), 2);
+        let p = &s.points[0];
+        assert_eq!(p.commands.0[0], 700.0);
+        assert!((p.commands.0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        assert_eq!(p.reflector, 0);
+        assert_eq!(p.measured, [950.0, 75.0, 1450.0]);
+        assert_eq!(p.t_s, Some(12.5));
+        assert_eq!(p.station.as_deref(), Some("S1"));
+        assert_eq!(p.line, 2);
+        assert_eq!(s.points[1].t_s, None);
+        // Round trip through the writer.
+        let again = MeasurementSet::from_csv_str(&m(), &s.to_csv_string(&m()), "again.csv").unwrap();
+        assert_eq!(again.points.len(), 2);
+        assert_eq!(again.points[0].commands, p.commands);
+    }
+
+    fn err(csv: &str) -> String {
+        MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn errors_name_file_line_and_column() {
+        let h = "X,C,Z,reflector,meas_x,meas_y,meas_z\n";
+        let e = err(&format!("{h}0,0,0,R1,950,75,1450\n0,abc,0,R1,1,2,3\n"));
+        assert!(e.starts_with("d.csv:3: field 'C': expected a number (deg)"), "{e}");
+        let e = err(&format!("{h}0,0,0,R9,950,75,1450\n"));
+        assert!(e.starts_with("d.csv:2: field 'reflector'") && e.contains("R1, R2"), "{e}");
+        let e = err(&format!("{h}0,0,0,R1,NaN,75,1450\n"));
+        assert!(e.starts_with("d.csv:2: field 'meas_x': expected a finite number"), "{e}");
+        let e = err(&format!("{h}1500,0,0,R1,950,75,1450\n"));
+        assert!(e.contains("outside the travel range [0, 1400]"), "{e}");
+        let e = err("X,C,reflector,meas_x,meas_y,meas_z\n0,0,R1,1,2,3\n");
+        assert!(e.starts_with("d.csv:1: field 'Z': missing column"), "{e}");
+        let e = err("X,Y,C,Z,reflector,meas_x,meas_y,meas_z\n0,0,0,0,R1,1,2,3\n");
+        assert!(e.contains("'Y' is an axis the machine (XCFZ) does not have"), "{e}");
+        let e = err("X,C,Z,reflector,meas_x,meas_x,meas_y,meas_z\n");
+        assert!(e.contains("appears twice"), "{e}");
+        let e = err(h);
+        assert!(e.contains("no measurement rows"), "{e}");
+        let e = err("");
+        assert!(e.contains("empty file"), "{e}");
+        let e = err(&format!("{h}0,0,0,R1,950,75\n"));
+        assert!(e.starts_with("d.csv:2") && e.contains("not valid CSV"), "{e}");
+    }
+}

@@ -1,0 +1,720 @@
+//! Error models (TOML), the parameter layout, linear constraints, and the compiled [`Model`] that
+//! evaluates the forward model and its structured Jacobian.
+//!
+//! ```toml
+//! name = "cubic linear errors, first-harmonic rotary errors"
+//! squareness = "from-straightness"   # or "separate", "none"
+//!
+//! [[error]]
+//! name = ["EXX", "EYX"]              # one name or a list; letter O accepted for 0
+//! basis = "legendre"                 # monomial | legendre | chebyshev | fourier | sine | constant
+//! degree = 3                         # polynomials; chebyshev also takes nodes = m
+//!
+//! [[error]]
+//! name = "ECC"
+//! basis = "sine"
+//! order = 2                          # periodic bases: number of harmonics
+//!
+//! [[error]]
+//! name = ["A0Z", "B0Z", "X0C"]       # location / squareness errors are constants
+//!
+//! [tracker]
+//! identify = ["x", "y", "z"]         # default: all six; the others are fixed
+//!
+//! [fixed]
+//! "EXX.c3" = 0.0                     # any parameter, in its unit (mm, rad)
+//! ```
+//!
+//! Errors not listed are zero. Parameters are named `<error>.<coefficient>` (`EYX.c2`,
+//! `EXC.a1`, `ECC.phi1`, `EXX.n3` for the third Chebyshev node), a constant by its error name
+//! (`B0Z`), the tracker `tracker.x … tracker.rz`.
+
+use crate::basis::{Basis, BasisKind, MAX_COEFFS};
+use crate::chain::MAX_AXES;
+use crate::error::{Error, Place, Result, from_toml, line_of_text};
+use crate::iso::{ErrorId, Group, Unit};
+use crate::kinematics::{PointErrors, Real, TRACKER_DOF, TRACKER_NAMES, predict};
+use crate::machine::{Commands, Machine};
+use num_dual::DualSVec64;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::ops::Range;
+use std::path::Path;
+
+/// The paper's error model for the embedded XCFZ machine.
+pub const DEFAULT_MODEL_TOML: &str = include_str!("../data/xcfz-paper-model.toml");
+
+/// Label used in messages for the embedded default error model.
+pub const DEFAULT_MODEL_LABEL: &str = "<embedded paper error model>";
+
+/// Most error values (modelled errors plus the tracker pose) one point may depend on.
+pub const MAX_SLOTS: usize = 72;
+
+/// How squareness and straightness share the slope they both describe (paper, section 6.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SquarenessRule {
+    /// The paper's rule: a squareness whose straightness partner is modelled (B0Z ↔ EXZ) is held
+    /// at zero; the squareness is read from the straightness' slope ([`Model::squareness`]).
+    #[default]
+    FromStraightness,
+    /// The straightness partner's best-fit slope (its Legendre P1 component) is held at zero and
+    /// the squareness parameter carries it: the ISO 230-1 split.
+    Separate,
+    /// No rule: squareness and the straightness slope are interchangeable (not identifiable).
+    None,
+}
+
+/// A name or a list of names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum OneOrMany {
+    /// One name.
+    One(String),
+    /// Several names.
+    Many(Vec<String>),
+}
+
+impl OneOrMany {
+    /// The names.
+    pub fn names(&self) -> Vec<&str> {
+        match self {
+            OneOrMany::One(s) => vec![s.as_str()],
+            OneOrMany::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
+}
+
+/// One `[[error]]` entry of an error model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ErrorTermSpec {
+    /// ISO 230 name(s) of the error(s).
+    pub name: OneOrMany,
+    /// Basis (absent for location and squareness errors, which are constants).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub basis: Option<BasisKind>,
+    /// Degree of a polynomial basis (Chebyshev: nodes − 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<usize>,
+    /// Number of Chebyshev nodes (alternative to `degree`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nodes: Option<usize>,
+    /// Number of harmonics of a periodic basis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order: Option<usize>,
+}
+
+/// The `[tracker]` table of an error model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerModelSpec {
+    /// Which of x, y, z, rx, ry, rz are identified; the others are fixed at their nominal value.
+    pub identify: Vec<String>,
+}
+
+impl Default for TrackerModelSpec {
+    fn default() -> Self {
+        TrackerModelSpec {
+            identify: TRACKER_NAMES.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+}
+
+fn default_true() -> bool {
+    true
+}
+
+fn is_true(b: &bool) -> bool {
+    *b
+}
+
+/// An error model as written in its TOML file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ErrorModelSpec {
+    /// Human-readable name.
+    #[serde(default)]
+    pub name: String,
+    /// Squareness rule.
+    #[serde(default)]
+    pub squareness: SquarenessRule,
+    /// Linear-axis errors vanish at the axis' reference position (section 5.1). Default true.
+    #[serde(default = "default_true", skip_serializing_if = "is_true")]
+    pub reference_constraint: bool,
+    /// The modelled errors.
+    #[serde(default, rename = "error")]
+    pub errors: Vec<ErrorTermSpec>,
+    /// Tracker pose identification.
+    #[serde(default)]
+    pub tracker: TrackerModelSpec,
+    /// Parameters held at a value (name → value in the parameter's unit).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub fixed: BTreeMap<String, f64>,
+}
+
+impl ErrorModelSpec {
+    /// Parses error-model TOML; `file` names the source in messages.
+    pub fn from_toml_str(text: &str, file: &str) -> Result<ErrorModelSpec> {
+        toml::from_str(text).map_err(|e| from_toml(file, text, e))
+    }
+}
+
+/// Which error value a parameter feeds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Owner {
+    /// Coefficient `coeff` of modelled error `term` (index in [`Model::terms`]).
+    Term {
+        /// Index of the term.
+        term: usize,
+        /// Index of the coefficient in the term's basis.
+        coeff: usize,
+    },
+    /// Tracker pose value (0..6: x, y, z, rx, ry, rz).
+    Tracker(usize),
+}
+
+/// One parameter of the layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamInfo {
+    /// Name, e.g. `EYX.c2`, `B0Z`, `tracker.rx`.
+    pub name: String,
+    /// Unit of the value.
+    pub unit: Unit,
+    /// Group for phased strategies.
+    pub group: Group,
+    /// What it feeds.
+    pub owner: Owner,
+}
+
+/// Why a constraint exists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ConstraintKind {
+    /// A linear-axis error vanishes at the reference position.
+    Reference,
+    /// The squareness-from-straightness rule.
+    Squareness,
+    /// A parameter held at a value.
+    Fixed,
+}
+
+/// One linear equality `Σ coeffs[j].1 · p[coeffs[j].0] = rhs`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Constraint {
+    /// Why it exists.
+    pub kind: ConstraintKind,
+    /// Human-readable statement, e.g. `EYX(X = 0 mm) = 0`.
+    pub label: String,
+    /// Sparse row: (parameter index, coefficient).
+    pub coeffs: Vec<(usize, f64)>,
+    /// Right-hand side.
+    pub rhs: f64,
+}
+
+/// The linear equality constraints `A p = b` of a model.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Constraints {
+    /// The rows.
+    pub rows: Vec<Constraint>,
+}
+
+impl Constraints {
+    /// Dense `A` (row-major, `rows × n_params`) and `b`.
+    pub fn dense(&self, n_params: usize) -> (Vec<f64>, Vec<f64>) {
+        let mut a = vec![0.0; self.rows.len() * n_params];
+        for (i, row) in self.rows.iter().enumerate() {
+            for &(j, v) in &row.coeffs {
+                a[i * n_params + j] += v;
+            }
+        }
+        (a, self.rows.iter().map(|r| r.rhs).collect())
+    }
+
+    /// Largest |A p − b| (0 when `p` satisfies every constraint exactly).
+    pub fn max_violation(&self, p: &[f64]) -> f64 {
+        self.rows
+            .iter()
+            .map(|r| (r.coeffs.iter().map(|&(j, v)| v * p[j]).sum::<f64>() - r.rhs).abs())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// One modelled error: its ISO name, the chain position of its axis, its basis and parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Term {
+    /// The error.
+    pub id: ErrorId,
+    /// Chain position of its axis.
+    pub axis: usize,
+    /// Its basis.
+    pub basis: Basis,
+    /// Its parameters' indices in the layout.
+    pub params: Range<usize>,
+}
+
+/// A machine plus an error model, compiled: parameter layout, constraints, evaluation.
+///
+/// ```
+/// use volver_core::model::Model;
+/// let model = Model::default_xcfz();
+/// assert_eq!(model.n_params(), 74);
+/// assert_eq!(model.constraints().rows.len(), 12 + 2 + 3); // reference, squareness, tracker angles
+/// let p = model.initial_params();
+/// let cmd = model.machine().commands_from_file_units(&[0.0, 0.0, 0.0]);
+/// let x = model.predict(&cmd, 0, &p);
+/// assert_eq!(x, [950.0, 75.0, 1450.0]); // Z offset + reflector R1
+/// ```
+#[derive(Clone, Debug)]
+pub struct Model {
+    machine: Machine,
+    spec: ErrorModelSpec,
+    terms: Vec<Term>,
+    params: Vec<ParamInfo>,
+    /// Error-value slot of each parameter: term index, or terms.len() + tracker index.
+    slot_of: Vec<usize>,
+    tracker_start: usize,
+    has_location: [bool; MAX_AXES],
+    constraints: Constraints,
+    initial: Vec<f64>,
+}
+
+impl Model {
+    /// The embedded XCFZ machine with the paper's error model.
+    pub fn default_xcfz() -> Model {
+        let spec = ErrorModelSpec::from_toml_str(DEFAULT_MODEL_TOML, DEFAULT_MODEL_LABEL)
+            .expect("embedded model parses");
+        Model::new(Machine::default_xcfz(), spec).expect("embedded model is valid")
+    }
+
+    /// Reads an error-model file and compiles it for `machine`.
+    pub fn load(machine: Machine, path: &Path) -> Result<Model> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Model::from_toml_str(machine, &text, &path.display().to_string())
+    }
+
+    /// Parses error-model TOML and compiles it for `machine`; `file` names it in messages.
+    pub fn from_toml_str(machine: Machine, text: &str, file: &str) -> Result<Model> {
+        let spec = ErrorModelSpec::from_toml_str(text, file)?;
+        Model::build(machine, spec, file, Some(text))
+    }
+
+    /// Compiles an error-model specification (e.g. one read back from a results file).
+    pub fn new(machine: Machine, spec: ErrorModelSpec) -> Result<Model> {
+        Model::build(machine, spec, "error model", None)
+    }
+
+    fn build(machine: Machine, spec: ErrorModelSpec, file: &str, source: Option<&str>) -> Result<Model> {
+        let place = |needle: &str, field: &str| {
+            let mut p = Place::file(file).at_field(field);
+            if let Some(line) = source.and_then(|s| line_of_text(s, needle)) {
+                p = p.at_line(line);
+            }
+            p
+        };
+        let mut terms: Vec<Term> = Vec::new();
+        let mut params: Vec<ParamInfo> = Vec::new();
+        for entry in &spec.errors {
+            for raw in entry.name.names() {
+                let bad = |m: String| Error::input(place(raw, "error.name"), m);
+                let id: ErrorId = raw.parse().map_err(bad)?;
+                let Some((axis, ax)) = machine.axis(id.axis()) else {
+                    return Err(bad(format!(
+                        "{id} belongs to axis {}, which the machine's chain {} does not have",
+                        id.axis(),
+                        machine.chain()
+                    )));
+                };
+                if terms.iter().any(|t| t.id == id) {
+                    return Err(bad(format!("{id} is listed twice")));
+                }
+                let basis = term_basis(id, ax.axis.is_rotary(), entry).map_err(bad)?;
+                let start = params.len();
+                let suffixes = basis.suffixes();
+                for (c, suffix) in suffixes.iter().enumerate() {
+                    let name = if suffix.is_empty() { id.to_string() } else { format!("{id}.{suffix}") };
+                    let unit = if basis.is_phase(c) { Unit::Rad } else { id.unit() };
+                    params.push(ParamInfo {
+                        name,
+                        unit,
+                        group: id.group(),
+                        owner: Owner::Term { term: terms.len(), coeff: c },
+                    });
+                }
+                terms.push(Term {
+                    id,
+                    axis,
+                    basis,
+                    params: start..params.len(),
+                });
+            }
+        }
+        if terms.len() + TRACKER_DOF > MAX_SLOTS {
+            return Err(Error::Model(format!(
+                "{} errors are modelled; at most {} fit beside the tracker pose",
+                terms.len(),
+                MAX_SLOTS - TRACKER_DOF
+            )));
+        }
+        let tracker_start = params.len();
+        for (k, n) in TRACKER_NAMES.iter().enumerate() {
+            params.push(ParamInfo {
+                name: format!("tracker.{n}"),
+                unit: if k < 3 { Unit::Mm } else { Unit::Rad },
+                group: Group::Tracker,
+                owner: Owner::Tracker(k),
+            });
+        }
+        let slot_of = params
+            .iter()
+            .map(|p| match p.owner {
+                Owner::Term { term, .. } => term,
+                Owner::Tracker(k) => terms.len() + k,
+            })
+            .collect();
+        let mut has_location = [false; MAX_AXES];
+        for t in &terms {
+            if matches!(t.id, ErrorId::Location { .. }) {
+                has_location[t.axis] = true;
+            }
+        }
+        let mut initial = vec![0.0; params.len()];
+        initial[tracker_start..tracker_start + 3].copy_from_slice(&machine.tracker().position);
+
+        // Constraints.
+        let mut rows = Vec::new();
+        if spec.reference_constraint {
+            for t in &terms {
+                let ax = &machine.axes()[t.axis];
+                if ax.axis.is_rotary() || !matches!(t.id, ErrorId::Component { .. }) {
+                    continue;
+                }
+                let n = t.basis.n_params();
+                let mut g = [0.0; MAX_COEFFS];
+                t.basis.eval(ax.normalise(ax.reference), &[0.0; MAX_COEFFS][..n], &mut g[..n]);
+                rows.push(Constraint {
+                    kind: ConstraintKind::Reference,
+                    label: format!("{}({} = {} {}) = 0", t.id, ax.axis, ax.to_file_units(ax.reference), ax.file_unit()),
+                    coeffs: t.params.clone().zip(g[..n].iter().copied()).filter(|(_, v)| *v != 0.0).collect(),
+                    rhs: 0.0,
+                });
+            }
+        }
+        if spec.squareness != SquarenessRule::None {
+            for t in terms.iter().filter(|t| t.id.is_squareness()) {
+                let partner = t.id.squareness_partner().expect("squareness has a partner");
+                let Some(p) = terms.iter().find(|q| q.id == partner) else { continue };
+                if p.basis.kind().is_periodic() || p.basis.kind() == BasisKind::Constant || p.basis.degree() == 0 {
+                    continue;
+                }
+                rows.push(match spec.squareness {
+                    SquarenessRule::FromStraightness => Constraint {
+                        kind: ConstraintKind::Squareness,
+                        label: format!("{} = 0 (taken from the slope of {partner})", t.id),
+                        coeffs: vec![(t.params.start, 1.0)],
+                        rhs: 0.0,
+                    },
+                    _ => Constraint {
+                        kind: ConstraintKind::Squareness,
+                        label: format!("slope of {partner} = 0 (carried by {})", t.id),
+                        coeffs: p.params.clone().zip(p.basis.linear_component()).filter(|(_, v)| v.abs() > 1e-14).collect(),
+                        rhs: 0.0,
+                    },
+                });
+            }
+        }
+        let mut fixed: BTreeMap<usize, (f64, String)> = BTreeMap::new();
+        for name in &spec.tracker.identify {
+            if !TRACKER_NAMES.contains(&name.as_str()) {
+                return Err(Error::input(
+                    place(name, "tracker.identify"),
+                    format!("'{name}' is not a tracker pose value; expected some of x, y, z, rx, ry, rz"),
+                ));
+            }
+        }
+        for (k, n) in TRACKER_NAMES.iter().enumerate() {
+            if !spec.tracker.identify.iter().any(|s| s == n) {
+                let j = tracker_start + k;
+                fixed.insert(j, (initial[j], format!("tracker.{n} held at its nominal value")));
+            }
+        }
+        for (name, &value) in &spec.fixed {
+            let Some(j) = params.iter().position(|p| &p.name == name) else {
+                return Err(Error::input(
+                    place(name, &format!("fixed.{name}")),
+                    format!("there is no parameter '{name}' in this model (names look like EYX.c2, ECC.a1, B0Z, tracker.rx)"),
+                ));
+            };
+            if !value.is_finite() {
+                return Err(Error::input(place(name, &format!("fixed.{name}")), "a fixed value must be a finite number"));
+            }
+            fixed.insert(j, (value, format!("{name} fixed")));
+        }
+        for (j, (value, label)) in fixed {
+            initial[j] = value;
+            rows.push(Constraint {
+                kind: ConstraintKind::Fixed,
+                label: format!("{label} = {value} {}", params[j].unit),
+                coeffs: vec![(j, 1.0)],
+                rhs: value,
+            });
+        }
+        Ok(Model {
+            machine,
+            spec,
+            terms,
+            params,
+            slot_of,
+            tracker_start,
+            has_location,
+            constraints: Constraints { rows },
+            initial,
+        })
+    }
+
+    /// The machine.
+    pub fn machine(&self) -> &Machine {
+        &self.machine
+    }
+
+    /// The error-model specification (what files store).
+    pub fn spec(&self) -> &ErrorModelSpec {
+        &self.spec
+    }
+
+    /// The modelled errors, in layout order.
+    pub fn terms(&self) -> &[Term] {
+        &self.terms
+    }
+
+    /// The parameter layout.
+    pub fn params(&self) -> &[ParamInfo] {
+        &self.params
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Index of a parameter by name.
+    pub fn param_index(&self, name: &str) -> Option<usize> {
+        self.params.iter().position(|p| p.name == name)
+    }
+
+    /// Index of the first tracker parameter (`tracker.x`).
+    pub fn tracker_start(&self) -> usize {
+        self.tracker_start
+    }
+
+    /// The linear equality constraints.
+    pub fn constraints(&self) -> &Constraints {
+        &self.constraints
+    }
+
+    /// Starting parameters: every error zero, the tracker at its nominal pose, fixed parameters
+    /// at their values. They satisfy every constraint.
+    pub fn initial_params(&self) -> Vec<f64> {
+        self.initial.clone()
+    }
+
+    /// The modelled error with a given ISO name.
+    pub fn term(&self, id: ErrorId) -> Option<&Term> {
+        self.terms.iter().find(|t| t.id == id)
+    }
+
+    /// Argument of a term's basis for a command: the angle (rad) for periodic bases, otherwise
+    /// the position normalised to [−1, 1] over the axis range.
+    #[inline]
+    fn argument(&self, t: &Term, commands: &Commands) -> f64 {
+        let u = commands.0[t.axis];
+        if t.basis.kind().is_periodic() { u } else { self.machine.axes()[t.axis].normalise(u) }
+    }
+
+    /// Value of a modelled error at an axis position (internal units: mm or rad), in mm or rad.
+    pub fn error_value(&self, id: ErrorId, position: f64, params: &[f64]) -> Option<f64> {
+        let t = self.term(id)?;
+        let mut cmd = Commands::default();
+        cmd.0[t.axis] = position;
+        Some(t.basis.value(self.argument(t, &cmd), &params[t.params.clone()]))
+    }
+
+    fn check_len(&self, params: &[f64]) {
+        assert_eq!(params.len(), self.params.len(), "parameter vector has the wrong length");
+    }
+
+    /// Places error values (one per slot: terms, then the tracker pose) into [`PointErrors`].
+    #[inline]
+    fn point_errors<S: Real>(&self, value: impl Fn(usize) -> S) -> PointErrors<S> {
+        let mut e = PointErrors::zero();
+        e.has_location = self.has_location;
+        for (i, t) in self.terms.iter().enumerate() {
+            let c = t.id.component().index();
+            match t.id {
+                ErrorId::Component { .. } => e.component[t.axis][c] = value(i),
+                ErrorId::Location { .. } => e.location[t.axis][c] = value(i),
+            }
+        }
+        for k in 0..TRACKER_DOF {
+            e.tracker[k] = value(self.terms.len() + k);
+        }
+        e
+    }
+
+    /// Predicted reflector position in the tracker frame (mm) for `commands` (chain order,
+    /// internal units) and reflector index.
+    pub fn predict(&self, commands: &Commands, reflector: usize, params: &[f64]) -> [f64; 3] {
+        self.check_len(params);
+        let mut vals = [0.0; MAX_SLOTS];
+        for (i, t) in self.terms.iter().enumerate() {
+            vals[i] = t.basis.value(self.argument(t, commands), &params[t.params.clone()]);
+        }
+        vals[self.terms.len()..self.terms.len() + TRACKER_DOF]
+            .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
+        let e = self.point_errors(|i| vals[i]);
+        predict(&self.machine, commands, &self.machine.reflectors()[reflector].offset, &e)
+    }
+
+    /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`
+    /// (row-major 3 × n_params: row c holds ∂x_c/∂p).
+    ///
+    /// The chain is differentiated with forward-mode duals over the few error *values* at the
+    /// point (one per modelled error, plus the tracker pose), then multiplied by each basis'
+    /// derivative with respect to its coefficients (the basis values; for the sine series also
+    /// the derivative with respect to the phases). No finite differences.
+    pub fn predict_with_jacobian(&self, commands: &Commands, reflector: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
+        self.check_len(params);
+        let n = self.params.len();
+        assert_eq!(jac.len(), 3 * n, "Jacobian buffer must hold 3 × n_params values");
+        // Row 0 first holds ∂value(slot)/∂p_j for each parameter.
+        let mut vals = [0.0; MAX_SLOTS];
+        for (i, t) in self.terms.iter().enumerate() {
+            let r = t.params.clone();
+            vals[i] = t.basis.eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
+        }
+        let m = self.terms.len() + TRACKER_DOF;
+        vals[self.terms.len()..m].copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
+        jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
+        let refl = &self.machine.reflectors()[reflector].offset;
+        let mut g = [[0.0; MAX_SLOTS]; 3];
+        let point = match m {
+            0..=8 => self.value_jacobian::<8>(commands, refl, &vals[..m], &mut g),
+            9..=16 => self.value_jacobian::<16>(commands, refl, &vals[..m], &mut g),
+            17..=24 => self.value_jacobian::<24>(commands, refl, &vals[..m], &mut g),
+            25..=32 => self.value_jacobian::<32>(commands, refl, &vals[..m], &mut g),
+            33..=40 => self.value_jacobian::<40>(commands, refl, &vals[..m], &mut g),
+            41..=48 => self.value_jacobian::<48>(commands, refl, &vals[..m], &mut g),
+            49..=64 => self.value_jacobian::<64>(commands, refl, &vals[..m], &mut g),
+            _ => self.value_jacobian::<MAX_SLOTS>(commands, refl, &vals[..m], &mut g),
+        };
+        let (r0, rest) = jac.split_at_mut(n);
+        let (r1, r2) = rest.split_at_mut(n);
+        for j in 0..n {
+            let s = self.slot_of[j];
+            let d = r0[j];
+            r0[j] = g[0][s] * d;
+            r1[j] = g[1][s] * d;
+            r2[j] = g[2][s] * d;
+        }
+        point
+    }
+
+    /// Point and ∂point/∂(error value) for every slot, by one dual pass with N derivatives.
+    #[inline(never)]
+    fn value_jacobian<const N: usize>(
+        &self,
+        commands: &Commands,
+        reflector: &[f64; 3],
+        vals: &[f64],
+        g: &mut [[f64; MAX_SLOTS]; 3],
+    ) -> [f64; 3] {
+        let e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
+        let x = predict(&self.machine, commands, reflector, &e);
+        let mut out = [0.0; 3];
+        for c in 0..3 {
+            out[c] = x[c].re;
+            if let Some(eps) = &x[c].eps.0 {
+                g[c][..vals.len()].copy_from_slice(&eps.as_slice()[..vals.len()]);
+            }
+        }
+        out
+    }
+
+    /// The squareness of every linear axis implied by the parameters, whatever the rule: the
+    /// squareness parameter (if modelled) plus the slope of its straightness partner's best-fit
+    /// line (if modelled), in rad. With the paper's rule the first is zero and this is the
+    /// squareness "taken from the straightness".
+    pub fn squareness(&self, params: &[f64]) -> Vec<(ErrorId, f64)> {
+        let mut out = Vec::new();
+        for (k, ax) in self.machine.axes().iter().enumerate() {
+            if ax.axis.is_rotary() {
+                continue;
+            }
+            for name in ErrorId::location_names(ax.axis) {
+                let id: ErrorId = name.parse().expect("valid name");
+                let partner = id.squareness_partner().expect("squareness");
+                let own = self.term(id).map(|t| params[t.params.start]);
+                let slope = self.term(partner).filter(|p| !p.basis.kind().is_periodic()).map(|p| {
+                    let w = p.basis.linear_component();
+                    let per_unit: f64 = w.iter().zip(&params[p.params.clone()]).map(|(a, b)| a * b).sum();
+                    // y −= s·u·A0Z  ⇔  dEYZ/du = −s·A0Z
+                    -ax.side.sign() * per_unit * 2.0 / (ax.max - ax.min)
+                });
+                if own.is_some() || slope.is_some() {
+                    debug_assert_eq!(self.machine.axes()[k].axis, id.axis());
+                    out.push((id, own.unwrap_or(0.0) + slope.unwrap_or(0.0)));
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The basis of one `[[error]]` entry for an error, with the checks that make it meaningful.
+fn term_basis(id: ErrorId, rotary_axis: bool, e: &ErrorTermSpec) -> std::result::Result<Basis, String> {
+    if let ErrorId::Location { .. } = id {
+        return match e.basis {
+            None | Some(BasisKind::Constant) => Basis::new(BasisKind::Constant, 0),
+            Some(b) => Err(format!("{id} is a location/squareness error, a constant: give it no basis (found '{b}')")),
+        };
+    }
+    let Some(kind) = e.basis else {
+        return Err(format!(
+            "{id} needs a basis: monomial, legendre or chebyshev with a degree, fourier or sine with an order, or constant"
+        ));
+    };
+    if kind.is_periodic() && !rotary_axis {
+        return Err(format!("{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)", id.axis()));
+    }
+    let degree = match kind {
+        BasisKind::Constant => 0,
+        BasisKind::Fourier | BasisKind::Sine => e
+            .order
+            .ok_or_else(|| format!("{id}: a {kind} series needs `order` (the number of harmonics)"))?,
+        BasisKind::Chebyshev => match (e.degree, e.nodes) {
+            (Some(d), None) => d,
+            (None, Some(m)) if m >= 1 => m - 1,
+            (None, Some(_)) => return Err(format!("{id}: chebyshev needs at least one node")),
+            (Some(_), Some(_)) => return Err(format!("{id}: give chebyshev either `degree` or `nodes`, not both")),
+            (None, None) => return Err(format!("{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)")),
+        },
+        BasisKind::Monomial | BasisKind::Legendre => {
+            e.degree.ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?
+        }
+    };
+    Basis::new(kind, degree).map_err(|m| format!("{id}: {m}"))
+}
+
+impl fmt::Display for SquarenessRule {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            SquarenessRule::FromStraightness => "from-straightness",
+            SquarenessRule::Separate => "separate",
+            SquarenessRule::None => "none",
+        })
+    }
+}

@@ -1,0 +1,163 @@
+//! Results files (JSON): the machine, the error model and every parameter with its value, unit
+//! and group — enough to rebuild the [`Model`] and evaluate every identified error function later.
+//!
+//! ```
+//! use volver_core::model::Model;
+//! use volver_core::results::ResultsFile;
+//! let model = Model::default_xcfz();
+//! let mut p = model.initial_params();
+//! p[model.param_index("EXX.c1").unwrap()] = 0.012;
+//! let json = ResultsFile::from_model(&model, &p).unwrap().to_json();
+//! let (back, q) = ResultsFile::from_json_str(&json, "r.json").unwrap().to_model("r.json").unwrap();
+//! assert_eq!(q, p);
+//! assert_eq!(back.n_params(), model.n_params());
+//! ```
+
+use crate::error::{Error, Place, Result};
+use crate::iso::{Group, Unit};
+use crate::machine::{Machine, MachineSpec};
+use crate::model::{ErrorModelSpec, Model};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The `format` field of every results file.
+pub const RESULTS_FORMAT: &str = "volver-results";
+
+/// The current results-file version.
+pub const RESULTS_VERSION: u32 = 1;
+
+/// One parameter in a results file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParamRecord {
+    /// Layout name (`EYX.c2`, `B0Z`, `tracker.x`).
+    pub name: String,
+    /// Value in `unit`.
+    pub value: f64,
+    /// Unit.
+    pub unit: Unit,
+    /// Group.
+    pub group: Group,
+}
+
+/// A results file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResultsFile {
+    /// Always [`RESULTS_FORMAT`].
+    pub format: String,
+    /// File version ([`RESULTS_VERSION`]).
+    pub version: u32,
+    /// The machine as specified.
+    pub machine: MachineSpec,
+    /// The error model as specified.
+    pub error_model: ErrorModelSpec,
+    /// Every parameter of the layout, in layout order.
+    pub parameters: Vec<ParamRecord>,
+}
+
+impl ResultsFile {
+    /// A results file for `params` of `model`. Non-finite values are refused.
+    pub fn from_model(model: &Model, params: &[f64]) -> Result<ResultsFile> {
+        if params.len() != model.n_params() {
+            return Err(Error::Model(format!(
+                "{} parameter values for a model of {} parameters",
+                params.len(),
+                model.n_params()
+            )));
+        }
+        if let Some((info, v)) = model.params().iter().zip(params).find(|(_, v)| !v.is_finite()) {
+            return Err(Error::Model(format!("parameter {} is {v}; a results file holds finite values only", info.name)));
+        }
+        Ok(ResultsFile {
+            format: RESULTS_FORMAT.to_string(),
+            version: RESULTS_VERSION,
+            machine: model.machine().spec().clone(),
+            error_model: model.spec().clone(),
+            parameters: model
+                .params()
+                .iter()
+                .zip(params)
+                .map(|(i, &value)| ParamRecord {
+                    name: i.name.clone(),
+                    value,
+                    unit: i.unit,
+                    group: i.group,
+                })
+                .collect(),
+        })
+    }
+
+    /// Pretty JSON text.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("results serialise")
+    }
+
+    /// Parses a results file; `file` names it in messages.
+    pub fn from_json_str(text: &str, file: &str) -> Result<ResultsFile> {
+        let r: ResultsFile = serde_json::from_str(text).map_err(|e| {
+            let mut place = Place::file(file);
+            if e.line() > 0 {
+                place = place.at_line(e.line());
+            }
+            Error::input(place, format!("not a volver results file: {e}"))
+        })?;
+        if r.format != RESULTS_FORMAT {
+            return Err(Error::input(Place::file(file).at_field("format"), format!("expected \"{RESULTS_FORMAT}\", found \"{}\"", r.format)));
+        }
+        if r.version != RESULTS_VERSION {
+            return Err(Error::input(
+                Place::file(file).at_field("version"),
+                format!("version {} is not supported (this volver reads version {RESULTS_VERSION})", r.version),
+            ));
+        }
+        Ok(r)
+    }
+
+    /// Reads a results file.
+    pub fn load(path: &Path) -> Result<ResultsFile> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        ResultsFile::from_json_str(&text, &path.display().to_string())
+    }
+
+    /// Writes the file.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        std::fs::write(path, self.to_json() + "\n").map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+    }
+
+    /// Rebuilds the model and the parameter vector; checks every parameter's name, unit and
+    /// group against the rebuilt layout.
+    pub fn to_model(&self, file: &str) -> Result<(Model, Vec<f64>)> {
+        let machine = Machine::from_spec(self.machine.clone(), &format!("{file} (machine)"))?;
+        let model = Model::new(machine, self.error_model.clone())?;
+        if self.parameters.len() != model.n_params() {
+            return Err(Error::input(
+                Place::file(file).at_field("parameters"),
+                format!("{} parameters, but the machine and error model define {}", self.parameters.len(), model.n_params()),
+            ));
+        }
+        let mut values = Vec::with_capacity(model.n_params());
+        for (k, (rec, info)) in self.parameters.iter().zip(model.params()).enumerate() {
+            if rec.name != info.name || rec.unit != info.unit || rec.group != info.group {
+                return Err(Error::input(
+                    Place::file(file).at_field(format!("parameters[{k}]")),
+                    format!(
+                        "found {} ({}, {}), expected {} ({}, {}) from the error model",
+                        rec.name, rec.unit, rec.group, info.name, info.unit, info.group
+                    ),
+                ));
+            }
+            if !rec.value.is_finite() {
+                return Err(Error::input(Place::file(file).at_field(format!("parameters[{k}].value")), "expected a finite number"));
+            }
+            values.push(rec.value);
+        }
+        Ok((model, values))
+    }
+}
