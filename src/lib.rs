@@ -1,0 +1,18 @@
+//! # volver
+//!
+//! Volumetric verification of multi-axis machine tools with a laser tracker. This crate is the
+//! facade over the workspace and the home of the `volver` command-line tool.
+//!
+//! - [`core`] (`volver-core`): machines, the ISO 230 errors, bases, error models, the forward
+//!   model and its exact Jacobian, measurement and results files;
+//! - [`solvers`] (`volver-solvers`): what the optimisation engines share.
+//!
+//! ```
+//! use volver::core::model::Model;
+//! let model = Model::default_xcfz();
+//! assert_eq!(model.machine().chain().to_string(), "XCFZ");
+//! ```
+#![deny(missing_docs)]
+
+pub use volver_core as core;
+pub use volver_solvers as solvers;

@@ -1,0 +1,155 @@
+//! The structured dual-number Jacobian against central finite differences (relative 1e-6), for
+//! every basis and every kind of error: component errors of linear and rotary axes on both sides
+//! of the chain, location errors of rotary axes, squareness of linear axes, the tracker pose.
+
+use volver::core::iso::ErrorId;
+use volver::core::machine::{Commands, Machine};
+use volver::core::model::Model;
+
+/// A small deterministic generator (xorshift) so the test needs no dependency.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// An error model listing every component error of every axis with bases taken in turn, plus
+/// every location/squareness error.
+fn model_toml(machine: &Machine) -> String {
+    let linear = ["basis = \"monomial\"\ndegree = 3", "basis = \"legendre\"\ndegree = 4", "basis = \"chebyshev\"\nnodes = 5"];
+    let rotary = ["basis = \"fourier\"\norder = 2", "basis = \"sine\"\norder = 2", "basis = \"legendre\"\ndegree = 2"];
+    let mut s = String::from("squareness = \"none\"\n");
+    let mut i = 0;
+    for ax in machine.axes() {
+        for id in ErrorId::components_of(ax.axis) {
+            let b = if ax.axis.is_rotary() { rotary[i % 3] } else { linear[i % 3] };
+            s += &format!("[[error]]\nname = \"{id}\"\n{b}\n");
+            i += 1;
+        }
+        for loc in ErrorId::location_names(ax.axis) {
+            s += &format!("[[error]]\nname = \"{loc}\"\n");
+        }
+    }
+    s
+}
+
+fn random_params(model: &Model, rng: &mut Rng) -> Vec<f64> {
+    model
+        .params()
+        .iter()
+        .map(|p| {
+            let scale = match (p.name.contains(".phi"), p.unit) {
+                (true, _) => 3.0,
+                (false, volver::core::iso::Unit::Mm) => 0.05,
+                (false, volver::core::iso::Unit::Rad) => 2e-4,
+            };
+            let base = if p.name == "tracker.x" { 150.0 } else { 0.0 };
+            base + scale * rng.next()
+        })
+        .collect()
+}
+
+fn check(machine: Machine, seed: u64) -> usize {
+    let text = model_toml(&machine);
+    let model = Model::from_toml_str(machine, &text, "generated model").unwrap();
+    let mut rng = Rng(seed);
+    let n = model.n_params();
+    let mut jac = vec![0.0; 3 * n];
+    let mut checked = 0;
+    for _ in 0..6 {
+        let p = random_params(&model, &mut rng);
+        let mut c = Commands::default();
+        for (k, ax) in model.machine().axes().iter().enumerate() {
+            c.0[k] = ax.min + (ax.max - ax.min) * 0.5 * (1.0 + rng.next());
+        }
+        for r in 0..model.machine().reflectors().len() {
+            let x = model.predict_with_jacobian(&c, r, &p, &mut jac);
+            assert_eq!(x, model.predict(&c, r, &p), "value of the dual pass equals the f64 model");
+            for j in 0..n {
+                // Steps that balance truncation against rounding at coordinates of ~2000 mm.
+                let info = &model.params()[j];
+                let h = if info.name.contains(".phi") {
+                    1e-5
+                } else if info.unit == volver::core::iso::Unit::Rad {
+                    1e-6
+                } else {
+                    1e-4
+                };
+                let mut pp = p.clone();
+                let mut pm = p.clone();
+                pp[j] += h;
+                pm[j] -= h;
+                let (a, b) = (model.predict(&c, r, &pp), model.predict(&c, r, &pm));
+                for i in 0..3 {
+                    let fd = (a[i] - b[i]) / (2.0 * h);
+                    let ad = jac[i * n + j];
+                    assert!(
+                        (fd - ad).abs() <= 1e-6 * fd.abs().max(ad.abs()).max(1.0),
+                        "{} coordinate {i}: dual {ad} vs finite difference {fd}",
+                        model.params()[j].name
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    checked
+}
+
+#[test]
+fn paper_machine_every_basis_and_error() {
+    let n = check(Machine::default_xcfz(), 7);
+    assert!(n > 3000);
+}
+
+#[test]
+fn six_axis_chain_with_rotary_axes_on_both_sides() {
+    // Workpiece: Y on the frame, trunnion B on Y; tool: X on the frame, Z on X, head C on Z.
+    let text = r#"
+        name = "test 6-axis"
+        chain = "YBFXZC"
+        [axes.Y]
+        range = [-400.0, 400.0]
+        offset = [0.0, 0.0, -50.0]
+        reference = 100.0
+        [axes.B]
+        range = [-110.0, 110.0]
+        offset = [0.0, 20.0, 200.0]
+        [axes.X]
+        range = [0.0, 1200.0]
+        offset = [-600.0, 0.0, 0.0]
+        [axes.Z]
+        range = [0.0, 700.0]
+        offset = [0.0, 0.0, 900.0]
+        [axes.C]
+        range = [-360.0, 360.0]
+        offset = [0.0, 0.0, -150.0]
+        [[reflector]]
+        id = "short"
+        offset = [0.0, 0.0, -80.0]
+        [[reflector]]
+        id = "long"
+        offset = [40.0, -30.0, -220.0]
+        [tracker]
+        mount = "workpiece"
+        position = [150.0, -30.0, 20.0]
+        orientation_deg = [1.5, -2.0, 30.0]
+    "#;
+    let m = Machine::from_toml_str(text, "6-axis").unwrap();
+    let n = check(m, 11);
+    assert!(n > 5000, "{n} derivatives checked");
+}
+
+#[test]
+fn tracker_on_the_frame() {
+    let text = Machine::default_xcfz().spec().clone();
+    let mut spec = text;
+    spec.tracker.mount = volver::core::machine::TrackerMount::Frame;
+    spec.chain = "FXZC".into();
+    let m = Machine::from_spec(spec, "frame-mounted").unwrap();
+    check(m, 5);
+}
