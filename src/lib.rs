@@ -16,3 +16,8 @@
 
 pub use volver_core as core;
 pub use volver_solvers as solvers;
+
+/// The README's Rust examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

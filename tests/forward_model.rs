@@ -42,7 +42,15 @@ fn rows() -> Vec<Row> {
                 reflector: if f[col("reflector")] == "R1" { 0 } else { 1 },
                 error: reference_error(f[col("error")]),
                 value: num("value"),
-                tracker: ["tracker_x", "tracker_y", "tracker_z", "tracker_rx", "tracker_ry", "tracker_rz"].map(num),
+                tracker: [
+                    "tracker_x",
+                    "tracker_y",
+                    "tracker_z",
+                    "tracker_rx",
+                    "tracker_ry",
+                    "tracker_rz",
+                ]
+                .map(num),
                 pred: ["pred_x", "pred_y", "pred_z"].map(num),
             }
         })
@@ -78,9 +86,18 @@ fn reproduces_the_eq11_reference_vectors() {
         let p = predict(&m, &cmd, &m.reflectors()[r.reflector].offset, &e);
         let d = dist(p, r.pred);
         worst = worst.max(d);
-        assert!(d < 1e-8, "case {}: {:?} vs {:?} ({d:e} mm)", r.case, p, r.pred);
+        assert!(
+            d < 1e-8,
+            "case {}: {:?} vs {:?} ({d:e} mm)",
+            r.case,
+            p,
+            r.pred
+        );
     }
-    eprintln!("eq. 11 reference: largest deviation {worst:e} mm over {} rows", all.len());
+    eprintln!(
+        "eq. 11 reference: largest deviation {worst:e} mm over {} rows",
+        all.len()
+    );
 }
 
 /// The same rows through a compiled model (every error a constant, the squareness of Z as a
@@ -137,18 +154,36 @@ fn with(f: impl FnOnce(&mut PointErrors<f64>)) -> PointErrors<f64> {
 fn zero_errors_give_the_nominal_geometry() {
     // XCFZ: X_LT = Rg(c)·(Z_O + (0, 0, z) + T + (x, 0, 0)) (eq. 11 with every error zero).
     let m = Machine::default_xcfz();
-    for (x, c_deg, z) in [(0.0, 0.0, 0.0), (350.0, 30.0, 75.0), (1400.0, 225.0, 600.0), (1000.0, 359.0, 10.0)] {
+    for (x, c_deg, z) in [
+        (0.0, 0.0, 0.0),
+        (350.0, 30.0, 75.0),
+        (1400.0, 225.0, 600.0),
+        (1000.0, 359.0, 10.0),
+    ] {
         let c = f64::to_radians(c_deg);
         for r in m.reflectors() {
-            let v = [1000.0 + r.offset[0] + x, 25.0 + r.offset[1], 1500.0 + r.offset[2] + z];
-            let expect = [c.cos() * v[0] - c.sin() * v[1], c.sin() * v[0] + c.cos() * v[1], v[2]];
+            let v = [
+                1000.0 + r.offset[0] + x,
+                25.0 + r.offset[1],
+                1500.0 + r.offset[2] + z,
+            ];
+            let expect = [
+                c.cos() * v[0] - c.sin() * v[1],
+                c.sin() * v[0] + c.cos() * v[1],
+                v[2],
+            ];
             let p = predict(&m, &cmd(&[x, c, z]), &r.offset, &PointErrors::<f64>::zero());
             assert!(dist(p, expect) < 1e-9, "{p:?} vs {expect:?}");
         }
     }
     // FXYZ (a gantry: everything moves the tool): offsets + commands + reflector.
     let m = machine("FXYZ", xyz_axes(), "");
-    let p = predict(&m, &cmd(&[100.0, 200.0, 300.0]), &[10.0, -20.0, -100.0], &PointErrors::<f64>::zero());
+    let p = predict(
+        &m,
+        &cmd(&[100.0, 200.0, 300.0]),
+        &[10.0, -20.0, -100.0],
+        &PointErrors::<f64>::zero(),
+    );
     assert!(dist(p, [110.0, 180.0, 200.0]) < 1e-12);
 }
 
@@ -166,8 +201,18 @@ fn workpiece_and_tool_side_axes() {
     // A component error of a workpiece-side axis moves the workpiece, so the tool moves the
     // other way relative to it (eq. 6: X̄ = (−x + EXX, …) and reference case 1).
     let d = 0.01;
-    let on_tool = predict(&tool, &cmd(&[100.0, 200.0, 300.0]), &t, &with(|e| e.component[1][0] = d));
-    let on_work = predict(&split, &cmd(&[200.0, 100.0, 300.0]), &t, &with(|e| e.component[0][0] = d));
+    let on_tool = predict(
+        &tool,
+        &cmd(&[100.0, 200.0, 300.0]),
+        &t,
+        &with(|e| e.component[1][0] = d),
+    );
+    let on_work = predict(
+        &split,
+        &cmd(&[200.0, 100.0, 300.0]),
+        &t,
+        &with(|e| e.component[0][0] = d),
+    );
     assert!(dist(on_tool, [a[0] + d, a[1], a[2]]) < 1e-12);
     assert!(dist(on_work, [a[0] - d, a[1], a[2]]) < 1e-12);
     // A tracker on the frame does not see the workpiece-side axes.
@@ -188,18 +233,27 @@ fn single_errors_move_the_point_as_derived_by_hand() {
     let (x, y, z) = (100.0, 200.0, 300.0);
     let t = [10.0, -20.0, -100.0];
     let base = predict(&m, &cmd(&[x, y, z]), &t, &PointErrors::<f64>::zero());
-    let cross = |w: [f64; 3], v: [f64; 3]| [w[1] * v[2] - w[2] * v[1], w[2] * v[0] - w[0] * v[2], w[0] * v[1] - w[1] * v[0]];
+    let cross = |w: [f64; 3], v: [f64; 3]| {
+        [
+            w[1] * v[2] - w[2] * v[1],
+            w[2] * v[0] - w[0] * v[2],
+            w[0] * v[1] - w[1] * v[0],
+        ]
+    };
     let lever = [[t[0], y + t[1], z + t[2]], [t[0], t[1], z + t[2]], t];
     let a = 1e-7;
-    for k in 0..3 {
+    for (k, arm) in lever.iter().enumerate() {
         for r in 0..3 {
             let e = with(|e| e.component[k][3 + r] = a);
             let p = predict(&m, &cmd(&[x, y, z]), &t, &e);
             let mut w = [0.0; 3];
             w[r] = a;
-            let dv = cross(w, lever[k]);
+            let dv = cross(w, *arm);
             let expect = [base[0] + dv[0], base[1] + dv[1], base[2] + dv[2]];
-            assert!(dist(p, expect) < 1e-10, "axis {k} rotation {r}: {p:?} vs {expect:?}");
+            assert!(
+                dist(p, expect) < 1e-10,
+                "axis {k} rotation {r}: {p:?} vs {expect:?}"
+            );
         }
         // Translation errors move the point by themselves.
         for c in 0..3 {
@@ -211,7 +265,8 @@ fn single_errors_move_the_point_as_derived_by_hand() {
         }
     }
     // Squareness B0Z (eq. 8): x shifts by −z·B0Z; A0Z: y by −z·A0Z; C0Y: x by −y·C0Y.
-    for (k, comp, axis_pos, shifted) in [(2, Axis::B, z, 0), (2, Axis::A, z, 1), (1, Axis::C, y, 0)] {
+    for (k, comp, axis_pos, shifted) in [(2, Axis::B, z, 0), (2, Axis::A, z, 1), (1, Axis::C, y, 0)]
+    {
         let beta = 2e-5;
         let e = with(|e| {
             e.location[k][comp.index()] = beta;
@@ -231,16 +286,36 @@ fn squareness_means_the_same_on_either_side() {
     let tool = machine("FXYZ", xyz_axes(), "");
     let split = machine("YFXZ", xyz_axes(), "");
     let g = 3e-5;
-    let a0 = predict(&tool, &cmd(&[100.0, 200.0, 300.0]), &t, &PointErrors::<f64>::zero());
-    let a = predict(&tool, &cmd(&[100.0, 200.0, 300.0]), &t, &with(|e| {
-        e.location[1][Axis::C.index()] = g;
-        e.has_location[1] = true;
-    }));
-    let b0 = predict(&split, &cmd(&[200.0, 100.0, 300.0]), &t, &PointErrors::<f64>::zero());
-    let b = predict(&split, &cmd(&[200.0, 100.0, 300.0]), &t, &with(|e| {
-        e.location[0][Axis::C.index()] = g;
-        e.has_location[0] = true;
-    }));
+    let a0 = predict(
+        &tool,
+        &cmd(&[100.0, 200.0, 300.0]),
+        &t,
+        &PointErrors::<f64>::zero(),
+    );
+    let a = predict(
+        &tool,
+        &cmd(&[100.0, 200.0, 300.0]),
+        &t,
+        &with(|e| {
+            e.location[1][Axis::C.index()] = g;
+            e.has_location[1] = true;
+        }),
+    );
+    let b0 = predict(
+        &split,
+        &cmd(&[200.0, 100.0, 300.0]),
+        &t,
+        &PointErrors::<f64>::zero(),
+    );
+    let b = predict(
+        &split,
+        &cmd(&[200.0, 100.0, 300.0]),
+        &t,
+        &with(|e| {
+            e.location[0][Axis::C.index()] = g;
+            e.has_location[0] = true;
+        }),
+    );
     for i in 0..3 {
         assert!(((a[i] - a0[i]) - (b[i] - b0[i])).abs() < 1e-12);
     }
@@ -253,7 +328,12 @@ fn c_at_90_degrees_rotates_and_location_errors_act_about_the_displaced_axis() {
     let r1 = m.reflectors()[0].offset;
     let quarter = std::f64::consts::FRAC_PI_2;
     let p0 = predict(&m, &cmd(&[0.0, 0.0, 0.0]), &r1, &PointErrors::<f64>::zero());
-    let p90 = predict(&m, &cmd(&[0.0, quarter, 0.0]), &r1, &PointErrors::<f64>::zero());
+    let p90 = predict(
+        &m,
+        &cmd(&[0.0, quarter, 0.0]),
+        &r1,
+        &PointErrors::<f64>::zero(),
+    );
     // Rg(90°) maps (x, y, z) to (−y, x, z).
     assert!(dist(p90, [-p0[1], p0[0], p0[2]]) < 1e-9);
     // X0C = l: rotation about a line through (l, 0): the point moves by (I − Rg(c))·(l, 0, 0),
@@ -265,7 +345,10 @@ fn c_at_90_degrees_rotates_and_location_errors_act_about_the_displaced_axis() {
     });
     assert!(dist(predict(&m, &cmd(&[0.0, 0.0, 0.0]), &r1, &e), p0) < 1e-12);
     let q = predict(&m, &cmd(&[0.0, quarter, 0.0]), &r1, &e);
-    assert!(dist(q, [p90[0] + l, p90[1] - l, p90[2]]) < 1e-12, "{q:?} vs {p90:?}");
+    assert!(
+        dist(q, [p90[0] + l, p90[1] - l, p90[2]]) < 1e-12,
+        "{q:?} vs {p90:?}"
+    );
     // A0C tilts the axis: no effect at C = 0; at C = 180° the tilt is seen twice over, to first
     // order a rotation by 2·A0C about x of the point: Δ = (0, −2a·z, 2a·y).
     let a = 1e-6;
@@ -275,7 +358,12 @@ fn c_at_90_degrees_rotates_and_location_errors_act_about_the_displaced_axis() {
     });
     assert!(dist(predict(&m, &cmd(&[0.0, 0.0, 0.0]), &r1, &e), p0) < 1e-12);
     let half = std::f64::consts::PI;
-    let n = predict(&m, &cmd(&[0.0, half, 0.0]), &r1, &PointErrors::<f64>::zero());
+    let n = predict(
+        &m,
+        &cmd(&[0.0, half, 0.0]),
+        &r1,
+        &PointErrors::<f64>::zero(),
+    );
     let t = predict(&m, &cmd(&[0.0, half, 0.0]), &r1, &e);
     let expect = [n[0], n[1] - 2.0 * a * n[2], n[2] + 2.0 * a * n[1]];
     assert!(dist(t, expect) < 1e-8, "{t:?} vs {expect:?}");
@@ -285,20 +373,37 @@ fn c_at_90_degrees_rotates_and_location_errors_act_about_the_displaced_axis() {
 fn tool_side_rotary_axes() {
     // A 5-axis head: FXYZCA, tool along −z. A = 90° turns (0, 0, −100) to (0, 100, 0);
     // then C = 90° turns that to (−100, 0, 0).
-    let axes = format!("{}[axes.C]\nrange = [-360.0, 360.0]\n[axes.A]\nrange = [-120.0, 120.0]\n", xyz_axes());
+    let axes = format!(
+        "{}[axes.C]\nrange = [-360.0, 360.0]\n[axes.A]\nrange = [-120.0, 120.0]\n",
+        xyz_axes()
+    );
     let m = machine("FXYZCA", &axes, "");
     let tool = [0.0, 0.0, -100.0];
     let q = std::f64::consts::FRAC_PI_2;
-    let p = predict(&m, &cmd(&[1.0, 2.0, 3.0, 0.0, q]), &tool, &PointErrors::<f64>::zero());
+    let p = predict(
+        &m,
+        &cmd(&[1.0, 2.0, 3.0, 0.0, q]),
+        &tool,
+        &PointErrors::<f64>::zero(),
+    );
     assert!(dist(p, [1.0, 102.0, 3.0]) < 1e-12, "{p:?}");
-    let p = predict(&m, &cmd(&[1.0, 2.0, 3.0, q, q]), &tool, &PointErrors::<f64>::zero());
+    let p = predict(
+        &m,
+        &cmd(&[1.0, 2.0, 3.0, q, q]),
+        &tool,
+        &PointErrors::<f64>::zero(),
+    );
     assert!(dist(p, [-99.0, 2.0, 3.0]) < 1e-12, "{p:?}");
 }
 
 #[test]
 fn tracker_pose_and_base_orientation() {
     // A tracker turned 90° about z sees frame x as its −y.
-    let m = machine("FXYZ", xyz_axes(), "[tracker]\nmount = \"frame\"\nposition = [5.0, 6.0, 7.0]\norientation_deg = [0.0, 0.0, 90.0]");
+    let m = machine(
+        "FXYZ",
+        xyz_axes(),
+        "[tracker]\nmount = \"frame\"\nposition = [5.0, 6.0, 7.0]\norientation_deg = [0.0, 0.0, 90.0]",
+    );
     let mut e = PointErrors::<f64>::zero();
     e.tracker[..3].copy_from_slice(&[5.0, 6.0, 7.0]);
     let p = predict(&m, &cmd(&[100.0, 0.0, 0.0]), &[0.0; 3], &e);

@@ -20,13 +20,25 @@ impl Rng {
 /// An error model listing every component error of every axis with bases taken in turn, plus
 /// every location/squareness error.
 fn model_toml(machine: &Machine) -> String {
-    let linear = ["basis = \"monomial\"\ndegree = 3", "basis = \"legendre\"\ndegree = 4", "basis = \"chebyshev\"\nnodes = 5"];
-    let rotary = ["basis = \"fourier\"\norder = 2", "basis = \"sine\"\norder = 2", "basis = \"legendre\"\ndegree = 2"];
+    let linear = [
+        "basis = \"monomial\"\ndegree = 3",
+        "basis = \"legendre\"\ndegree = 4",
+        "basis = \"chebyshev\"\nnodes = 5",
+    ];
+    let rotary = [
+        "basis = \"fourier\"\norder = 2",
+        "basis = \"sine\"\norder = 2",
+        "basis = \"legendre\"\ndegree = 2",
+    ];
     let mut s = String::from("squareness = \"none\"\n");
     let mut i = 0;
     for ax in machine.axes() {
         for id in ErrorId::components_of(ax.axis) {
-            let b = if ax.axis.is_rotary() { rotary[i % 3] } else { linear[i % 3] };
+            let b = if ax.axis.is_rotary() {
+                rotary[i % 3]
+            } else {
+                linear[i % 3]
+            };
             s += &format!("[[error]]\nname = \"{id}\"\n{b}\n");
             i += 1;
         }
@@ -68,7 +80,11 @@ fn check(machine: Machine, seed: u64) -> usize {
         }
         for r in 0..model.machine().reflectors().len() {
             let x = model.predict_with_jacobian(&c, r, &p, &mut jac);
-            assert_eq!(x, model.predict(&c, r, &p), "value of the dual pass equals the f64 model");
+            assert_eq!(
+                x,
+                model.predict(&c, r, &p),
+                "value of the dual pass equals the f64 model"
+            );
             for j in 0..n {
                 // Steps that balance truncation against rounding at coordinates of ~2000 mm.
                 let info = &model.params()[j];

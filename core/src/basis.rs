@@ -84,7 +84,11 @@ impl Basis {
     /// A basis of a kind and degree (polynomials: degree; Chebyshev: degree = nodes − 1;
     /// periodic: order = number of harmonics; constant: ignored).
     pub fn new(kind: BasisKind, degree: usize) -> Result<Basis, String> {
-        let degree = if kind == BasisKind::Constant { 0 } else { degree };
+        let degree = if kind == BasisKind::Constant {
+            0
+        } else {
+            degree
+        };
         let b = Basis {
             kind,
             degree,
@@ -150,7 +154,11 @@ impl Basis {
             }
             BasisKind::Chebyshev => (1..=self.degree + 1).map(|i| format!("n{i}")).collect(),
             BasisKind::Fourier | BasisKind::Sine => {
-                let second = if self.kind == BasisKind::Fourier { "b" } else { "phi" };
+                let second = if self.kind == BasisKind::Fourier {
+                    "b"
+                } else {
+                    "phi"
+                };
                 let mut v = vec!["d".to_string()];
                 for k in 1..=self.degree {
                     v.push(format!("a{k}"));
@@ -164,7 +172,7 @@ impl Basis {
     /// `true` when a coefficient is an angle (the phases of the sine series), whose unit is rad
     /// whatever the error's unit.
     pub fn is_phase(&self, coeff: usize) -> bool {
-        self.kind == BasisKind::Sine && coeff > 0 && coeff % 2 == 0
+        self.kind == BasisKind::Sine && coeff > 0 && coeff.is_multiple_of(2)
     }
 
     /// The Chebyshev nodes (for a Chebyshev basis).
@@ -331,7 +339,12 @@ mod tests {
             cp[i] += h;
             cm[i] -= h;
             let fd = (b.value(x, &cp) - b.value(x, &cm)) / (2.0 * h);
-            assert!((fd - g[i]).abs() <= 1e-8 * (1.0 + g[i].abs()), "{:?} coeff {i}: {fd} vs {}", b.kind, g[i]);
+            assert!(
+                (fd - g[i]).abs() <= 1e-8 * (1.0 + g[i].abs()),
+                "{:?} coeff {i}: {fd} vs {}",
+                b.kind,
+                g[i]
+            );
         }
     }
 
@@ -347,7 +360,11 @@ mod tests {
             (BasisKind::Constant, 0),
         ] {
             let b = Basis::new(kind, deg).unwrap();
-            let xs: &[f64] = if kind.is_periodic() { &[-0.3, 0.2, 2.5, 5.9] } else { &[-1.0, -0.3, 0.2, 0.9, 1.0] };
+            let xs: &[f64] = if kind.is_periodic() {
+                &[-0.3, 0.2, 2.5, 5.9]
+            } else {
+                &[-1.0, -0.3, 0.2, 0.9, 1.0]
+            };
             for &x in xs {
                 fd_check(&b, x, &coeffs[..b.n_params()]);
             }
@@ -363,7 +380,12 @@ mod tests {
         let m = [1.0, -2.0, 0.0, 0.5];
         // ξ³ = (2 P3 + 3 P1)/5
         let l = [1.0, -2.0 + 0.3, 0.0, 0.2];
-        let nodes: Vec<f64> = cheb.chebyshev_nodes().unwrap().iter().map(|&z| mono.value(z, &m)).collect();
+        let nodes: Vec<f64> = cheb
+            .chebyshev_nodes()
+            .unwrap()
+            .iter()
+            .map(|&z| mono.value(z, &m))
+            .collect();
         for x in [-1.0, -0.5, 0.1, 0.77, 1.0] {
             let v = mono.value(x, &m);
             assert!((leg.value(x, &l) - v).abs() < 1e-14);
@@ -377,7 +399,8 @@ mod tests {
         let s = Basis::new(BasisKind::Sine, 2).unwrap();
         let th = 0.7_f64;
         let v = f.value(th, &[0.1, 0.2, 0.3, 0.4, 0.5]);
-        let expect = 0.1 + 0.2 * th.sin() + 0.3 * th.cos() + 0.4 * (2.0 * th).sin() + 0.5 * (2.0 * th).cos();
+        let expect =
+            0.1 + 0.2 * th.sin() + 0.3 * th.cos() + 0.4 * (2.0 * th).sin() + 0.5 * (2.0 * th).cos();
         assert!((v - expect).abs() < 1e-15);
         // a sin(kθ + φ) = a cos φ sin kθ + a sin φ cos kθ
         let (a, phi) = (0.25_f64, 0.6_f64);
@@ -401,8 +424,14 @@ mod tests {
 
     #[test]
     fn names_and_limits() {
-        assert_eq!(Basis::new(BasisKind::Sine, 1).unwrap().suffixes(), ["d", "a1", "phi1"]);
-        assert_eq!(Basis::new(BasisKind::Chebyshev, 2).unwrap().suffixes(), ["n1", "n2", "n3"]);
+        assert_eq!(
+            Basis::new(BasisKind::Sine, 1).unwrap().suffixes(),
+            ["d", "a1", "phi1"]
+        );
+        assert_eq!(
+            Basis::new(BasisKind::Chebyshev, 2).unwrap().suffixes(),
+            ["n1", "n2", "n3"]
+        );
         assert!(Basis::new(BasisKind::Fourier, 0).is_err());
         assert!(Basis::new(BasisKind::Legendre, 40).is_err());
     }

@@ -141,7 +141,13 @@ mod tests {
         assert_eq!(c.workpiece, vec![Axis::X, Axis::C]);
         assert_eq!(c.tool, vec![Axis::Z]);
         assert_eq!(c.position(Axis::Z), Some(2));
-        for s in ["FXYZ", "YFXZ", "XYZFCA", "xcfz", "wCBXFZYt".trim_matches(['w', 't'])] {
+        for s in [
+            "FXYZ",
+            "YFXZ",
+            "XYZFCA",
+            "xcfz",
+            "wCBXFZYt".trim_matches(['w', 't']),
+        ] {
             let c: Chain = s.parse().unwrap();
             assert_eq!(c.to_string(), s.to_ascii_uppercase());
         }

@@ -174,9 +174,7 @@ impl ErrorId {
     /// The component letter (what moves: X/Y/Z translation, A/B/C rotation).
     pub fn component(self) -> Axis {
         match self {
-            ErrorId::Component { component, .. } | ErrorId::Location { component, .. } => {
-                component
-            }
+            ErrorId::Component { component, .. } | ErrorId::Location { component, .. } => component,
         }
     }
 
@@ -338,7 +336,9 @@ mod tests {
 
     #[test]
     fn names_round_trip_with_digit_zero() {
-        for s in ["EXX", "EYC", "ECZ", "X0C", "Y0C", "A0C", "B0C", "B0Z", "A0Z", "C0Y"] {
+        for s in [
+            "EXX", "EYC", "ECZ", "X0C", "Y0C", "A0C", "B0C", "B0Z", "A0Z", "C0Y",
+        ] {
             let id: ErrorId = s.parse().unwrap();
             assert_eq!(id.to_string(), s);
         }
@@ -356,9 +356,24 @@ mod tests {
 
     #[test]
     fn invalid_names_are_explained() {
-        assert!("EQX".parse::<ErrorId>().unwrap_err().contains("not an ISO 230"));
-        assert!("Z0C".parse::<ErrorId>().unwrap_err().contains("constant term of EZC"));
-        assert!("C0C".parse::<ErrorId>().unwrap_err().contains("X0C, Y0C, A0C, B0C"));
+        assert!(
+            "EQX"
+                .parse::<ErrorId>()
+                .unwrap_err()
+                .contains("not an ISO 230")
+        );
+        assert!(
+            "Z0C"
+                .parse::<ErrorId>()
+                .unwrap_err()
+                .contains("constant term of EZC")
+        );
+        assert!(
+            "C0C"
+                .parse::<ErrorId>()
+                .unwrap_err()
+                .contains("X0C, Y0C, A0C, B0C")
+        );
         assert!("X0Z".parse::<ErrorId>().unwrap_err().contains("A0Z, B0Z"));
         assert!("C0Z".parse::<ErrorId>().unwrap_err().contains("roll ECZ"));
     }

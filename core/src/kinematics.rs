@@ -148,7 +148,13 @@ fn axis_translation<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointError
 
 /// Axis k's own frame → the frame it rides on.
 #[inline]
-fn axis_forward<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointErrors<S>, q: V3<S>) -> V3<S> {
+fn axis_forward<S: Real>(
+    machine: &Machine,
+    k: usize,
+    u: f64,
+    e: &PointErrors<S>,
+    q: V3<S>,
+) -> V3<S> {
     let ax = &machine.axes()[k];
     let t = axis_translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
@@ -171,7 +177,13 @@ fn axis_forward<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointErrors<S>
 
 /// The frame axis k rides on → axis k's own frame (exact inverse of [`axis_forward`]).
 #[inline]
-fn axis_inverse<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointErrors<S>, p: V3<S>) -> V3<S> {
+fn axis_inverse<S: Real>(
+    machine: &Machine,
+    k: usize,
+    u: f64,
+    e: &PointErrors<S>,
+    p: V3<S>,
+) -> V3<S> {
     let ax = &machine.axes()[k];
     let t = axis_translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
@@ -182,7 +194,10 @@ fn axis_inverse<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointErrors<S>
         if e.has_location[k] {
             let l = head3(&e.location[k]);
             let om = tail3(&e.location[k]);
-            add(l, rot_err_inv(om, rot_nominal(dir, sin, cos, rot_err(om, sub(inner, l)))))
+            add(
+                l,
+                rot_err_inv(om, rot_nominal(dir, sin, cos, rot_err(om, sub(inner, l)))),
+            )
         } else {
             rot_nominal(dir, sin, cos, inner)
         }
@@ -214,7 +229,10 @@ pub fn predict<S: Real>(
     let axes = machine.axes();
     let mut p: V3<S> = reflector.map(S::from);
     // Tool side: from the axis carrying the tool inward to the frame.
-    for k in (0..axes.len()).rev().filter(|&k| axes[k].side == Side::Tool) {
+    for k in (0..axes.len())
+        .rev()
+        .filter(|&k| axes[k].side == Side::Tool)
+    {
         p = axis_forward(machine, k, commands.0[k], errors, p);
     }
     let tracker = machine.tracker();

@@ -247,7 +247,9 @@ impl Machine {
             if !known {
                 return Err(Error::input(
                     place(&format!("axes.{key}"), &format!("axes.{key}")),
-                    format!("axis '{key}' is not in the chain {chain}; expected one [axes.<letter>] table per axis of the chain"),
+                    format!(
+                        "axis '{key}' is not in the chain {chain}; expected one [axes.<letter>] table per axis of the chain"
+                    ),
                 ));
             }
         }
@@ -258,18 +260,27 @@ impl Machine {
             let Some(a) = spec.axes.get(&key) else {
                 return Err(Error::input(
                     Place::file(file).at_field(&field),
-                    format!("the chain {chain} has axis {axis} but there is no [axes.{axis}] table with its range"),
+                    format!(
+                        "the chain {chain} has axis {axis} but there is no [axes.{axis}] table with its range"
+                    ),
                 ));
             };
             let at = || place(&format!("[axes.{key}]"), &field);
-            let finite = a.range.iter().chain(&a.offset).all(|v| v.is_finite()) && a.reference.is_finite();
+            let finite =
+                a.range.iter().chain(&a.offset).all(|v| v.is_finite()) && a.reference.is_finite();
             if !finite {
-                return Err(Error::input(at(), "range, offset and reference must be finite numbers"));
+                return Err(Error::input(
+                    at(),
+                    "range, offset and reference must be finite numbers",
+                ));
             }
             if a.range[0] >= a.range[1] {
                 return Err(Error::input(
                     at(),
-                    format!("range [{}, {}] must be [min, max] with min < max", a.range[0], a.range[1]),
+                    format!(
+                        "range [{}, {}] must be [min, max] with min < max",
+                        a.range[0], a.range[1]
+                    ),
                 ));
             }
             if a.reference < a.range[0] || a.reference > a.range[1] {
@@ -304,13 +315,22 @@ impl Machine {
         for r in &spec.reflectors {
             let at = || place(&r.id, "reflector.id");
             if r.id.trim().is_empty() {
-                return Err(Error::input(Place::file(file).at_field("reflector.id"), "reflector id is empty"));
+                return Err(Error::input(
+                    Place::file(file).at_field("reflector.id"),
+                    "reflector id is empty",
+                ));
             }
             if reflectors.iter().any(|q| q.id == r.id) {
-                return Err(Error::input(at(), format!("reflector id '{}' is used twice", r.id)));
+                return Err(Error::input(
+                    at(),
+                    format!("reflector id '{}' is used twice", r.id),
+                ));
             }
             if !r.offset.iter().all(|v| v.is_finite()) {
-                return Err(Error::input(at(), "reflector offset must be finite numbers (mm)"));
+                return Err(Error::input(
+                    at(),
+                    "reflector offset must be finite numbers (mm)",
+                ));
             }
             reflectors.push(Reflector {
                 id: r.id.clone(),
@@ -318,7 +338,12 @@ impl Machine {
             });
         }
         let t = &spec.tracker;
-        if !t.position.iter().chain(&t.orientation_deg).all(|v| v.is_finite()) {
+        if !t
+            .position
+            .iter()
+            .chain(&t.orientation_deg)
+            .all(|v| v.is_finite())
+        {
             return Err(Error::input(
                 place("[tracker]", "tracker"),
                 "tracker position (mm) and orientation_deg must be finite numbers",
@@ -422,25 +447,35 @@ mod tests {
     #[test]
     fn errors_name_file_line_and_field() {
         let bad = DEFAULT_MACHINE_TOML.replace("range = [0.0, 600.0]", "range = [600.0, 0.0]");
-        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        let e = Machine::from_toml_str(&bad, "m.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("m.toml:22: field 'axes.Z'"), "{e}");
         assert!(e.contains("min < max"), "{e}");
 
         let bad = DEFAULT_MACHINE_TOML.replace("chain = \"XCFZ\"", "chain = \"XCZ\"");
-        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        let e = Machine::from_toml_str(&bad, "m.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("m.toml:10: field 'chain'"), "{e}");
 
         let bad = DEFAULT_MACHINE_TOML.replace("[axes.C]", "[axes.Y]");
-        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        let e = Machine::from_toml_str(&bad, "m.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("axis 'Y' is not in the chain XCFZ"), "{e}");
 
         let bad = DEFAULT_MACHINE_TOML.replace("offset = [1000.0", "ofset = [1000.0");
-        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        let e = Machine::from_toml_str(&bad, "m.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.starts_with("m.toml:24"), "{e}");
         assert!(e.contains("ofset"), "{e}");
 
         let bad = DEFAULT_MACHINE_TOML.replace("id = \"R2\"", "id = \"R1\"");
-        let e = Machine::from_toml_str(&bad, "m.toml").unwrap_err().to_string();
+        let e = Machine::from_toml_str(&bad, "m.toml")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("used twice"), "{e}");
     }
 }

@@ -74,16 +74,30 @@ impl MeasurementSet {
             }
             Error::input(place, format!("not valid CSV: {e}"))
         };
-        let headers: Vec<String> = rdr.headers().map_err(csv_err)?.iter().map(str::to_string).collect();
+        let headers: Vec<String> = rdr
+            .headers()
+            .map_err(csv_err)?
+            .iter()
+            .map(str::to_string)
+            .collect();
         let header_place = |field: &str| Place::file(file).at_line(1).at_field(field);
         if headers.iter().all(|h| h.is_empty()) {
-            return Err(Error::input(Place::file(file), "empty file: expected a header line with the axis columns, reflector, meas_x, meas_y, meas_z"));
+            return Err(Error::input(
+                Place::file(file),
+                "empty file: expected a header line with the axis columns, reflector, meas_x, meas_y, meas_z",
+            ));
         }
         let find = |name: &str| -> Result<Option<usize>> {
-            let mut it = headers.iter().enumerate().filter(|(_, h)| h.as_str() == name);
+            let mut it = headers
+                .iter()
+                .enumerate()
+                .filter(|(_, h)| h.as_str() == name);
             let first = it.next().map(|(i, _)| i);
             if it.next().is_some() {
-                return Err(Error::input(header_place(name), format!("column '{name}' appears twice in the header")));
+                return Err(Error::input(
+                    header_place(name),
+                    format!("column '{name}' appears twice in the header"),
+                ));
             }
             Ok(first)
         };
@@ -96,7 +110,10 @@ impl MeasurementSet {
             {
                 return Err(Error::input(
                     header_place(h),
-                    format!("column '{h}' is an axis the machine ({}) does not have", machine.chain()),
+                    format!(
+                        "column '{h}' is an axis the machine ({}) does not have",
+                        machine.chain()
+                    ),
                 ));
             }
         }
@@ -106,7 +123,11 @@ impl MeasurementSet {
             let Some(i) = find(&name)? else {
                 return Err(Error::input(
                     header_place(&name),
-                    format!("missing column '{name}' (axis {name} of {}, in {})", machine.chain(), ax.file_unit()),
+                    format!(
+                        "missing column '{name}' (axis {name} of {}, in {})",
+                        machine.chain(),
+                        ax.file_unit()
+                    ),
                 ));
             };
             axis_cols.push(i);
@@ -114,7 +135,13 @@ impl MeasurementSet {
         let mut req = [0usize; 4];
         for (k, name) in REQUIRED.iter().enumerate() {
             req[k] = find(name)?.ok_or_else(|| {
-                Error::input(header_place(name), format!("missing column '{name}'; required: axis letters, {}", REQUIRED.join(", ")))
+                Error::input(
+                    header_place(name),
+                    format!(
+                        "missing column '{name}'; required: axis letters, {}",
+                        REQUIRED.join(", ")
+                    ),
+                )
             })?;
         }
         let t_col = find("t_s")?;
@@ -127,12 +154,24 @@ impl MeasurementSet {
             if rec.iter().all(str::is_empty) {
                 continue;
             }
-            let at = |col: usize| Place::file(file).at_line(line).at_field(headers[col].clone());
+            let at = |col: usize| {
+                Place::file(file)
+                    .at_line(line)
+                    .at_field(headers[col].clone())
+            };
             let number = |col: usize, what: &str| -> Result<f64> {
                 let s = &rec[col];
-                let v: f64 = s.parse().map_err(|_| Error::input(at(col), format!("expected a number ({what}), found \"{s}\"")))?;
+                let v: f64 = s.parse().map_err(|_| {
+                    Error::input(
+                        at(col),
+                        format!("expected a number ({what}), found \"{s}\""),
+                    )
+                })?;
                 if !v.is_finite() {
-                    return Err(Error::input(at(col), format!("expected a finite number ({what}), found \"{s}\"")));
+                    return Err(Error::input(
+                        at(col),
+                        format!("expected a finite number ({what}), found \"{s}\""),
+                    ));
                 }
                 Ok(v)
             };
@@ -144,7 +183,11 @@ impl MeasurementSet {
                 if v < lo - tol || v > hi + tol {
                     return Err(Error::input(
                         at(col),
-                        format!("{v} {} is outside the travel range [{lo}, {hi}] of axis {}", ax.file_unit(), ax.axis),
+                        format!(
+                            "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
+                            ax.file_unit(),
+                            ax.axis
+                        ),
                     ));
                 }
                 commands.0[k] = ax.from_file_units(v);
@@ -152,9 +195,19 @@ impl MeasurementSet {
             let id = &rec[req[0]];
             let reflector = machine.reflector_index(id).ok_or_else(|| {
                 let known: Vec<&str> = machine.reflectors().iter().map(|r| r.id.as_str()).collect();
-                Error::input(at(req[0]), format!("reflector '{id}' is not in the machine file (known: {})", known.join(", ")))
+                Error::input(
+                    at(req[0]),
+                    format!(
+                        "reflector '{id}' is not in the machine file (known: {})",
+                        known.join(", ")
+                    ),
+                )
             })?;
-            let measured = [number(req[1], "mm")?, number(req[2], "mm")?, number(req[3], "mm")?];
+            let measured = [
+                number(req[1], "mm")?,
+                number(req[2], "mm")?,
+                number(req[3], "mm")?,
+            ];
             let t_s = match t_col {
                 Some(c) if !rec[c].is_empty() => Some(number(c, "seconds")?),
                 _ => None,
@@ -170,7 +223,10 @@ impl MeasurementSet {
             });
         }
         if points.is_empty() {
-            return Err(Error::input(Place::file(file), "the file has a header but no measurement rows"));
+            return Err(Error::input(
+                Place::file(file),
+                "the file has a header but no measurement rows",
+            ));
         }
         Ok(MeasurementSet { points })
     }
@@ -205,7 +261,11 @@ impl MeasurementSet {
                 p.measured[2]
             );
             if with_t {
-                let _ = write!(out, ",{}", p.t_s.map_or(String::new(), |t| format!("{t:.3}")));
+                let _ = write!(
+                    out,
+                    ",{}",
+                    p.t_s.map_or(String::new(), |t| format!("{t:.3}"))
+                );
             }
             if with_station {
                 let _ = write!(out, ",{}", p.station.as_deref().unwrap_or(""));
@@ -247,30 +307,45 @@ mod tests {
         assert_eq!(p.line, 2);
         assert_eq!(s.points[1].t_s, None);
         // Round trip through the writer.
-        let again = MeasurementSet::from_csv_str(&m(), &s.to_csv_string(&m()), "again.csv").unwrap();
+        let again =
+            MeasurementSet::from_csv_str(&m(), &s.to_csv_string(&m()), "again.csv").unwrap();
         assert_eq!(again.points.len(), 2);
         assert_eq!(again.points[0].commands, p.commands);
     }
 
     fn err(csv: &str) -> String {
-        MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap_err().to_string()
+        MeasurementSet::from_csv_str(&m(), csv, "d.csv")
+            .unwrap_err()
+            .to_string()
     }
 
     #[test]
     fn errors_name_file_line_and_column() {
         let h = "X,C,Z,reflector,meas_x,meas_y,meas_z\n";
         let e = err(&format!("{h}0,0,0,R1,950,75,1450\n0,abc,0,R1,1,2,3\n"));
-        assert!(e.starts_with("d.csv:3: field 'C': expected a number (deg)"), "{e}");
+        assert!(
+            e.starts_with("d.csv:3: field 'C': expected a number (deg)"),
+            "{e}"
+        );
         let e = err(&format!("{h}0,0,0,R9,950,75,1450\n"));
-        assert!(e.starts_with("d.csv:2: field 'reflector'") && e.contains("R1, R2"), "{e}");
+        assert!(
+            e.starts_with("d.csv:2: field 'reflector'") && e.contains("R1, R2"),
+            "{e}"
+        );
         let e = err(&format!("{h}0,0,0,R1,NaN,75,1450\n"));
-        assert!(e.starts_with("d.csv:2: field 'meas_x': expected a finite number"), "{e}");
+        assert!(
+            e.starts_with("d.csv:2: field 'meas_x': expected a finite number"),
+            "{e}"
+        );
         let e = err(&format!("{h}1500,0,0,R1,950,75,1450\n"));
         assert!(e.contains("outside the travel range [0, 1400]"), "{e}");
         let e = err("X,C,reflector,meas_x,meas_y,meas_z\n0,0,R1,1,2,3\n");
         assert!(e.starts_with("d.csv:1: field 'Z': missing column"), "{e}");
         let e = err("X,Y,C,Z,reflector,meas_x,meas_y,meas_z\n0,0,0,0,R1,1,2,3\n");
-        assert!(e.contains("'Y' is an axis the machine (XCFZ) does not have"), "{e}");
+        assert!(
+            e.contains("'Y' is an axis the machine (XCFZ) does not have"),
+            "{e}"
+        );
         let e = err("X,C,Z,reflector,meas_x,meas_x,meas_y,meas_z\n");
         assert!(e.contains("appears twice"), "{e}");
         let e = err(h);
@@ -278,6 +353,9 @@ mod tests {
         let e = err("");
         assert!(e.contains("empty file"), "{e}");
         let e = err(&format!("{h}0,0,0,R1,950,75\n"));
-        assert!(e.starts_with("d.csv:2") && e.contains("not valid CSV"), "{e}");
+        assert!(
+            e.starts_with("d.csv:2") && e.contains("not valid CSV"),
+            "{e}"
+        );
     }
 }

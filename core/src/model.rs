@@ -308,7 +308,12 @@ impl Model {
         Model::build(machine, spec, "error model", None)
     }
 
-    fn build(machine: Machine, spec: ErrorModelSpec, file: &str, source: Option<&str>) -> Result<Model> {
+    fn build(
+        machine: Machine,
+        spec: ErrorModelSpec,
+        file: &str,
+        source: Option<&str>,
+    ) -> Result<Model> {
         let place = |needle: &str, field: &str| {
             let mut p = Place::file(file).at_field(field);
             if let Some(line) = source.and_then(|s| line_of_text(s, needle)) {
@@ -336,13 +341,24 @@ impl Model {
                 let start = params.len();
                 let suffixes = basis.suffixes();
                 for (c, suffix) in suffixes.iter().enumerate() {
-                    let name = if suffix.is_empty() { id.to_string() } else { format!("{id}.{suffix}") };
-                    let unit = if basis.is_phase(c) { Unit::Rad } else { id.unit() };
+                    let name = if suffix.is_empty() {
+                        id.to_string()
+                    } else {
+                        format!("{id}.{suffix}")
+                    };
+                    let unit = if basis.is_phase(c) {
+                        Unit::Rad
+                    } else {
+                        id.unit()
+                    };
                     params.push(ParamInfo {
                         name,
                         unit,
                         group: id.group(),
-                        owner: Owner::Term { term: terms.len(), coeff: c },
+                        owner: Owner::Term {
+                            term: terms.len(),
+                            coeff: c,
+                        },
                     });
                 }
                 terms.push(Term {
@@ -395,11 +411,26 @@ impl Model {
                 }
                 let n = t.basis.n_params();
                 let mut g = [0.0; MAX_COEFFS];
-                t.basis.eval(ax.normalise(ax.reference), &[0.0; MAX_COEFFS][..n], &mut g[..n]);
+                t.basis.eval(
+                    ax.normalise(ax.reference),
+                    &[0.0; MAX_COEFFS][..n],
+                    &mut g[..n],
+                );
                 rows.push(Constraint {
                     kind: ConstraintKind::Reference,
-                    label: format!("{}({} = {} {}) = 0", t.id, ax.axis, ax.to_file_units(ax.reference), ax.file_unit()),
-                    coeffs: t.params.clone().zip(g[..n].iter().copied()).filter(|(_, v)| *v != 0.0).collect(),
+                    label: format!(
+                        "{}({} = {} {}) = 0",
+                        t.id,
+                        ax.axis,
+                        ax.to_file_units(ax.reference),
+                        ax.file_unit()
+                    ),
+                    coeffs: t
+                        .params
+                        .clone()
+                        .zip(g[..n].iter().copied())
+                        .filter(|(_, v)| *v != 0.0)
+                        .collect(),
                     rhs: 0.0,
                 });
             }
@@ -407,8 +438,13 @@ impl Model {
         if spec.squareness != SquarenessRule::None {
             for t in terms.iter().filter(|t| t.id.is_squareness()) {
                 let partner = t.id.squareness_partner().expect("squareness has a partner");
-                let Some(p) = terms.iter().find(|q| q.id == partner) else { continue };
-                if p.basis.kind().is_periodic() || p.basis.kind() == BasisKind::Constant || p.basis.degree() == 0 {
+                let Some(p) = terms.iter().find(|q| q.id == partner) else {
+                    continue;
+                };
+                if p.basis.kind().is_periodic()
+                    || p.basis.kind() == BasisKind::Constant
+                    || p.basis.degree() == 0
+                {
                     continue;
                 }
                 rows.push(match spec.squareness {
@@ -421,7 +457,12 @@ impl Model {
                     _ => Constraint {
                         kind: ConstraintKind::Squareness,
                         label: format!("slope of {partner} = 0 (carried by {})", t.id),
-                        coeffs: p.params.clone().zip(p.basis.linear_component()).filter(|(_, v)| v.abs() > 1e-14).collect(),
+                        coeffs: p
+                            .params
+                            .clone()
+                            .zip(p.basis.linear_component())
+                            .filter(|(_, v)| v.abs() > 1e-14)
+                            .collect(),
                         rhs: 0.0,
                     },
                 });
@@ -432,25 +473,35 @@ impl Model {
             if !TRACKER_NAMES.contains(&name.as_str()) {
                 return Err(Error::input(
                     place(name, "tracker.identify"),
-                    format!("'{name}' is not a tracker pose value; expected some of x, y, z, rx, ry, rz"),
+                    format!(
+                        "'{name}' is not a tracker pose value; expected some of x, y, z, rx, ry, rz"
+                    ),
                 ));
             }
         }
         for (k, n) in TRACKER_NAMES.iter().enumerate() {
             if !spec.tracker.identify.iter().any(|s| s == n) {
                 let j = tracker_start + k;
-                fixed.insert(j, (initial[j], format!("tracker.{n} held at its nominal value")));
+                fixed.insert(
+                    j,
+                    (initial[j], format!("tracker.{n} held at its nominal value")),
+                );
             }
         }
         for (name, &value) in &spec.fixed {
             let Some(j) = params.iter().position(|p| &p.name == name) else {
                 return Err(Error::input(
                     place(name, &format!("fixed.{name}")),
-                    format!("there is no parameter '{name}' in this model (names look like EYX.c2, ECC.a1, B0Z, tracker.rx)"),
+                    format!(
+                        "there is no parameter '{name}' in this model (names look like EYX.c2, ECC.a1, B0Z, tracker.rx)"
+                    ),
                 ));
             };
             if !value.is_finite() {
-                return Err(Error::input(place(name, &format!("fixed.{name}")), "a fixed value must be a finite number"));
+                return Err(Error::input(
+                    place(name, &format!("fixed.{name}")),
+                    "a fixed value must be a finite number",
+                ));
             }
             fixed.insert(j, (value, format!("{name} fixed")));
         }
@@ -532,7 +583,11 @@ impl Model {
     #[inline]
     fn argument(&self, t: &Term, commands: &Commands) -> f64 {
         let u = commands.0[t.axis];
-        if t.basis.kind().is_periodic() { u } else { self.machine.axes()[t.axis].normalise(u) }
+        if t.basis.kind().is_periodic() {
+            u
+        } else {
+            self.machine.axes()[t.axis].normalise(u)
+        }
     }
 
     /// Value of a modelled error at an axis position (internal units: mm or rad), in mm or rad.
@@ -540,11 +595,18 @@ impl Model {
         let t = self.term(id)?;
         let mut cmd = Commands::default();
         cmd.0[t.axis] = position;
-        Some(t.basis.value(self.argument(t, &cmd), &params[t.params.clone()]))
+        Some(
+            t.basis
+                .value(self.argument(t, &cmd), &params[t.params.clone()]),
+        )
     }
 
     fn check_len(&self, params: &[f64]) {
-        assert_eq!(params.len(), self.params.len(), "parameter vector has the wrong length");
+        assert_eq!(
+            params.len(),
+            self.params.len(),
+            "parameter vector has the wrong length"
+        );
     }
 
     /// Places error values (one per slot: terms, then the tracker pose) into [`PointErrors`].
@@ -571,12 +633,19 @@ impl Model {
         self.check_len(params);
         let mut vals = [0.0; MAX_SLOTS];
         for (i, t) in self.terms.iter().enumerate() {
-            vals[i] = t.basis.value(self.argument(t, commands), &params[t.params.clone()]);
+            vals[i] = t
+                .basis
+                .value(self.argument(t, commands), &params[t.params.clone()]);
         }
         vals[self.terms.len()..self.terms.len() + TRACKER_DOF]
             .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
         let e = self.point_errors(|i| vals[i]);
-        predict(&self.machine, commands, &self.machine.reflectors()[reflector].offset, &e)
+        predict(
+            &self.machine,
+            commands,
+            &self.machine.reflectors()[reflector].offset,
+            &e,
+        )
     }
 
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`
@@ -586,18 +655,31 @@ impl Model {
     /// point (one per modelled error, plus the tracker pose), then multiplied by each basis'
     /// derivative with respect to its coefficients (the basis values; for the sine series also
     /// the derivative with respect to the phases). No finite differences.
-    pub fn predict_with_jacobian(&self, commands: &Commands, reflector: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
+    pub fn predict_with_jacobian(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        params: &[f64],
+        jac: &mut [f64],
+    ) -> [f64; 3] {
         self.check_len(params);
         let n = self.params.len();
-        assert_eq!(jac.len(), 3 * n, "Jacobian buffer must hold 3 × n_params values");
+        assert_eq!(
+            jac.len(),
+            3 * n,
+            "Jacobian buffer must hold 3 × n_params values"
+        );
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter.
         let mut vals = [0.0; MAX_SLOTS];
         for (i, t) in self.terms.iter().enumerate() {
             let r = t.params.clone();
-            vals[i] = t.basis.eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
+            vals[i] = t
+                .basis
+                .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
         }
         let m = self.terms.len() + TRACKER_DOF;
-        vals[self.terms.len()..m].copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
+        vals[self.terms.len()..m]
+            .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
         let refl = &self.machine.reflectors()[reflector].offset;
         let mut g = [[0.0; MAX_SLOTS]; 3];
@@ -658,12 +740,19 @@ impl Model {
                 let id: ErrorId = name.parse().expect("valid name");
                 let partner = id.squareness_partner().expect("squareness");
                 let own = self.term(id).map(|t| params[t.params.start]);
-                let slope = self.term(partner).filter(|p| !p.basis.kind().is_periodic()).map(|p| {
-                    let w = p.basis.linear_component();
-                    let per_unit: f64 = w.iter().zip(&params[p.params.clone()]).map(|(a, b)| a * b).sum();
-                    // y −= s·u·A0Z  ⇔  dEYZ/du = −s·A0Z
-                    -ax.side.sign() * per_unit * 2.0 / (ax.max - ax.min)
-                });
+                let slope = self
+                    .term(partner)
+                    .filter(|p| !p.basis.kind().is_periodic())
+                    .map(|p| {
+                        let w = p.basis.linear_component();
+                        let per_unit: f64 = w
+                            .iter()
+                            .zip(&params[p.params.clone()])
+                            .map(|(a, b)| a * b)
+                            .sum();
+                        // y −= s·u·A0Z  ⇔  dEYZ/du = −s·A0Z
+                        -ax.side.sign() * per_unit * 2.0 / (ax.max - ax.min)
+                    });
                 if own.is_some() || slope.is_some() {
                     debug_assert_eq!(self.machine.axes()[k].axis, id.axis());
                     out.push((id, own.unwrap_or(0.0) + slope.unwrap_or(0.0)));
@@ -675,11 +764,17 @@ impl Model {
 }
 
 /// The basis of one `[[error]]` entry for an error, with the checks that make it meaningful.
-fn term_basis(id: ErrorId, rotary_axis: bool, e: &ErrorTermSpec) -> std::result::Result<Basis, String> {
+fn term_basis(
+    id: ErrorId,
+    rotary_axis: bool,
+    e: &ErrorTermSpec,
+) -> std::result::Result<Basis, String> {
     if let ErrorId::Location { .. } = id {
         return match e.basis {
             None | Some(BasisKind::Constant) => Basis::new(BasisKind::Constant, 0),
-            Some(b) => Err(format!("{id} is a location/squareness error, a constant: give it no basis (found '{b}')")),
+            Some(b) => Err(format!(
+                "{id} is a location/squareness error, a constant: give it no basis (found '{b}')"
+            )),
         };
     }
     let Some(kind) = e.basis else {
@@ -688,23 +783,34 @@ fn term_basis(id: ErrorId, rotary_axis: bool, e: &ErrorTermSpec) -> std::result:
         ));
     };
     if kind.is_periodic() && !rotary_axis {
-        return Err(format!("{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)", id.axis()));
+        return Err(format!(
+            "{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)",
+            id.axis()
+        ));
     }
     let degree = match kind {
         BasisKind::Constant => 0,
-        BasisKind::Fourier | BasisKind::Sine => e
-            .order
-            .ok_or_else(|| format!("{id}: a {kind} series needs `order` (the number of harmonics)"))?,
+        BasisKind::Fourier | BasisKind::Sine => e.order.ok_or_else(|| {
+            format!("{id}: a {kind} series needs `order` (the number of harmonics)")
+        })?,
         BasisKind::Chebyshev => match (e.degree, e.nodes) {
             (Some(d), None) => d,
             (None, Some(m)) if m >= 1 => m - 1,
             (None, Some(_)) => return Err(format!("{id}: chebyshev needs at least one node")),
-            (Some(_), Some(_)) => return Err(format!("{id}: give chebyshev either `degree` or `nodes`, not both")),
-            (None, None) => return Err(format!("{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)")),
+            (Some(_), Some(_)) => {
+                return Err(format!(
+                    "{id}: give chebyshev either `degree` or `nodes`, not both"
+                ));
+            }
+            (None, None) => {
+                return Err(format!(
+                    "{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)"
+                ));
+            }
         },
-        BasisKind::Monomial | BasisKind::Legendre => {
-            e.degree.ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?
-        }
+        BasisKind::Monomial | BasisKind::Legendre => e
+            .degree
+            .ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?,
     };
     Basis::new(kind, degree).map_err(|m| format!("{id}: {m}"))
 }

@@ -66,8 +66,16 @@ impl ResultsFile {
                 model.n_params()
             )));
         }
-        if let Some((info, v)) = model.params().iter().zip(params).find(|(_, v)| !v.is_finite()) {
-            return Err(Error::Model(format!("parameter {} is {v}; a results file holds finite values only", info.name)));
+        if let Some((info, v)) = model
+            .params()
+            .iter()
+            .zip(params)
+            .find(|(_, v)| !v.is_finite())
+        {
+            return Err(Error::Model(format!(
+                "parameter {} is {v}; a results file holds finite values only",
+                info.name
+            )));
         }
         Ok(ResultsFile {
             format: RESULTS_FORMAT.to_string(),
@@ -103,12 +111,18 @@ impl ResultsFile {
             Error::input(place, format!("not a volver results file: {e}"))
         })?;
         if r.format != RESULTS_FORMAT {
-            return Err(Error::input(Place::file(file).at_field("format"), format!("expected \"{RESULTS_FORMAT}\", found \"{}\"", r.format)));
+            return Err(Error::input(
+                Place::file(file).at_field("format"),
+                format!("expected \"{RESULTS_FORMAT}\", found \"{}\"", r.format),
+            ));
         }
         if r.version != RESULTS_VERSION {
             return Err(Error::input(
                 Place::file(file).at_field("version"),
-                format!("version {} is not supported (this volver reads version {RESULTS_VERSION})", r.version),
+                format!(
+                    "version {} is not supported (this volver reads version {RESULTS_VERSION})",
+                    r.version
+                ),
             ));
         }
         Ok(r)
@@ -139,7 +153,11 @@ impl ResultsFile {
         if self.parameters.len() != model.n_params() {
             return Err(Error::input(
                 Place::file(file).at_field("parameters"),
-                format!("{} parameters, but the machine and error model define {}", self.parameters.len(), model.n_params()),
+                format!(
+                    "{} parameters, but the machine and error model define {}",
+                    self.parameters.len(),
+                    model.n_params()
+                ),
             ));
         }
         let mut values = Vec::with_capacity(model.n_params());
@@ -154,7 +172,10 @@ impl ResultsFile {
                 ));
             }
             if !rec.value.is_finite() {
-                return Err(Error::input(Place::file(file).at_field(format!("parameters[{k}].value")), "expected a finite number"));
+                return Err(Error::input(
+                    Place::file(file).at_field(format!("parameters[{k}].value")),
+                    "expected a finite number",
+                ));
             }
             values.push(rec.value);
         }

@@ -60,7 +60,10 @@ impl NullSpace {
     }
 
     /// Elimination of `constraints`; `p₀` is the point of the constraint set nearest to `anchor`.
-    pub fn from_constraints(constraints: &Constraints, anchor: &[f64]) -> Result<NullSpace, ConstraintError> {
+    pub fn from_constraints(
+        constraints: &Constraints,
+        anchor: &[f64],
+    ) -> Result<NullSpace, ConstraintError> {
         let n = anchor.len();
         let (a, b) = constraints.dense(n);
         NullSpace::new(&a, &b, anchor)
@@ -70,7 +73,11 @@ impl NullSpace {
     pub fn new(a: &[f64], b: &[f64], anchor: &[f64]) -> Result<NullSpace, ConstraintError> {
         let (k, n) = (b.len(), anchor.len());
         if a.len() != k * n {
-            return Err(ConstraintError::Shape { rows: k, cols: n, expected: a.len() });
+            return Err(ConstraintError::Shape {
+                rows: k,
+                cols: n,
+                expected: a.len(),
+            });
         }
         if k == 0 {
             return Ok(NullSpace {
@@ -88,7 +95,9 @@ impl NullSpace {
         let rank = (0..k.min(n)).filter(|&i| s[i] > tol).count();
         let (u, v) = (svd.U(), svd.V());
         // p0 = anchor − A⁺ (A anchor − b)
-        let resid: Vec<f64> = (0..k).map(|i| (0..n).map(|j| a[i * n + j] * anchor[j]).sum::<f64>() - b[i]).collect();
+        let resid: Vec<f64> = (0..k)
+            .map(|i| (0..n).map(|j| a[i * n + j] * anchor[j]).sum::<f64>() - b[i])
+            .collect();
         let mut p0 = anchor.to_vec();
         for r in 0..rank {
             let coef = (0..k).map(|i| u[(i, r)] * resid[i]).sum::<f64>() / s[r];
@@ -104,7 +113,12 @@ impl NullSpace {
             return Err(ConstraintError::Inconsistent { residual });
         }
         let basis = Mat::from_fn(n, n - rank, |i, j| v[(i, rank + j)]);
-        Ok(NullSpace { p0, basis, rank, redundant: k - rank })
+        Ok(NullSpace {
+            p0,
+            basis,
+            rank,
+            redundant: k - rank,
+        })
     }
 
     /// Number of free directions (`n − rank A`).
@@ -145,7 +159,11 @@ impl NullSpace {
     pub fn reduce(&self, p: &[f64]) -> Vec<f64> {
         assert_eq!(p.len(), self.p0.len(), "p has the wrong length");
         (0..self.n_free())
-            .map(|j| (0..p.len()).map(|i| self.basis[(i, j)] * (p[i] - self.p0[i])).sum())
+            .map(|j| {
+                (0..p.len())
+                    .map(|i| self.basis[(i, j)] * (p[i] - self.p0[i]))
+                    .sum()
+            })
             .collect()
     }
 }
@@ -174,6 +192,9 @@ mod tests {
     fn rejects_contradictions() {
         let a = [1.0, 0.0, 1.0, 0.0];
         let b = [1.0, 2.0];
-        assert!(matches!(NullSpace::new(&a, &b, &[0.0; 2]), Err(ConstraintError::Inconsistent { .. })));
+        assert!(matches!(
+            NullSpace::new(&a, &b, &[0.0; 2]),
+            Err(ConstraintError::Inconsistent { .. })
+        ));
     }
 }
