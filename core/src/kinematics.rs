@@ -146,6 +146,30 @@ fn axis_translation<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointError
     t
 }
 
+/// Nominal rotation by `angle` about rotary axis k's line: through the position location errors
+/// `L` (X0C, Y0C) and tilted by the orientation location errors `Ω` (A0C, B0C),
+/// `L + Ω⁻¹·Rg(angle)·Ω·(v − L)`; plain `Rg(angle)·v` when the axis has no location error.
+/// Its inverse is the same map with `−angle`.
+#[inline]
+fn rotate_about_axis_line<S: Real>(
+    dir: usize,
+    angle: f64,
+    e: &PointErrors<S>,
+    k: usize,
+    v: V3<S>,
+) -> V3<S> {
+    let (sin, cos) = angle.sin_cos();
+    if !e.has_location[k] {
+        return rot_nominal(dir, sin, cos, v);
+    }
+    let l = head3(&e.location[k]);
+    let om = tail3(&e.location[k]);
+    add(
+        l,
+        rot_err_inv(om, rot_nominal(dir, sin, cos, rot_err(om, sub(v, l)))),
+    )
+}
+
 /// Axis k's own frame → the frame it rides on.
 #[inline]
 fn axis_forward<S: Real>(
@@ -159,16 +183,7 @@ fn axis_forward<S: Real>(
     let t = axis_translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
     let inner = if ax.axis.is_rotary() {
-        let (sin, cos) = (ax.side.sign() * u).sin_cos();
-        let dir = ax.axis.direction();
-        if e.has_location[k] {
-            let l = head3(&e.location[k]);
-            let om = tail3(&e.location[k]);
-            let r = rot_err_inv(om, rot_nominal(dir, sin, cos, rot_err(om, sub(q, l))));
-            add(l, r)
-        } else {
-            rot_nominal(dir, sin, cos, q)
-        }
+        rotate_about_axis_line(ax.axis.direction(), ax.side.sign() * u, e, k, q)
     } else {
         q
     };
@@ -189,18 +204,7 @@ fn axis_inverse<S: Real>(
     let w = tail3(&e.component[k]);
     let inner = rot_err(w, sub(p, t));
     if ax.axis.is_rotary() {
-        let (sin, cos) = (-ax.side.sign() * u).sin_cos();
-        let dir = ax.axis.direction();
-        if e.has_location[k] {
-            let l = head3(&e.location[k]);
-            let om = tail3(&e.location[k]);
-            add(
-                l,
-                rot_err_inv(om, rot_nominal(dir, sin, cos, rot_err(om, sub(inner, l)))),
-            )
-        } else {
-            rot_nominal(dir, sin, cos, inner)
-        }
+        rotate_about_axis_line(ax.axis.direction(), -ax.side.sign() * u, e, k, inner)
     } else {
         inner
     }
