@@ -288,3 +288,53 @@ fn results_file_round_trip_and_errors_evaluate_later() {
     nan[0] = f64::NAN;
     assert!(ResultsFile::from_model(&model, &nan).is_err());
 }
+
+#[test]
+fn squareness_from_slope_on_a_workpiece_side_axis() {
+    // YFXZ: Y moves the workpiece, so its errors enter with the opposite sign (s = −1). C0Y and
+    // the slope of EXY must still describe the same motion, and Model::squareness must agree.
+    let machine = || {
+        Machine::from_toml_str(
+            "name = \"t\"\nchain = \"YFXZ\"\n[axes.Y]\nrange = [-200.0, 600.0]\nreference = 100.0\n\
+             [axes.X]\nrange = [0.0, 1000.0]\n[axes.Z]\nrange = [0.0, 500.0]\n\
+             [[reflector]]\nid = \"R\"\noffset = [5.0, 5.0, -60.0]\n",
+            "yfxz.toml",
+        )
+        .unwrap()
+    };
+    let only_sq = Model::from_toml_str(machine(), "[[error]]\nname = \"C0Y\"\n", "a.toml").unwrap();
+    let only_st = Model::from_toml_str(
+        machine(),
+        "[[error]]\nname = \"EXY\"\nbasis = \"monomial\"\ndegree = 1\n",
+        "b.toml",
+    )
+    .unwrap();
+    // EXY(ξ) = c0 + c1 ξ with ξ = (y + 200)/400 − 1; zero at y = 100 (ξ = −0.25): c0 = 0.25 c1.
+    let slope_per_mm = 3e-5;
+    let c1 = slope_per_mm * 400.0;
+    let mut p_st = only_st.initial_params();
+    p_st[only_st.param_index("EXY.c0").unwrap()] = 0.25 * c1;
+    p_st[only_st.param_index("EXY.c1").unwrap()] = c1;
+    assert!(only_st.constraints().max_violation(&p_st) < 1e-18);
+    let implied = only_st.squareness(&p_st);
+    assert_eq!(implied.len(), 1);
+    assert_eq!(implied[0].0, id("C0Y"));
+    // Workpiece side: the slope enters with s = −1, so C0Y = +slope.
+    assert!((implied[0].1 - slope_per_mm).abs() < 1e-18, "{implied:?}");
+    let mut p_sq = only_sq.initial_params();
+    p_sq[only_sq.param_index("C0Y").unwrap()] = implied[0].1;
+    for pos in [
+        [100.0, 0.0, 0.0],
+        [-200.0, 500.0, 100.0],
+        [600.0, 1000.0, 500.0],
+    ] {
+        let cmd = only_st.machine().commands_from_file_units(&pos);
+        let (a, b) = (
+            only_st.predict(&cmd, 0, &p_st),
+            only_sq.predict(&cmd, 0, &p_sq),
+        );
+        for i in 0..3 {
+            assert!((a[i] - b[i]).abs() < 1e-12, "{pos:?}: {a:?} vs {b:?}");
+        }
+    }
+}

@@ -629,6 +629,10 @@ impl Model {
 
     /// Predicted reflector position in the tracker frame (mm) for `commands` (chain order,
     /// internal units) and reflector index.
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()` or the reflector index is out of range: both are
+    /// programming errors (input files are validated when they are read).
     pub fn predict(&self, commands: &Commands, reflector: usize, params: &[f64]) -> [f64; 3] {
         self.check_len(params);
         let mut vals = [0.0; MAX_SLOTS];
@@ -655,6 +659,9 @@ impl Model {
     /// point (one per modelled error, plus the tracker pose), then multiplied by each basis'
     /// derivative with respect to its coefficients (the basis values; for the sine series also
     /// the derivative with respect to the phases). No finite differences.
+    ///
+    /// # Panics
+    /// As [`Model::predict`], and when `jac.len() != 3 * n_params()`.
     pub fn predict_with_jacobian(
         &self,
         commands: &Commands,
