@@ -11,7 +11,9 @@
 //!   structured Jacobian;
 //! - [`kinematics`]: the scalar-generic forward model (eq. 11 of the paper for XCFZ);
 //! - [`measure`]: measurement files (CSV);
-//! - [`results`]: results files (JSON).
+//! - [`results`]: results files (JSON);
+//! - [`plan`]: test plans (the paper's meshes and plain grids);
+//! - [`noise`], [`random`]: the tracker's noise model and a seeded random source.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -36,6 +38,9 @@ pub mod kinematics;
 pub mod machine;
 pub mod measure;
 pub mod model;
+pub mod noise;
+pub mod plan;
+pub mod random;
 pub mod results;
 
 pub use error::{Error, Place, Result};

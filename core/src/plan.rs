@@ -1,0 +1,338 @@
+//! Test plans: the commanded positions of a verification and the reflectors measured at each.
+//!
+//! Named presets reproduce the paper's meshes for the XCFZ machine (section 6.2, tables 4 and 7);
+//! plain grids are given per axis as `start:end:step` in file units (mm, degrees).
+//!
+//! | preset | mesh |
+//! |---|---|
+//! | `table4` / `test2` | X = 0, Z = 0, C 0–360° step 5° |
+//! | `table7` | X 0–1400 step 100 mm, Z 0–600 step 50 mm, C = 0 |
+//! | `test1` | X 0–1400 step 100 mm, Z 0–600 step 75 mm, C = 0 |
+//! | `test3` | X 0–1400 step 300 mm, Z 0–600 step 225 mm, C 0–360° step 45° |
+//! | `test4` | X 0–1400 step 200 mm, Z 0–600 step 150 mm, C 0–360° step 30° (the reference test) |
+//! | `test5` | the mesh of `test3` (test 5 differs by its strategy: linear-axis errors from test 1) |
+//!
+//! Where a step does not divide the range (300 mm over 1400 mm), the end of the range is added as
+//! a last, shorter step: the paper's meshes start *and finish* at the ends of table 7. C = 360° is
+//! kept: it is the pose of C = 0 measured again, a repeated point. Every reflector of the machine
+//! is measured at every position. Points are ordered as a machine would run them: the first axis
+//! of the chain slowest, the last fastest.
+//!
+//! ```
+//! use volver_core::machine::Machine;
+//! use volver_core::plan::Plan;
+//! let m = Machine::default_xcfz();
+//! let p = Plan::preset(&m, "test4").unwrap();
+//! assert_eq!(p.positions.len(), 8 * 5 * 13); // X 0..1400/200, Z 0..600/150, C 0..360/30
+//! assert_eq!(p.n_points(), 2 * 520);         // two reflectors
+//! ```
+
+use crate::error::{Error, Place, Result};
+use crate::iso::Axis;
+use crate::machine::{Commands, Machine};
+
+/// The named presets, in the order `volver simulate --help` lists them.
+pub const PRESETS: [&str; 7] = [
+    "table4", "table7", "test1", "test2", "test3", "test4", "test5",
+];
+
+/// Values of one axis in a grid, file units.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AxisRange {
+    /// The axis.
+    pub axis: Axis,
+    /// First value.
+    pub start: f64,
+    /// Last value (included).
+    pub end: f64,
+    /// Step (> 0; ignored when start == end).
+    pub step: f64,
+}
+
+impl AxisRange {
+    /// The values: start, start + step, … up to end, with end always included.
+    pub fn values(&self) -> Vec<f64> {
+        if self.start == self.end {
+            return vec![self.start];
+        }
+        let n = ((self.end - self.start) / self.step + 1e-9).floor() as usize;
+        let mut v: Vec<f64> = (0..=n).map(|i| self.start + i as f64 * self.step).collect();
+        if (self.end - v[n]).abs() > 1e-9 * self.step {
+            v.push(self.end);
+        }
+        v
+    }
+}
+
+/// A test plan: commanded positions (chain order, internal units) and the reflectors measured
+/// at each.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// Name (preset name or the grid text).
+    pub name: String,
+    /// Commanded positions, in measuring order.
+    pub positions: Vec<Commands>,
+    /// Reflector indices measured at every position.
+    pub reflectors: Vec<usize>,
+}
+
+impl Plan {
+    /// Number of measured points (positions × reflectors).
+    pub fn n_points(&self) -> usize {
+        self.positions.len() * self.reflectors.len()
+    }
+
+    /// A named preset of the paper (see the module documentation). The presets are defined for
+    /// machines with the axes X, C and Z; each axis must reach the preset's range.
+    pub fn preset(machine: &Machine, name: &str) -> Result<Plan> {
+        let r = |axis, start, end, step| AxisRange {
+            axis,
+            start,
+            end,
+            step,
+        };
+        let ranges = match name {
+            "table4" | "test2" => vec![
+                r(Axis::X, 0.0, 0.0, 0.0),
+                r(Axis::C, 0.0, 360.0, 5.0),
+                r(Axis::Z, 0.0, 0.0, 0.0),
+            ],
+            "table7" => vec![
+                r(Axis::X, 0.0, 1400.0, 100.0),
+                r(Axis::C, 0.0, 0.0, 0.0),
+                r(Axis::Z, 0.0, 600.0, 50.0),
+            ],
+            "test1" => vec![
+                r(Axis::X, 0.0, 1400.0, 100.0),
+                r(Axis::C, 0.0, 0.0, 0.0),
+                r(Axis::Z, 0.0, 600.0, 75.0),
+            ],
+            "test3" | "test5" => {
+                vec![
+                    r(Axis::X, 0.0, 1400.0, 300.0),
+                    r(Axis::C, 0.0, 360.0, 45.0),
+                    r(Axis::Z, 0.0, 600.0, 225.0),
+                ]
+            }
+            "test4" => vec![
+                r(Axis::X, 0.0, 1400.0, 200.0),
+                r(Axis::C, 0.0, 360.0, 30.0),
+                r(Axis::Z, 0.0, 600.0, 150.0),
+            ],
+            _ => {
+                return Err(Error::input(
+                    Place::file("plan").at_field("name"),
+                    format!(
+                        "unknown plan '{name}'; presets are {}, or a grid such as X=0:1400:100,Z=0:600:50,C=0",
+                        PRESETS.join(", ")
+                    ),
+                ));
+            }
+        };
+        Plan::grid_named(machine, &ranges, name)
+    }
+
+    /// A plain grid from text: one `AXIS=start:end:step` or `AXIS=value` per axis of the
+    /// machine, comma-separated, in file units, e.g. `X=0:1400:100,Z=0:600:50,C=0`.
+    pub fn parse_grid(machine: &Machine, text: &str) -> Result<Plan> {
+        let place = || Place::file("plan").at_field("grid");
+        let mut ranges = Vec::new();
+        for part in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, spec) = part.split_once('=').ok_or_else(|| {
+                Error::input(
+                    place(),
+                    format!("'{part}' is not AXIS=start:end:step or AXIS=value"),
+                )
+            })?;
+            let mut letters = name.trim().chars();
+            let axis = match (letters.next().and_then(Axis::from_letter), letters.next()) {
+                (Some(a), None) => a,
+                _ => {
+                    return Err(Error::input(
+                        place(),
+                        format!("'{name}' is not an axis letter"),
+                    ));
+                }
+            };
+            let nums: Vec<f64> = spec
+                .split(':')
+                .map(|s| s.trim().parse::<f64>())
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|_| {
+                    Error::input(
+                        place(),
+                        format!("'{spec}' (axis {axis}) is not start:end:step or a number"),
+                    )
+                })?;
+            let range = match nums.as_slice() {
+                [v] => AxisRange {
+                    axis,
+                    start: *v,
+                    end: *v,
+                    step: 0.0,
+                },
+                [s, e, st] => AxisRange {
+                    axis,
+                    start: *s,
+                    end: *e,
+                    step: *st,
+                },
+                _ => {
+                    return Err(Error::input(
+                        place(),
+                        format!("'{spec}' (axis {axis}) is not start:end:step or a number"),
+                    ));
+                }
+            };
+            ranges.push(range);
+        }
+        Plan::grid_named(machine, &ranges, text)
+    }
+
+    /// A grid over the given ranges (one per axis of the machine, any order).
+    pub fn grid(machine: &Machine, ranges: &[AxisRange]) -> Result<Plan> {
+        Plan::grid_named(machine, ranges, "grid")
+    }
+
+    fn grid_named(machine: &Machine, ranges: &[AxisRange], name: &str) -> Result<Plan> {
+        let place = || Place::file("plan").at_field(name.to_string());
+        let mut per_axis: Vec<Vec<f64>> = Vec::new();
+        for ax in machine.axes() {
+            let found: Vec<&AxisRange> = ranges.iter().filter(|r| r.axis == ax.axis).collect();
+            let r = match found.as_slice() {
+                [r] => *r,
+                [] => {
+                    return Err(Error::input(
+                        place(),
+                        format!("no values for axis {} of {}", ax.axis, machine.chain()),
+                    ));
+                }
+                _ => {
+                    return Err(Error::input(
+                        place(),
+                        format!("axis {} is given twice", ax.axis),
+                    ));
+                }
+            };
+            let finite = r.start.is_finite() && r.end.is_finite() && r.step.is_finite();
+            if !finite || (r.start != r.end && (r.step <= 0.0 || r.end < r.start)) {
+                return Err(Error::input(
+                    place(),
+                    format!(
+                        "axis {}: {}:{}:{} is not start ≤ end with a positive step",
+                        ax.axis, r.start, r.end, r.step
+                    ),
+                ));
+            }
+            let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
+            let tol = 1e-9 * (hi - lo).abs().max(1.0);
+            if r.start < lo - tol || r.end > hi + tol {
+                return Err(Error::input(
+                    place(),
+                    format!(
+                        "axis {}: {}..{} {} leaves the travel range [{lo}, {hi}]",
+                        ax.axis,
+                        r.start,
+                        r.end,
+                        ax.file_unit()
+                    ),
+                ));
+            }
+            per_axis.push(
+                r.values()
+                    .into_iter()
+                    .map(|v| ax.from_file_units(v))
+                    .collect(),
+            );
+        }
+        if let Some(extra) = ranges.iter().find(|r| machine.axis(r.axis).is_none()) {
+            return Err(Error::input(
+                place(),
+                format!(
+                    "axis {} is not in the machine's chain {}",
+                    extra.axis,
+                    machine.chain()
+                ),
+            ));
+        }
+        // Cartesian product, first chain axis slowest.
+        let mut positions = vec![Commands::default()];
+        for (k, values) in per_axis.iter().enumerate() {
+            positions = positions
+                .iter()
+                .flat_map(|c| {
+                    values.iter().map(move |&v| {
+                        let mut c = *c;
+                        c.0[k] = v;
+                        c
+                    })
+                })
+                .collect();
+        }
+        Ok(Plan {
+            name: name.to_string(),
+            positions,
+            reflectors: (0..machine.reflectors().len()).collect(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_meshes_have_the_paper_sizes() {
+        let m = Machine::default_xcfz();
+        let count = |n: &str| Plan::preset(&m, n).unwrap().positions.len();
+        assert_eq!(count("table4"), 73); // 0..360 step 5, 360 included
+        assert_eq!(count("table7"), 15 * 13);
+        assert_eq!(count("test1"), 15 * 9);
+        assert_eq!(count("test3"), 6 * 9 * 4); // X 0,300,…,1200,1400; C 0..360/45; Z 0,225,450,600
+        assert_eq!(count("test4"), 8 * 13 * 5);
+        assert_eq!(
+            Plan::preset(&m, "test5").unwrap().positions,
+            Plan::preset(&m, "test3").unwrap().positions
+        );
+    }
+
+    #[test]
+    fn ranges_include_their_end() {
+        let r = AxisRange {
+            axis: Axis::X,
+            start: 0.0,
+            end: 1400.0,
+            step: 300.0,
+        };
+        assert_eq!(r.values(), [0.0, 300.0, 600.0, 900.0, 1200.0, 1400.0]);
+        let r = AxisRange {
+            axis: Axis::Z,
+            start: 0.0,
+            end: 600.0,
+            step: 150.0,
+        };
+        assert_eq!(r.values(), [0.0, 150.0, 300.0, 450.0, 600.0]);
+    }
+
+    #[test]
+    fn grids_from_text_and_their_errors() {
+        let m = Machine::default_xcfz();
+        let p = Plan::parse_grid(&m, "X=0:1400:700, Z=0:600:600, C=90").unwrap();
+        assert_eq!(p.positions.len(), 3 * 2);
+        assert!((p.positions[0].0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+        // First chain axis (X) slowest, last (Z) fastest.
+        assert_eq!((p.positions[1].0[0], p.positions[1].0[2]), (0.0, 600.0));
+        let e = |t: &str| Plan::parse_grid(&m, t).unwrap_err().to_string();
+        assert!(e("X=0:1400:100,Z=0:600:50").contains("no values for axis C"));
+        assert!(e("X=0:1500:100,Z=0,C=0").contains("leaves the travel range [0, 1400]"));
+        assert!(e("X=0:1400:0,Z=0,C=0").contains("positive step"));
+        assert!(e("X=0,Y=0,Z=0,C=0").contains("not in the machine's chain"));
+        assert!(e("X=a,Z=0,C=0").contains("not start:end:step"));
+        assert!(
+            Plan::preset(&m, "test9")
+                .unwrap_err()
+                .to_string()
+                .contains("table4, table7")
+        );
+    }
+}
