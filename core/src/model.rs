@@ -739,7 +739,7 @@ impl Model {
     /// squareness "taken from the straightness".
     pub fn squareness(&self, params: &[f64]) -> Vec<(ErrorId, f64)> {
         let mut out = Vec::new();
-        for (k, ax) in self.machine.axes().iter().enumerate() {
+        for ax in self.machine.axes() {
             if ax.axis.is_rotary() {
                 continue;
             }
@@ -761,7 +761,6 @@ impl Model {
                         -ax.side.sign() * per_unit * 2.0 / (ax.max - ax.min)
                     });
                 if own.is_some() || slope.is_some() {
-                    debug_assert_eq!(self.machine.axes()[k].axis, id.axis());
                     out.push((id, own.unwrap_or(0.0) + slope.unwrap_or(0.0)));
                 }
             }
