@@ -230,6 +230,31 @@ pub fn predict<S: Real>(
     reflector: &[f64; 3],
     errors: &PointErrors<S>,
 ) -> [S; 3] {
+    predict_with_tool_shift(machine, commands, reflector, errors, None)
+}
+
+/// [`predict`] with the tool point displaced by `shift` (mm) in the machine frame, after the
+/// tool-side axes and before the workpiece-side ones: a displacement of the tool relative to
+/// the machine's frame that no axis error describes, such as thermal drift of the spindle.
+/// `None` is exactly [`predict`].
+///
+/// ```
+/// use volver_core::kinematics::{predict, predict_with_tool_shift, PointErrors};
+/// use volver_core::machine::Machine;
+/// let m = Machine::default_xcfz();
+/// let cmd = m.commands_from_file_units(&[700.0, 0.0, 300.0]); // C = 0: frame ∥ tracker
+/// let e = PointErrors::<f64>::zero();
+/// let a = predict(&m, &cmd, &m.reflectors()[0].offset, &e);
+/// let b = predict_with_tool_shift(&m, &cmd, &m.reflectors()[0].offset, &e, Some([0.0, 0.0, 0.02]));
+/// assert!((b[2] - a[2] - 0.02).abs() < 1e-12);
+/// ```
+pub fn predict_with_tool_shift<S: Real>(
+    machine: &Machine,
+    commands: &Commands,
+    reflector: &[f64; 3],
+    errors: &PointErrors<S>,
+    shift: Option<[f64; 3]>,
+) -> [S; 3] {
     let axes = machine.axes();
     let mut p: V3<S> = reflector.map(S::from);
     // Tool side: from the axis carrying the tool inward to the frame.
@@ -238,6 +263,9 @@ pub fn predict<S: Real>(
         .filter(|&k| axes[k].side == Side::Tool)
     {
         p = axis_forward(machine, k, commands.0[k], errors, p);
+    }
+    if let Some(d) = shift {
+        p = add(p, d.map(S::from));
     }
     let tracker = machine.tracker();
     if tracker.mount == TrackerMount::Workpiece {

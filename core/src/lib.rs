@@ -13,7 +13,9 @@
 //! - [`measure`]: measurement files (CSV);
 //! - [`results`]: results files (JSON);
 //! - [`plan`]: test plans (the paper's meshes and plain grids);
-//! - [`noise`], [`random`]: the tracker's noise model and a seeded random source.
+//! - [`noise`], [`random`]: the tracker's noise model and a seeded random source;
+//! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
+//! - [`metrics`]: EMM and EMax.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -37,10 +39,12 @@ pub mod iso;
 pub mod kinematics;
 pub mod machine;
 pub mod measure;
+pub mod metrics;
 pub mod model;
 pub mod noise;
 pub mod plan;
 pub mod random;
 pub mod results;
+pub mod simulate;
 
 pub use error::{Error, Place, Result};

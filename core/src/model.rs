@@ -32,7 +32,7 @@
 use crate::basis::{Basis, BasisKind, MAX_COEFFS};
 use crate::chain::MAX_AXES;
 use crate::error::{Error, Place, Result, from_toml, line_of_text};
-use crate::iso::{ErrorId, Group, Unit};
+use crate::iso::{Axis, ErrorId, Group, Unit};
 use crate::kinematics::{PointErrors, Real, TRACKER_DOF, TRACKER_NAMES, predict};
 use crate::machine::{Commands, Machine};
 use num_dual::DualSVec64;
@@ -158,6 +158,78 @@ impl ErrorModelSpec {
     /// Parses error-model TOML; `file` names the source in messages.
     pub fn from_toml_str(text: &str, file: &str) -> Result<ErrorModelSpec> {
         toml::from_str(text).map_err(|e| from_toml(file, text, e))
+    }
+
+    /// Every geometric error of a machine in the paper's bases: the six component errors of each
+    /// linear axis as Legendre cubics, those of each rotary axis as first-harmonic Fourier series
+    /// (their constant absorbs the rotary location errors), the squareness errors of every linear
+    /// axis but the first one in X, Y, Z order, and the tracker translation. For the embedded
+    /// XCFZ machine this is the paper's model.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::model::{ErrorModelSpec, Model};
+    /// let m = Machine::default_xcfz();
+    /// let full = Model::new(m, ErrorModelSpec::complete(&Machine::default_xcfz())).unwrap();
+    /// assert_eq!(full.n_params(), Model::default_xcfz().n_params());
+    /// ```
+    pub fn complete(machine: &Machine) -> ErrorModelSpec {
+        let names = |axis: Axis| -> Vec<String> {
+            ErrorId::components_of(axis)
+                .iter()
+                .map(ToString::to_string)
+                .collect()
+        };
+        let mut linear = Vec::new();
+        let mut rotary = Vec::new();
+        for ax in machine.axes() {
+            if ax.axis.is_rotary() {
+                rotary.extend(names(ax.axis));
+            } else {
+                linear.extend(names(ax.axis));
+            }
+        }
+        let first_linear = machine
+            .axes()
+            .iter()
+            .map(|a| a.axis)
+            .filter(|a| !a.is_rotary())
+            .min();
+        let squareness: Vec<String> = machine
+            .axes()
+            .iter()
+            .map(|a| a.axis)
+            .filter(|&a| !a.is_rotary() && Some(a) != first_linear)
+            .flat_map(ErrorId::location_names)
+            .collect();
+        let entry = |names: Vec<String>, basis, degree, order| ErrorTermSpec {
+            name: OneOrMany::Many(names),
+            basis,
+            degree,
+            nodes: None,
+            order,
+        };
+        let mut errors = Vec::new();
+        if !linear.is_empty() {
+            errors.push(entry(linear, Some(BasisKind::Legendre), Some(3), None));
+        }
+        if !rotary.is_empty() {
+            errors.push(entry(rotary, Some(BasisKind::Fourier), None, Some(1)));
+        }
+        if !squareness.is_empty() {
+            errors.push(entry(squareness, None, None, None));
+        }
+        ErrorModelSpec {
+            name: "complete: cubic linear-axis errors, first-harmonic rotary errors, squareness"
+                .to_string(),
+            squareness: SquarenessRule::FromStraightness,
+            reference_constraint: true,
+            errors,
+            tracker: TrackerModelSpec {
+                identify: TRACKER_NAMES[..3].iter().map(|s| s.to_string()).collect(),
+            },
+            fixed: BTreeMap::new(),
+        }
     }
 }
 
@@ -634,6 +706,22 @@ impl Model {
     /// When `params.len() != n_params()` or the reflector index is out of range: both are
     /// programming errors (input files are validated when they are read).
     pub fn predict(&self, commands: &Commands, reflector: usize, params: &[f64]) -> [f64; 3] {
+        let e = self.errors_at(commands, params);
+        predict(
+            &self.machine,
+            commands,
+            &self.machine.reflectors()[reflector].offset,
+            &e,
+        )
+    }
+
+    /// The value of every modelled error at `commands` and the tracker pose, laid out for
+    /// [`crate::kinematics::predict`] (errors the model leaves out are zero). The synthetic
+    /// generator adds effects outside the model to these values.
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn errors_at(&self, commands: &Commands, params: &[f64]) -> PointErrors<f64> {
         self.check_len(params);
         let mut vals = [0.0; MAX_SLOTS];
         for (i, t) in self.terms.iter().enumerate() {
@@ -643,13 +731,7 @@ impl Model {
         }
         vals[self.terms.len()..self.terms.len() + TRACKER_DOF]
             .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
-        let e = self.point_errors(|i| vals[i]);
-        predict(
-            &self.machine,
-            commands,
-            &self.machine.reflectors()[reflector].offset,
-            &e,
-        )
+        self.point_errors(|i| vals[i])
     }
 
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`

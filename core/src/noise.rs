@@ -47,6 +47,45 @@ impl TrackerNoise {
         range_um_per_m: 0.0,
     };
 
+    /// Reads `paper`, `none`, or four σ `AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M` (the CLI's
+    /// `--noise`).
+    ///
+    /// ```
+    /// use volver_core::noise::TrackerNoise;
+    /// assert_eq!(TrackerNoise::from_text("paper").unwrap(), TrackerNoise::PAPER);
+    /// assert_eq!(TrackerNoise::from_text("10,10,2,0.5").unwrap().range_um, 2.0);
+    /// assert!(TrackerNoise::from_text("10,10").is_err());
+    /// ```
+    pub fn from_text(text: &str) -> crate::Result<TrackerNoise> {
+        match text.trim() {
+            "paper" => return Ok(TrackerNoise::PAPER),
+            "none" => return Ok(TrackerNoise::NONE),
+            _ => {}
+        }
+        let v: Vec<f64> = text
+            .split(',')
+            .map(|s| {
+                s.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+            })
+            .collect::<Option<_>>()
+            .filter(|v: &Vec<f64>| v.len() == 4)
+            .ok_or_else(|| {
+                crate::Error::input(
+                    crate::Place::file("--noise").at_field(text.to_string()),
+                    "expected paper, none, or four σ ≥ 0: AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M",
+                )
+            })?;
+        Ok(TrackerNoise {
+            azimuth_urad: v[0],
+            elevation_urad: v[1],
+            range_um: v[2],
+            range_um_per_m: v[3],
+        })
+    }
+
     /// Standard deviation of the range at a range of `r_mm`, in mm.
     pub fn range_sigma_mm(&self, r_mm: f64) -> f64 {
         (self.range_um + self.range_um_per_m * r_mm * 1e-3) * 1e-3
