@@ -94,7 +94,7 @@ Magnitude kinds (--magnitude KIND=VALUE; defaults in brackets):
 
 Effects (--effect, repeatable):
   thermal-drift=VX,VY,VZ              tool point drifts in the machine frame, µm/h
-  rotary-harmonics=H[,UM,URAD]        rotary errors get harmonics up to H (default 5 µm, 10 µrad)
+  rotary-harmonics=H[,AMP_UM,AMP_URAD] rotary errors get harmonics up to H (default 5 µm, 10 µrad)
   tracker-tilt=RX,RY                  tracker mounted tilted, µrad
   ball-screw=AXIS,PERIOD_MM,AMP_UM    periodic positioning error A·sin(2π(u − u_ref)/P)
   reflector-offset=ID,DX,DY,DZ        reflector off its nominal offset, µm
@@ -113,6 +113,7 @@ fn main() -> Result<()> {
             let model = Model::default_xcfz();
             print_layout(&model)?;
             print_nominal_points(&model);
+            demo_simulation(&model)?;
         }
         Command::Layout { machine, model } => {
             let m = match &machine {
@@ -463,9 +464,44 @@ fn print_nominal_points(model: &Model) {
             );
         }
     }
+}
+
+/// The demo's synthetic test: the paper's reference mesh (test 4) on the XCFZ grinder with random
+/// true errors and the paper's tracker noise.
+fn demo_simulation(model: &Model) -> Result<()> {
+    let m = model.machine();
+    let seed = 7;
+    let truth = Truth::random(m, model.spec(), &Magnitudes::default(), seed)?;
+    let plan = Plan::preset(m, "test4")?;
+    let out = Simulation::new(plan, truth, seed).run()?;
+    let r = &out.record;
     println!(
-        "\nThis version builds and evaluates the model; simulation, identification and diagnosis come next (README, roadmap)."
+        "\nSynthetic test (paper, section 4.1): plan test4, {} positions × {} reflectors = {} points, seed {seed}",
+        r.positions,
+        r.reflectors.len(),
+        r.points
     );
+    println!(
+        "  true errors drawn at the default magnitudes (50 µm positioning, 30 µm straightness, 50 µrad angular …)"
+    );
+    println!(
+        "  machine error (noise-free vs nominal points): EMM {:7.2} µm  EMax {:7.2} µm",
+        r.machine_error.emm_um, r.machine_error.emax_um
+    );
+    println!(
+        "  noise error (30 µrad, 30 µrad, 4 µm + 0.8 µm/m): EMM {:7.2} µm  EMax {:7.2} µm",
+        r.noise_error.emm_um, r.noise_error.emax_um
+    );
+    println!("  first points of the measurement file:");
+    let csv = out.measurements.to_csv_string(m);
+    for line in csv.lines().take(5) {
+        println!("    {line}");
+    }
+    println!(
+        "\nWrite such a test with `volver simulate --plan test4 --seed 7 --out sim` (add --effect to hide\n\
+         a physical effect). Identification and diagnosis come next (README, roadmap)."
+    );
+    Ok(())
 }
 
 fn letters(v: &[volver::core::iso::Axis]) -> String {
@@ -473,5 +509,36 @@ fn letters(v: &[volver::core::iso::Axis]) -> String {
         "(none)".into()
     } else {
         v.iter().map(|a| a.letter()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volver::core::simulate::{EFFECTS, MAGNITUDE_KINDS};
+
+    /// The help text lists every magnitude kind with its real default, and every effect.
+    #[test]
+    fn simulate_help_matches_the_library() {
+        let defaults = serde_json::to_value(Magnitudes::default()).unwrap();
+        for (kind, unit, _) in MAGNITUDE_KINDS {
+            let field = format!(
+                "{}_{}",
+                kind.replace('-', "_"),
+                match unit {
+                    "µm" => "um",
+                    "µrad" => "urad",
+                    _ => "mm",
+                }
+            );
+            let v = defaults[&field]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{field}"));
+            let entry = format!("{kind} {unit} [{v}]");
+            assert!(SIMULATE_HELP.contains(&entry), "help lacks '{entry}'");
+        }
+        for (_, syntax, _) in EFFECTS {
+            assert!(SIMULATE_HELP.contains(syntax), "help lacks '{syntax}'");
+        }
     }
 }
