@@ -15,7 +15,8 @@
 //! - [`plan`]: test plans (the paper's meshes and plain grids);
 //! - [`noise`], [`random`]: the tracker's noise model and a seeded random source;
 //! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
-//! - [`metrics`]: EMM and EMax.
+//! - [`metrics`]: EMM and EMax;
+//! - [`problem`]: a model with its measurements: residuals, Φ, ve.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -43,6 +44,7 @@ pub mod metrics;
 pub mod model;
 pub mod noise;
 pub mod plan;
+pub mod problem;
 pub mod random;
 pub mod results;
 pub mod simulate;

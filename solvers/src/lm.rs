@@ -1,0 +1,487 @@
+//! The native Levenberg–Marquardt engine on `faer`.
+//!
+//! * **Normal equations in row blocks.** Each pass runs over the points in blocks of
+//!   [`BLOCK`] points: the block's weighted Jacobian rows (3 per point) are multiplied into the
+//!   lower triangle of `JᵀWJ` and into `JᵀWr`; no dense Jacobian of the whole problem is kept.
+//! * **Scaling.** Parameters are scaled by the inverse column norms of the starting Jacobian, so
+//!   millimetres and radians (whose columns differ by the lever arms, ~10³) weigh alike.
+//! * **Constraints** by null-space elimination in the scaled coordinates: `p = D (s₀ + N z)`,
+//!   with z free ([`crate::nullspace`]).
+//! * **Steps** solve `(H + λ diag H) δ = −g` (Marquardt scaling) by Cholesky; if that fails
+//!   (an ill-conditioned, nearly unidentifiable direction) by a rank-revealing SVD pseudo-inverse.
+//!   The damping follows Nielsen's rule on the gain ratio.
+//! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised by iteratively
+//!   reweighted least squares: each pass weights point i by `1/√(‖r_i‖² + ε²)`, with the radial
+//!   direction's curvature reduced by `‖r_i‖²/(‖r_i‖² + ε²)` (Ceres' Triggs correction), which is
+//!   the exact Gauss–Newton model of the smoothed objective `Φ_ε = (1/n) Σ √(‖r_i‖² + ε²)`. ε starts at [`Options::irls_initial_epsilon`] × Φ and shrinks tenfold each time the
+//!   smoothed problem has converged, down to [`Options::irls_final_epsilon`] × Φ; only then do the
+//!   convergence criteria stop the run. Φ_ε − Φ ≤ ε, so the final Φ is exact to that fraction.
+//!
+//! ```
+//! use volver_core::machine::Machine;
+//! use volver_core::model::ErrorModelSpec;
+//! use volver_core::noise::TrackerNoise;
+//! use volver_core::plan::Plan;
+//! use volver_core::problem::Problem;
+//! use volver_core::simulate::{Magnitudes, Simulation, Truth};
+//! use volver_solvers::{lm::LevenbergMarquardt, Options, Silent, Solver, Task};
+//! let m = Machine::default_xcfz();
+//! let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &Magnitudes::default(), 1).unwrap();
+//! let mut sim = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 1);
+//! sim.noise = TrackerNoise::NONE;
+//! let data = sim.run().unwrap().measurements;
+//! let model = volver_core::model::Model::default_xcfz();
+//! let problem = Problem::new(&model, &data).unwrap();
+//! let sol = LevenbergMarquardt.solve(&Task::new(problem), &model.initial_params(),
+//!                                    &Options::default(), &mut Silent);
+//! assert!(sol.summary.termination.converged());
+//! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
+//! ```
+
+use crate::nullspace::NullSpace;
+use crate::options::{Objective, Options};
+use crate::summary::{Summary, Termination};
+use crate::{Iteration, Observer, Solution, Solver, Task, evaluate};
+use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
+use faer::prelude::*;
+use faer::{Accum, Mat, Par, Side};
+use std::time::Instant;
+use volver_core::problem::{Problem, norm};
+
+/// Points per block of the normal-equation accumulation.
+pub const BLOCK: usize = 128;
+
+/// The native engine (always available).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LevenbergMarquardt;
+
+/// Normal equations of one pass at a point: `H` (accumulated in its lower triangle, then
+/// mirrored) and `g`.
+struct Normal {
+    h: Mat<f64>,
+    g: Vec<f64>,
+}
+
+/// `H = Σ J_iᵀ W_i J_i` and `g = Σ w_i J_iᵀ r_i`, where `weight(‖r_i‖)` gives `(w_i, c_i)` and
+/// `W_i = w_i (I − c_i r̂_i r̂_iᵀ)` (the exact Gauss–Newton Hessian of the loss on each point:
+/// `c = 0` for ve; for Φ_ε the radial direction carries less curvature than the tangential ones,
+/// Ceres' "Triggs correction"). `None` when a residual or Jacobian entry is not finite.
+fn accumulate(problem: &Problem, p: &[f64], weight: impl Fn(f64) -> (f64, f64)) -> Option<Normal> {
+    let n = p.len();
+    let np = problem.n_points();
+    let mut h = Mat::<f64>::zeros(n, n);
+    let mut g = vec![0.0; n];
+    let mut jb = Mat::<f64>::zeros(3 * BLOCK, n);
+    let mut row = vec![0.0; 3 * n];
+    let mut start = 0;
+    while start < np {
+        let m = (np - start).min(BLOCK);
+        for b in 0..m {
+            let r = problem.residual_and_jacobian(start + b, p, &mut row);
+            let nr = norm(r);
+            if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
+                return None;
+            }
+            let (w, c) = weight(nr);
+            // W^½ = √w (I − k r̂ r̂ᵀ) with (1 − k)² = 1 − c.
+            let k = 1.0 - (1.0 - c).max(0.0).sqrt();
+            let rhat = if nr > 0.0 {
+                r.map(|v| v / nr)
+            } else {
+                [0.0; 3]
+            };
+            let sw = w.sqrt();
+            for j in 0..n {
+                let col = [row[j], row[n + j], row[2 * n + j]];
+                let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
+                g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
+                for c in 0..3 {
+                    jb[(3 * b + c, j)] = sw * (col[c] - k * rhat[c] * radial);
+                }
+            }
+        }
+        let jv = jb.as_ref().subrows(0, 3 * m);
+        triangular_matmul(
+            h.as_mut(),
+            BlockStructure::TriangularLower,
+            Accum::Add,
+            jv.transpose(),
+            BlockStructure::Rectangular,
+            jv,
+            BlockStructure::Rectangular,
+            1.0,
+            Par::Seq,
+        );
+        start += m;
+    }
+    for j in 0..n {
+        for i in 0..j {
+            h[(i, j)] = h[(j, i)];
+        }
+    }
+    Some(Normal { h, g })
+}
+
+/// The smoothed objective from residual modules: ve, or Φ_ε.
+fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
+    let n = norms.len() as f64;
+    match objective {
+        Objective::Ve => norms.iter().map(|r| r * r).sum::<f64>() / n,
+        Objective::Phi => {
+            norms
+                .iter()
+                .map(|r| (r * r + eps * eps).sqrt())
+                .sum::<f64>()
+                / n
+        }
+    }
+}
+
+/// Weight of a point in the Gauss–Newton model of the cost: twice the derivative of the
+/// point's loss with respect to ‖r‖², over n, and the radial reduction c of its Hessian.
+fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f64, f64) {
+    match objective {
+        Objective::Ve => (2.0 / n as f64, 0.0),
+        Objective::Phi => {
+            let s = r * r + eps * eps;
+            (1.0 / (s.sqrt() * n as f64), r * r / s)
+        }
+    }
+}
+
+/// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
+/// pseudo-inverse that drops directions below 1e-14 of the largest singular value.
+fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
+    let k = rhs.len();
+    let b = Mat::from_fn(k, 1, |i, _| rhs[i]);
+    if let Ok(llt) = a.llt(Side::Lower) {
+        let x = llt.solve(&b);
+        let v: Vec<f64> = (0..k).map(|i| x[(i, 0)]).collect();
+        if v.iter().all(|x| x.is_finite()) {
+            return Some(v);
+        }
+    }
+    let svd = a.svd().ok()?;
+    let (u, s, v) = (svd.U(), svd.S().column_vector(), svd.V());
+    let smax = (0..k).map(|i| s[i]).fold(0.0, f64::max);
+    let mut x = vec![0.0; k];
+    for r in 0..k {
+        if s[r] > 1e-14 * smax {
+            let c = (0..k).map(|i| u[(i, r)] * rhs[i]).sum::<f64>() / s[r];
+            for (j, xj) in x.iter_mut().enumerate() {
+                *xj += v[(j, r)] * c;
+            }
+        }
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
+struct Free {
+    d: Vec<f64>,
+    ns: NullSpace,
+}
+
+impl Free {
+    fn params(&self, z: &[f64]) -> Vec<f64> {
+        self.ns
+            .expand(z)
+            .iter()
+            .zip(&self.d)
+            .map(|(s, d)| s * d)
+            .collect()
+    }
+}
+
+impl Solver for LevenbergMarquardt {
+    fn name(&self) -> &'static str {
+        "lm"
+    }
+
+    fn solve(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
+        let t0 = Instant::now();
+        let problem = &task.problem;
+        let model = problem.model();
+        let n = model.n_params();
+        let objective = options.objective;
+        let mut summary = Summary {
+            solver: self.name().to_string(),
+            objective,
+            phase: task.phase.clone(),
+            free_parameters: 0,
+            unidentifiable: 0,
+            points: problem.n_points(),
+            initial: Default::default(),
+            final_: Default::default(),
+            iterations: 0,
+            evaluations: 0,
+            jacobian_evaluations: 0,
+            time_s: 0.0,
+            termination: Termination::NoFreeParameters,
+        };
+        let finish = |mut summary: Summary, params: Vec<f64>, termination: Termination| {
+            summary.final_ = evaluate(problem, &params);
+            summary.evaluations += 1;
+            summary.termination = termination;
+            summary.time_s = t0.elapsed().as_secs_f64();
+            Solution { params, summary }
+        };
+        if let Err(e) = options.validate() {
+            return finish(summary, start.to_vec(), Termination::InvalidInput(e));
+        }
+        if start.len() != n || start.iter().any(|v| !v.is_finite()) {
+            return finish(
+                summary,
+                start.to_vec(),
+                Termination::InvalidInput(format!(
+                    "the start has {} values (finite: {}), the model {n} parameters",
+                    start.len(),
+                    start.iter().all(|v| v.is_finite())
+                )),
+            );
+        }
+        summary.initial = evaluate(problem, start);
+        summary.evaluations += 1;
+
+        // Column scaling from the unweighted Jacobian at the start.
+        let Some(first) = accumulate(problem, start, |_| (1.0, 0.0)) else {
+            return finish(
+                summary,
+                start.to_vec(),
+                Termination::NumericalFailure("the Jacobian is not finite at the start".into()),
+            );
+        };
+        summary.evaluations += 1;
+        summary.jacobian_evaluations += 1;
+        let d: Vec<f64> = (0..n)
+            .map(|j| {
+                let c = first.h[(j, j)];
+                if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
+            })
+            .collect();
+        let (a, b) = task.constraints.dense(n);
+        let rows = b.len();
+        let a_scaled: Vec<f64> = (0..rows * n).map(|k| a[k] * d[k % n]).collect();
+        let anchor: Vec<f64> = start.iter().zip(&d).map(|(p, d)| p / d).collect();
+        let ns = match NullSpace::new(&a_scaled, &b, &anchor) {
+            Ok(ns) => ns,
+            Err(e) => {
+                return finish(
+                    summary,
+                    start.to_vec(),
+                    Termination::InvalidInput(e.to_string()),
+                );
+            }
+        };
+        let nf = ns.n_free();
+        summary.free_parameters = nf;
+        let free = Free { d, ns };
+        let mut z = vec![0.0; nf];
+        let mut p = free.params(&z);
+        if nf == 0 {
+            return finish(summary, p, Termination::NoFreeParameters);
+        }
+
+        let mut norms: Vec<f64> = (0..problem.n_points())
+            .map(|i| norm(problem.residual(i, &p)))
+            .collect();
+        summary.evaluations += 1;
+        let phi0 = norms.iter().sum::<f64>() / norms.len() as f64;
+        if !phi0.is_finite() {
+            return finish(
+                summary,
+                p,
+                Termination::NumericalFailure("the objective is not finite at the start".into()),
+            );
+        }
+        let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
+        let mut eps = (options.irls_initial_epsilon * phi0).max(1e-300);
+        let final_stage = |eps: f64, phi: f64| objective == Objective::Ve || eps <= eps_final(phi);
+        let mut cost = cost_of(objective, &norms, eps);
+        let cost0 = cost;
+        let mut lambda = options.initial_damping;
+        let mut nu = 2.0;
+        let np = problem.n_points();
+        let termination = 'outer: loop {
+            // One Jacobian pass at the current point.
+            if summary.evaluations >= options.max_evaluations {
+                break Termination::EvaluationLimit;
+            }
+            let Some(normal) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np)) else {
+                break Termination::NumericalFailure(format!(
+                    "the Jacobian is not finite at iteration {}",
+                    summary.iterations
+                ));
+            };
+            summary.evaluations += 1;
+            summary.jacobian_evaluations += 1;
+            // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
+            let dv = &free.d;
+            let hs = Mat::from_fn(n, n, |i, j| dv[i] * normal.h[(i, j)] * dv[j]);
+            let basis = free.ns.basis();
+            let t = &hs * basis;
+            let hz = basis.transpose() * &t;
+            let gz: Vec<f64> = (0..nf)
+                .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
+                .collect();
+            let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            if final_stage(eps, cost) && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0)
+            {
+                break Termination::Gradient;
+            }
+            // Marquardt scaling: H' = S H S, g' = S g with S = diag(H)^-½ (floored), then a
+            // rank-revealing eigen-decomposition of H'. Directions whose curvature is below
+            // rank_tolerance × the largest are not identifiable from the data: they are held.
+            let dmax = (0..nf).map(|i| hz[(i, i)]).fold(0.0_f64, f64::max);
+            let sc: Vec<f64> = (0..nf)
+                .map(|i| 1.0 / hz[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+                .collect();
+            let hp = Mat::from_fn(nf, nf, |i, j| sc[i] * hz[(i, j)] * sc[j]);
+            let gp: Vec<f64> = (0..nf).map(|i| sc[i] * gz[i]).collect();
+            let Ok(evd) = hp.self_adjoint_eigen(Side::Lower) else {
+                break Termination::NumericalFailure(format!(
+                    "the eigen-decomposition of the normal matrix failed at iteration {}",
+                    summary.iterations
+                ));
+            };
+            let (mu, vecs) = (evd.S().column_vector(), evd.U());
+            let mu_max = mu[nf - 1].max(0.0);
+            // The Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: the
+            // tolerance relaxes as Φ falls, so a (nearly) exact fit may use every direction.
+            let phi_now = norms.iter().sum::<f64>() / np as f64;
+            let tolerance = options.rank_tolerance * (phi_now / phi0).min(1.0);
+            let keep: Vec<usize> = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).collect();
+            summary.unidentifiable = nf - keep.len();
+            let gv: Vec<f64> = (0..nf)
+                .map(|i| (0..nf).map(|k| vecs[(k, i)] * gp[k]).sum())
+                .collect();
+            // Try steps until one is accepted or a criterion stops the run.
+            loop {
+                if summary.iterations >= options.max_iterations {
+                    break 'outer Termination::IterationLimit;
+                }
+                if summary.iterations > 0 && summary.evaluations >= options.max_evaluations {
+                    break 'outer Termination::EvaluationLimit;
+                }
+                summary.iterations += 1;
+                let delta = if keep.len() == nf {
+                    // Full rank: Cholesky of the damped system (eigen solve if it fails).
+                    let damped = Mat::from_fn(nf, nf, |i, j| {
+                        hp[(i, j)] + if i == j { lambda } else { 0.0 }
+                    });
+                    let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
+                    solve_spd(&damped, &rhs)
+                } else {
+                    None
+                };
+                let delta: Vec<f64> = delta
+                    .unwrap_or_else(|| {
+                        let mut y = vec![0.0; nf];
+                        for &i in &keep {
+                            let c = -gv[i] / (mu[i] + lambda);
+                            for (k, yk) in y.iter_mut().enumerate() {
+                                *yk += vecs[(k, i)] * c;
+                            }
+                        }
+                        y
+                    })
+                    .iter()
+                    .zip(&sc)
+                    .map(|(y, s)| y * s)
+                    .collect();
+                if delta.iter().any(|v| !v.is_finite()) {
+                    break 'outer Termination::NumericalFailure(format!(
+                        "the step is not finite at iteration {}",
+                        summary.iterations
+                    ));
+                }
+                let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let small_step =
+                    step <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
+                // Predicted decrease of the quadratic model.
+                let hd: Vec<f64> = (0..nf)
+                    .map(|i| (0..nf).map(|j| hz[(i, j)] * delta[j]).sum())
+                    .collect();
+                let pred = -(0..nf)
+                    .map(|i| gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
+                    .sum::<f64>();
+                let z_new: Vec<f64> = z.iter().zip(&delta).map(|(a, b)| a + b).collect();
+                let p_new = free.params(&z_new);
+                let norms_new: Vec<f64> =
+                    (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
+                summary.evaluations += 1;
+                let cost_new = cost_of(objective, &norms_new, eps);
+                let rho = if cost_new.is_finite() && pred > 0.0 {
+                    (cost - cost_new) / pred
+                } else {
+                    -1.0
+                };
+                let accepted = rho > 1e-4;
+                observer.iteration(&Iteration {
+                    iteration: summary.iterations,
+                    evaluations: summary.evaluations,
+                    cost: if accepted { cost_new } else { cost },
+                    emm_um: if accepted {
+                        norms_new.iter().sum::<f64>() / np as f64 * 1e3
+                    } else {
+                        norms.iter().sum::<f64>() / np as f64 * 1e3
+                    },
+                    damping: lambda,
+                    step,
+                    accepted,
+                });
+                if accepted {
+                    let old = cost;
+                    z = z_new;
+                    p = p_new;
+                    norms = norms_new;
+                    cost = cost_new;
+                    lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                    nu = 2.0;
+                    let small_change = old - cost <= options.objective_tolerance * old;
+                    let phi = norms.iter().sum::<f64>() / np as f64;
+                    if small_step || small_change {
+                        if final_stage(eps, phi) {
+                            break 'outer if small_step {
+                                Termination::ParameterChange
+                            } else {
+                                Termination::ObjectiveChange
+                            };
+                        }
+                        eps = (eps / 10.0).max(eps_final(phi));
+                        cost = cost_of(objective, &norms, eps);
+                    } else if objective == Objective::Phi
+                        && !final_stage(eps, phi)
+                        && old - cost <= 1e-3 * old
+                    {
+                        // The smoothed problem has nearly converged: sharpen it.
+                        eps = (eps / 10.0).max(eps_final(phi));
+                        cost = cost_of(objective, &norms, eps);
+                    }
+                    break;
+                }
+                lambda *= nu;
+                nu *= 2.0;
+                if small_step || !lambda.is_finite() || lambda > 1e30 {
+                    let phi = norms.iter().sum::<f64>() / np as f64;
+                    if final_stage(eps, phi) {
+                        break 'outer Termination::ParameterChange;
+                    }
+                    eps = (eps / 10.0).max(eps_final(phi));
+                    cost = cost_of(objective, &norms, eps);
+                    lambda = options.initial_damping;
+                    nu = 2.0;
+                    break;
+                }
+            }
+        };
+        finish(summary, p, termination)
+    }
+}

@@ -1,0 +1,139 @@
+//! Options shared by every engine: the objective and the paper's four convergence criteria
+//! (section 6.1) — minimum parameter change, minimum objective change, iteration limit,
+//! evaluation limit — plus a gradient test and the IRLS schedule for Φ.
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// What is minimised.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Objective {
+    /// Φ, the mean error module (eq. 12), the paper's choice: robust to outliers, not a sum of
+    /// squares. The native engine minimises it by iteratively reweighted least squares.
+    #[default]
+    Phi,
+    /// ve, the mean squared error module (eq. 1): ordinary least squares.
+    Ve,
+}
+
+impl fmt::Display for Objective {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Objective::Phi => "phi",
+            Objective::Ve => "ve",
+        })
+    }
+}
+
+impl std::str::FromStr for Objective {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "phi" | "Φ" => Ok(Objective::Phi),
+            "ve" => Ok(Objective::Ve),
+            _ => Err(format!("unknown objective '{s}': phi or ve")),
+        }
+    }
+}
+
+/// Convergence criteria and tuning, with documented defaults ([`Options::default`]).
+///
+/// ```
+/// use volver_solvers::Options;
+/// let o = Options { max_iterations: 50, ..Options::default() };
+/// assert!(o.validate().is_ok());
+/// assert!(Options { parameter_tolerance: -1.0, ..o }.validate().is_err());
+/// ```
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Options {
+    /// The objective.
+    pub objective: Objective,
+    /// Criterion 1, minimum parameter change: stop when the step in the scaled free
+    /// coordinates is below `parameter_tolerance · (‖z‖ + parameter_tolerance)`. Default 1e-10.
+    pub parameter_tolerance: f64,
+    /// Criterion 2, minimum objective change: stop when an accepted step lowers the objective by
+    /// less than `objective_tolerance` times its value. Default 1e-12.
+    pub objective_tolerance: f64,
+    /// Criterion 3, iteration limit (accepted or rejected steps). Default 200.
+    pub max_iterations: usize,
+    /// Criterion 4, evaluation limit: objective evaluations, Jacobians included. Default 2000.
+    pub max_evaluations: usize,
+    /// Stop when the largest scaled gradient component is below this times the objective.
+    /// Default 1e-13.
+    pub gradient_tolerance: f64,
+    /// Starting Levenberg–Marquardt damping, relative to the diagonal (Marquardt scaling).
+    /// Default 1e-4.
+    pub initial_damping: f64,
+    /// Directions of the scaled normal matrix whose curvature is below this fraction of the
+    /// largest, times Φ / Φ_start (at most 1), are not identifiable from the data and are held
+    /// (no step along them), so that nearly redundant parameters do not drift to meaningless
+    /// values while Φ creeps down by fractions of a nanometre. The factor Φ / Φ_start frees them
+    /// again as the fit becomes exact, where the Gauss–Newton model is exact too. Default 1e-10
+    /// (a condition number of 10⁵ on the scaled Jacobian).
+    pub rank_tolerance: f64,
+    /// Φ only: the smoothing ε of the IRLS weights `1/√(‖r‖² + ε²)` starts at this fraction of
+    /// Φ and shrinks tenfold each time the smoothed problem converges. Default 0.1.
+    pub irls_initial_epsilon: f64,
+    /// Φ only: the IRLS ε stops shrinking at this fraction of Φ. Default 1e-9.
+    pub irls_final_epsilon: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            objective: Objective::Phi,
+            parameter_tolerance: 1e-10,
+            objective_tolerance: 1e-12,
+            max_iterations: 200,
+            max_evaluations: 2000,
+            gradient_tolerance: 1e-13,
+            initial_damping: 1e-4,
+            rank_tolerance: 1e-10,
+            irls_initial_epsilon: 0.1,
+            irls_final_epsilon: 1e-9,
+        }
+    }
+}
+
+impl Options {
+    /// Checks every value; the message names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let nonneg = [
+            ("parameter_tolerance", self.parameter_tolerance),
+            ("objective_tolerance", self.objective_tolerance),
+            ("gradient_tolerance", self.gradient_tolerance),
+            ("rank_tolerance", self.rank_tolerance),
+        ];
+        for (name, v) in nonneg {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!(
+                    "options.{name} = {v}: expected a finite number ≥ 0"
+                ));
+            }
+        }
+        let positive = [
+            ("initial_damping", self.initial_damping),
+            ("irls_initial_epsilon", self.irls_initial_epsilon),
+            ("irls_final_epsilon", self.irls_final_epsilon),
+        ];
+        for (name, v) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!(
+                    "options.{name} = {v}: expected a finite number > 0"
+                ));
+            }
+        }
+        if self.irls_final_epsilon > self.irls_initial_epsilon {
+            return Err(format!(
+                "options.irls_final_epsilon = {} exceeds irls_initial_epsilon = {}",
+                self.irls_final_epsilon, self.irls_initial_epsilon
+            ));
+        }
+        if self.max_iterations == 0 || self.max_evaluations == 0 {
+            return Err("options.max_iterations and max_evaluations must be ≥ 1".into());
+        }
+        Ok(())
+    }
+}

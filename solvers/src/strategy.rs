@@ -1,0 +1,386 @@
+//! Identification strategies, for any engine.
+//!
+//! **Phases** (paper, table 1): which parameter groups each phase identifies; the others are
+//! held at their current values. The tracker pose and extra effects (group `other`) are
+//! identified in every phase.
+//!
+//! | name | phases |
+//! |---|---|
+//! | `one` | squareness + translation + rotation |
+//! | `two` | squareness · translation + rotation (table 1, "2 phases") |
+//! | `tr` | squareness + translation · rotation (tables 6, 8, "2 phases TR") |
+//! | `rt` | squareness + rotation · translation (tables 6, 8, "2 phases RT") |
+//! | `three-tr` | squareness · translation · rotation |
+//! | `three-rt` | squareness · rotation · translation |
+//!
+//! **Sub-loops** (fig. 14): the phase sequence is repeated, each pass with its own solves,
+//! until a pass no longer lowers the EMM (relative 1e-9) or the count is reached.
+//!
+//! **Methods** (section 5.3, tables 11–12): [`identify`] on one data set (joint);
+//! [`independent`] (tests 1 + 2: the linear-axis errors from one set, the rotary-axis errors
+//! from another, each alone); [`combined`] (test 5: the linear-axis errors from one set held
+//! while the rotary-axis errors are identified on another); [`cross_validate`] (the
+//! compensated error of a reference set, with only its tracker pose fitted, table 12).
+
+use crate::init::init_tracker;
+use crate::options::Options;
+use crate::summary::{Evaluation, Summary, Termination};
+use crate::{Observer, Solver, Task, evaluate};
+use serde::Serialize;
+use std::time::Instant;
+use volver_core::iso::Group;
+use volver_core::model::{Model, Owner, ParamInfo};
+use volver_core::problem::Problem;
+
+/// The phase sequences of table 1 and tables 6 and 8.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Phasing {
+    /// Everything at once.
+    #[default]
+    One,
+    /// Squareness, then translation and rotation.
+    Two,
+    /// Squareness and translation, then rotation.
+    Tr,
+    /// Squareness and rotation, then translation.
+    Rt,
+    /// Squareness, translation, rotation.
+    ThreeTr,
+    /// Squareness, rotation, translation.
+    ThreeRt,
+}
+
+/// Names accepted by [`Phasing::parse`].
+pub const PHASINGS: [&str; 6] = ["one", "two", "tr", "rt", "three-tr", "three-rt"];
+
+impl Phasing {
+    /// From its name (see the module table).
+    pub fn parse(s: &str) -> Result<Phasing, String> {
+        Ok(match s {
+            "one" | "1" => Phasing::One,
+            "two" | "2" => Phasing::Two,
+            "tr" => Phasing::Tr,
+            "rt" => Phasing::Rt,
+            "three-tr" => Phasing::ThreeTr,
+            "three-rt" => Phasing::ThreeRt,
+            _ => {
+                return Err(format!("unknown phasing '{s}': {}", PHASINGS.join(", ")));
+            }
+        })
+    }
+
+    /// Its name.
+    pub fn name(self) -> &'static str {
+        PHASINGS[self as usize]
+    }
+
+    /// The groups identified in each phase (besides the tracker and `other`, always free).
+    pub fn phases(self) -> Vec<Vec<Group>> {
+        use Group::{Rotation as R, Squareness as S, Translation as T};
+        match self {
+            Phasing::One => vec![vec![S, T, R]],
+            Phasing::Two => vec![vec![S], vec![T, R]],
+            Phasing::Tr => vec![vec![S, T], vec![R]],
+            Phasing::Rt => vec![vec![S, R], vec![T]],
+            Phasing::ThreeTr => vec![vec![S], vec![T], vec![R]],
+            Phasing::ThreeRt => vec![vec![S], vec![R], vec![T]],
+        }
+    }
+}
+
+/// A strategy: phases, sub-loops and whether the tracker pose is first fitted rigidly.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Strategy {
+    /// The phase sequence.
+    pub phasing: Phasing,
+    /// How many times the sequence may run (≥ 1).
+    pub subloops: usize,
+    /// Start the tracker pose from a rigid best fit ([`init_tracker`]).
+    pub init_tracker: bool,
+}
+
+impl Default for Strategy {
+    fn default() -> Self {
+        Strategy {
+            phasing: Phasing::One,
+            subloops: 1,
+            init_tracker: true,
+        }
+    }
+}
+
+/// The outcome of a strategy: parameters and one summary per solve.
+#[derive(Clone, Debug)]
+pub struct Identification {
+    /// The identified parameters.
+    pub params: Vec<f64>,
+    /// One summary per phase solved, in order.
+    pub phases: Vec<Summary>,
+    /// At the start, after the tracker's rigid fit: the uncompensated machine.
+    pub initial: Evaluation,
+    /// At the end.
+    pub final_: Evaluation,
+    /// How the last solve ended (or why the strategy could not start).
+    pub termination: Termination,
+    /// Wall time (s).
+    pub time_s: f64,
+}
+
+impl Identification {
+    /// Final EMM as a percentage of the initial EMM.
+    pub fn residual_percent(&self) -> f64 {
+        100.0 * self.final_.stats.emm_um / self.initial.stats.emm_um
+    }
+
+    /// Steps tried over every phase.
+    pub fn iterations(&self) -> usize {
+        self.phases.iter().map(|s| s.iterations).sum()
+    }
+
+    /// Evaluations over every phase.
+    pub fn evaluations(&self) -> usize {
+        self.phases.iter().map(|s| s.evaluations).sum()
+    }
+}
+
+/// Which axes' errors a method may identify.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Errors {
+    /// Every modelled error.
+    All,
+    /// Errors of linear axes (squareness included).
+    Linear,
+    /// Errors of rotary axes.
+    Rotary,
+    /// None: only the tracker pose (and `other` effects).
+    None,
+}
+
+/// Whether parameter `info` of `model` is an error of the given kind of axis; the tracker and
+/// `other` parameters are always eligible.
+fn eligible(model: &Model, info: &ParamInfo, errors: Errors) -> bool {
+    if matches!(info.group, Group::Tracker | Group::Other) {
+        return true;
+    }
+    let rotary = match info.owner {
+        Owner::Term { term, .. } => model.terms()[term].id.axis().is_rotary(),
+        Owner::Tracker(_) => return true,
+    };
+    match errors {
+        Errors::All => true,
+        Errors::Linear => !rotary,
+        Errors::Rotary => rotary,
+        Errors::None => false,
+    }
+}
+
+/// Runs a strategy on one data set, identifying the errors `errors` allows (the others stay at
+/// their `start` values).
+pub fn identify_errors(
+    solver: &dyn Solver,
+    problem: Problem,
+    start: &[f64],
+    errors: Errors,
+    strategy: &Strategy,
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> Identification {
+    let t0 = Instant::now();
+    let model = problem.model();
+    let mut p = start.to_vec();
+    let done = |p: Vec<f64>, phases: Vec<Summary>, initial, termination| Identification {
+        final_: evaluate(&problem, &p),
+        params: p,
+        phases,
+        initial,
+        termination,
+        time_s: t0.elapsed().as_secs_f64(),
+    };
+    if strategy.subloops == 0 {
+        let initial = evaluate(&problem, &p);
+        return done(
+            p,
+            vec![],
+            initial,
+            Termination::InvalidInput("the strategy needs at least one sub-loop".into()),
+        );
+    }
+    if strategy.init_tracker {
+        match init_tracker(&problem, &p) {
+            Ok(q) => p = q,
+            Err(e) => {
+                let initial = evaluate(&problem, &p);
+                return done(p, vec![], initial, Termination::InvalidInput(e));
+            }
+        }
+    }
+    let initial = evaluate(&problem, &p);
+    let mut phases = Vec::new();
+    let mut termination = Termination::NoFreeParameters;
+    let mut emm = initial.stats.emm_um;
+    'loops: for pass in 0..strategy.subloops {
+        for groups in strategy.phasing.phases() {
+            let free = |info: &ParamInfo| {
+                eligible(model, info, errors)
+                    && (matches!(info.group, Group::Tracker | Group::Other)
+                        || groups.contains(&info.group))
+            };
+            let names: Vec<String> = groups.iter().map(ToString::to_string).collect();
+            let label = if strategy.subloops > 1 {
+                format!("{} (loop {})", names.join("+"), pass + 1)
+            } else {
+                names.join("+")
+            };
+            let task = Task::holding(problem, |_, info| !free(info), &p, &label);
+            let sol = solver.solve(&task, &p, options, observer);
+            termination = sol.summary.termination.clone();
+            let failed = termination.failed();
+            phases.push(sol.summary);
+            if failed {
+                break 'loops;
+            }
+            p = sol.params;
+        }
+        let now = evaluate(&problem, &p).stats.emm_um;
+        if emm - now <= 1e-9 * emm {
+            break;
+        }
+        emm = now;
+    }
+    done(p, phases, initial, termination)
+}
+
+/// [`identify_errors`] with every error free: the joint method.
+pub fn identify(
+    solver: &dyn Solver,
+    problem: Problem,
+    start: &[f64],
+    strategy: &Strategy,
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> Identification {
+    identify_errors(
+        solver,
+        problem,
+        start,
+        Errors::All,
+        strategy,
+        options,
+        observer,
+    )
+}
+
+/// Tests 1 + 2: the linear-axis errors identified on `linear` alone (rotary errors held at
+/// `start`), the rotary-axis errors on `rotary` alone (linear errors held at `start`); the result
+/// takes each group from its own identification and the tracker pose from the rotary one.
+pub fn independent(
+    solver: &dyn Solver,
+    linear: Problem,
+    rotary: Problem,
+    start: &[f64],
+    strategy: &Strategy,
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> (Vec<f64>, Identification, Identification) {
+    let model = linear.model();
+    let a = identify_errors(
+        solver,
+        linear,
+        start,
+        Errors::Linear,
+        strategy,
+        options,
+        observer,
+    );
+    let b = identify_errors(
+        solver,
+        rotary,
+        start,
+        Errors::Rotary,
+        strategy,
+        options,
+        observer,
+    );
+    let p = model
+        .params()
+        .iter()
+        .enumerate()
+        .map(|(j, info)| {
+            if eligible(model, info, Errors::Linear) && !eligible(model, info, Errors::Rotary) {
+                a.params[j]
+            } else {
+                b.params[j]
+            }
+        })
+        .collect();
+    (p, a, b)
+}
+
+/// Test 5: the linear-axis errors identified on `linear`, then held while the rotary-axis
+/// errors are identified on `rotary`.
+pub fn combined(
+    solver: &dyn Solver,
+    linear: Problem,
+    rotary: Problem,
+    start: &[f64],
+    strategy: &Strategy,
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> (Identification, Identification) {
+    let a = identify_errors(
+        solver,
+        linear,
+        start,
+        Errors::Linear,
+        strategy,
+        options,
+        observer,
+    );
+    let b = identify_errors(
+        solver,
+        rotary,
+        &a.params,
+        Errors::Rotary,
+        strategy,
+        options,
+        observer,
+    );
+    (a, b)
+}
+
+/// Table 12: the error left in a reference set when the machine is compensated with `params`.
+/// Only the tracker pose is fitted on the reference set (rigid fit, then identified with every
+/// error held); `initial` is the uncompensated machine (every error zero) seen the same way.
+pub fn cross_validate(
+    solver: &dyn Solver,
+    reference: Problem,
+    params: &[f64],
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> Identification {
+    let strategy = Strategy::default();
+    let mut uncompensated = reference.model().initial_params();
+    let t = reference.model().tracker_start();
+    uncompensated[t..t + 6].copy_from_slice(&params[t..t + 6]);
+    let before = identify_errors(
+        solver,
+        reference,
+        &uncompensated,
+        Errors::None,
+        &strategy,
+        options,
+        observer,
+    );
+    let mut after = identify_errors(
+        solver,
+        reference,
+        params,
+        Errors::None,
+        &strategy,
+        options,
+        observer,
+    );
+    after.initial = before.final_;
+    after
+}

@@ -1,0 +1,205 @@
+//! What a solve reports, in the spirit of Ceres' `Solver::Summary`: the objective before and
+//! after, the error metrics, counts, time, and the criterion that stopped it. A failed run is a
+//! status here, never a panic.
+
+use crate::options::Objective;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use volver_core::metrics::ErrorStats;
+
+/// Why a solve stopped.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "reason", content = "detail", rename_all = "kebab-case")]
+pub enum Termination {
+    /// Criterion 1: the parameter change fell below its tolerance.
+    ParameterChange,
+    /// Criterion 2: the objective change fell below its tolerance.
+    ObjectiveChange,
+    /// Criterion 3: the iteration limit.
+    IterationLimit,
+    /// Criterion 4: the evaluation limit.
+    EvaluationLimit,
+    /// The gradient vanished (a stationary point).
+    Gradient,
+    /// Nothing to identify: no free parameter.
+    NoFreeParameters,
+    /// The objective or a step became non-finite, or a factorisation failed; the text says
+    /// where. The last finite parameters are kept.
+    NumericalFailure(String),
+    /// The input cannot be solved (inconsistent constraints, bad options); the text says why.
+    InvalidInput(String),
+}
+
+impl Termination {
+    /// `true` for a convergence criterion (1, 2, gradient, or nothing to do); `false` for a
+    /// limit or a failure.
+    pub fn converged(&self) -> bool {
+        matches!(
+            self,
+            Termination::ParameterChange
+                | Termination::ObjectiveChange
+                | Termination::Gradient
+                | Termination::NoFreeParameters
+        )
+    }
+
+    /// `true` for a failure (the result should not be used).
+    pub fn failed(&self) -> bool {
+        matches!(
+            self,
+            Termination::NumericalFailure(_) | Termination::InvalidInput(_)
+        )
+    }
+}
+
+impl fmt::Display for Termination {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Termination::ParameterChange => f.write_str("converged: minimum parameter change"),
+            Termination::ObjectiveChange => f.write_str("converged: minimum objective change"),
+            Termination::IterationLimit => f.write_str("stopped: iteration limit"),
+            Termination::EvaluationLimit => f.write_str("stopped: evaluation limit"),
+            Termination::Gradient => f.write_str("converged: gradient vanished"),
+            Termination::NoFreeParameters => f.write_str("nothing to identify: no free parameter"),
+            Termination::NumericalFailure(s) => write!(f, "failed: numerical failure ({s})"),
+            Termination::InvalidInput(s) => write!(f, "failed: invalid input ({s})"),
+        }
+    }
+}
+
+/// Objective values and error metrics at one parameter vector.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Evaluation {
+    /// Φ, mean error module (mm).
+    pub phi_mm: f64,
+    /// ve, mean squared error module (mm²).
+    pub ve_mm2: f64,
+    /// EMM and EMax (µm).
+    pub stats: ErrorStats,
+}
+
+/// One solve (one phase of a strategy).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Engine name (`lm`, `nlopt`, …).
+    pub solver: String,
+    /// What was minimised.
+    pub objective: Objective,
+    /// Label of the phase (`all`, `squareness`, `translation+rotation` …).
+    pub phase: String,
+    /// Parameters free in this solve (after constraints and held groups).
+    pub free_parameters: usize,
+    /// Free directions the data could not identify at the last iteration (held by the
+    /// engine's rank-revealing step; see `Options::rank_tolerance`).
+    pub unidentifiable: usize,
+    /// Measured points.
+    pub points: usize,
+    /// At the start.
+    pub initial: Evaluation,
+    /// At the end.
+    pub final_: Evaluation,
+    /// Iterations (steps tried).
+    pub iterations: usize,
+    /// Objective evaluations (residual passes), Jacobian passes included.
+    pub evaluations: usize,
+    /// Jacobian passes.
+    pub jacobian_evaluations: usize,
+    /// Wall time (s).
+    pub time_s: f64,
+    /// The criterion that stopped it.
+    pub termination: Termination,
+}
+
+impl Summary {
+    /// The final objective value (Φ in mm or ve in mm²).
+    pub fn final_cost(&self) -> f64 {
+        match self.objective {
+            Objective::Phi => self.final_.phi_mm,
+            Objective::Ve => self.final_.ve_mm2,
+        }
+    }
+
+    /// Final EMM as a percentage of the initial EMM (the paper's residual error).
+    pub fn residual_percent(&self) -> f64 {
+        100.0 * self.final_.stats.emm_um / self.initial.stats.emm_um
+    }
+
+    /// One line.
+    pub fn brief_report(&self) -> String {
+        format!(
+            "{} ({}, {}): EMM {:.4} → {:.4} µm ({:.4} %), {} iterations, {} evaluations, {:.2} s, {}",
+            self.solver,
+            self.objective,
+            self.phase,
+            self.initial.stats.emm_um,
+            self.final_.stats.emm_um,
+            self.residual_percent(),
+            self.iterations,
+            self.evaluations,
+            self.time_s,
+            self.termination
+        )
+    }
+
+    /// Several lines with every figure.
+    pub fn full_report(&self) -> String {
+        let mut s = String::new();
+        let line = |s: &mut String, k: &str, v: String| {
+            s.push_str(&format!("  {k:<26}{v}\n"));
+        };
+        s.push_str(&format!(
+            "Solver summary ({}, phase {})\n",
+            self.solver, self.phase
+        ));
+        line(&mut s, "objective", self.objective.to_string());
+        line(&mut s, "points", self.points.to_string());
+        line(
+            &mut s,
+            "free parameters",
+            format!(
+                "{} ({} not identifiable from the data)",
+                self.free_parameters, self.unidentifiable
+            ),
+        );
+        line(
+            &mut s,
+            "Φ initial / final (mm)",
+            format!("{:.6e} / {:.6e}", self.initial.phi_mm, self.final_.phi_mm),
+        );
+        line(
+            &mut s,
+            "ve initial / final (mm²)",
+            format!("{:.6e} / {:.6e}", self.initial.ve_mm2, self.final_.ve_mm2),
+        );
+        line(
+            &mut s,
+            "EMM initial / final (µm)",
+            format!(
+                "{:.4} / {:.4}",
+                self.initial.stats.emm_um, self.final_.stats.emm_um
+            ),
+        );
+        line(
+            &mut s,
+            "EMax initial / final (µm)",
+            format!(
+                "{:.4} / {:.4}",
+                self.initial.stats.emax_um, self.final_.stats.emax_um
+            ),
+        );
+        line(
+            &mut s,
+            "residual error",
+            format!("{:.4} %", self.residual_percent()),
+        );
+        line(&mut s, "iterations", self.iterations.to_string());
+        line(
+            &mut s,
+            "evaluations (Jacobians)",
+            format!("{} ({})", self.evaluations, self.jacobian_evaluations),
+        );
+        line(&mut s, "time", format!("{:.3} s", self.time_s));
+        line(&mut s, "termination", self.termination.to_string());
+        s
+    }
+}
