@@ -4,12 +4,17 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use volver::core::machine::{Machine, TrackerMount};
+use volver::core::measure::MeasurementSet;
 use volver::core::model::{ConstraintKind, ErrorModelSpec, Model};
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
+use volver::core::problem::Problem;
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth, TruthSource};
+use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::nullspace::NullSpace;
+use volver::solvers::strategy::{Phasing, Strategy, identify};
+use volver::solvers::{Iteration, Objective, Observer, Options, Solver};
 
 /// Volumetric verification of multi-axis machine tools with a laser tracker.
 #[derive(Parser)]
@@ -32,6 +37,12 @@ enum Command {
         #[arg(long)]
         model: Option<PathBuf>,
     },
+    /// Identifies the geometric errors and the tracker pose from measurements.
+    ///
+    /// Minimises Φ (or ve) under the model's constraints, starting from zero errors and a rigid
+    /// best fit of the tracker pose; prints a summary table (or one JSON object with --json) and
+    /// writes the parameters with --out. Progress goes to stderr.
+    Identify(IdentifyArgs),
     /// Generates a synthetic test: measurements, the true errors and the machine file.
     ///
     /// Writes DIR/measurements.csv, DIR/truth.json (the true error functions and tracker pose,
@@ -76,6 +87,48 @@ enum Command {
         #[arg(long)]
         reflectors: Option<String>,
     },
+}
+
+/// Options of `volver identify`.
+#[derive(clap::Args)]
+struct IdentifyArgs {
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Error model (TOML); the paper's model when absent (with the embedded machine).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Measurement file (CSV).
+    #[arg(long)]
+    data: PathBuf,
+    /// Engine: lm (native Levenberg–Marquardt).
+    #[arg(long, default_value = "lm")]
+    solver: String,
+    /// Objective: phi (mean error module, eq. 12) or ve (mean squared error, eq. 1).
+    #[arg(long, default_value = "phi")]
+    objective: String,
+    /// Phases: one, two, tr, rt, three-tr, three-rt (table 1 of the paper).
+    #[arg(long, default_value = "one")]
+    strategy: String,
+    /// Sub-loops: how many times the phase sequence may run (fig. 14).
+    #[arg(long, default_value_t = 1)]
+    subloops: usize,
+    /// The true errors (results JSON, e.g. truth.json of `volver simulate`): reports the
+    /// noise error, the EMM of the measurements against the truth.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Iteration limit per phase (criterion 3).
+    #[arg(long)]
+    max_iterations: Option<usize>,
+    /// Evaluation limit per phase (criterion 4).
+    #[arg(long)]
+    max_evaluations: Option<usize>,
+    /// Write the identified parameters as a results file (JSON).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    json: bool,
 }
 
 const SIMULATE_HELP: &str = "\
@@ -129,6 +182,7 @@ fn main() -> Result<()> {
             };
             print_layout(&model)?;
         }
+        Command::Identify(args) => identify_command(args)?,
         Command::Simulate {
             plan,
             seed,
@@ -156,6 +210,207 @@ fn main() -> Result<()> {
         })?,
     }
     Ok(())
+}
+
+/// Prints one line per accepted step to stderr.
+struct Progress {
+    quiet: bool,
+}
+
+impl Observer for Progress {
+    fn iteration(&mut self, it: &Iteration) {
+        if !self.quiet && it.accepted {
+            eprintln!(
+                "  iteration {:>4}  evaluations {:>5}  EMM {:>12.6} µm  λ {:.1e}",
+                it.iteration, it.evaluations, it.emm_um, it.damping
+            );
+        }
+    }
+}
+
+fn identify_command(a: IdentifyArgs) -> Result<()> {
+    let machine = match &a.machine {
+        Some(p) => Machine::load(p).context("reading the machine file")?,
+        None => Machine::default_xcfz(),
+    };
+    let model = match (&a.model, &a.machine) {
+        (Some(p), _) => Model::load(machine.clone(), p).context("reading the error model")?,
+        (None, None) => Model::default_xcfz(),
+        (None, Some(_)) => anyhow::bail!(
+            "--model is needed with --machine (the embedded model is for the embedded machine)"
+        ),
+    };
+    let data = MeasurementSet::load(&machine, &a.data).context("reading the measurements")?;
+    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
+    let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
+    if a.subloops == 0 {
+        anyhow::bail!("--subloops must be at least 1");
+    }
+    let solver: Box<dyn Solver> = match a.solver.as_str() {
+        "lm" => Box::new(LevenbergMarquardt),
+        other => anyhow::bail!(
+            "unknown solver '{other}': this build has lm (the native Levenberg–Marquardt)"
+        ),
+    };
+    let mut options = Options {
+        objective,
+        ..Options::default()
+    };
+    if let Some(v) = a.max_iterations {
+        options.max_iterations = v;
+    }
+    if let Some(v) = a.max_evaluations {
+        options.max_evaluations = v;
+    }
+    options.validate().map_err(anyhow::Error::msg)?;
+    let problem = Problem::new(&model, &data)?;
+    let noise_error = match &a.truth {
+        Some(path) => {
+            let label = path.display().to_string();
+            let truth = Truth::from_results(
+                &ResultsFile::load(path).context("reading the truth file")?,
+                &label,
+            )?;
+            if truth.model.machine().spec() != machine.spec() {
+                anyhow::bail!("the machine of {label} is not the machine of the measurements");
+            }
+            let truth_problem = Problem::new(&truth.model, &data)?;
+            Some(truth_problem.stats(&truth.params))
+        }
+        None => None,
+    };
+    let strategy = Strategy {
+        phasing,
+        subloops: a.subloops,
+        init_tracker: true,
+    };
+    if !a.json {
+        println!(
+            "volver identify — {} points, model \"{}\" ({} parameters), solver {}, objective {}, strategy {}",
+            data.points.len(),
+            model.spec().name,
+            model.n_params(),
+            solver.name(),
+            objective,
+            phasing.name()
+        );
+    }
+    let id = identify(
+        solver.as_ref(),
+        problem,
+        &model.initial_params(),
+        &strategy,
+        &options,
+        &mut Progress { quiet: a.json },
+    );
+    if let Some(out) = &a.out {
+        ResultsFile::from_model(&model, &id.params)?
+            .save(out)
+            .context("writing the results file")?;
+    }
+    let params: Vec<serde_json::Value> = model
+        .params()
+        .iter()
+        .zip(&id.params)
+        .map(|(info, v)| {
+            serde_json::json!({
+                "name": info.name,
+                "value": v,
+                "unit": info.unit.to_string(),
+                "group": info.group.to_string(),
+            })
+        })
+        .collect();
+    if a.json {
+        let obj = serde_json::json!({
+            "solver": solver.name(),
+            "objective": objective.to_string(),
+            "strategy": phasing.name(),
+            "subloops": a.subloops,
+            "points": data.points.len(),
+            "emm_initial_um": id.initial.stats.emm_um,
+            "emm_final_um": id.final_.stats.emm_um,
+            "emax_initial_um": id.initial.stats.emax_um,
+            "emax_final_um": id.final_.stats.emax_um,
+            "phi_final_mm": id.final_.phi_mm,
+            "ve_final_mm2": id.final_.ve_mm2,
+            "residual_percent": id.residual_percent(),
+            "noise_error_um": noise_error.map(|s| s.emm_um),
+            "noise_emax_um": noise_error.map(|s| s.emax_um),
+            "iterations": id.iterations(),
+            "evaluations": id.evaluations(),
+            "time_s": id.time_s,
+            "termination": id.termination.to_string(),
+            "converged": id.termination.converged(),
+            "phases": id.phases,
+            "parameters": params,
+        });
+        println!("{}", serde_json::to_string_pretty(&obj)?);
+    } else {
+        println!(
+            "\n  {:<32} {:>12} {:>12} {:>10} {:>6} {:>6}  termination",
+            "phase", "EMM µm", "EMax µm", "residual", "iter", "eval"
+        );
+        for s in &id.phases {
+            println!(
+                "  {:<32} {:>12} {:>12} {:>9.3}% {:>6} {:>6}  {}",
+                s.phase,
+                um(s.final_.stats.emm_um),
+                um(s.final_.stats.emax_um),
+                s.residual_percent(),
+                s.iterations,
+                s.evaluations,
+                s.termination
+            );
+        }
+        println!(
+            "\n  initial (errors zero, tracker fitted):  EMM {:>10.4} µm   EMax {:>10.4} µm",
+            id.initial.stats.emm_um, id.initial.stats.emax_um
+        );
+        println!(
+            "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {:.3e} %",
+            um(id.final_.stats.emm_um),
+            um(id.final_.stats.emax_um),
+            id.residual_percent()
+        );
+        if let Some(n) = noise_error {
+            println!(
+                "  noise error (measured vs truth):       EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
+                um(n.emm_um),
+                um(n.emax_um),
+                id.final_.stats.emm_um / n.emm_um
+            );
+        }
+        let held: usize = id.phases.last().map_or(0, |s| s.unidentifiable);
+        println!(
+            "  {} iterations, {} evaluations, {:.2} s; {}{}",
+            id.iterations(),
+            id.evaluations(),
+            id.time_s,
+            id.termination,
+            if held > 0 {
+                format!("; {held} direction(s) not identifiable from these data were held")
+            } else {
+                String::new()
+            }
+        );
+        if let Some(out) = &a.out {
+            println!("  parameters written to {}", out.display());
+        }
+    }
+    if id.termination.failed() {
+        anyhow::bail!("identification failed: {}", id.termination);
+    }
+    Ok(())
+}
+
+/// A length in µm for tables: fixed-point, or scientific when below 0.01 µm.
+fn um(v: f64) -> String {
+    if v != 0.0 && v.abs() < 0.01 {
+        format!("{v:.3e}")
+    } else {
+        format!("{v:.4}")
+    }
 }
 
 struct SimulateArgs {

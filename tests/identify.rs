@@ -181,3 +181,215 @@ fn fourier_and_sine_series_of_equal_order_reach_the_same_phi() {
     assert!(f.termination.converged() && s.termination.converged());
     assert!((s.final_.phi_mm / f.final_.phi_mm - 1.0).abs() < 1e-9);
 }
+
+fn volver(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
+        .args(args)
+        .output()
+        .expect("volver runs")
+}
+
+#[test]
+fn volver_identify_prints_json_writes_results_and_rejects_bad_options() {
+    let dir = std::env::temp_dir().join(format!("volver-identify-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    let out = volver(&["simulate", "--plan", "test3", "--seed", "4", "--out", d]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = dir.join("measurements.csv");
+    let truth = dir.join("truth.json");
+    let results = dir.join("results.json");
+    let out = volver(&[
+        "identify",
+        "--data",
+        data.to_str().unwrap(),
+        "--truth",
+        truth.to_str().unwrap(),
+        "--strategy",
+        "tr",
+        "--out",
+        results.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "solver",
+        "objective",
+        "emm_initial_um",
+        "emm_final_um",
+        "emax_initial_um",
+        "emax_final_um",
+        "residual_percent",
+        "iterations",
+        "evaluations",
+        "termination",
+        "parameters",
+        "noise_error_um",
+    ] {
+        assert!(!v[key].is_null(), "missing {key}");
+    }
+    assert_eq!(v["solver"], "lm");
+    assert_eq!(v["phases"].as_array().unwrap().len(), 2);
+    let p = &v["parameters"][0];
+    assert!(p["name"].is_string() && p["unit"].is_string() && p["group"].is_string());
+    let ratio = v["emm_final_um"].as_f64().unwrap() / v["noise_error_um"].as_f64().unwrap();
+    assert!((0.9..1.05).contains(&ratio), "final / noise {ratio}");
+    // The results file rebuilds the model and reproduces the final EMM.
+    let (model, params) = volver::core::results::ResultsFile::load(&results)
+        .unwrap()
+        .to_model("results.json")
+        .unwrap();
+    let set = MeasurementSet::load(model.machine(), &data).unwrap();
+    let emm = Problem::new(&model, &set).unwrap().stats(&params).emm_um;
+    assert!((emm - v["emm_final_um"].as_f64().unwrap()).abs() < 1e-9);
+    for (args, needle) in [
+        (vec!["--solver", "magic"], "unknown solver 'magic'"),
+        (vec!["--strategy", "four"], "unknown phasing 'four'"),
+        (vec!["--objective", "l1"], "unknown objective 'l1'"),
+    ] {
+        let mut all = vec!["identify", "--data", data.to_str().unwrap()];
+        all.extend(args);
+        let out = volver(&all);
+        assert!(!out.status.success());
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
+    use volver::core::iso::Group;
+    use volver::solvers::strategy::{Errors, Phasing, identify_errors};
+    use volver::solvers::{Solver, Task};
+    let sim = simulate("test4", TrackerNoise::NONE, 12);
+    let model = Model::default_xcfz();
+    let problem = Problem::new(&model, &sim.measurements).unwrap();
+    // A phase holds what it does not identify, exactly.
+    let start = model.initial_params();
+    let task = Task::holding(
+        problem,
+        |_, i| i.group == Group::Rotation,
+        &start,
+        "translation",
+    );
+    let sol = LevenbergMarquardt.solve(&task, &start, &Options::default(), &mut Silent);
+    for (j, info) in model.params().iter().enumerate() {
+        if info.group == Group::Rotation {
+            assert_eq!(sol.params[j], start[j], "{}", info.name);
+        }
+    }
+    assert!(model.constraints().max_violation(&sol.params) < 1e-12);
+    // Every phasing runs its phases; repeating TR sub-loops lowers the error towards the joint
+    // fit (block coordinate descent).
+    let run = |phasing, subloops| {
+        let s = Strategy {
+            phasing,
+            subloops,
+            init_tracker: true,
+        };
+        identify_errors(
+            &LevenbergMarquardt,
+            problem,
+            &start,
+            Errors::All,
+            &s,
+            &Options::default(),
+            &mut Silent,
+        )
+    };
+    for (phasing, n) in [
+        (Phasing::Two, 2),
+        (Phasing::Tr, 2),
+        (Phasing::Rt, 2),
+        (Phasing::ThreeTr, 3),
+        (Phasing::ThreeRt, 3),
+    ] {
+        let id = run(phasing, 1);
+        assert_eq!(id.phases.len(), n, "{phasing:?}");
+        assert!(
+            !id.termination.failed(),
+            "{phasing:?}: {:?}",
+            id.termination
+        );
+        assert!(id.final_.stats.emm_um < id.initial.stats.emm_um);
+    }
+    let one = run(Phasing::Tr, 1).final_.stats.emm_um;
+    let many = run(Phasing::Tr, 8).final_.stats.emm_um;
+    let joint = run(Phasing::One, 1).final_.stats.emm_um;
+    println!("TR ×1 {one} µm, TR ×8 {many} µm, joint {joint} µm");
+    assert!(many < one && joint <= many);
+}
+
+#[test]
+fn combined_independent_and_cross_validation_methods() {
+    use volver::solvers::strategy::{combined, cross_validate, independent};
+    let m = Machine::default_xcfz();
+    let truth = Truth::random(
+        &m,
+        &ErrorModelSpec::complete(&m),
+        &Magnitudes::default(),
+        13,
+    )
+    .unwrap();
+    let sets: Vec<MeasurementSet> = ["test1", "test2", "test3", "test4"]
+        .iter()
+        .map(|plan| {
+            let mut sim = Simulation::new(Plan::preset(&m, plan).unwrap(), truth.clone(), 13);
+            sim.noise = TrackerNoise::NONE;
+            sim.run().unwrap().measurements
+        })
+        .collect();
+    let model = Model::default_xcfz();
+    let pr: Vec<Problem> = sets
+        .iter()
+        .map(|s| Problem::new(&model, s).unwrap())
+        .collect();
+    let (o, s, p0) = (
+        Options::default(),
+        Strategy::default(),
+        model.initial_params(),
+    );
+    let reference =
+        |params: &[f64]| cross_validate(&LevenbergMarquardt, pr[3], params, &o, &mut Silent);
+    // Joint on the reference itself: cross-validation reproduces its own fit.
+    let joint = identify(&LevenbergMarquardt, pr[3], &p0, &s, &o, &mut Silent);
+    let cv = reference(&joint.params);
+    assert!(cv.final_.stats.emm_um <= joint.final_.stats.emm_um * (1.0 + 1e-9));
+    // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
+    let (lin, rot) = combined(&LevenbergMarquardt, pr[0], pr[2], &p0, &s, &o, &mut Silent);
+    for (j, info) in model.params().iter().enumerate() {
+        if let volver::core::model::Owner::Term { term, .. } = info.owner
+            && !model.terms()[term].id.axis().is_rotary()
+        {
+            assert_eq!(
+                rot.params[j], lin.params[j],
+                "{} held in the rotary phase",
+                info.name
+            );
+        }
+    }
+    let c = reference(&rot.params);
+    // Tests 1 + 2: each group alone.
+    let (ind, _, _) = independent(&LevenbergMarquardt, pr[0], pr[1], &p0, &s, &o, &mut Silent);
+    let i = reference(&ind);
+    println!(
+        "reference test 4: uncompensated {} µm; joint {} µm; combined {} µm ({:.2} %); independent {} µm ({:.2} %)",
+        c.initial.stats.emm_um,
+        cv.final_.stats.emm_um,
+        c.final_.stats.emm_um,
+        c.residual_percent(),
+        i.final_.stats.emm_um,
+        i.residual_percent()
+    );
+    assert!(c.final_.stats.emm_um < 0.5 * c.initial.stats.emm_um);
+    assert!(cv.final_.stats.emm_um < c.final_.stats.emm_um);
+}

@@ -180,16 +180,23 @@ fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
 struct Free {
     d: Vec<f64>,
     ns: NullSpace,
+    /// Parameters held at a value: set exactly, not to rounding.
+    fixed: Vec<(usize, f64)>,
 }
 
 impl Free {
     fn params(&self, z: &[f64]) -> Vec<f64> {
-        self.ns
+        let mut p: Vec<f64> = self
+            .ns
             .expand(z)
             .iter()
             .zip(&self.d)
             .map(|(s, d)| s * d)
-            .collect()
+            .collect();
+        for &(j, v) in &self.fixed {
+            p[j] = v;
+        }
+        p
     }
 }
 
@@ -281,7 +288,16 @@ impl Solver for LevenbergMarquardt {
         };
         let nf = ns.n_free();
         summary.free_parameters = nf;
-        let free = Free { d, ns };
+        let fixed = task
+            .constraints
+            .rows
+            .iter()
+            .filter_map(|r| match r.coeffs.as_slice() {
+                [(j, c)] if *c != 0.0 => Some((*j, r.rhs / c)),
+                _ => None,
+            })
+            .collect();
+        let free = Free { d, ns, fixed };
         let mut z = vec![0.0; nf];
         let mut p = free.params(&z);
         if nf == 0 {
