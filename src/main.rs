@@ -1,5 +1,7 @@
 //! The `volver` command-line tool.
 
+mod study;
+
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
@@ -37,6 +39,15 @@ enum Command {
         /// Error-model file (TOML); the paper's model when absent (needs the default machine).
         #[arg(long)]
         model: Option<PathBuf>,
+    },
+    /// Reruns the paper's studies (tables 5, 6, 8, 11, 12) on synthetic data and prints our
+    /// figures beside the paper's, with a note per table on why they differ.
+    Study {
+        /// Which study: paper.
+        which: String,
+        /// Seed of the true errors and the noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
     /// Identifies the geometric errors and the tracker pose from measurements.
     ///
@@ -184,6 +195,16 @@ fn main() -> Result<()> {
             print_layout(&model)?;
         }
         Command::Identify(args) => identify_command(args)?,
+        Command::Study { which, seed } => {
+            if which != "paper" {
+                anyhow::bail!("unknown study '{which}': the study is `paper`");
+            }
+            println!(
+                "volver study paper — the paper's studies on synthetic data (seed {seed}, default magnitudes × {})",
+                study::MAGNITUDE_SCALE
+            );
+            study::print(&study::paper(seed)?);
+        }
         Command::Simulate {
             plan,
             seed,

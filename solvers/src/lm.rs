@@ -368,10 +368,11 @@ impl Solver for LevenbergMarquardt {
             };
             let (mu, vecs) = (evd.S().column_vector(), evd.U());
             let mu_max = mu[nf - 1].max(0.0);
-            // The Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: the
-            // tolerance relaxes as Φ falls, so a (nearly) exact fit may use every direction.
+            // The Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once
+            // Φ is below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
+            // tolerance relaxes in proportion, so such a fit may use every direction.
             let phi_now = norms.iter().sum::<f64>() / np as f64;
-            let tolerance = options.rank_tolerance * (phi_now / phi0).min(1.0);
+            let tolerance = options.rank_tolerance * (1e4 * phi_now / phi0).min(1.0);
             let keep: Vec<usize> = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).collect();
             summary.unidentifiable = nf - keep.len();
             let gv: Vec<f64> = (0..nf)

@@ -67,11 +67,12 @@ pub struct Options {
     /// Default 1e-4.
     pub initial_damping: f64,
     /// Directions of the scaled normal matrix whose curvature is below this fraction of the
-    /// largest, times Φ / Φ_start (at most 1), are not identifiable from the data and are held
-    /// (no step along them), so that nearly redundant parameters do not drift to meaningless
-    /// values while Φ creeps down by fractions of a nanometre. The factor Φ / Φ_start frees them
-    /// again as the fit becomes exact, where the Gauss–Newton model is exact too. Default 1e-10
-    /// (a condition number of 10⁵ on the scaled Jacobian).
+    /// largest are not identifiable from the data and are held (no step along them), so that
+    /// nearly redundant parameters do not drift to meaningless values while Φ creeps down by
+    /// fractions of a nanometre. Once Φ falls below 1e-4 of its start (a nearly exact fit, where
+    /// the Gauss–Newton model is exact too) the fraction shrinks in proportion, so an exact fit
+    /// may use every direction. Default 1e-10 (a condition number of 10⁵ on the scaled
+    /// Jacobian).
     pub rank_tolerance: f64,
     /// Φ only: the smoothing ε of the IRLS weights `1/√(‖r‖² + ε²)` starts at this fraction of
     /// Φ and shrinks tenfold each time the smoothed problem converges. Default 0.1.
