@@ -393,3 +393,50 @@ fn combined_independent_and_cross_validation_methods() {
     assert!(c.final_.stats.emm_um < 0.5 * c.initial.stats.emm_um);
     assert!(cv.final_.stats.emm_um < c.final_.stats.emm_um);
 }
+
+#[test]
+fn the_rigid_fit_finds_a_tilted_and_displaced_tracker() {
+    use volver::core::simulate::Effect;
+    use volver::solvers::init::init_tracker;
+    let m = Machine::default_xcfz();
+    let mags = Magnitudes {
+        tracker_mm: 10.0,
+        ..Magnitudes::ZERO
+    };
+    let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &mags, 21).unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 21);
+    sim.noise = TrackerNoise::NONE;
+    sim.effects = vec![Effect::TrackerTilt {
+        rx_urad: 300.0,
+        ry_urad: -150.0,
+    }];
+    let out = sim.run().unwrap();
+    let mut spec = ErrorModelSpec::complete(&m);
+    spec.tracker.identify = ["x", "y", "z", "rx", "ry", "rz"].map(String::from).to_vec();
+    let model = Model::new(m, spec).unwrap();
+    let problem = Problem::new(&model, &out.measurements).unwrap();
+    let p = init_tracker(&problem, &model.initial_params()).unwrap();
+    let t = model.tracker_start();
+    let want = out.truth.tracker_pose();
+    for k in 0..6 {
+        // Second order in the angles: R⁻¹(w) of eq. 4 is not exactly a rotation.
+        let tol = if k < 3 { 1e-6 } else { 1e-8 };
+        assert!(
+            (p[t + k] - want[k]).abs() < tol,
+            "pose {k}: {} vs {}",
+            p[t + k],
+            want[k]
+        );
+    }
+    // A tracker turned by degrees is an error in the machine file, reported as such.
+    let mut spec = model.machine().spec().clone();
+    spec.tracker.orientation_deg = [0.0, 0.0, 5.0];
+    let turned = Machine::from_spec(spec, "turned").unwrap();
+    let model2 = Model::new(turned, model.spec().clone()).unwrap();
+    let e = init_tracker(
+        &Problem::new(&model2, &out.measurements).unwrap(),
+        &model2.initial_params(),
+    )
+    .unwrap_err();
+    assert!(e.contains("orientation_deg"), "{e}");
+}
