@@ -16,6 +16,7 @@
 //! - [`noise`], [`random`]: the tracker's noise model and a seeded random source;
 //! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
 //! - [`metrics`]: EMM and EMax;
+//! - [`diagnose`]: where a model fails (residual breakdowns, periodograms, repeat noise);
 //! - [`problem`]: a model with its measurements: residuals, Φ, ve.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
@@ -35,6 +36,7 @@
 
 pub mod basis;
 pub mod chain;
+pub mod diagnose;
 pub mod error;
 pub mod iso;
 pub mod kinematics;

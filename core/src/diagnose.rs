@@ -1,0 +1,376 @@
+//! Where a model fails: its residuals broken down by axis position, reflector, time and tracker
+//! distance, periodograms against an axis, the largest outliers, and the noise estimated from
+//! repeated points. The first part of the diagnosis loop; candidates for the missing effect
+//! come next.
+//!
+//! ```
+//! use volver_core::diagnose::{by_axis, largest};
+//! use volver_core::machine::Machine;
+//! use volver_core::measure::MeasurementSet;
+//! use volver_core::model::Model;
+//! use volver_core::problem::Problem;
+//! let model = Model::default_xcfz();
+//! let csv = "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.003,75,1450\nR1,1400,0,0,-449.99,75,1450\n";
+//! let data = MeasurementSet::from_csv_str(model.machine(), csv, "inline.csv").unwrap();
+//! let problem = Problem::new(&model, &data).unwrap();
+//! let r = problem.residuals(&model.initial_params());
+//! let b = by_axis(&problem, &r, 0, 8);
+//! assert_eq!(b.bins.len(), 2); // two distinct X positions
+//! assert!((b.bins[1].stats.emm_um - 10.0).abs() < 1e-6);
+//! assert_eq!(largest(&r, 1)[0].0, 1);
+//! ```
+
+use crate::kinematics::{PointErrors, predict_with_tool_shift};
+use crate::metrics::ErrorStats;
+use crate::problem::{Problem, norm};
+use std::f64::consts::PI;
+
+/// Residuals of the points that fall in one bin.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bin {
+    /// The bin's label (`0 … 200 mm`, `R1`).
+    pub label: String,
+    /// Lower end of the bin (in the breakdown's unit; the index for categories).
+    pub from: f64,
+    /// Upper end.
+    pub to: f64,
+    /// Points in the bin.
+    pub count: usize,
+    /// EMM and EMax of their residuals (µm).
+    pub stats: ErrorStats,
+    /// Mean residual vector (µm, tracker frame): a systematic offset the model misses.
+    pub mean_um: [f64; 3],
+}
+
+/// A breakdown of the residuals by one quantity.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Breakdown {
+    /// What the residuals are broken down by (`X`, `reflector`, `t_s` …).
+    pub by: String,
+    /// Its unit (`mm`, `deg`, `s`, or empty).
+    pub unit: String,
+    /// The bins in increasing order.
+    pub bins: Vec<Bin>,
+}
+
+impl Breakdown {
+    /// Largest bin EMM divided by the smallest (1 when uniform; ∞ if a bin is exact).
+    pub fn spread(&self) -> f64 {
+        let emms = self.bins.iter().map(|b| b.stats.emm_um);
+        let (lo, hi) = emms.fold((f64::INFINITY, 0.0_f64), |(l, h), e| (l.min(e), h.max(e)));
+        if self.bins.is_empty() { 1.0 } else { hi / lo }
+    }
+}
+
+fn bin_of(label: String, from: f64, to: f64, members: &[[f64; 3]]) -> Bin {
+    let n = members.len().max(1) as f64;
+    let mean_um = [0, 1, 2].map(|c| members.iter().map(|r| r[c]).sum::<f64>() / n * 1e3);
+    Bin {
+        label,
+        from,
+        to,
+        count: members.len(),
+        stats: ErrorStats::of_modules(members.iter().map(|r| norm(*r))),
+        mean_um,
+    }
+}
+
+/// Breaks residuals down by a value per point: one bin per distinct value when there are at
+/// most `max_bins` of them (mesh positions), otherwise `max_bins` equal-width bins.
+pub fn by_values(
+    by: &str,
+    unit: &str,
+    values: &[f64],
+    residuals: &[[f64; 3]],
+    max_bins: usize,
+) -> Breakdown {
+    assert_eq!(values.len(), residuals.len(), "one value per residual");
+    let mut distinct: Vec<f64> = values.to_vec();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs().max(1.0));
+    let mut bins = Vec::new();
+    if distinct.len() <= max_bins.max(1) {
+        for &v in &distinct {
+            let members: Vec<[f64; 3]> = values
+                .iter()
+                .zip(residuals)
+                .filter(|(x, _)| (**x - v).abs() <= 1e-9 * v.abs().max(1.0))
+                .map(|(_, r)| *r)
+                .collect();
+            bins.push(bin_of(format!("{}", round(v)), v, v, &members));
+        }
+    } else {
+        let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
+        let width = (hi - lo) / max_bins as f64;
+        for k in 0..max_bins {
+            let (a, b) = (lo + k as f64 * width, lo + (k + 1) as f64 * width);
+            let last = k + 1 == max_bins;
+            let members: Vec<[f64; 3]> = values
+                .iter()
+                .zip(residuals)
+                .filter(|(x, _)| **x >= a && (**x < b || (last && **x <= hi)))
+                .map(|(_, r)| *r)
+                .collect();
+            if !members.is_empty() {
+                bins.push(bin_of(
+                    format!("{} … {}", round(a), round(b)),
+                    a,
+                    b,
+                    &members,
+                ));
+            }
+        }
+    }
+    Breakdown {
+        by: by.to_string(),
+        unit: unit.to_string(),
+        bins,
+    }
+}
+
+fn round(v: f64) -> f64 {
+    (v * 1e6).round() / 1e6
+}
+
+/// By the position of chain axis `k` (file units: mm or degrees).
+pub fn by_axis(problem: &Problem, residuals: &[[f64; 3]], k: usize, max_bins: usize) -> Breakdown {
+    let ax = &problem.model().machine().axes()[k];
+    let values: Vec<f64> = problem
+        .data()
+        .points
+        .iter()
+        .map(|p| ax.to_file_units(p.commands.0[k]))
+        .collect();
+    by_values(
+        &ax.axis.to_string(),
+        ax.file_unit(),
+        &values,
+        residuals,
+        max_bins,
+    )
+}
+
+/// By reflector.
+pub fn by_reflector(problem: &Problem, residuals: &[[f64; 3]]) -> Breakdown {
+    let refl = problem.model().machine().reflectors();
+    let bins = (0..refl.len())
+        .filter_map(|r| {
+            let members: Vec<[f64; 3]> = problem
+                .data()
+                .points
+                .iter()
+                .zip(residuals)
+                .filter(|(p, _)| p.reflector == r)
+                .map(|(_, res)| *res)
+                .collect();
+            (!members.is_empty()).then(|| bin_of(refl[r].id.clone(), r as f64, r as f64, &members))
+        })
+        .collect();
+    Breakdown {
+        by: "reflector".into(),
+        unit: String::new(),
+        bins,
+    }
+}
+
+/// By measurement time `t_s` (seconds), when every point has one.
+pub fn by_time(problem: &Problem, residuals: &[[f64; 3]], max_bins: usize) -> Option<Breakdown> {
+    let t: Option<Vec<f64>> = problem.data().points.iter().map(|p| p.t_s).collect();
+    t.map(|t| by_values("t_s", "s", &t, residuals, max_bins))
+}
+
+/// By distance from the tracker (mm, of the measured point).
+pub fn by_distance(problem: &Problem, residuals: &[[f64; 3]], max_bins: usize) -> Breakdown {
+    let d: Vec<f64> = problem
+        .data()
+        .points
+        .iter()
+        .map(|p| norm(p.measured))
+        .collect();
+    by_values("distance", "mm", &d, residuals, max_bins)
+}
+
+/// One line of a periodogram.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    /// Frequency in cycles per unit of the argument (per turn for a rotary axis).
+    pub frequency: f64,
+    /// Least-squares amplitude of `a cos 2πfx + b sin 2πfx` in each residual component (µm).
+    pub amplitude_um: [f64; 3],
+}
+
+impl Line {
+    /// Amplitude of the three components together (µm).
+    pub fn total_um(&self) -> f64 {
+        norm(self.amplitude_um)
+    }
+}
+
+/// Periodogram of the residuals against `x`: for each frequency, the least-squares fit of a
+/// sinusoid plus a constant to each residual component (Lomb–Scargle style, so uneven sampling
+/// is fine). Frequencies the sampling cannot tell apart from a constant give zero.
+pub fn periodogram(x: &[f64], residuals: &[[f64; 3]], frequencies: &[f64]) -> Vec<Line> {
+    assert_eq!(x.len(), residuals.len(), "one argument per residual");
+    frequencies
+        .iter()
+        .map(|&f| {
+            let w = 2.0 * PI * f;
+            // Normal equations of [1, cos, sin] per component.
+            let mut m = [[0.0; 3]; 3];
+            let mut rhs = [[0.0; 3]; 3];
+            for (xi, r) in x.iter().zip(residuals) {
+                let b = [1.0, (w * xi).cos(), (w * xi).sin()];
+                for i in 0..3 {
+                    for j in 0..3 {
+                        m[i][j] += b[i] * b[j];
+                    }
+                    for c in 0..3 {
+                        rhs[c][i] += b[i] * r[c];
+                    }
+                }
+            }
+            let amplitude_um =
+                [0, 1, 2].map(|c| solve3(m, rhs[c]).map_or(0.0, |s| s[1].hypot(s[2]) * 1e3));
+            Line {
+                frequency: f,
+                amplitude_um,
+            }
+        })
+        .collect()
+}
+
+/// Solves a 3×3 symmetric system; `None` when singular.
+fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let det = |a: [[f64; 3]; 3]| {
+        a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
+            - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
+            + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
+    };
+    let d = det(m);
+    let scale = m[0][0] * m[1][1] * m[2][2];
+    if d.abs() <= 1e-10 * scale.abs() || d == 0.0 {
+        return None;
+    }
+    Some(std::array::from_fn(|k| {
+        let mut a = m;
+        for i in 0..3 {
+            a[i][k] = b[i];
+        }
+        det(a) / d
+    }))
+}
+
+/// Periodogram against chain axis `k`: harmonics 1 … `max_order` per turn for a rotary axis
+/// (argument in turns), per travel length for a linear one.
+pub fn axis_periodogram(
+    problem: &Problem,
+    residuals: &[[f64; 3]],
+    k: usize,
+    max_order: usize,
+) -> Vec<Line> {
+    let ax = &problem.model().machine().axes()[k];
+    let span = if ax.axis.is_rotary() {
+        2.0 * PI
+    } else {
+        ax.max - ax.min
+    };
+    let x: Vec<f64> = problem
+        .data()
+        .points
+        .iter()
+        .map(|p| (p.commands.0[k] - ax.min) / span)
+        .collect();
+    let f: Vec<f64> = (1..=max_order).map(|h| h as f64).collect();
+    periodogram(&x, residuals, &f)
+}
+
+/// Residuals turned from the tracker frame into the machine frame: for a tracker standing on the
+/// workpiece (on the table of XCFZ) the tracker frame turns with the workpiece-side axes, which
+/// smears an error fixed in the machine over neighbouring harmonics; in the machine frame a
+/// rotary error of harmonic h shows at h. The rotation is that of the nominal chain seen from
+/// the tracker pose in `params`.
+pub fn to_machine_frame(
+    problem: &Problem,
+    params: &[f64],
+    residuals: &[[f64; 3]],
+) -> Vec<[f64; 3]> {
+    let model = problem.model();
+    let machine = model.machine();
+    let mut e = PointErrors::<f64>::zero();
+    let t = model.tracker_start();
+    e.tracker.copy_from_slice(&params[t..t + 6]);
+    problem
+        .data()
+        .points
+        .iter()
+        .zip(residuals)
+        .map(|(p, r)| {
+            let offset = &machine.reflectors()[p.reflector].offset;
+            let base = predict_with_tool_shift(machine, &p.commands, offset, &e, None);
+            // Columns of the map machine → tracker: the images of unit tool shifts.
+            let cols: [[f64; 3]; 3] = std::array::from_fn(|j| {
+                let mut d = [0.0; 3];
+                d[j] = 1.0;
+                let q = predict_with_tool_shift(machine, &p.commands, offset, &e, Some(d));
+                [q[0] - base[0], q[1] - base[1], q[2] - base[2]]
+            });
+            // Rᵀ r (R is a rotation).
+            std::array::from_fn(|j| cols[j][0] * r[0] + cols[j][1] * r[1] + cols[j][2] * r[2])
+        })
+        .collect()
+}
+
+/// The `k` largest residual modules: (point index, µm), largest first.
+pub fn largest(residuals: &[[f64; 3]], k: usize) -> Vec<(usize, f64)> {
+    let mut v: Vec<(usize, f64)> = residuals
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (i, norm(*r) * 1e3))
+        .collect();
+    v.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    v.truncate(k);
+    v
+}
+
+/// The noise estimated from repeated points (same commands and reflector measured twice or
+/// more, e.g. C = 0° and C = 360° in the paper's meshes): EMM and EMax of `(m₁ − m₂)/√2` over
+/// consecutive repeats, and the number of pairs. `None` without repeats.
+///
+/// For normal noise the difference of two readings divided by √2 has the noise's own
+/// distribution, so this estimates the noise error without knowing the truth. Drift between the
+/// readings counts as noise here.
+pub fn repeat_noise(problem: &Problem) -> Option<(ErrorStats, usize)> {
+    let machine = problem.model().machine();
+    let pts = &problem.data().points;
+    // Rotary positions a full turn apart are the same pose.
+    let key = |i: usize| -> Vec<i64> {
+        let p = &pts[i];
+        let mut k: Vec<i64> = machine
+            .axes()
+            .iter()
+            .enumerate()
+            .map(|(j, ax)| {
+                let mut u = p.commands.0[j];
+                if ax.axis.is_rotary() {
+                    u = u.rem_euclid(2.0 * PI);
+                    if (u - 2.0 * PI).abs() < 1e-9 {
+                        u = 0.0;
+                    }
+                }
+                (u * 1e6).round() as i64
+            })
+            .collect();
+        k.push(p.reflector as i64);
+        k
+    };
+    let mut order: Vec<usize> = (0..pts.len()).collect();
+    order.sort_by_key(|&i| (key(i), i));
+    let mut diffs = Vec::new();
+    for w in order.windows(2) {
+        if key(w[0]) == key(w[1]) {
+            let (a, b) = (pts[w[0]].measured, pts[w[1]].measured);
+            diffs.push(norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) / 2f64.sqrt());
+        }
+    }
+    (!diffs.is_empty()).then(|| (ErrorStats::of_modules(diffs.iter().copied()), diffs.len()))
+}
