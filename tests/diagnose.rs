@@ -5,7 +5,6 @@ use volver::core::diagnose::{
     axis_periodogram, by_axis, by_reflector, by_time, largest, repeat_noise, to_machine_frame,
 };
 use volver::core::machine::Machine;
-use volver::core::model::ErrorModelSpec;
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
 use volver::core::problem::Problem;
@@ -13,13 +12,7 @@ use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 
 fn truth(seed: u64) -> Truth {
     let m = Machine::default_xcfz();
-    Truth::random(
-        &m,
-        &ErrorModelSpec::complete(&m),
-        &Magnitudes::default(),
-        seed,
-    )
-    .unwrap()
+    Truth::random_complete(&m, &Magnitudes::default(), seed).unwrap()
 }
 
 fn run(plan: Plan, t: Truth, noise: TrackerNoise, effects: Vec<Effect>) -> Synthetic {

@@ -22,13 +22,7 @@ fn xcfz() -> Machine {
 
 fn random_truth(seed: u64) -> Truth {
     let m = xcfz();
-    Truth::random(
-        &m,
-        &ErrorModelSpec::complete(&m),
-        &Magnitudes::default(),
-        seed,
-    )
-    .unwrap()
+    Truth::random_complete(&m, &Magnitudes::default(), seed).unwrap()
 }
 
 fn zero_truth() -> Truth {

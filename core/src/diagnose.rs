@@ -10,8 +10,15 @@
 //! use volver_core::model::Model;
 //! use volver_core::problem::Problem;
 //! let model = Model::default_xcfz();
-//! let csv = "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.003,75,1450\nR1,1400,0,0,-449.99,75,1450\n";
-//! let data = MeasurementSet::from_csv_str(model.machine(), csv, "inline.csv").unwrap();
+//! let p0 = model.initial_params();
+//! let at = |x: f64| model.machine().commands_from_file_units(&[x, 0.0, 0.0]);
+//! let (a, b) = (model.predict(&at(0.0), 0, &p0), model.predict(&at(1400.0), 0, &p0));
+//! // Measured 3 µm off at X = 0 and 10 µm off at X = 1400.
+//! let csv = format!(
+//!     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,{},{},{}\nR1,1400,0,0,{},{},{}\n",
+//!     a[0] + 0.003, a[1], a[2], b[0] + 0.010, b[1], b[2]
+//! );
+//! let data = MeasurementSet::from_csv_str(model.machine(), &csv, "inline.csv").unwrap();
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let r = problem.residuals(&model.initial_params());
 //! let b = by_axis(&problem, &r, 0, 8);

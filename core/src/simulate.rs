@@ -392,6 +392,16 @@ impl Truth {
         Ok(Truth { model, params: p })
     }
 
+    /// [`Truth::random`] with every error of the machine ([`ErrorModelSpec::complete`]).
+    pub fn random_complete(machine: &Machine, magnitudes: &Magnitudes, seed: u64) -> Result<Truth> {
+        Truth::random(
+            machine,
+            &ErrorModelSpec::complete(machine),
+            magnitudes,
+            seed,
+        )
+    }
+
     /// The truth held in a results file (`file` names it in messages).
     pub fn from_results(results: &ResultsFile, file: &str) -> Result<Truth> {
         let (model, params) = results.to_model(file)?;
