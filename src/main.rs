@@ -774,15 +774,7 @@ fn demo_simulation(model: &Model) -> Result<()> {
     for line in csv.lines().take(3) {
         println!("    {line}");
     }
-    let problem = Problem::new(model, &out.measurements)?;
-    let id = identify(
-        &LevenbergMarquardt,
-        problem,
-        &model.initial_params(),
-        &Strategy::default(),
-        &Options::default(),
-        &mut Progress { quiet: true },
-    );
+    let id = volver::solvers::strategy::fit(Problem::new(model, &out.measurements)?);
     println!(
         "\nIdentification (native Levenberg–Marquardt, objective Φ, one phase, {} free parameters):",
         id.phases.first().map_or(0, |s| s.free_parameters)

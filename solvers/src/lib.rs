@@ -9,10 +9,12 @@
 //! - [`lm`]: the native Levenberg–Marquardt engine on faer (always available);
 //! - [`strategy`]: phases (table 1 of the paper), sub-loops, and the joint, independent,
 //!   combined and cross-validation methods, for any engine;
+//! - [`identifiability`]: rank, condition, uncertainties, correlations, inseparable parameters;
 //! - [`init`]: the tracker pose's starting value by a rigid best fit (Kabsch);
 //! - [`nullspace`]: constraint elimination, `p = p₀ + N z`.
 #![deny(missing_docs)]
 
+pub mod identifiability;
 pub mod init;
 pub mod lm;
 pub mod nullspace;

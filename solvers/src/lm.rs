@@ -57,16 +57,20 @@ pub struct LevenbergMarquardt;
 
 /// Normal equations of one pass at a point: `H` (accumulated in its lower triangle, then
 /// mirrored) and `g`.
-struct Normal {
-    h: Mat<f64>,
-    g: Vec<f64>,
+pub(crate) struct Normal {
+    pub(crate) h: Mat<f64>,
+    pub(crate) g: Vec<f64>,
 }
 
 /// `H = Σ J_iᵀ W_i J_i` and `g = Σ w_i J_iᵀ r_i`, where `weight(‖r_i‖)` gives `(w_i, c_i)` and
 /// `W_i = w_i (I − c_i r̂_i r̂_iᵀ)` (the exact Gauss–Newton Hessian of the loss on each point:
 /// `c = 0` for ve; for Φ_ε the radial direction carries less curvature than the tangential ones,
 /// Ceres' "Triggs correction"). `None` when a residual or Jacobian entry is not finite.
-fn accumulate(problem: &Problem, p: &[f64], weight: impl Fn(f64) -> (f64, f64)) -> Option<Normal> {
+pub(crate) fn accumulate(
+    problem: &Problem,
+    p: &[f64],
+    weight: impl Fn(f64) -> (f64, f64),
+) -> Option<Normal> {
     let n = p.len();
     let np = problem.n_points();
     let mut h = Mat::<f64>::zeros(n, n);
@@ -120,6 +124,31 @@ fn accumulate(problem: &Problem, p: &[f64], weight: impl Fn(f64) -> (f64, f64)) 
         }
     }
     Some(Normal { h, g })
+}
+
+/// Column scaling `D` (inverse column norms of the Jacobian, from the diagonal of `JᵀJ`; 1 for
+/// a parameter the data do not see) and the null space of the constraints in the scaled
+/// coordinates `s = p / D`, anchored at `anchor`.
+pub(crate) fn scaled_null_space(
+    h: &Mat<f64>,
+    constraints: &volver_core::model::Constraints,
+    anchor: &[f64],
+) -> (
+    Vec<f64>,
+    Result<NullSpace, crate::nullspace::ConstraintError>,
+) {
+    let n = anchor.len();
+    let d: Vec<f64> = (0..n)
+        .map(|j| {
+            let c = h[(j, j)];
+            if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
+        })
+        .collect();
+    let (a, b) = constraints.dense(n);
+    let a_scaled: Vec<f64> = (0..b.len() * n).map(|k| a[k] * d[k % n]).collect();
+    let anchor_scaled: Vec<f64> = anchor.iter().zip(&d).map(|(p, d)| p / d).collect();
+    let ns = NullSpace::new(&a_scaled, &b, &anchor_scaled);
+    (d, ns)
 }
 
 /// The smoothed objective from residual modules: ve, or Φ_ε.
@@ -266,17 +295,8 @@ impl Solver for LevenbergMarquardt {
         };
         summary.evaluations += 1;
         summary.jacobian_evaluations += 1;
-        let d: Vec<f64> = (0..n)
-            .map(|j| {
-                let c = first.h[(j, j)];
-                if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
-            })
-            .collect();
-        let (a, b) = task.constraints.dense(n);
-        let rows = b.len();
-        let a_scaled: Vec<f64> = (0..rows * n).map(|k| a[k] * d[k % n]).collect();
-        let anchor: Vec<f64> = start.iter().zip(&d).map(|(p, d)| p / d).collect();
-        let ns = match NullSpace::new(&a_scaled, &b, &anchor) {
+        let (d, ns) = scaled_null_space(&first.h, &task.constraints, start);
+        let ns = match ns {
             Ok(ns) => ns,
             Err(e) => {
                 return finish(

@@ -271,6 +271,30 @@ pub fn identify(
     )
 }
 
+/// The joint method with the native engine, the default strategy (one phase, tracker fitted
+/// rigidly first) and default options, from the model's initial parameters: the common case.
+///
+/// ```
+/// # use volver_core::{machine::Machine, model::Model, plan::Plan, problem::Problem};
+/// # use volver_core::simulate::{Magnitudes, Simulation, Truth};
+/// let m = Machine::default_xcfz();
+/// let truth = Truth::random_complete(&m, &Magnitudes::default(), 2).unwrap();
+/// let data = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 2).run().unwrap().measurements;
+/// let model = Model::default_xcfz();
+/// let id = volver_solvers::strategy::fit(Problem::new(&model, &data).unwrap());
+/// assert!(id.termination.converged() && id.final_.stats.emm_um < id.initial.stats.emm_um);
+/// ```
+pub fn fit(problem: Problem) -> Identification {
+    identify(
+        &crate::lm::LevenbergMarquardt,
+        problem,
+        &problem.model().initial_params(),
+        &Strategy::default(),
+        &Options::default(),
+        &mut crate::Silent,
+    )
+}
+
 /// Tests 1 + 2: the linear-axis errors identified on `linear` alone (rotary errors held at
 /// `start`), the rotary-axis errors on `rotary` alone (linear errors held at `start`); the result
 /// takes each group from its own identification and the tracker pose from the rotary one.

@@ -1,0 +1,152 @@
+//! What the data can identify: rank and condition of the design after the constraints, the
+//! standard uncertainty of every parameter (from the Jacobian and the residual variance),
+//! parameter correlations, and the combinations of parameters the data cannot separate.
+//!
+//! The analysis works in the scaled, constraint-free coordinates of the engine
+//! ([`crate::lm`]): `p = D (s₀ + N z)` with `D` the inverse column norms of the Jacobian. The
+//! normal matrix `H_z = Nᵀ D JᵀJ D N` is eigen-decomposed; directions whose curvature is below
+//! `tolerance` × the largest are not identifiable and are reported by the parameters they
+//! move. The covariance of the rest is `σ² H_z⁺` with `σ²` the residual variance per
+//! coordinate, `Σ‖r‖² / (3n − rank)`, mapped back to the parameters.
+
+use crate::Task;
+use crate::lm::{accumulate, scaled_null_space};
+use faer::{Mat, Side};
+
+/// A combination of parameters the data cannot identify.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WeakDirection {
+    /// Its curvature relative to the best-determined direction.
+    pub relative_curvature: f64,
+    /// The parameters it moves most (index, share of the scaled direction, sign included),
+    /// largest first, shares above 0.1.
+    pub parameters: Vec<(usize, f64)>,
+}
+
+/// The identifiability of a model on a data set at a parameter vector.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Identifiability {
+    /// Free directions after the constraints.
+    pub free: usize,
+    /// Directions the data identify (curvature above the tolerance).
+    pub rank: usize,
+    /// Condition number of the scaled Jacobian over the identified directions.
+    pub condition: f64,
+    /// Condition number over every free direction (∞ when one is exactly redundant).
+    pub condition_all: f64,
+    /// Residual standard deviation per coordinate (mm).
+    pub sigma_mm: f64,
+    /// Standard uncertainty of every parameter in its unit (0 for held parameters); only the
+    /// identified directions contribute.
+    pub uncertainty: Vec<f64>,
+    /// Pairs of parameters whose correlation exceeds the threshold: (i, j, correlation).
+    pub correlations: Vec<(usize, usize, f64)>,
+    /// The directions that are not identified, weakest first.
+    pub weak: Vec<WeakDirection>,
+}
+
+/// Analyses `task` (its problem and constraints) at `params`. `tolerance` is the relative
+/// curvature below which a direction counts as not identified (the engine's
+/// `Options::rank_tolerance`, 1e-10 by default); correlations above `correlation` in absolute
+/// value are listed. `None` when the Jacobian is not finite or a decomposition fails.
+pub fn analyse(
+    task: &Task,
+    params: &[f64],
+    tolerance: f64,
+    correlation: f64,
+) -> Option<Identifiability> {
+    let problem = &task.problem;
+    let n = params.len();
+    let normal = accumulate(problem, params, |_| (1.0, 0.0))?;
+    let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
+    let ns = ns.ok()?;
+    let nf = ns.n_free();
+    let basis = ns.basis();
+    let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
+    let hz = basis.transpose() * (&hs * basis);
+    let residual_sq: f64 = problem
+        .residuals(params)
+        .iter()
+        .map(|r| r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        .sum();
+    if nf == 0 {
+        return Some(Identifiability {
+            free: 0,
+            rank: 0,
+            condition: 1.0,
+            condition_all: 1.0,
+            sigma_mm: (residual_sq / (3 * problem.n_points()) as f64).sqrt(),
+            uncertainty: vec![0.0; n],
+            correlations: vec![],
+            weak: vec![],
+        });
+    }
+    let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
+    let (mu, v) = (evd.S().column_vector(), evd.U());
+    let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+    let kept: Vec<usize> = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).collect();
+    let rank = kept.len();
+    let dof = (3 * problem.n_points()).saturating_sub(rank).max(1);
+    let sigma2 = residual_sq / dof as f64;
+    // Covariance in the parameters: D N (Σ_kept v vᵀ / μ) Nᵀ D σ².
+    // Columns: w_i = D N v_i / √μ_i.
+    let w: Vec<Vec<f64>> = kept
+        .iter()
+        .map(|&i| {
+            (0..n)
+                .map(|j| {
+                    d[j] * (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum::<f64>() / mu[i].sqrt()
+                })
+                .collect()
+        })
+        .collect();
+    let cov = |i: usize, j: usize| sigma2 * w.iter().map(|c| c[i] * c[j]).sum::<f64>();
+    let uncertainty: Vec<f64> = (0..n).map(|j| cov(j, j).max(0.0).sqrt()).collect();
+    let mut correlations = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (si, sj) = (uncertainty[i], uncertainty[j]);
+            if si > 0.0 && sj > 0.0 {
+                let c = cov(i, j) / (si * sj);
+                if c.abs() > correlation {
+                    correlations.push((i, j, c));
+                }
+            }
+        }
+    }
+    correlations.sort_by(|a, b| b.2.abs().total_cmp(&a.2.abs()));
+    let weak = (0..nf)
+        .filter(|i| !kept.contains(i))
+        .map(|i| {
+            let dir: Vec<f64> = (0..n)
+                .map(|j| (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum())
+                .collect();
+            let mut parameters: Vec<(usize, f64)> = dir
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| x.abs() > 0.1)
+                .map(|(j, x)| (j, *x))
+                .collect();
+            parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            WeakDirection {
+                relative_curvature: mu[i].max(0.0) / mu_max,
+                parameters,
+            }
+        })
+        .collect();
+    let mu_min_kept = kept.first().map_or(mu_max, |&i| mu[i]);
+    Some(Identifiability {
+        free: nf,
+        rank,
+        condition: (mu_max / mu_min_kept).sqrt(),
+        condition_all: if mu[0] > 0.0 {
+            (mu_max / mu[0]).sqrt()
+        } else {
+            f64::INFINITY
+        },
+        sigma_mm: sigma2.sqrt(),
+        uncertainty,
+        correlations,
+        weak,
+    })
+}
