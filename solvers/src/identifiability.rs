@@ -10,8 +10,8 @@
 //! coordinate, `Σ‖r‖² / (3n − rank)`, mapped back to the parameters.
 
 use crate::Task;
-use crate::lm::{accumulate, scaled_null_space};
-use faer::{Mat, Side};
+use crate::lm::{Reduced, reduced_normal};
+use faer::Side;
 
 /// A combination of parameters the data cannot identify.
 #[derive(Clone, Debug, PartialEq)]
@@ -57,13 +57,9 @@ pub fn analyse(
 ) -> Option<Identifiability> {
     let problem = &task.problem;
     let n = params.len();
-    let normal = accumulate(problem, params, |_| (1.0, 0.0))?;
-    let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
-    let ns = ns.ok()?;
+    let Reduced { d, ns, hz, .. } = reduced_normal(task, params)?;
     let nf = ns.n_free();
     let basis = ns.basis();
-    let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
-    let hz = basis.transpose() * (&hs * basis);
     let residual_sq: f64 = problem
         .residuals(params)
         .iter()

@@ -9,11 +9,13 @@
 //! - [`lm`]: the native Levenberg–Marquardt engine on faer (always available);
 //! - [`strategy`]: phases (table 1 of the paper), sub-loops, and the joint, independent,
 //!   combined and cross-validation methods, for any engine;
+//! - [`candidates`]: what the model misses, ranked by a score test;
 //! - [`identifiability`]: rank, condition, uncertainties, correlations, inseparable parameters;
 //! - [`init`]: the tracker pose's starting value by a rigid best fit (Kabsch);
 //! - [`nullspace`]: constraint elimination, `p = p₀ + N z`.
 #![deny(missing_docs)]
 
+pub mod candidates;
 pub mod identifiability;
 pub mod init;
 pub mod lm;

@@ -151,6 +151,36 @@ pub(crate) fn scaled_null_space(
     (d, ns)
 }
 
+/// The least-squares normal equations of a task at `params`, reduced to the scaled free
+/// coordinates: `p = D (s₀ + N z)`, `H_z = Nᵀ D JᵀJ D N`, `g_z = Nᵀ D Jᵀ r`.
+pub(crate) struct Reduced {
+    /// Column scaling D.
+    pub(crate) d: Vec<f64>,
+    /// Null space of the scaled constraints.
+    pub(crate) ns: NullSpace,
+    /// Reduced normal matrix.
+    pub(crate) hz: Mat<f64>,
+    /// Reduced gradient of ½‖r‖².
+    pub(crate) gz: Vec<f64>,
+}
+
+/// [`Reduced`] normal equations; `None` when the Jacobian is not finite or the constraints
+/// cannot be eliminated.
+pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
+    let n = params.len();
+    let normal = accumulate(&task.problem, params, |_| (1.0, 0.0))?;
+    let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
+    let ns = ns.ok()?;
+    let nf = ns.n_free();
+    let basis = ns.basis();
+    let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
+    let hz = basis.transpose() * (&hs * basis);
+    let gz: Vec<f64> = (0..nf)
+        .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * normal.g[i]).sum())
+        .collect();
+    Some(Reduced { d, ns, hz, gz })
+}
+
 /// The smoothed objective from residual modules: ve, or Φ_ε.
 fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
     let n = norms.len() as f64;

@@ -1,0 +1,386 @@
+//! What is missing: a library of candidate effects the model could add, each ranked by how much
+//! it would lower the error given what the model already explains.
+//!
+//! The score of a candidate is one Gauss–Newton step of the extended model from the current
+//! solution (the new parameters start at zero, so the start is the current fit): it measures the
+//! residual the candidate's Jacobian columns explain beyond the current ones — a score
+//! (Lagrange-multiplier) test — and the predicted EMM is the extended model evaluated after that
+//! step. Significance is ΔBIC = m·ln(RSS′/RSS) + Δk·ln m over the m = 3n residual coordinates
+//! (Δk the extra identified directions): below −10 is strong evidence. Candidates are ranked by
+//! ΔBIC, most negative first.
+//!
+//! Candidate ids (stable):
+//!
+//! | id | what it adds |
+//! |---|---|
+//! | `add:EAC` | an ISO 230 error the model leaves out (linear axes: Legendre of the model's polynomial degree, default 3; rotary: first-harmonic Fourier; location and squareness errors: a constant) |
+//! | `raise:EXX` | the next degree (polynomial) or harmonic (periodic) of one modelled error |
+//! | `raise-axis:C` | the next degree or harmonic of every modelled error of one axis |
+//! | `tracker-tilt` | the tracker's small rotations about its x and y axes, when the model holds them |
+//!
+//! Effects outside the ISO 230 model (thermal drift, a periodic positioning error, a reflector
+//! offset error, a tracker range scale error) join the library when the model can carry them.
+
+use crate::Task;
+use crate::lm::{Reduced, reduced_normal};
+use faer::Side;
+use volver_core::basis::{BasisKind, chebyshev_nodes};
+use volver_core::iso::{Axis, ErrorId, Unit};
+use volver_core::model::{ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
+use volver_core::problem::Problem;
+
+/// A candidate: an extension of the error model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Candidate {
+    /// Stable id (see the module table).
+    pub id: String,
+    /// What it means, in words.
+    pub description: String,
+    /// The extended error model.
+    pub spec: ErrorModelSpec,
+}
+
+/// A ranked candidate.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Score {
+    /// Candidate id.
+    pub id: String,
+    /// What it means.
+    pub description: String,
+    /// Extra directions the data identify with it.
+    pub added: usize,
+    /// Predicted EMM after adding it (µm).
+    pub emm_um: f64,
+    /// ΔBIC against the current model (negative: the data support it).
+    pub delta_bic: f64,
+    /// Size of the implied effect: its largest value over the travel, µm or µrad.
+    pub size: f64,
+    /// Unit of `size` (`µm` or `µrad`).
+    pub size_unit: &'static str,
+    /// Candidates the data cannot tell from this one: as many added directions and a ΔBIC
+    /// within 2 of it ("not worth more than a bare mention" on Kass and Raftery's scale), e.g. a
+    /// tilt of the tracker standing on the table and a tilt motion of the table. Listed under
+    /// the better of them.
+    pub equivalent: Vec<String>,
+}
+
+fn polynomial_degree(spec: &ErrorModelSpec) -> usize {
+    spec.errors
+        .iter()
+        .filter(|e| {
+            matches!(
+                e.basis,
+                Some(BasisKind::Legendre | BasisKind::Monomial | BasisKind::Chebyshev)
+            )
+        })
+        .map(|e| {
+            e.degree
+                .or(e.nodes.map(|n| n.saturating_sub(1)))
+                .unwrap_or(3)
+        })
+        .max()
+        .unwrap_or(3)
+}
+
+/// The spec with `id` moved to an entry of its own whose degree, nodes or order is raised by 1.
+fn raised(spec: &ErrorModelSpec, id: ErrorId) -> Option<ErrorModelSpec> {
+    let mut spec = spec.clone();
+    let name = id.to_string();
+    let pos = spec.errors.iter().position(|e| {
+        e.name
+            .names()
+            .iter()
+            .any(|n| n.parse::<ErrorId>().ok() == Some(id))
+    })?;
+    let mut entry = spec.errors[pos].clone();
+    match entry.basis {
+        None | Some(BasisKind::Constant) => return None,
+        Some(BasisKind::Fourier | BasisKind::Sine) => {
+            entry.order = Some(entry.order.unwrap_or(1) + 1);
+        }
+        Some(BasisKind::Chebyshev) if entry.nodes.is_some() => {
+            entry.nodes = entry.nodes.map(|n| n + 1);
+        }
+        Some(_) => entry.degree = Some(entry.degree.unwrap_or(3) + 1),
+    }
+    let rest: Vec<String> = spec.errors[pos]
+        .name
+        .names()
+        .iter()
+        .filter(|n| n.parse::<ErrorId>().ok() != Some(id))
+        .map(|s| s.to_string())
+        .collect();
+    if rest.is_empty() {
+        spec.errors.remove(pos);
+    } else {
+        spec.errors[pos].name = OneOrMany::Many(rest);
+    }
+    entry.name = OneOrMany::One(name);
+    spec.errors.push(entry);
+    Some(spec)
+}
+
+/// The library of candidates for a model.
+pub fn library(model: &Model) -> Vec<Candidate> {
+    let spec = model.spec();
+    let machine = model.machine();
+    let mut out = Vec::new();
+    // ISO errors left out.
+    let degree = polynomial_degree(spec);
+    for ax in machine.axes() {
+        let mut ids: Vec<ErrorId> = ErrorId::components_of(ax.axis).to_vec();
+        ids.extend(
+            ErrorId::location_names(ax.axis)
+                .iter()
+                .map(|n| n.parse::<ErrorId>().expect("valid name")),
+        );
+        for id in ids {
+            if model.term(id).is_some() {
+                continue;
+            }
+            let (basis, degree, order, what) = match id {
+                ErrorId::Location { .. } => (None, None, None, "a constant".to_string()),
+                _ if ax.axis.is_rotary() => (
+                    Some(BasisKind::Fourier),
+                    None,
+                    Some(1),
+                    "a first-harmonic Fourier series".to_string(),
+                ),
+                _ => (
+                    Some(BasisKind::Legendre),
+                    Some(degree),
+                    None,
+                    format!("a Legendre polynomial of degree {degree}"),
+                ),
+            };
+            let mut s = spec.clone();
+            s.errors.push(ErrorTermSpec {
+                name: OneOrMany::One(id.to_string()),
+                basis,
+                degree,
+                nodes: None,
+                order,
+            });
+            out.push(Candidate {
+                id: format!("add:{id}"),
+                description: format!("add the missing error {id} as {what}"),
+                spec: s,
+            });
+        }
+    }
+    // The next degree or harmonic, per error and per axis.
+    for ax in machine.axes() {
+        let mut axis_spec = spec.clone();
+        let mut any = false;
+        for t in model.terms().iter().filter(|t| t.id.axis() == ax.axis) {
+            if let Some(s) = raised(spec, t.id) {
+                let what = if t.basis.kind().is_periodic() {
+                    format!("harmonic {}", t.basis.degree() + 1)
+                } else {
+                    format!("degree {}", t.basis.degree() + 1)
+                };
+                out.push(Candidate {
+                    id: format!("raise:{}", t.id),
+                    description: format!("give {} its {what}", t.id),
+                    spec: s,
+                });
+                if let Some(s) = raised(&axis_spec, t.id) {
+                    axis_spec = s;
+                    any = true;
+                }
+            }
+        }
+        if any {
+            out.push(Candidate {
+                id: format!("raise-axis:{}", ax.axis),
+                description: format!("raise the degree or harmonic of every error of {}", ax.axis),
+                spec: axis_spec,
+            });
+        }
+    }
+    // The tracker's tilt.
+    let identify = &spec.tracker.identify;
+    if !identify.iter().any(|n| n == "rx") && !identify.iter().any(|n| n == "ry") {
+        let mut s = spec.clone();
+        s.tracker
+            .identify
+            .extend(["rx".to_string(), "ry".to_string()]);
+        out.push(Candidate {
+            id: "tracker-tilt".into(),
+            description: "identify the tracker's tilt (rx, ry)".into(),
+            spec: s,
+        });
+    }
+    out
+}
+
+/// `params` of `model` carried over to `extended` (a superset): by name, new parameters zero,
+/// Chebyshev node values re-evaluated at the new nodes so every function is unchanged.
+pub fn carry_over(model: &Model, params: &[f64], extended: &Model) -> Vec<f64> {
+    let mut p = extended.initial_params();
+    for (j, info) in extended.params().iter().enumerate() {
+        if let Some(i) = model.param_index(&info.name) {
+            p[j] = params[i];
+        }
+    }
+    for t in extended.terms() {
+        if t.basis.kind() != BasisKind::Chebyshev {
+            continue;
+        }
+        let Some(old) = model.term(t.id) else {
+            continue;
+        };
+        if old.basis.degree() == t.basis.degree() {
+            continue;
+        }
+        let nodes = chebyshev_nodes(t.basis.degree() + 1);
+        for (k, z) in nodes.iter().enumerate() {
+            p[t.params.start + k] = old.basis.value(*z, &params[old.params.clone()]);
+        }
+    }
+    p
+}
+
+/// One Gauss–Newton step of least squares from `params` under the task's constraints, holding
+/// directions below `tolerance`: the parameters after it, RSS before the step, and the number of
+/// identified directions.
+fn gauss_newton_step(task: &Task, params: &[f64], tolerance: f64) -> Option<(Vec<f64>, usize)> {
+    let n = params.len();
+    let Reduced { d, ns, hz, gz } = reduced_normal(task, params)?;
+    let nf = ns.n_free();
+    if nf == 0 {
+        return Some((params.to_vec(), 0));
+    }
+    let basis = ns.basis();
+    let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
+    let (mu, v) = (evd.S().column_vector(), evd.U());
+    let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+    let mut zeta = vec![0.0; nf];
+    let mut rank = 0;
+    for i in 0..nf {
+        if mu[i] > tolerance * mu_max {
+            rank += 1;
+            let c = -(0..nf).map(|k| v[(k, i)] * gz[k]).sum::<f64>() / mu[i];
+            for (k, z) in zeta.iter_mut().enumerate() {
+                *z += v[(k, i)] * c;
+            }
+        }
+    }
+    let p: Vec<f64> = (0..n)
+        .map(|j| params[j] + d[j] * (0..nf).map(|k| basis[(j, k)] * zeta[k]).sum::<f64>())
+        .collect();
+    Some((p, rank))
+}
+
+/// The residuals' sum of squares and EMM predicted to first order after moving from `params`
+/// to `q`: `r_i + J_i (q − params)` (the score test is a linear prediction; a full nonlinear
+/// step could overshoot along nearly redundant directions).
+fn linear_prediction(problem: &Problem, params: &[f64], q: &[f64]) -> (f64, f64) {
+    let n = params.len();
+    let delta: Vec<f64> = q.iter().zip(params).map(|(a, b)| a - b).collect();
+    let mut jac = vec![0.0; 3 * n];
+    let (mut rss, mut sum) = (0.0, 0.0);
+    for i in 0..problem.n_points() {
+        let r = problem.residual_and_jacobian(i, params, &mut jac);
+        let lin: [f64; 3] =
+            std::array::from_fn(|c| r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>());
+        let s2 = lin[0] * lin[0] + lin[1] * lin[1] + lin[2] * lin[2];
+        rss += s2;
+        sum += s2.sqrt();
+    }
+    (rss, sum / problem.n_points() as f64 * 1e3)
+}
+
+/// Largest |value| over the travel of what the candidate adds to the model (µm or µrad).
+fn implied_size(model: &Model, params: &[f64], extended: &Model, q: &[f64]) -> (f64, &'static str) {
+    let mut best: (f64, &'static str) = (0.0, "µm");
+    for t in extended.terms() {
+        let ax = &extended.machine().axes()[t.axis];
+        let scale = match t.id.unit() {
+            Unit::Mm => (1e3, "µm"),
+            Unit::Rad => (1e6, "µrad"),
+        };
+        let peak = (0..=64)
+            .map(|i| {
+                let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
+                let new = extended.error_value(t.id, u, q).unwrap_or(0.0);
+                let old = model.error_value(t.id, u, params).unwrap_or(0.0);
+                (new - old).abs() * scale.0
+            })
+            .fold(0.0, f64::max);
+        if peak > best.0
+            && (model.term(t.id).is_none() || t.basis != model.term(t.id).expect("exists").basis)
+        {
+            best = (peak, scale.1);
+        }
+    }
+    let (ts, te) = (model.tracker_start(), extended.tracker_start());
+    let tilt =
+        ((q[te + 3] - params[ts + 3]).powi(2) + (q[te + 4] - params[ts + 4]).powi(2)).sqrt() * 1e6;
+    if tilt > 0.0 && best.0 == 0.0 {
+        best = (tilt, "µrad");
+    }
+    best
+}
+
+/// Scores every candidate of the library at the solution `params` of `problem`'s model and
+/// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's).
+pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
+    let model = problem.model();
+    let data = problem.data();
+    let m = (3 * problem.n_points()) as f64;
+    let base_task = Task::new(*problem);
+    let Some((p0, rank0)) = gauss_newton_step(&base_task, params, tolerance) else {
+        return Vec::new();
+    };
+    let (rss0, _) = linear_prediction(problem, params, &p0);
+    let mut scores: Vec<Score> = library(model)
+        .into_iter()
+        .filter_map(|c| {
+            let extended = Model::new(model.machine().clone(), c.spec.clone()).ok()?;
+            let ext_problem = Problem::new(&extended, data).ok()?;
+            let start = carry_over(model, params, &extended);
+            let (q, rank1) = gauss_newton_step(&Task::new(ext_problem), &start, tolerance)?;
+            let (rss1, emm_um) = linear_prediction(&ext_problem, &start, &q);
+            let (size, size_unit) = implied_size(model, params, &extended, &q);
+            let added = rank1.saturating_sub(rank0);
+            Some(Score {
+                id: c.id,
+                description: c.description,
+                added,
+                emm_um,
+                delta_bic: m * (rss1 / rss0).ln() + added as f64 * m.ln(),
+                size,
+                size_unit,
+                equivalent: Vec::new(),
+            })
+        })
+        .collect();
+    scores.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    // Merge candidates the data cannot tell apart: as many directions, ΔBIC within 2.
+    let mut merged: Vec<Score> = Vec::new();
+    for s in scores {
+        if let Some(prev) = merged
+            .iter_mut()
+            .find(|p| p.added == s.added && s.added > 0 && (p.delta_bic - s.delta_bic).abs() < 2.0)
+        {
+            prev.equivalent.push(s.id);
+        } else {
+            merged.push(s);
+        }
+    }
+    merged
+}
+
+/// The axis of a candidate id, when it names one (`add:EAC` → C, `raise-axis:X` → X).
+pub fn axis_of(id: &str) -> Option<Axis> {
+    let (_, what) = id.split_once(':')?;
+    if let Ok(e) = what.parse::<ErrorId>() {
+        return Some(e.axis());
+    }
+    let mut c = what.chars();
+    match (c.next().and_then(Axis::from_letter), c.next()) {
+        (Some(a), None) => Some(a),
+        _ => None,
+    }
+}
