@@ -40,6 +40,21 @@ enum Command {
         #[arg(long)]
         model: Option<PathBuf>,
     },
+    /// Fits the model, then shows where it fails and ranks the effects it most likely misses.
+    ///
+    /// Prints the residuals by axis position, reflector, time and tracker distance, the noise
+    /// estimated from repeated points, the parameter combinations the data cannot separate,
+    /// and the candidate effects ranked by ΔBIC with the EMM each would give.
+    Diagnose {
+        #[command(flatten)]
+        inputs: Inputs,
+        /// How many candidates to list.
+        #[arg(long, default_value_t = 10)]
+        top: usize,
+        /// Print one JSON object instead of the tables.
+        #[arg(long)]
+        json: bool,
+    },
     /// Reruns the paper's studies (tables 5, 6, 8, 11, 12) on synthetic data and prints our
     /// figures beside the paper's, with a note per table on why they differ.
     Study {
@@ -101,9 +116,9 @@ enum Command {
     },
 }
 
-/// Options of `volver identify`.
+/// The machine, error model and measurements that `identify` and `diagnose` read.
 #[derive(clap::Args)]
-struct IdentifyArgs {
+struct Inputs {
     /// Machine file (TOML); the embedded XCFZ grinder when absent.
     #[arg(long)]
     machine: Option<PathBuf>,
@@ -113,6 +128,32 @@ struct IdentifyArgs {
     /// Measurement file (CSV).
     #[arg(long)]
     data: PathBuf,
+}
+
+impl Inputs {
+    /// Reads the three files.
+    fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
+        let m = match &self.machine {
+            Some(p) => Machine::load(p).context("reading the machine file")?,
+            None => Machine::default_xcfz(),
+        };
+        let model = match (&self.model, &self.machine) {
+            (Some(p), _) => Model::load(m.clone(), p).context("reading the error model")?,
+            (None, None) => Model::default_xcfz(),
+            (None, Some(_)) => anyhow::bail!(
+                "--model is needed with --machine (the embedded model is for the embedded machine)"
+            ),
+        };
+        let set = MeasurementSet::load(&m, &self.data).context("reading the measurements")?;
+        Ok((m, model, set))
+    }
+}
+
+/// Options of `volver identify`.
+#[derive(clap::Args)]
+struct IdentifyArgs {
+    #[command(flatten)]
+    inputs: Inputs,
     /// Engine: lm (native Levenberg–Marquardt).
     #[arg(long, default_value = "lm")]
     solver: String,
@@ -195,6 +236,7 @@ fn main() -> Result<()> {
             print_layout(&model)?;
         }
         Command::Identify(args) => identify_command(args)?,
+        Command::Diagnose { inputs, top, json } => diagnose_command(inputs, top, json)?,
         Command::Study { which, seed } => {
             if which != "paper" {
                 anyhow::bail!("unknown study '{which}': the study is `paper`");
@@ -234,6 +276,158 @@ fn main() -> Result<()> {
     Ok(())
 }
 
+fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
+    use volver::core::diagnose;
+    use volver::solvers::candidates::rank;
+    use volver::solvers::identifiability::analyse;
+    let (m, model, set) = inputs.load()?;
+    let problem = Problem::new(&model, &set)?;
+    let id = volver::solvers::strategy::fit(problem);
+    if id.termination.failed() {
+        anyhow::bail!("the fit failed: {}", id.termination);
+    }
+    let r = problem.residuals(&id.params);
+    let rm = diagnose::to_machine_frame(&problem, &id.params, &r);
+    let mut breakdowns: Vec<diagnose::Breakdown> = (0..m.axes().len())
+        .map(|k| diagnose::by_axis(&problem, &r, k, 24))
+        .collect();
+    breakdowns.push(diagnose::by_reflector(&problem, &r));
+    if let Some(t) = diagnose::by_time(&problem, &r, 8) {
+        breakdowns.push(t);
+    }
+    breakdowns.push(diagnose::by_distance(&problem, &r, 8));
+    let periodograms: Vec<(String, Vec<diagnose::Line>)> = m
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(k, ax)| {
+            (
+                ax.axis.to_string(),
+                diagnose::axis_periodogram(&problem, &rm, k, 6),
+            )
+        })
+        .collect();
+    let repeat = diagnose::repeat_noise(&problem);
+    let options = Options::default();
+    let ident = analyse(
+        &volver::solvers::Task::new(problem),
+        &id.params,
+        options.rank_tolerance,
+        0.99,
+    );
+    let ranked = rank(&problem, &id.params, options.rank_tolerance);
+    let name = |j: usize| model.params()[j].name.clone();
+    if json {
+        let obj = serde_json::json!({
+            "emm_um": id.final_.stats.emm_um,
+            "emax_um": id.final_.stats.emax_um,
+            "termination": id.termination.to_string(),
+            "noise_estimate_um": repeat.map(|(s, _)| s.emm_um),
+            "repeat_pairs": repeat.map(|(_, n)| n),
+            "breakdowns": breakdowns.iter().map(|b| serde_json::json!({
+                "by": b.by, "unit": b.unit, "spread": b.spread(),
+                "bins": b.bins.iter().map(|x| serde_json::json!({
+                    "label": x.label, "count": x.count, "emm_um": x.stats.emm_um,
+                    "emax_um": x.stats.emax_um, "mean_um": x.mean_um,
+                })).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
+            "periodograms": periodograms.iter().map(|(a, lines)| serde_json::json!({
+                "axis": a,
+                "lines": lines.iter().map(|l| serde_json::json!({
+                    "order": l.frequency, "amplitude_um": l.amplitude_um,
+                })).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
+            "identifiability": ident.as_ref().map(|a| serde_json::json!({
+                "free": a.free, "rank": a.rank, "condition": a.condition,
+                "weak": a.weak.iter().map(|w| w.parameters.iter().map(|(j, x)| serde_json::json!({"name": name(*j), "share": x})).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            })),
+            "candidates": ranked.iter().take(top).map(|s| serde_json::json!({
+                "id": s.id, "description": s.description, "delta_bic": s.delta_bic,
+                "emm_um": s.emm_um, "size": s.size, "size_unit": s.size_unit,
+                "added": s.added, "equivalent": s.equivalent,
+            })).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&obj)?);
+        return Ok(());
+    }
+    println!(
+        "volver diagnose — {} points, model \"{}\": EMM {} µm, EMax {} µm ({})",
+        set.points.len(),
+        model.spec().name,
+        um(id.final_.stats.emm_um),
+        um(id.final_.stats.emax_um),
+        id.termination
+    );
+    match repeat {
+        Some((s, n)) => println!(
+            "  noise estimated from {n} repeated points: EMM {} µm — the fit is {:.2} × that",
+            um(s.emm_um),
+            id.final_.stats.emm_um / s.emm_um
+        ),
+        None => println!("  no repeated points: the noise cannot be estimated from these data"),
+    }
+    println!("\nWhere it fails (EMM per bin, µm; spread = largest / smallest bin):");
+    for b in &breakdowns {
+        let cells: Vec<String> = b
+            .bins
+            .iter()
+            .map(|x| format!("{}:{:.1}", x.label, x.stats.emm_um))
+            .collect();
+        println!(
+            "  {:<10} spread {:>5.2}  {}",
+            format!("{} {}", b.by, b.unit).trim(),
+            b.spread(),
+            cells.join("  ")
+        );
+    }
+    println!("\nPeriodograms of the residuals in the machine frame (amplitude µm of orders 1–6):");
+    for (a, lines) in &periodograms {
+        let cells: Vec<String> = lines
+            .iter()
+            .map(|l| format!("{:.1}", l.total_um()))
+            .collect();
+        println!("  {a}: {}", cells.join("  "));
+    }
+    if let Some(a) = &ident {
+        println!(
+            "\nIdentifiability: {} of {} free directions identified, condition {:.2e}",
+            a.rank, a.free, a.condition
+        );
+        for w in a.weak.iter().take(4) {
+            let parts: Vec<String> = w
+                .parameters
+                .iter()
+                .take(4)
+                .map(|(j, x)| format!("{} {x:+.2}", name(*j)))
+                .collect();
+            println!("  cannot separate: {}", parts.join(", "));
+        }
+    }
+    println!("\nWhat is most likely missing (ranked by ΔBIC; below −10 is strong evidence):");
+    println!(
+        "  {:<3} {:<18} {:>10} {:>12} {:>12}  meaning",
+        "#", "candidate", "ΔBIC", "EMM µm", "size"
+    );
+    for (i, s) in ranked.iter().take(top).enumerate() {
+        println!(
+            "  {:<3} {:<18} {:>10.1} {:>12} {:>8.2} {:<4}  {}{}",
+            i + 1,
+            s.id,
+            s.delta_bic,
+            um(s.emm_um),
+            s.size,
+            s.size_unit,
+            s.description,
+            if s.equivalent.is_empty() {
+                String::new()
+            } else {
+                format!(" (indistinguishable here from {})", s.equivalent.join(", "))
+            }
+        );
+    }
+    Ok(())
+}
+
 /// Prints one line per accepted step to stderr.
 struct Progress {
     quiet: bool,
@@ -251,18 +445,7 @@ impl Observer for Progress {
 }
 
 fn identify_command(a: IdentifyArgs) -> Result<()> {
-    let machine = match &a.machine {
-        Some(p) => Machine::load(p).context("reading the machine file")?,
-        None => Machine::default_xcfz(),
-    };
-    let model = match (&a.model, &a.machine) {
-        (Some(p), _) => Model::load(machine.clone(), p).context("reading the error model")?,
-        (None, None) => Model::default_xcfz(),
-        (None, Some(_)) => anyhow::bail!(
-            "--model is needed with --machine (the embedded model is for the embedded machine)"
-        ),
-    };
-    let data = MeasurementSet::load(&machine, &a.data).context("reading the measurements")?;
+    let (machine, model, data) = a.inputs.load()?;
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
     let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
     if a.subloops == 0 {

@@ -170,3 +170,81 @@ fn a_tilted_tracker_is_found() {
         );
     }
 }
+
+#[test]
+fn volver_diagnose_ranks_the_hidden_effect_first_in_json() {
+    let dir = std::env::temp_dir().join(format!("volver-diagnose-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    let run = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
+            .args(args)
+            .output()
+            .expect("volver runs")
+    };
+    let out = run(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--seed",
+        "32",
+        "--noise",
+        "3,3,0.5,0.1",
+        "--effect",
+        "rotary-harmonics=2,20,40",
+        "--out",
+        d,
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = dir.join("measurements.csv");
+    let out = run(&[
+        "diagnose",
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+        "--top",
+        "5",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let c = &v["candidates"];
+    assert_eq!(c.as_array().unwrap().len(), 5);
+    assert_eq!(c[0]["id"], "raise-axis:C");
+    for key in [
+        "id",
+        "description",
+        "delta_bic",
+        "emm_um",
+        "size",
+        "size_unit",
+    ] {
+        assert!(!c[0][key].is_null(), "{key}");
+    }
+    assert!(c[0]["delta_bic"].as_f64().unwrap() < -10.0);
+    // The repeated C = 0/360 points estimate the noise.
+    assert!(v["noise_estimate_um"].as_f64().unwrap() > 0.0);
+    // The harmonic shows in C's periodogram at order 2 (machine frame).
+    let c_lines = v["periodograms"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["axis"] == "C")
+        .unwrap()["lines"]
+        .clone();
+    let amp = |k: usize| {
+        let a = c_lines[k]["amplitude_um"].as_array().unwrap();
+        a.iter()
+            .map(|x| x.as_f64().unwrap().powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    assert!(amp(1) > 5.0 * amp(0) && amp(1) > 5.0 * amp(2), "{c_lines}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

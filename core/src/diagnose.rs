@@ -104,7 +104,7 @@ pub fn by_values(
                 .filter(|(x, _)| (**x - v).abs() <= 1e-9 * v.abs().max(1.0))
                 .map(|(_, r)| *r)
                 .collect();
-            bins.push(bin_of(format!("{}", round(v)), v, v, &members));
+            bins.push(bin_of(label(v), v, v, &members));
         }
     } else {
         let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
@@ -120,7 +120,7 @@ pub fn by_values(
                 .collect();
             if !members.is_empty() {
                 bins.push(bin_of(
-                    format!("{} … {}", round(a), round(b)),
+                    format!("{} … {}", label(a), label(b)),
                     a,
                     b,
                     &members,
@@ -135,8 +135,14 @@ pub fn by_values(
     }
 }
 
-fn round(v: f64) -> f64 {
-    (v * 1e6).round() / 1e6
+/// A bin edge for labels: whole numbers as such, others to four significant digits.
+fn label(v: f64) -> String {
+    if v == v.round() && v.abs() < 1e15 {
+        format!("{v:.0}")
+    } else {
+        let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 9) as usize;
+        format!("{v:.digits$}")
+    }
 }
 
 /// By the position of chain axis `k` (file units: mm or degrees).
@@ -253,9 +259,12 @@ fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
             - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
             + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0])
     };
+    // A sinusoid the sampling cannot see (aliased onto a constant, or a column of zeros).
+    if m[1][1] <= 1e-9 * m[0][0] || m[2][2] <= 1e-9 * m[0][0] {
+        return None;
+    }
     let d = det(m);
-    let scale = m[0][0] * m[1][1] * m[2][2];
-    if d.abs() <= 1e-10 * scale.abs() || d == 0.0 {
+    if d.abs() <= 1e-9 * (m[0][0] * m[1][1] * m[2][2]).abs() {
         return None;
     }
     Some(std::array::from_fn(|k| {
@@ -268,7 +277,8 @@ fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
 }
 
 /// Periodogram against chain axis `k`: harmonics 1 … `max_order` per turn for a rotary axis
-/// (argument in turns), per travel length for a linear one.
+/// (argument in turns), per travel length for a linear one. Orders the positions cannot
+/// resolve (more than half the number of distinct positions) are left out.
 pub fn axis_periodogram(
     problem: &Problem,
     residuals: &[[f64; 3]],
@@ -287,7 +297,11 @@ pub fn axis_periodogram(
         .iter()
         .map(|p| (p.commands.0[k] - ax.min) / span)
         .collect();
-    let f: Vec<f64> = (1..=max_order).map(|h| h as f64).collect();
+    let mut distinct = x.clone();
+    distinct.sort_by(f64::total_cmp);
+    distinct.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    let resolvable = (distinct.len().saturating_sub(1) / 2).min(max_order);
+    let f: Vec<f64> = (1..=resolvable).map(|h| h as f64).collect();
     periodogram(&x, residuals, &f)
 }
 
