@@ -176,6 +176,13 @@ struct IdentifyArgs {
     /// Evaluation limit per phase (criterion 4).
     #[arg(long)]
     max_evaluations: Option<usize>,
+    /// Extend the model with a candidate of `volver diagnose` before fitting (e.g. add:EAC,
+    /// raise-axis:C, tracker-tilt); repeatable, applied in order.
+    #[arg(long = "add", value_name = "ID")]
+    add: Vec<String>,
+    /// Write the error model actually fitted (after --add) as TOML.
+    #[arg(long)]
+    write_model: Option<PathBuf>,
     /// Write the identified parameters as a results file (JSON).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -445,7 +452,22 @@ impl Observer for Progress {
 }
 
 fn identify_command(a: IdentifyArgs) -> Result<()> {
-    let (machine, model, data) = a.inputs.load()?;
+    let (machine, mut model, data) = a.inputs.load()?;
+    for id in &a.add {
+        let library = volver::solvers::candidates::library(&model);
+        let Some(c) = library.iter().find(|c| &c.id == id) else {
+            let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
+            anyhow::bail!(
+                "--add {id}: not a candidate for this model; candidates are {}",
+                ids.join(", ")
+            );
+        };
+        model = Model::new(machine.clone(), c.spec.clone())?;
+    }
+    if let Some(path) = &a.write_model {
+        let text = toml::to_string(model.spec()).context("writing the error model")?;
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+    }
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
     let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
     if a.subloops == 0 {
@@ -573,10 +595,10 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             id.initial.stats.emm_um, id.initial.stats.emax_um
         );
         println!(
-            "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {:.3e} %",
+            "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {} %",
             um(id.final_.stats.emm_um),
             um(id.final_.stats.emax_um),
-            id.residual_percent()
+            um(id.residual_percent())
         );
         if let Some(n) = noise_error {
             println!(

@@ -2,6 +2,9 @@
 //! diagnosis ranks the true effect first, and after adding it the final EMM is within 5 % of the
 //! noise error, under low noise and under the paper's noise.
 
+mod common;
+use common::volver;
+
 use volver::core::machine::Machine;
 use volver::core::model::{ErrorModelSpec, Model, OneOrMany};
 use volver::core::noise::TrackerNoise;
@@ -12,6 +15,31 @@ use volver::solvers::candidates::{carry_over, library, rank};
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::strategy::{Strategy, fit, identify};
 use volver::solvers::{Options, Silent};
+
+/// `volver simulate` of test 4 under low noise with a hidden second rotary harmonic, into a
+/// fresh folder named after `name`.
+fn simulate_harmonic_files(name: &str, seed: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("volver-{name}-{}", std::process::id()));
+    let out = volver(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--seed",
+        seed,
+        "--noise",
+        "3,3,0.5,0.1",
+        "--effect",
+        "rotary-harmonics=2,20,40",
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    dir
+}
 
 const LOW_NOISE: TrackerNoise = TrackerNoise {
     azimuth_urad: 3.0,
@@ -173,34 +201,9 @@ fn a_tilted_tracker_is_found() {
 
 #[test]
 fn volver_diagnose_ranks_the_hidden_effect_first_in_json() {
-    let dir = std::env::temp_dir().join(format!("volver-diagnose-{}", std::process::id()));
-    let d = dir.to_str().unwrap();
-    let run = |args: &[&str]| {
-        std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
-            .args(args)
-            .output()
-            .expect("volver runs")
-    };
-    let out = run(&[
-        "simulate",
-        "--plan",
-        "test4",
-        "--seed",
-        "32",
-        "--noise",
-        "3,3,0.5,0.1",
-        "--effect",
-        "rotary-harmonics=2,20,40",
-        "--out",
-        d,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let dir = simulate_harmonic_files("diagnose", "32");
     let data = dir.join("measurements.csv");
-    let out = run(&[
+    let out = volver(&[
         "diagnose",
         "--data",
         data.to_str().unwrap(),
@@ -246,5 +249,58 @@ fn volver_diagnose_ranks_the_hidden_effect_first_in_json() {
             .sqrt()
     };
     assert!(amp(1) > 5.0 * amp(0) && amp(1) > 5.0 * amp(2), "{c_lines}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn volver_identify_add_refits_with_the_candidate_and_writes_the_model() {
+    let dir = simulate_harmonic_files("add", "33");
+    let data = dir.join("measurements.csv");
+    let truth = dir.join("truth.json");
+    let model = dir.join("model.toml");
+    let json = |extra: &[&str]| -> serde_json::Value {
+        let mut args = vec![
+            "identify",
+            "--data",
+            data.to_str().unwrap(),
+            "--truth",
+            truth.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend(extra);
+        let out = volver(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let before = json(&[]);
+    let after = json(&[
+        "--add",
+        "raise-axis:C",
+        "--write-model",
+        model.to_str().unwrap(),
+    ]);
+    let noise = after["noise_error_um"].as_f64().unwrap();
+    let (b, a) = (
+        before["emm_final_um"].as_f64().unwrap(),
+        after["emm_final_um"].as_f64().unwrap(),
+    );
+    println!("EMM {b} → {a} µm, noise {noise} µm");
+    assert!(b > 5.0 * noise && (a / noise - 1.0).abs() < 0.05);
+    // The written model is the extended one: fitting it gives the same EMM.
+    let again = json(&["--model", model.to_str().unwrap()]);
+    assert!((again["emm_final_um"].as_f64().unwrap() - a).abs() < 1e-6 * a);
+    let out = volver(&[
+        "identify",
+        "--data",
+        data.to_str().unwrap(),
+        "--add",
+        "add:EQQ",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a candidate for this model"));
     let _ = std::fs::remove_dir_all(&dir);
 }

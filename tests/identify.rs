@@ -1,6 +1,9 @@
 //! Identification with the native Levenberg–Marquardt on synthetic data: noise-free recovery,
 //! fit to the noise level, equal Φ across equivalent bases, constraints at the solution.
 
+mod common;
+use common::volver;
+
 use volver::core::machine::Machine;
 use volver::core::measure::MeasurementSet;
 use volver::core::model::{ErrorModelSpec, Model};
@@ -180,13 +183,6 @@ fn fourier_and_sine_series_of_equal_order_reach_the_same_phi() {
     );
     assert!(f.termination.converged() && s.termination.converged());
     assert!((s.final_.phi_mm / f.final_.phi_mm - 1.0).abs() < 1e-9);
-}
-
-fn volver(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
-        .args(args)
-        .output()
-        .expect("volver runs")
 }
 
 #[test]

@@ -2,9 +2,11 @@
 //! errors of the requested size that satisfy the model's constraints, every hidden effect as its
 //! formula says, and `volver simulate` files that the readers read back.
 
+mod common;
+use common::volver;
+
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use volver::core::basis::BasisKind;
 use volver::core::iso::{Axis, ErrorId};
 use volver::core::kinematics::{PointErrors, predict};
@@ -600,13 +602,6 @@ fn the_complete_model_of_the_paper_machine_is_the_paper_model() {
         complete.constraints().rows.len(),
         paper.constraints().rows.len()
     );
-}
-
-fn volver(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_volver"))
-        .args(args)
-        .output()
-        .expect("volver runs")
 }
 
 fn read_back(dir: &Path) -> (Machine, MeasurementSet, Model, Vec<f64>, String) {
