@@ -1,5 +1,6 @@
 //! The `volver` command-line tool.
 
+mod history;
 mod study;
 
 use anyhow::{Context, Result};
@@ -54,6 +55,16 @@ enum Command {
         /// Print one JSON object instead of the tables.
         #[arg(long)]
         json: bool,
+    },
+    /// Shows the fits of a diagnosis session: EMM per model revision as a table, and as an SVG
+    /// chart with --svg.
+    History {
+        /// History file written by `volver identify`.
+        #[arg(long, default_value = history::DEFAULT_NAME)]
+        file: PathBuf,
+        /// Write the chart here (SVG).
+        #[arg(long)]
+        svg: Option<PathBuf>,
     },
     /// Reruns the paper's studies (tables 5, 6, 8, 11, 12) on synthetic data and prints our
     /// figures beside the paper's, with a note per table on why they differ.
@@ -186,6 +197,12 @@ struct IdentifyArgs {
     /// Write the identified parameters as a results file (JSON).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Append this fit to a history file (default: volver-history.jsonl beside the data).
+    #[arg(long)]
+    history: Option<PathBuf>,
+    /// Do not append this fit to any history file.
+    #[arg(long, conflicts_with = "history")]
+    no_history: bool,
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
@@ -244,6 +261,20 @@ fn main() -> Result<()> {
         }
         Command::Identify(args) => identify_command(args)?,
         Command::Diagnose { inputs, top, json } => diagnose_command(inputs, top, json)?,
+        Command::History { file, svg } => {
+            let records = history::read(&file)?;
+            println!(
+                "volver history — {} fits in {}\n",
+                records.len(),
+                file.display()
+            );
+            print!("{}", history::table(&records));
+            if let Some(path) = svg {
+                std::fs::write(&path, history::svg(&records))
+                    .with_context(|| format!("writing {}", path.display()))?;
+                println!("\n  chart written to {}", path.display());
+            }
+        }
         Command::Study { which, seed } => {
             if which != "paper" {
                 anyhow::bail!("unknown study '{which}': the study is `paper`");
@@ -530,6 +561,28 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         &options,
         &mut Progress { quiet: a.json },
     );
+    if !a.no_history {
+        let path = a
+            .history
+            .clone()
+            .unwrap_or_else(|| history::default_path(&a.inputs.data));
+        history::append(
+            &path,
+            &history::Record {
+                data: a.inputs.data.display().to_string(),
+                model: model.spec().name.clone(),
+                added: a.add.clone(),
+                parameters: model.n_params(),
+                free: id.phases.last().map_or(0, |s| s.free_parameters),
+                emm_initial_um: id.initial.stats.emm_um,
+                emm_final_um: id.final_.stats.emm_um,
+                emax_final_um: id.final_.stats.emax_um,
+                phi_mm: id.final_.phi_mm,
+                noise_error_um: noise_error.map(|s| s.emm_um),
+                termination: id.termination.to_string(),
+            },
+        )?;
+    }
     if let Some(out) = &a.out {
         ResultsFile::from_model(&model, &id.params)?
             .save(out)

@@ -302,5 +302,27 @@ fn volver_identify_add_refits_with_the_candidate_and_writes_the_model() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a candidate for this model"));
+    // Every fit went into the session's history, beside the data.
+    let history = dir.join("volver-history.jsonl");
+    let chart = dir.join("history.svg");
+    let out = volver(&[
+        "history",
+        "--file",
+        history.to_str().unwrap(),
+        "--svg",
+        chart.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("3 fits") && text.contains("raise-axis:C"),
+        "{text}"
+    );
+    let svg = std::fs::read_to_string(&chart).unwrap();
+    assert_eq!(svg.matches("class=\"revision\"").count(), 3);
     let _ = std::fs::remove_dir_all(&dir);
 }
