@@ -583,6 +583,17 @@ fn bad_effects_and_options_get_clear_errors() {
             .contains("kinds are positioning")
     );
     assert!(TrackerNoise::from_text("30,30,4").is_err());
+    // Harmonics need periodic rotary errors in the truth to extend.
+    let linear_only = ErrorModelSpec::from_toml_str(
+        "[[error]]\nname = \"EXX\"\nbasis = \"legendre\"\ndegree = 2\n",
+        "inline",
+    )
+    .unwrap();
+    let truth = Truth::random(&m, &linear_only, &Magnitudes::default(), 1).unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, "table4").unwrap(), truth, 1);
+    sim.effects = vec![Effect::parse("rotary-harmonics=3").unwrap()];
+    let e = sim.run().unwrap_err().to_string();
+    assert!(e.contains("no periodic"), "{e}");
     // A plan outside the travel of the truth's machine is refused, not extrapolated.
     let mut plan = Plan::preset(&m, "table4").unwrap();
     plan.positions[3].0[0] = 1500.0;

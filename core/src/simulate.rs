@@ -446,10 +446,18 @@ impl Truth {
         rng: &mut Rng,
     ) -> Result<Truth> {
         let mut spec = self.model.spec().clone();
+        let mut periodic = false;
         for entry in &mut spec.errors {
             if entry.basis.is_some_and(BasisKind::is_periodic) {
                 entry.order = Some(entry.order.unwrap_or(1).max(max_order));
+                periodic = true;
             }
+        }
+        if !periodic {
+            return Err(Error::input(
+                Place::file("effects").at_field("rotary-harmonics"),
+                "the true errors have no periodic (Fourier or sine) rotary-axis error to extend",
+            ));
         }
         let model = Model::new(self.model.machine().clone(), spec)?;
         let mut p = model.initial_params();
