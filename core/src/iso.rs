@@ -129,6 +129,12 @@ pub enum Unit {
     /// Radians.
     #[serde(rename = "rad")]
     Rad,
+    /// Millimetres per hour (thermal drift rates).
+    #[serde(rename = "mm/h")]
+    MmPerHour,
+    /// Parts per million (scale errors).
+    #[serde(rename = "ppm")]
+    Ppm,
 }
 
 impl fmt::Display for Unit {
@@ -136,6 +142,8 @@ impl fmt::Display for Unit {
         f.write_str(match self {
             Unit::Mm => "mm",
             Unit::Rad => "rad",
+            Unit::MmPerHour => "mm/h",
+            Unit::Ppm => "ppm",
         })
     }
 }

@@ -47,6 +47,13 @@ pub struct PointErrors<S> {
     pub has_location: [bool; MAX_AXES],
     /// Tracker pose: T_LT x, y, z (mm) and the small angles R_LTx, R_LTy, R_LTz (rad, eq. 9).
     pub tracker: [S; TRACKER_DOF],
+    /// Effects outside the ISO 230 model: a displacement of the tool point in the machine frame
+    /// (mm, e.g. thermal drift), applied after the tool-side axes.
+    pub tool_shift: [S; 3],
+    /// The reflector's offset error (mm, frame of the last tool-side axis).
+    pub reflector_delta: [S; 3],
+    /// The tracker's range scale error (relative: the point is scaled by 1 + this).
+    pub range_scale: S,
 }
 
 impl<S: Real> PointErrors<S> {
@@ -58,6 +65,9 @@ impl<S: Real> PointErrors<S> {
             location: [[z; 6]; MAX_AXES],
             has_location: [false; MAX_AXES],
             tracker: [z; TRACKER_DOF],
+            tool_shift: [z; 3],
+            reflector_delta: [z; 3],
+            range_scale: z,
         }
     }
 }
@@ -256,7 +266,7 @@ pub fn predict_with_tool_shift<S: Real>(
     shift: Option<[f64; 3]>,
 ) -> [S; 3] {
     let axes = machine.axes();
-    let mut p: V3<S> = reflector.map(S::from);
+    let mut p: V3<S> = add(reflector.map(S::from), errors.reflector_delta);
     // Tool side: from the axis carrying the tool inward to the frame.
     for k in (0..axes.len())
         .rev()
@@ -264,6 +274,7 @@ pub fn predict_with_tool_shift<S: Real>(
     {
         p = axis_forward(machine, k, commands.0[k], errors, p);
     }
+    p = add(p, errors.tool_shift);
     if let Some(d) = shift {
         p = add(p, d.map(S::from));
     }
@@ -278,5 +289,7 @@ pub fn predict_with_tool_shift<S: Real>(
     let r0 = &tracker.base_rotation;
     // R0ᵀ·d
     let local = [0, 1, 2].map(|j| d[0] * r0[0][j] + d[1] * r0[1][j] + d[2] * r0[2][j]);
-    rot_err_inv(tail3(&errors.tracker), local)
+    let x = rot_err_inv(tail3(&errors.tracker), local);
+    let scale = S::one() + errors.range_scale;
+    [x[0] * scale, x[1] * scale, x[2] * scale]
 }

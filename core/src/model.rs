@@ -152,6 +152,78 @@ pub struct ErrorModelSpec {
     /// Parameters held at a value (name → value in the parameter's unit).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub fixed: BTreeMap<String, f64>,
+    /// Effects outside the ISO 230 model.
+    #[serde(default, skip_serializing_if = "EffectsSpec::is_empty")]
+    pub effects: EffectsSpec,
+}
+
+/// A periodic positioning error of a linear axis (e.g. a ball screw's pitch error).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BallScrewSpec {
+    /// The linear axis (letter).
+    pub axis: String,
+    /// The period (mm).
+    pub period_mm: f64,
+}
+
+/// The `[effects]` table of an error model: physical effects outside the ISO 230 errors, each
+/// with its parameters in group `other`. Formulas as in the synthetic generator
+/// ([`crate::simulate`]).
+///
+/// ```toml
+/// [effects]
+/// thermal_drift = true          # drift.x, drift.y, drift.z (mm/h): tool point, machine frame, × t_s
+/// reflector_offset = ["R1"]     # reflector.R1.x … (mm): the reflector off its nominal offset
+/// range_scale = true            # range.scale (ppm): points scaled about the tracker
+/// [[effects.ball_screw]]
+/// axis = "X"
+/// period_mm = 700.0             # screw.X.a, screw.X.b (mm): a·sin φ + b·cos φ, φ = 2π(u − u_ref)/P
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EffectsSpec {
+    /// Thermal drift of the tool point with time (needs `t_s` in the measurements).
+    #[serde(skip_serializing_if = "is_false")]
+    pub thermal_drift: bool,
+    /// Reflectors whose offset is identified.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reflector_offset: Vec<String>,
+    /// The tracker's range scale error.
+    #[serde(skip_serializing_if = "is_false")]
+    pub range_scale: bool,
+    /// Periodic positioning errors.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ball_screw: Vec<BallScrewSpec>,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+impl EffectsSpec {
+    /// No effect.
+    pub fn is_empty(&self) -> bool {
+        *self == EffectsSpec::default()
+    }
+}
+
+/// One effect value at a point (a dual slot after the tracker's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum EffectSlot {
+    /// Tool shift component c: value = drift rate × t (h).
+    Drift(usize),
+    /// Reflector offset component c of reflector r: value = δ when r is measured.
+    Reflector { reflector: usize, c: usize },
+    /// Range scale: value = s × 1e-6.
+    RangeScale,
+    /// Positioning error added to chain axis k along `dir`: a·sin φ + b·cos φ.
+    Screw {
+        k: usize,
+        dir: usize,
+        period_mm: f64,
+        reference: f64,
+    },
 }
 
 impl ErrorModelSpec {
@@ -229,6 +301,7 @@ impl ErrorModelSpec {
                 identify: TRACKER_NAMES[..3].iter().map(|s| s.to_string()).collect(),
             },
             fixed: BTreeMap::new(),
+            effects: EffectsSpec::default(),
         }
     }
 }
@@ -245,6 +318,8 @@ pub enum Owner {
     },
     /// Tracker pose value (0..6: x, y, z, rx, ry, rz).
     Tracker(usize),
+    /// An effect outside the ISO 230 model (index of its value slot among the effects).
+    Effect(usize),
 }
 
 /// One parameter of the layout.
@@ -350,6 +425,8 @@ pub struct Model {
     has_location: [bool; MAX_AXES],
     constraints: Constraints,
     initial: Vec<f64>,
+    /// Effect slots (after the tracker's) and the index of their first parameter.
+    effects: Vec<(EffectSlot, usize)>,
 }
 
 impl Model {
@@ -457,11 +534,104 @@ impl Model {
                 owner: Owner::Tracker(k),
             });
         }
+        let mut effects: Vec<(EffectSlot, usize)> = Vec::new();
+        {
+            let fx = &spec.effects;
+            let mut push =
+                |slot: EffectSlot, names: &[(String, Unit)], params: &mut Vec<ParamInfo>| {
+                    let k = effects.len();
+                    effects.push((slot, params.len()));
+                    for (name, unit) in names {
+                        params.push(ParamInfo {
+                            name: name.clone(),
+                            unit: *unit,
+                            group: Group::Other,
+                            owner: Owner::Effect(k),
+                        });
+                    }
+                };
+            if fx.thermal_drift {
+                for (c, x) in ["x", "y", "z"].iter().enumerate() {
+                    push(
+                        EffectSlot::Drift(c),
+                        &[(format!("drift.{x}"), Unit::MmPerHour)],
+                        &mut params,
+                    );
+                }
+            }
+            for id in &fx.reflector_offset {
+                let Some(r) = machine.reflector_index(id) else {
+                    return Err(Error::input(
+                        place(id, "effects.reflector_offset"),
+                        format!("no reflector '{id}' in the machine"),
+                    ));
+                };
+                for (c, x) in ["x", "y", "z"].iter().enumerate() {
+                    push(
+                        EffectSlot::Reflector { reflector: r, c },
+                        &[(format!("reflector.{id}.{x}"), Unit::Mm)],
+                        &mut params,
+                    );
+                }
+            }
+            if fx.range_scale {
+                push(
+                    EffectSlot::RangeScale,
+                    &[("range.scale".to_string(), Unit::Ppm)],
+                    &mut params,
+                );
+            }
+            for b in &fx.ball_screw {
+                let axis = b
+                    .axis
+                    .chars()
+                    .next()
+                    .filter(|_| b.axis.len() == 1)
+                    .and_then(crate::iso::Axis::from_letter);
+                let Some((k, ax)) = axis
+                    .and_then(|a| machine.axis(a))
+                    .filter(|(_, ax)| !ax.axis.is_rotary())
+                else {
+                    return Err(Error::input(
+                        place(&b.axis, "effects.ball_screw.axis"),
+                        format!("'{}' is not a linear axis of {}", b.axis, machine.chain()),
+                    ));
+                };
+                if !(b.period_mm.is_finite() && b.period_mm > 0.0) {
+                    return Err(Error::input(
+                        place(&b.axis, "effects.ball_screw.period_mm"),
+                        format!("the period {} mm must be positive", b.period_mm),
+                    ));
+                }
+                push(
+                    EffectSlot::Screw {
+                        k,
+                        dir: ax.axis.direction(),
+                        period_mm: b.period_mm,
+                        reference: ax.reference,
+                    },
+                    &[
+                        (format!("screw.{}.a", b.axis), Unit::Mm),
+                        (format!("screw.{}.b", b.axis), Unit::Mm),
+                    ],
+                    &mut params,
+                );
+            }
+        }
+        if terms.len() + TRACKER_DOF + effects.len() > MAX_SLOTS {
+            return Err(Error::Model(format!(
+                "{} errors and {} effect values are modelled; at most {} fit beside the tracker pose",
+                terms.len(),
+                effects.len(),
+                MAX_SLOTS - TRACKER_DOF
+            )));
+        }
         let slot_of = params
             .iter()
             .map(|p| match p.owner {
                 Owner::Term { term, .. } => term,
                 Owner::Tracker(k) => terms.len() + k,
+                Owner::Effect(k) => terms.len() + TRACKER_DOF + k,
             })
             .collect();
         let mut has_location = [false; MAX_AXES];
@@ -596,6 +766,7 @@ impl Model {
             has_location,
             constraints: Constraints { rows },
             initial,
+            effects,
         })
     }
 
@@ -696,7 +867,72 @@ impl Model {
         for k in 0..TRACKER_DOF {
             e.tracker[k] = value(self.terms.len() + k);
         }
+        let base = self.terms.len() + TRACKER_DOF;
+        for (i, (slot, _)) in self.effects.iter().enumerate() {
+            let v = value(base + i);
+            match *slot {
+                EffectSlot::Drift(c) => e.tool_shift[c] = v,
+                EffectSlot::Reflector { c, .. } => e.reflector_delta[c] += v,
+                EffectSlot::RangeScale => e.range_scale = v,
+                EffectSlot::Screw { k, dir, .. } => e.component[k][dir] += v,
+            }
+        }
         e
+    }
+
+    /// Whether the model needs the measurements' time stamps (thermal drift).
+    pub fn needs_time(&self) -> bool {
+        self.spec.effects.thermal_drift
+    }
+
+    /// Effect values at a point into `vals` (slots after the tracker's) and, when `jac` is
+    /// given, each effect parameter's ∂value/∂p into `jac[parameter]`.
+    fn effect_values(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        vals: &mut [f64],
+        mut jac: Option<&mut [f64]>,
+    ) {
+        let base = self.terms.len() + TRACKER_DOF;
+        for (i, &(slot, j)) in self.effects.iter().enumerate() {
+            let mut set = |p: usize, g: f64| {
+                if let Some(jac) = jac.as_deref_mut() {
+                    jac[p] = g;
+                }
+            };
+            vals[base + i] = match slot {
+                EffectSlot::Drift(_) => {
+                    let t_h = t_s / 3600.0;
+                    set(j, t_h);
+                    params[j] * t_h
+                }
+                EffectSlot::Reflector { reflector: r, .. } => {
+                    let on = if r == reflector { 1.0 } else { 0.0 };
+                    set(j, on);
+                    params[j] * on
+                }
+                EffectSlot::RangeScale => {
+                    set(j, 1e-6);
+                    params[j] * 1e-6
+                }
+                EffectSlot::Screw {
+                    k,
+                    period_mm,
+                    reference,
+                    ..
+                } => {
+                    let phase =
+                        2.0 * std::f64::consts::PI * (commands.0[k] - reference) / period_mm;
+                    let (sn, cs) = phase.sin_cos();
+                    set(j, sn);
+                    set(j + 1, cs);
+                    params[j] * sn + params[j + 1] * cs
+                }
+            };
+        }
     }
 
     /// Predicted reflector position in the tracker frame (mm) for `commands` (chain order,
@@ -706,7 +942,22 @@ impl Model {
     /// When `params.len() != n_params()` or the reflector index is out of range: both are
     /// programming errors (input files are validated when they are read).
     pub fn predict(&self, commands: &Commands, reflector: usize, params: &[f64]) -> [f64; 3] {
-        let e = self.errors_at(commands, params);
+        self.predict_at(commands, reflector, 0.0, params)
+    }
+
+    /// [`Model::predict`] at time `t_s` (s since the test started), for models with thermal
+    /// drift.
+    ///
+    /// # Panics
+    /// As [`Model::predict`].
+    pub fn predict_at(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+    ) -> [f64; 3] {
+        let e = self.errors_at_point(commands, reflector, t_s, params);
         predict(
             &self.machine,
             commands,
@@ -722,6 +973,21 @@ impl Model {
     /// # Panics
     /// When `params.len() != n_params()`.
     pub fn errors_at(&self, commands: &Commands, params: &[f64]) -> PointErrors<f64> {
+        self.errors_at_point(commands, usize::MAX, 0.0, params)
+    }
+
+    /// [`Model::errors_at`] for a measured point: with the effects that depend on the reflector
+    /// and on the time stamp `t_s` (s).
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn errors_at_point(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+    ) -> PointErrors<f64> {
         self.check_len(params);
         let mut vals = [0.0; MAX_SLOTS];
         for (i, t) in self.terms.iter().enumerate() {
@@ -731,6 +997,7 @@ impl Model {
         }
         vals[self.terms.len()..self.terms.len() + TRACKER_DOF]
             .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
+        self.effect_values(commands, reflector, t_s, params, &mut vals, None);
         self.point_errors(|i| vals[i])
     }
 
@@ -748,6 +1015,21 @@ impl Model {
         &self,
         commands: &Commands,
         reflector: usize,
+        params: &[f64],
+        jac: &mut [f64],
+    ) -> [f64; 3] {
+        self.predict_with_jacobian_at(commands, reflector, 0.0, params, jac)
+    }
+
+    /// [`Model::predict_with_jacobian`] at time `t_s` (s).
+    ///
+    /// # Panics
+    /// As [`Model::predict_with_jacobian`].
+    pub fn predict_with_jacobian_at(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
@@ -770,6 +1052,8 @@ impl Model {
         vals[self.terms.len()..m]
             .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
+        let m = m + self.effects.len();
+        self.effect_values(commands, reflector, t_s, params, &mut vals, Some(jac));
         let refl = &self.machine.reflectors()[reflector].offset;
         let mut g = [[0.0; MAX_SLOTS]; 3];
         let point = match m {

@@ -39,6 +39,14 @@ impl<'a> Problem<'a> {
             return Err(Error::Model("no measured points".into()));
         }
         let n_refl = model.machine().reflectors().len();
+        if model.needs_time()
+            && let Some(p) = data.points.iter().find(|p| p.t_s.is_none())
+        {
+            return Err(Error::Model(format!(
+                "the model has thermal drift, but the measurement of line {} has no t_s",
+                p.line
+            )));
+        }
         if let Some(p) = data.points.iter().find(|p| p.reflector >= n_refl) {
             return Err(Error::Model(format!(
                 "measurement of line {} uses reflector index {} but the machine has {n_refl}",
@@ -66,7 +74,9 @@ impl<'a> Problem<'a> {
     /// Residual of point `i`: predicted minus measured (mm).
     pub fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
         let m = &self.data.points[i];
-        let x = self.model.predict(&m.commands, m.reflector, params);
+        let x = self
+            .model
+            .predict_at(&m.commands, m.reflector, m.t_s.unwrap_or(0.0), params);
         [
             x[0] - m.measured[0],
             x[1] - m.measured[1],
@@ -77,9 +87,13 @@ impl<'a> Problem<'a> {
     /// Residual of point `i` and its Jacobian (row-major 3 × n_params) in `jac`.
     pub fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
         let m = &self.data.points[i];
-        let x = self
-            .model
-            .predict_with_jacobian(&m.commands, m.reflector, params, jac);
+        let x = self.model.predict_with_jacobian_at(
+            &m.commands,
+            m.reflector,
+            m.t_s.unwrap_or(0.0),
+            params,
+            jac,
+        );
         [
             x[0] - m.measured[0],
             x[1] - m.measured[1],

@@ -298,9 +298,11 @@ impl Magnitudes {
         let v = *m
             .slot(Magnitudes::kind_of(id))
             .expect("every kind has a slot");
-        match id.unit() {
-            Unit::Mm => v * 1e-3,
-            Unit::Rad => v * 1e-6,
+        // An ISO error is in mm or rad.
+        if id.unit() == Unit::Mm {
+            v * 1e-3
+        } else {
+            v * 1e-6
         }
     }
 
@@ -473,9 +475,10 @@ impl Truth {
                 continue;
             }
             let before = self.model.term(t.id).map_or(0, |old| old.basis.degree());
-            let amp = match t.id.unit() {
-                Unit::Mm => translation_mm,
-                Unit::Rad => rotation_rad,
+            let amp = if t.id.unit() == Unit::Mm {
+                translation_mm
+            } else {
+                rotation_rad
             };
             for h in before + 1..=t.basis.degree() {
                 let phase = PI * (2.0 * rng.uniform() - 1.0);

@@ -296,9 +296,10 @@ fn implied_size(model: &Model, params: &[f64], extended: &Model, q: &[f64]) -> (
     let mut best: (f64, &'static str) = (0.0, "µm");
     for t in extended.terms() {
         let ax = &extended.machine().axes()[t.axis];
-        let scale = match t.id.unit() {
-            Unit::Mm => (1e3, "µm"),
-            Unit::Rad => (1e6, "µrad"),
+        let scale = if t.id.unit() == Unit::Mm {
+            (1e3, "µm")
+        } else {
+            (1e6, "µrad")
         };
         let peak = (0..=64)
             .map(|i| {

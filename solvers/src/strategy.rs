@@ -165,7 +165,7 @@ fn eligible(model: &Model, info: &ParamInfo, errors: Errors) -> bool {
     }
     let rotary = match info.owner {
         Owner::Term { term, .. } => model.terms()[term].id.axis().is_rotary(),
-        Owner::Tracker(_) => return true,
+        Owner::Tracker(_) | Owner::Effect(_) => return true,
     };
     match errors {
         Errors::All => true,

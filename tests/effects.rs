@@ -1,0 +1,157 @@
+//! Effects outside the ISO 230 model in the error model (`[effects]`): exact Jacobians, and a
+//! model that carries them recovers data the generator made with them.
+
+use volver::core::iso::Unit;
+use volver::core::machine::Machine;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::{ErrorModelSpec, Model};
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::Plan;
+use volver::core::problem::Problem;
+use volver::core::random::Rng;
+use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
+use volver::solvers::strategy::fit;
+
+const EFFECTS: &str = r#"
+[effects]
+thermal_drift = true
+reflector_offset = ["R1", "R2"]
+range_scale = true
+[[effects.ball_screw]]
+axis = "X"
+period_mm = 350.0
+[[effects.ball_screw]]
+axis = "Z"
+period_mm = 200.0
+"#;
+
+fn model_with_effects() -> Model {
+    let m = Machine::default_xcfz();
+    let text = format!("{}\n{EFFECTS}", volver::core::model::DEFAULT_MODEL_TOML);
+    Model::from_toml_str(m, &text, "inline").unwrap()
+}
+
+#[test]
+fn effect_parameters_have_names_units_and_exact_jacobians() {
+    let model = model_with_effects();
+    let name = |n: &str| model.param_index(n).unwrap_or_else(|| panic!("{n}"));
+    assert_eq!(model.params()[name("drift.z")].unit, Unit::MmPerHour);
+    assert_eq!(model.params()[name("range.scale")].unit, Unit::Ppm);
+    assert_eq!(model.params()[name("reflector.R2.y")].unit, Unit::Mm);
+    assert_eq!(model.params()[name("screw.Z.b")].unit, Unit::Mm);
+    assert_eq!(model.n_params(), 74 + 3 + 6 + 1 + 4);
+    let mut rng = Rng::new(5);
+    let mut p = model.initial_params();
+    for (j, info) in model.params().iter().enumerate() {
+        let scale = match info.unit {
+            Unit::Mm => 0.02,
+            Unit::Rad => 2e-5,
+            Unit::MmPerHour => 0.01,
+            Unit::Ppm => 10.0,
+        };
+        p[j] += scale * rng.normal();
+    }
+    let n = model.n_params();
+    let mut jac = vec![0.0; 3 * n];
+    let m = model.machine();
+    for (pos, refl, t_s) in [
+        ([700.0, 90.0, 300.0], 0, 1800.0),
+        ([1234.0, 250.0, 77.0], 1, 7200.0),
+    ] {
+        let cmd = m.commands_from_file_units(&pos);
+        model.predict_with_jacobian_at(&cmd, refl, t_s, &p, &mut jac);
+        for j in 0..n {
+            let h = match model.params()[j].unit {
+                Unit::Rad => 1e-6,
+                Unit::Ppm => 1e-1,
+                _ => 1e-4,
+            };
+            let (mut a, mut b) = (p.clone(), p.clone());
+            a[j] += h;
+            b[j] -= h;
+            let (xa, xb) = (
+                model.predict_at(&cmd, refl, t_s, &a),
+                model.predict_at(&cmd, refl, t_s, &b),
+            );
+            for c in 0..3 {
+                let fd = (xa[c] - xb[c]) / (2.0 * h);
+                let an = jac[c * n + j];
+                assert!(
+                    (fd - an).abs() <= 1e-6 * fd.abs().max(1.0),
+                    "{} row {c}: dual {an} vs FD {fd}",
+                    model.params()[j].name
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn a_model_with_the_effects_recovers_data_made_with_them() {
+    let m = Machine::default_xcfz();
+    let truth = Truth::random_complete(&m, &Magnitudes::default(), 41).unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, "test4").unwrap(), truth, 41);
+    sim.noise = TrackerNoise::NONE;
+    sim.effects = [
+        "thermal-drift=3,-4,15",
+        "reflector-offset=R1,30,-20,15",
+        "range-scale=25",
+        "ball-screw=X,350,4",
+    ]
+    .iter()
+    .map(|e| Effect::parse(e).unwrap())
+    .collect();
+    let data: MeasurementSet = sim.run().unwrap().measurements;
+    let model = model_with_effects();
+    let id = fit(Problem::new(&model, &data).unwrap());
+    println!(
+        "EMM {} → {} µm ({:?})",
+        id.initial.stats.emm_um, id.final_.stats.emm_um, id.termination
+    );
+    assert!(id.final_.stats.emm_um < 1e-5 * id.initial.stats.emm_um);
+    // The paper's model alone cannot.
+    let plain = fit(Problem::new(&Model::default_xcfz(), &data).unwrap());
+    assert!(
+        plain.final_.stats.emm_um > 1.0,
+        "{}",
+        plain.final_.stats.emm_um
+    );
+    // Thermal drift needs time stamps.
+    let mut no_time = data.clone();
+    no_time.points[3].t_s = None;
+    let e = Problem::new(&model, &no_time).unwrap_err().to_string();
+    assert!(e.contains("no t_s"), "{e}");
+}
+
+#[test]
+fn bad_effects_in_a_model_file_are_named() {
+    let m = Machine::default_xcfz();
+    let err = |fx: &str| {
+        let text = format!("{}\n{fx}", volver::core::model::DEFAULT_MODEL_TOML);
+        Model::from_toml_str(m.clone(), &text, "e.toml")
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err("[effects]\nreflector_offset = [\"R9\"]\n");
+    assert!(
+        e.contains("e.toml") && e.contains("no reflector 'R9'"),
+        "{e}"
+    );
+    let e = err("[[effects.ball_screw]]\naxis = \"C\"\nperiod_mm = 10.0\n");
+    assert!(e.contains("'C' is not a linear axis of XCFZ"), "{e}");
+    let e = err("[[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 0.0\n");
+    assert!(e.contains("must be positive"), "{e}");
+    let e = err("[effects]\ndrift = true\n");
+    assert!(e.contains("e.toml") && e.contains("drift"), "{e}");
+    // The effects survive a results file round trip.
+    let model = model_with_effects();
+    let json = volver::core::results::ResultsFile::from_model(&model, &model.initial_params())
+        .unwrap()
+        .to_json();
+    let (back, _) = volver::core::results::ResultsFile::from_json_str(&json, "r.json")
+        .unwrap()
+        .to_model("r.json")
+        .unwrap();
+    assert_eq!(back.n_params(), model.n_params());
+    let _: &ErrorModelSpec = back.spec();
+}
