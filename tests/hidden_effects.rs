@@ -326,3 +326,38 @@ fn volver_identify_add_refits_with_the_candidate_and_writes_the_model() {
     assert_eq!(svg.matches("class=\"revision\"").count(), 3);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn effects_outside_the_iso_model_are_found() {
+    // Sizes that stand out of each noise level; the plan's order (X slowest) lets part of a
+    // drift hide in the X errors, so the drift is fast enough to show within each X block.
+    for (effect, want) in [
+        ("reflector-offset=R1,60,-40,50", "reflector-offset:R1"),
+        ("ball-screw=X,700,30", "ball-screw:X:700"),
+    ] {
+        for noise in [LOW_NOISE, TrackerNoise::PAPER] {
+            let sim = simulate(noise, vec![Effect::parse(effect).unwrap()], 34);
+            diagnose_and_fix(paper_spec(), &sim, want);
+        }
+    }
+}
+
+#[test]
+fn thermal_drift_is_found_when_the_measuring_order_does_not_follow_an_axis() {
+    // Measured in plan order (X slowest), time is X: a drift hides in the X errors. Measured in
+    // a shuffled order, it stands out.
+    let m = Machine::default_xcfz();
+    let truth = Truth::random_complete(&m, &Magnitudes::default(), 35).unwrap();
+    let mut plan = Plan::preset(&m, "test4").unwrap();
+    let mut rng = volver::core::random::Rng::new(9);
+    for i in (1..plan.positions.len()).rev() {
+        let j = (rng.uniform() * (i + 1) as f64) as usize;
+        plan.positions.swap(i, j);
+    }
+    for noise in [LOW_NOISE, TrackerNoise::PAPER] {
+        let mut sim = Simulation::new(plan.clone(), truth.clone(), 35);
+        sim.noise = noise;
+        sim.effects = vec![Effect::parse("thermal-drift=10,-5,60").unwrap()];
+        diagnose_and_fix(paper_spec(), &sim.run().unwrap(), "thermal-drift");
+    }
+}

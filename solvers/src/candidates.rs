@@ -17,16 +17,20 @@
 //! | `raise:EXX` | the next degree (polynomial) or harmonic (periodic) of one modelled error |
 //! | `raise-axis:C` | the next degree or harmonic of every modelled error of one axis |
 //! | `tracker-tilt` | the tracker's small rotations about its x and y axes, when the model holds them |
-//!
-//! Effects outside the ISO 230 model (thermal drift, a periodic positioning error, a reflector
-//! offset error, a tracker range scale error) join the library when the model can carry them.
+//! | `thermal-drift` | drift of the tool point with time (`[effects] thermal_drift`; needs `t_s`) |
+//! | `reflector-offset:R1` | reflector R1 off its nominal offset |
+//! | `range-scale` | a scale error of the tracker's range |
+//! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
 
 use crate::Task;
 use crate::lm::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
-use volver_core::iso::{Axis, ErrorId, Unit};
-use volver_core::model::{ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
+use volver_core::iso::{Axis, ErrorId, Group, Unit};
+use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
+
+/// Periodic positioning errors are tried with periods travel/2 … travel/SCREW_PERIODS.
+pub const SCREW_PERIODS: usize = 8;
 use volver_core::problem::Problem;
 
 /// A candidate: an extension of the error model.
@@ -55,7 +59,7 @@ pub struct Score {
     pub delta_bic: f64,
     /// Size of the implied effect: its largest value over the travel, µm or µrad.
     pub size: f64,
-    /// Unit of `size` (`µm` or `µrad`).
+    /// Unit of `size` (`µm`, `µrad`, `µm/h` or `ppm`).
     pub size_unit: &'static str,
     /// Candidates the data cannot tell from this one: as many added directions and a ΔBIC
     /// within 2 of it ("not worth more than a bare mention" on Kass and Raftery's scale), e.g. a
@@ -198,6 +202,64 @@ pub fn library(model: &Model) -> Vec<Candidate> {
             });
         }
     }
+    // Effects outside the ISO 230 model.
+    let fx = &spec.effects;
+    if !fx.thermal_drift {
+        let mut s = spec.clone();
+        s.effects.thermal_drift = true;
+        out.push(Candidate {
+            id: "thermal-drift".into(),
+            description: "thermal drift of the tool point with time (needs t_s)".into(),
+            spec: s,
+        });
+    }
+    for r in machine.reflectors() {
+        if !fx.reflector_offset.contains(&r.id) {
+            let mut s = spec.clone();
+            s.effects.reflector_offset.push(r.id.clone());
+            out.push(Candidate {
+                id: format!("reflector-offset:{}", r.id),
+                description: format!("reflector {} off its nominal offset", r.id),
+                spec: s,
+            });
+        }
+    }
+    if !fx.range_scale {
+        let mut s = spec.clone();
+        s.effects.range_scale = true;
+        out.push(Candidate {
+            id: "range-scale".into(),
+            description: "a scale error of the tracker's range".into(),
+            spec: s,
+        });
+    }
+    for ax in machine.axes().iter().filter(|a| !a.axis.is_rotary()) {
+        let travel = ax.max - ax.min;
+        for k in 2..=SCREW_PERIODS {
+            let period = travel / k as f64;
+            let period = (period * 1e3).round() / 1e3;
+            let letter = ax.axis.to_string();
+            if fx
+                .ball_screw
+                .iter()
+                .any(|b| b.axis == letter && (b.period_mm - period).abs() < 1e-9)
+            {
+                continue;
+            }
+            let mut s = spec.clone();
+            s.effects.ball_screw.push(BallScrewSpec {
+                axis: letter.clone(),
+                period_mm: period,
+            });
+            out.push(Candidate {
+                id: format!("ball-screw:{letter}:{period}"),
+                description: format!(
+                    "a periodic positioning error of {letter} with a period of {period} mm"
+                ),
+                spec: s,
+            });
+        }
+    }
     // The tracker's tilt.
     let identify = &spec.tracker.identify;
     if !identify.iter().any(|n| n == "rx") && !identify.iter().any(|n| n == "ry") {
@@ -318,8 +380,36 @@ fn implied_size(model: &Model, params: &[f64], extended: &Model, q: &[f64]) -> (
     let (ts, te) = (model.tracker_start(), extended.tracker_start());
     let tilt =
         ((q[te + 3] - params[ts + 3]).powi(2) + (q[te + 4] - params[ts + 4]).powi(2)).sqrt() * 1e6;
-    if tilt > 0.0 && best.0 == 0.0 {
+    if tilt > 1e-9 && best.0 <= 1e-9 {
         best = (tilt, "µrad");
+    }
+    // New effect parameters: the norm of each group (drift.x/y/z, screw.X.a/b …).
+    let mut groups: Vec<(String, f64, &'static str)> = Vec::new();
+    for (j, info) in extended.params().iter().enumerate() {
+        if info.group != Group::Other || model.param_index(&info.name).is_some() {
+            continue;
+        }
+        let (scale, unit) = match info.unit {
+            Unit::Mm => (1e3, "µm"),
+            Unit::MmPerHour => (1e3, "µm/h"),
+            Unit::Ppm => (1.0, "ppm"),
+            Unit::Rad => (1e6, "µrad"),
+        };
+        let key = info
+            .name
+            .rsplit_once('.')
+            .map_or(info.name.as_str(), |(k, _)| k)
+            .to_string();
+        let v = q[j] * scale;
+        match groups.iter_mut().find(|g| g.0 == key) {
+            Some(g) => g.1 = g.1.hypot(v),
+            None => groups.push((key, v.abs(), unit)),
+        }
+    }
+    if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1))
+        && best.0 <= 1e-9
+    {
+        best = (g.1, g.2);
     }
     best
 }

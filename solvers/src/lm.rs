@@ -138,9 +138,12 @@ pub(crate) fn scaled_null_space(
     Result<NullSpace, crate::nullspace::ConstraintError>,
 ) {
     let n = anchor.len();
+    // A column at rounding level (a sinusoid the mesh samples only at its zeros) must not be
+    // blown up to unit norm: column norms are floored at 1e-12 of the largest.
+    let cmax = (0..n).map(|j| h[(j, j)]).fold(0.0_f64, f64::max);
     let d: Vec<f64> = (0..n)
         .map(|j| {
-            let c = h[(j, j)];
+            let c = h[(j, j)].max(1e-24 * cmax);
             if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
         })
         .collect();
