@@ -14,7 +14,9 @@ use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
 use volver::core::problem::Problem;
 use volver::core::results::ResultsFile;
-use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth, TruthSource};
+use volver::core::simulate::{
+    Effect, Magnitudes, Simulation, SimulationRecord, Truth, TruthSource,
+};
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::nullspace::NullSpace;
 use volver::solvers::strategy::{Phasing, Strategy, identify};
@@ -178,7 +180,8 @@ struct IdentifyArgs {
     #[arg(long, default_value_t = 1)]
     subloops: usize,
     /// The true errors (results JSON, e.g. truth.json of `volver simulate`): reports the
-    /// noise error, the EMM of the measurements against the truth.
+    /// noise error, from the simulation.json beside it when there is one (it knows the effects
+    /// the results format cannot hold), else the EMM of the measurements against the truth.
     #[arg(long)]
     truth: Option<PathBuf>,
     /// Iteration limit per phase (criterion 3).
@@ -532,8 +535,17 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             if truth.model.machine().spec() != machine.spec() {
                 anyhow::bail!("the machine of {label} is not the machine of the measurements");
             }
-            let truth_problem = Problem::new(&truth.model, &data)?;
-            Some(truth_problem.stats(&truth.params))
+            // Effects outside the results format (drift, reflector offsets …) are not in the
+            // truth file; the generator's own record beside it has the exact noise error.
+            let record = path
+                .parent()
+                .map(|d| d.join("simulation.json"))
+                .and_then(|p| std::fs::read_to_string(p).ok())
+                .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok());
+            match record {
+                Some(r) => Some(r.noise_error),
+                None => Some(Problem::new(&truth.model, &data)?.stats(&truth.params)),
+            }
         }
         None => None,
     };
@@ -655,7 +667,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         );
         if let Some(n) = noise_error {
             println!(
-                "  noise error (measured vs truth):       EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
+                "  noise error (of the measurements):      EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
                 um(n.emm_um),
                 um(n.emax_um),
                 id.final_.stats.emm_um / n.emm_um

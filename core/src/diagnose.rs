@@ -137,7 +137,7 @@ pub fn by_values(
 
 /// A bin edge for labels: whole numbers as such, others to four significant digits.
 fn label(v: f64) -> String {
-    if v == v.round() && v.abs() < 1e15 {
+    if (v - v.round()).abs() <= 1e-9 * v.abs().max(1.0) && v.abs() < 1e15 {
         format!("{v:.0}")
     } else {
         let digits = (3 - v.abs().log10().floor() as i32).clamp(0, 9) as usize;
