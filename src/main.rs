@@ -349,6 +349,25 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
         })
         .collect();
     let repeat = diagnose::repeat_noise(&problem);
+    let outliers = diagnose::largest(&r, 5);
+    let describe = |i: usize| {
+        let p = &set.points[i];
+        let pos: Vec<String> = m
+            .axes()
+            .iter()
+            .enumerate()
+            .map(|(k, ax)| {
+                let v = (ax.to_file_units(p.commands.0[k]) * 1e6).round() / 1e6;
+                format!("{}={v}", ax.axis)
+            })
+            .collect();
+        format!(
+            "line {} ({} {})",
+            p.line,
+            pos.join(" "),
+            m.reflectors()[p.reflector].id
+        )
+    };
     let options = Options::default();
     let ident = analyse(
         &volver::solvers::Task::new(problem),
@@ -377,6 +396,9 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
                 "lines": lines.iter().map(|l| serde_json::json!({
                     "order": l.frequency, "amplitude_um": l.amplitude_um,
                 })).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
+            "outliers": outliers.iter().map(|(i, e)| serde_json::json!({
+                "line": set.points[*i].line, "error_um": e, "where": describe(*i),
             })).collect::<Vec<_>>(),
             "identifiability": ident.as_ref().map(|a| serde_json::json!({
                 "free": a.free, "rank": a.rank, "condition": a.condition,
@@ -421,6 +443,11 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
             cells.join("  ")
         );
     }
+    let worst: Vec<String> = outliers
+        .iter()
+        .map(|(i, e)| format!("{} {:.1} µm", describe(*i), e))
+        .collect();
+    println!("  largest residuals: {}", worst.join("; "));
     println!("\nPeriodograms of the residuals in the machine frame (amplitude µm of orders 1–6):");
     for (a, lines) in &periodograms {
         let cells: Vec<String> = lines

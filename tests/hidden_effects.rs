@@ -231,6 +231,8 @@ fn volver_diagnose_ranks_the_hidden_effect_first_in_json() {
         assert!(!c[0][key].is_null(), "{key}");
     }
     assert!(c[0]["delta_bic"].as_f64().unwrap() < -10.0);
+    assert_eq!(v["outliers"].as_array().unwrap().len(), 5);
+    assert!(v["outliers"][0]["line"].as_u64().unwrap() >= 2);
     // The repeated C = 0/360 points estimate the noise.
     assert!(v["noise_estimate_um"].as_f64().unwrap() > 0.0);
     // The harmonic shows in C's periodogram at order 2 (machine frame).
