@@ -89,44 +89,7 @@ enum Command {
     /// as a results file), DIR/machine.toml and DIR/simulation.json (inputs and figures), and
     /// prints the noise error (EMM, EMax of the noise alone, tables 9–10 of the paper).
     #[command(after_help = SIMULATE_HELP)]
-    Simulate {
-        /// Test plan: table4, table7, test1 … test5, or a grid such as X=0:1400:100,Z=0:600:50,C=0
-        /// (file units: mm, degrees).
-        #[arg(long, default_value = "test4")]
-        plan: String,
-        /// Seed of the true errors, the harmonics' phases and the noise.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Output folder (created if missing; files of the same names are replaced).
-        #[arg(long)]
-        out: PathBuf,
-        /// Machine file (TOML); the embedded XCFZ grinder when absent.
-        #[arg(long)]
-        machine: Option<PathBuf>,
-        /// True errors from a results file (JSON) instead of random ones.
-        #[arg(long, conflicts_with_all = ["truth_model", "magnitude"])]
-        truth: Option<PathBuf>,
-        /// Error model (TOML) giving the structure of the random true errors; every error of the
-        /// machine (cubic / first harmonic) when absent.
-        #[arg(long)]
-        truth_model: Option<PathBuf>,
-        /// Size of the random true errors of one kind, e.g. straightness=20 (see below).
-        #[arg(long = "magnitude", value_name = "KIND=VALUE")]
-        magnitude: Vec<String>,
-        /// Tracker noise: paper (30 µrad, 30 µrad, 4 µm + 0.8 µm/m), none, or
-        /// AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M.
-        #[arg(long, default_value = "paper")]
-        noise: String,
-        /// An effect outside the standard model, hidden in the data (see below); repeatable.
-        #[arg(long = "effect", value_name = "EFFECT=VALUES")]
-        effect: Vec<String>,
-        /// Test duration in hours (time stamps t_s); 10 s per point when absent.
-        #[arg(long)]
-        duration_h: Option<f64>,
-        /// Reflectors measured at each position, ids comma-separated; all when absent.
-        #[arg(long)]
-        reflectors: Option<String>,
-    },
+    Simulate(SimulateArgs),
 }
 
 /// The machine, error model and measurements that `identify` and `diagnose` read.
@@ -288,31 +251,7 @@ fn main() -> Result<()> {
             );
             study::print(&study::paper(seed)?);
         }
-        Command::Simulate {
-            plan,
-            seed,
-            out,
-            machine,
-            truth,
-            truth_model,
-            magnitude,
-            noise,
-            effect,
-            duration_h,
-            reflectors,
-        } => simulate(SimulateArgs {
-            plan,
-            seed,
-            out,
-            machine,
-            truth,
-            truth_model,
-            magnitude,
-            noise,
-            effect,
-            duration_h,
-            reflectors,
-        })?,
+        Command::Simulate(args) => simulate(args)?,
     }
     Ok(())
 }
@@ -622,24 +561,11 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             },
         )?;
     }
+    let results = ResultsFile::from_model(&model, &id.params)?;
     if let Some(out) = &a.out {
-        ResultsFile::from_model(&model, &id.params)?
-            .save(out)
-            .context("writing the results file")?;
+        results.save(out).context("writing the results file")?;
     }
-    let params: Vec<serde_json::Value> = model
-        .params()
-        .iter()
-        .zip(&id.params)
-        .map(|(info, v)| {
-            serde_json::json!({
-                "name": info.name,
-                "value": v,
-                "unit": info.unit.to_string(),
-                "group": info.group.to_string(),
-            })
-        })
-        .collect();
+    let params = serde_json::to_value(&results.parameters)?;
     if a.json {
         let obj = serde_json::json!({
             "solver": solver.name(),
@@ -732,17 +658,44 @@ fn um(v: f64) -> String {
     }
 }
 
+/// Options of `volver simulate`.
+#[derive(clap::Args)]
 struct SimulateArgs {
+    /// Test plan: table4, table7, test1 … test5, or a grid such as X=0:1400:100,Z=0:600:50,C=0
+    /// (file units: mm, degrees).
+    #[arg(long, default_value = "test4")]
     plan: String,
+    /// Seed of the true errors, the harmonics' phases and the noise.
+    #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Output folder (created if missing; files of the same names are replaced).
+    #[arg(long)]
     out: PathBuf,
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
     machine: Option<PathBuf>,
+    /// True errors from a results file (JSON) instead of random ones.
+    #[arg(long, conflicts_with_all = ["truth_model", "magnitude"])]
     truth: Option<PathBuf>,
+    /// Error model (TOML) giving the structure of the random true errors; every error of the
+    /// machine (cubic / first harmonic) when absent.
+    #[arg(long)]
     truth_model: Option<PathBuf>,
+    /// Size of the random true errors of one kind, e.g. straightness=20 (see below).
+    #[arg(long = "magnitude", value_name = "KIND=VALUE")]
     magnitude: Vec<String>,
+    /// Tracker noise: paper (30 µrad, 30 µrad, 4 µm + 0.8 µm/m), none, or
+    /// AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M.
+    #[arg(long, default_value = "paper")]
     noise: String,
+    /// An effect outside the standard model, hidden in the data (see below); repeatable.
+    #[arg(long = "effect", value_name = "EFFECT=VALUES")]
     effect: Vec<String>,
+    /// Test duration in hours (time stamps t_s); 10 s per point when absent.
+    #[arg(long)]
     duration_h: Option<f64>,
+    /// Reflectors measured at each position, ids comma-separated; all when absent.
+    #[arg(long)]
     reflectors: Option<String>,
 }
 

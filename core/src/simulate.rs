@@ -275,6 +275,21 @@ impl Magnitudes {
         Ok(())
     }
 
+    /// Every magnitude multiplied by `k`.
+    ///
+    /// ```
+    /// use volver_core::simulate::Magnitudes;
+    /// let m = Magnitudes::default().scaled(2.0);
+    /// assert_eq!(m.angular_urad, 2.0 * Magnitudes::default().angular_urad);
+    /// ```
+    pub fn scaled(&self, k: f64) -> Magnitudes {
+        let mut m = *self;
+        for (kind, _, _) in MAGNITUDE_KINDS {
+            *m.slot(kind).expect("every kind has a slot") *= k;
+        }
+        m
+    }
+
     /// The kind of an error (a name of [`MAGNITUDE_KINDS`]).
     pub fn kind_of(id: ErrorId) -> &'static str {
         let own = id.component().direction() == id.axis().direction();
