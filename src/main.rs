@@ -17,7 +17,6 @@ use volver::core::results::ResultsFile;
 use volver::core::simulate::{
     Effect, Magnitudes, Simulation, SimulationRecord, Truth, TruthSource,
 };
-use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::nullspace::NullSpace;
 use volver::solvers::strategy::{Phasing, Strategy, identify};
 use volver::solvers::{Iteration, Objective, Observer, Options, Solver};
@@ -473,12 +472,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     if a.subloops == 0 {
         anyhow::bail!("--subloops must be at least 1");
     }
-    let solver: Box<dyn Solver> = match a.solver.as_str() {
-        "lm" => Box::new(LevenbergMarquardt),
-        other => anyhow::bail!(
-            "unknown solver '{other}': this build has lm (the native Levenberg–Marquardt)"
-        ),
-    };
+    let solver: Box<dyn Solver> = volver::solvers::engine(&a.solver).map_err(anyhow::Error::msg)?;
     let mut options = Options {
         objective,
         ..Options::default()

@@ -345,6 +345,9 @@ pub enum ConstraintKind {
     Squareness,
     /// A parameter held at a value.
     Fixed,
+    /// A combination of parameters the data cannot identify, held at its value (gauge fixing,
+    /// e.g. to compare engines on a well-posed problem).
+    Gauge,
 }
 
 /// One linear equality `Σ coeffs[j].1 · p[coeffs[j].0] = rhs`.

@@ -12,7 +12,10 @@ const INSTALL: &str = "on Debian or Ubuntu: `apt-get install libceres-dev libcla
 
 fn first_existing(env: &str, candidates: &[&str], probe: &str) -> Option<PathBuf> {
     if let Ok(dir) = std::env::var(env) {
-        return Path::new(&dir).join(probe).exists().then(|| PathBuf::from(dir));
+        return Path::new(&dir)
+            .join(probe)
+            .exists()
+            .then(|| PathBuf::from(dir));
     }
     candidates
         .iter()
@@ -29,7 +32,11 @@ fn main() {
 
     let ceres = first_existing(
         "CERES_INCLUDE_DIR",
-        &["/usr/include", "/usr/local/include", "/opt/homebrew/include"],
+        &[
+            "/usr/include",
+            "/usr/local/include",
+            "/opt/homebrew/include",
+        ],
         "ceres/ceres.h",
     )
     .unwrap_or_else(|| {

@@ -12,6 +12,7 @@
 use crate::Task;
 use crate::lm::{Reduced, reduced_normal};
 use faer::Side;
+use volver_core::model::{Constraint, ConstraintKind};
 
 /// A combination of parameters the data cannot identify.
 #[derive(Clone, Debug, PartialEq)]
@@ -145,4 +146,48 @@ pub fn analyse(
         correlations,
         weak,
     })
+}
+
+/// `task` with its unidentifiable directions held: every free direction whose curvature at
+/// `params` is below `tolerance` × the largest (in the engine's scaled coordinates) becomes a
+/// [`ConstraintKind::Gauge`] constraint `Σ_j v_j p_j / D_j = Σ_j v_j params_j / D_j`. The
+/// problem that is left is well posed, so engines that differ in how they treat flat
+/// directions reach the same optimum. `None` when the Jacobian is not finite or a
+/// decomposition fails.
+pub fn hold_weak<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option<Task<'a>> {
+    let n = params.len();
+    let Reduced { d, ns, hz, .. } = reduced_normal(task, params)?;
+    let nf = ns.n_free();
+    let mut held = task.clone();
+    if nf == 0 {
+        return Some(held);
+    }
+    let basis = ns.basis();
+    let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
+    let (mu, v) = (evd.S().column_vector(), evd.U());
+    let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+    for i in (0..nf).filter(|&i| mu[i] <= tolerance * mu_max) {
+        let coeffs: Vec<(usize, f64)> = (0..n)
+            .map(|j| {
+                let dir: f64 = (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum();
+                (j, dir / d[j])
+            })
+            .filter(|(_, c)| *c != 0.0)
+            .collect();
+        // Unit largest coefficient, so that the constraint matrix stays balanced.
+        let cmax = coeffs.iter().fold(0.0_f64, |m, (_, c)| m.max(c.abs()));
+        let coeffs: Vec<(usize, f64)> = coeffs.into_iter().map(|(j, c)| (j, c / cmax)).collect();
+        let rhs = coeffs.iter().map(|&(j, c)| c * params[j]).sum();
+        held.constraints.rows.push(Constraint {
+            kind: ConstraintKind::Gauge,
+            label: format!(
+                "unidentifiable direction {} held (relative curvature {:.1e})",
+                i + 1,
+                mu[i].max(0.0) / mu_max
+            ),
+            coeffs,
+            rhs,
+        });
+    }
+    Some(held)
 }

@@ -16,9 +16,16 @@
 #![deny(missing_docs)]
 
 pub mod candidates;
+#[cfg(feature = "ceres")]
+pub mod ceres;
+#[cfg(feature = "clarabel")]
+pub mod clarabel;
+mod free;
 pub mod identifiability;
 pub mod init;
 pub mod lm;
+#[cfg(feature = "nlopt")]
+pub mod nlopt;
 pub mod nullspace;
 pub mod options;
 pub mod strategy;
@@ -106,13 +113,23 @@ pub struct Iteration {
 pub trait Observer {
     /// Called after every step tried.
     fn iteration(&mut self, _it: &Iteration) {}
+
+    /// Whether [`Iteration::emm_um`] is read: engines whose own iteration reports lack the
+    /// residual modules (Ceres) then spend a residual pass per iteration to compute it.
+    fn wants_metrics(&self) -> bool {
+        true
+    }
 }
 
 /// An observer that does nothing.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Silent;
 
-impl Observer for Silent {}
+impl Observer for Silent {
+    fn wants_metrics(&self) -> bool {
+        false
+    }
+}
 
 /// A minimisation engine.
 pub trait Solver {
@@ -128,6 +145,68 @@ pub trait Solver {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution;
+}
+
+/// Names of the engines this build has, in the order [`engine`] knows them: `lm` always;
+/// `lm+clarabel` and `clarabel` with the `clarabel` feature; `ceres` with `ceres`;
+/// `nlopt-lbfgs`, `nlopt-slsqp`, `nlopt-mma` and `nlopt-bobyqa` with `nlopt`.
+///
+/// ```
+/// let names = volver_solvers::engine_names();
+/// assert_eq!(names[0], "lm");
+/// for name in &names {
+///     assert_eq!(volver_solvers::engine(name).unwrap().name(), *name);
+/// }
+/// assert!(volver_solvers::engine("simplex").is_err());
+/// ```
+pub fn engine_names() -> Vec<&'static str> {
+    #[allow(unused_mut)]
+    let mut names = vec!["lm"];
+    #[cfg(feature = "clarabel")]
+    names.extend(["lm+clarabel", "clarabel"]);
+    #[cfg(feature = "ceres")]
+    names.push("ceres");
+    #[cfg(feature = "nlopt")]
+    names.extend(["nlopt-lbfgs", "nlopt-slsqp", "nlopt-mma", "nlopt-bobyqa"]);
+    names
+}
+
+/// The engine called `name`, or an error listing the engines of this build (and the Cargo
+/// feature that brings a known engine this build lacks).
+pub fn engine(name: &str) -> Result<Box<dyn Solver>, String> {
+    let engine: Box<dyn Solver> = match name {
+        "lm" => Box::new(lm::LevenbergMarquardt),
+        #[cfg(feature = "clarabel")]
+        "clarabel" => Box::new(crate::clarabel::ProxLinear),
+        #[cfg(feature = "clarabel")]
+        "lm+clarabel" => Box::new(crate::clarabel::Polished),
+        #[cfg(feature = "ceres")]
+        "ceres" => Box::new(ceres::Ceres::default()),
+        #[cfg(feature = "nlopt")]
+        "nlopt-lbfgs" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Lbfgs)),
+        #[cfg(feature = "nlopt")]
+        "nlopt-slsqp" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Slsqp)),
+        #[cfg(feature = "nlopt")]
+        "nlopt-mma" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Mma)),
+        #[cfg(feature = "nlopt")]
+        "nlopt-bobyqa" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Bobyqa)),
+        other => {
+            let feature = match other {
+                "ceres" => Some("ceres"),
+                "clarabel" | "lm+clarabel" => Some("clarabel"),
+                o if o.starts_with("nlopt") => Some("nlopt"),
+                _ => None,
+            };
+            let hint = feature
+                .map(|f| format!(" ('{other}' needs the Cargo feature `{f}`)"))
+                .unwrap_or_default();
+            return Err(format!(
+                "unknown solver '{other}'{hint}: this build has {}",
+                engine_names().join(", ")
+            ));
+        }
+    };
+    Ok(engine)
 }
 
 /// Φ, ve, EMM and EMax of a problem at `params`.

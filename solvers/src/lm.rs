@@ -34,18 +34,18 @@
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let sol = LevenbergMarquardt.solve(&Task::new(problem), &model.initial_params(),
 //!                                    &Options::default(), &mut Silent);
-//! assert!(sol.summary.termination.converged());
-//! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
+//! assert!(sol.run.summary.termination.converged());
+//! assert!(sol.run.summary.final_.stats.emm_um < 1e-6 * sol.run.summary.initial.stats.emm_um);
 //! ```
 
+use crate::free::{Run, cost_of, weight_of};
 use crate::nullspace::NullSpace;
 use crate::options::{Objective, Options};
-use crate::summary::{Summary, Termination};
-use crate::{Iteration, Observer, Solution, Solver, Task, evaluate};
+use crate::summary::Termination;
+use crate::{Iteration, Observer, Solution, Solver, Task};
 use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
 use faer::prelude::*;
 use faer::{Accum, Mat, Par, Side};
-use std::time::Instant;
 use volver_core::problem::{Problem, norm};
 
 /// Points per block of the normal-equation accumulation.
@@ -184,33 +184,6 @@ pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduc
     Some(Reduced { d, ns, hz, gz })
 }
 
-/// The smoothed objective from residual modules: ve, or Φ_ε.
-fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
-    let n = norms.len() as f64;
-    match objective {
-        Objective::Ve => norms.iter().map(|r| r * r).sum::<f64>() / n,
-        Objective::Phi => {
-            norms
-                .iter()
-                .map(|r| (r * r + eps * eps).sqrt())
-                .sum::<f64>()
-                / n
-        }
-    }
-}
-
-/// Weight of a point in the Gauss–Newton model of the cost: twice the derivative of the
-/// point's loss with respect to ‖r‖², over n, and the radial reduction c of its Hessian.
-fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f64, f64) {
-    match objective {
-        Objective::Ve => (2.0 / n as f64, 0.0),
-        Objective::Phi => {
-            let s = r * r + eps * eps;
-            (1.0 / (s.sqrt() * n as f64), r * r / s)
-        }
-    }
-}
-
 /// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
 /// pseudo-inverse that drops directions below 1e-14 of the largest singular value.
 fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
@@ -238,30 +211,6 @@ fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
-/// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
-struct Free {
-    d: Vec<f64>,
-    ns: NullSpace,
-    /// Parameters held at a value: set exactly, not to rounding.
-    fixed: Vec<(usize, f64)>,
-}
-
-impl Free {
-    fn params(&self, z: &[f64]) -> Vec<f64> {
-        let mut p: Vec<f64> = self
-            .ns
-            .expand(z)
-            .iter()
-            .zip(&self.d)
-            .map(|(s, d)| s * d)
-            .collect();
-        for &(j, v) in &self.fixed {
-            p[j] = v;
-        }
-        p
-    }
-}
-
 impl Solver for LevenbergMarquardt {
     fn name(&self) -> &'static str {
         "lm"
@@ -274,97 +223,65 @@ impl Solver for LevenbergMarquardt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let t0 = Instant::now();
+        let run = match Run::start(self.name(), task, start, options) {
+            Ok(run) => run,
+            Err(solution) => return *solution,
+        };
+        let (mut run, free, first) = match run.free_and_normal(task, start) {
+            Ok(x) => x,
+            Err(solution) => return *solution,
+        };
         let problem = &task.problem;
-        let model = problem.model();
-        let n = model.n_params();
+        let n = problem.model().n_params();
         let objective = options.objective;
-        let mut summary = Summary {
-            solver: self.name().to_string(),
-            objective,
-            phase: task.phase.clone(),
-            free_parameters: 0,
-            unidentifiable: 0,
-            points: problem.n_points(),
-            initial: Default::default(),
-            final_: Default::default(),
-            iterations: 0,
-            evaluations: 0,
-            jacobian_evaluations: 0,
-            time_s: 0.0,
-            termination: Termination::NoFreeParameters,
-        };
-        let finish = |mut summary: Summary, params: Vec<f64>, termination: Termination| {
-            summary.final_ = evaluate(problem, &params);
-            summary.evaluations += 1;
-            summary.termination = termination;
-            summary.time_s = t0.elapsed().as_secs_f64();
-            Solution { params, summary }
-        };
-        if let Err(e) = options.validate() {
-            return finish(summary, start.to_vec(), Termination::InvalidInput(e));
-        }
-        if start.len() != n || start.iter().any(|v| !v.is_finite()) {
-            return finish(
-                summary,
-                start.to_vec(),
-                Termination::InvalidInput(format!(
-                    "the start has {} values (finite: {}), the model {n} parameters",
-                    start.len(),
-                    start.iter().all(|v| v.is_finite())
-                )),
-            );
-        }
-        summary.initial = evaluate(problem, start);
-        summary.evaluations += 1;
-
-        // Column scaling from the unweighted Jacobian at the start.
-        let Some(first) = accumulate(problem, start, |_| (1.0, 0.0)) else {
-            return finish(
-                summary,
-                start.to_vec(),
-                Termination::NumericalFailure("the Jacobian is not finite at the start".into()),
-            );
-        };
-        summary.evaluations += 1;
-        summary.jacobian_evaluations += 1;
-        let (d, ns) = scaled_null_space(&first.h, &task.constraints, start);
-        let ns = match ns {
-            Ok(ns) => ns,
-            Err(e) => {
-                return finish(
-                    summary,
-                    start.to_vec(),
-                    Termination::InvalidInput(e.to_string()),
-                );
-            }
-        };
-        let nf = ns.n_free();
-        summary.free_parameters = nf;
-        let fixed = task
-            .constraints
-            .rows
-            .iter()
-            .filter_map(|r| match r.coeffs.as_slice() {
-                [(j, c)] if *c != 0.0 => Some((*j, r.rhs / c)),
-                _ => None,
-            })
-            .collect();
-        let free = Free { d, ns, fixed };
+        let nf = free.n_free();
         let mut z = vec![0.0; nf];
         let mut p = free.params(&z);
         if nf == 0 {
-            return finish(summary, p, Termination::NoFreeParameters);
+            return run.finish(p, Termination::NoFreeParameters);
         }
+        // What the data cannot identify is a property of the design: it is read from the
+        // unweighted normal matrix at the start (Marquardt-scaled, eigen-decomposed), not from
+        // the IRLS-weighted matrices of the iterations, whose weights spread the curvatures by
+        // up to Φ/ε and would hide identifiable directions near the end of a Φ fit.
+        let design = {
+            let dv = &free.d;
+            let basis = free.ns.basis();
+            let hs = Mat::from_fn(n, n, |i, j| dv[i] * first.h[(i, j)] * dv[j]);
+            let h0 = basis.transpose() * (&hs * basis);
+            let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
+            let s0: Vec<f64> = (0..nf)
+                .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+                .collect();
+            let hp0 = Mat::from_fn(nf, nf, |i, j| s0[i] * h0[(i, j)] * s0[j]);
+            match hp0.self_adjoint_eigen(Side::Lower) {
+                Ok(evd) => {
+                    let mu: Vec<f64> = (0..nf).map(|i| evd.S().column_vector()[i]).collect();
+                    let u = evd.U();
+                    // Directions in z: S₀ v.
+                    let dirs = Mat::from_fn(nf, nf, |k, i| s0[k] * u[(k, i)]);
+                    (mu, dirs)
+                }
+                Err(_) => {
+                    return run.finish(
+                        p,
+                        Termination::NumericalFailure(
+                            "the eigen-decomposition of the design's normal matrix failed".into(),
+                        ),
+                    );
+                }
+            }
+        };
+        let (mu0, dirs0) = design;
+        let mu0_max = mu0[nf - 1].max(0.0);
 
         let mut norms: Vec<f64> = (0..problem.n_points())
             .map(|i| norm(problem.residual(i, &p)))
             .collect();
-        summary.evaluations += 1;
+        run.summary.evaluations += 1;
         let phi0 = norms.iter().sum::<f64>() / norms.len() as f64;
         if !phi0.is_finite() {
-            return finish(
-                summary,
+            return run.finish(
                 p,
                 Termination::NumericalFailure("the objective is not finite at the start".into()),
             );
@@ -379,17 +296,17 @@ impl Solver for LevenbergMarquardt {
         let np = problem.n_points();
         let termination = 'outer: loop {
             // One Jacobian pass at the current point.
-            if summary.evaluations >= options.max_evaluations {
+            if run.summary.evaluations >= options.max_evaluations {
                 break Termination::EvaluationLimit;
             }
             let Some(normal) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np)) else {
                 break Termination::NumericalFailure(format!(
                     "the Jacobian is not finite at iteration {}",
-                    summary.iterations
+                    run.summary.iterations
                 ));
             };
-            summary.evaluations += 1;
-            summary.jacobian_evaluations += 1;
+            run.summary.evaluations += 1;
+            run.summary.jacobian_evaluations += 1;
             // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
             let dv = &free.d;
             let hs = Mat::from_fn(n, n, |i, j| dv[i] * normal.h[(i, j)] * dv[j]);
@@ -404,71 +321,66 @@ impl Solver for LevenbergMarquardt {
             {
                 break Termination::Gradient;
             }
-            // Marquardt scaling: H' = S H S, g' = S g with S = diag(H)^-½ (floored), then a
-            // rank-revealing eigen-decomposition of H'. Directions whose curvature is below
-            // rank_tolerance × the largest are not identifiable from the data: they are held.
-            let dmax = (0..nf).map(|i| hz[(i, i)]).fold(0.0_f64, f64::max);
-            let sc: Vec<f64> = (0..nf)
-                .map(|i| 1.0 / hz[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
-                .collect();
-            let hp = Mat::from_fn(nf, nf, |i, j| sc[i] * hz[(i, j)] * sc[j]);
-            let gp: Vec<f64> = (0..nf).map(|i| sc[i] * gz[i]).collect();
-            let Ok(evd) = hp.self_adjoint_eigen(Side::Lower) else {
-                break Termination::NumericalFailure(format!(
-                    "the eigen-decomposition of the normal matrix failed at iteration {}",
-                    summary.iterations
-                ));
-            };
-            let (mu, vecs) = (evd.S().column_vector(), evd.U());
-            let mu_max = mu[nf - 1].max(0.0);
-            // The Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once
-            // Φ is below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
+            // Directions whose design curvature is below rank_tolerance × the largest are not
+            // identifiable from the data: steps stay in the span q of the others. The
+            // Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once Φ is
+            // below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
             // tolerance relaxes in proportion, so such a fit may use every direction.
             let phi_now = norms.iter().sum::<f64>() / np as f64;
             let tolerance = options.rank_tolerance * (1e4 * phi_now / phi0).min(1.0);
-            let keep: Vec<usize> = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).collect();
-            summary.unidentifiable = nf - keep.len();
-            let gv: Vec<f64> = (0..nf)
-                .map(|i| (0..nf).map(|k| vecs[(k, i)] * gp[k]).sum())
+            let keep: Vec<usize> = (0..nf).filter(|&i| mu0[i] > tolerance * mu0_max).collect();
+            run.summary.unidentifiable = nf - keep.len();
+            let q =
+                (keep.len() < nf).then(|| Mat::from_fn(nf, keep.len(), |k, c| dirs0[(k, keep[c])]));
+            let (hq, gq) = match &q {
+                None => (hz.clone(), gz.clone()),
+                Some(q) => {
+                    let hq = q.transpose() * (&hz * q);
+                    let gq: Vec<f64> = (0..q.ncols())
+                        .map(|c| (0..nf).map(|k| q[(k, c)] * gz[k]).sum())
+                        .collect();
+                    (hq, gq)
+                }
+            };
+            // Marquardt scaling: H' = S H S, g' = S g with S = diag(H)^-½ (floored).
+            let nr = gq.len();
+            let dmax = (0..nr).map(|i| hq[(i, i)]).fold(0.0_f64, f64::max);
+            let sc: Vec<f64> = (0..nr)
+                .map(|i| 1.0 / hq[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
                 .collect();
+            let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
+            let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
             // Try steps until one is accepted or a criterion stops the run.
             loop {
-                if summary.iterations >= options.max_iterations {
+                if run.summary.iterations >= options.max_iterations {
                     break 'outer Termination::IterationLimit;
                 }
-                if summary.iterations > 0 && summary.evaluations >= options.max_evaluations {
+                if run.summary.iterations > 0 && run.summary.evaluations >= options.max_evaluations
+                {
                     break 'outer Termination::EvaluationLimit;
                 }
-                summary.iterations += 1;
-                let delta = if keep.len() == nf {
-                    // Full rank: Cholesky of the damped system (eigen solve if it fails).
-                    let damped = Mat::from_fn(nf, nf, |i, j| {
-                        hp[(i, j)] + if i == j { lambda } else { 0.0 }
-                    });
-                    let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
-                    solve_spd(&damped, &rhs)
-                } else {
-                    None
-                };
-                let delta: Vec<f64> = delta
-                    .unwrap_or_else(|| {
-                        let mut y = vec![0.0; nf];
-                        for &i in &keep {
-                            let c = -gv[i] / (mu[i] + lambda);
-                            for (k, yk) in y.iter_mut().enumerate() {
-                                *yk += vecs[(k, i)] * c;
-                            }
-                        }
-                        y
-                    })
+                run.summary.iterations += 1;
+                // Cholesky of the damped system (an SVD pseudo-inverse if it fails).
+                let damped = Mat::from_fn(nr, nr, |i, j| {
+                    hp[(i, j)] + if i == j { lambda } else { 0.0 }
+                });
+                let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
+                let y: Vec<f64> = solve_spd(&damped, &rhs)
+                    .unwrap_or_else(|| vec![f64::NAN; nr])
                     .iter()
                     .zip(&sc)
                     .map(|(y, s)| y * s)
                     .collect();
+                let delta: Vec<f64> = match &q {
+                    None => y,
+                    Some(q) => (0..nf)
+                        .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
+                        .collect(),
+                };
                 if delta.iter().any(|v| !v.is_finite()) {
                     break 'outer Termination::NumericalFailure(format!(
                         "the step is not finite at iteration {}",
-                        summary.iterations
+                        run.summary.iterations
                     ));
                 }
                 let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -486,7 +398,7 @@ impl Solver for LevenbergMarquardt {
                 let p_new = free.params(&z_new);
                 let norms_new: Vec<f64> =
                     (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
-                summary.evaluations += 1;
+                run.summary.evaluations += 1;
                 let cost_new = cost_of(objective, &norms_new, eps);
                 let rho = if cost_new.is_finite() && pred > 0.0 {
                     (cost - cost_new) / pred
@@ -495,8 +407,8 @@ impl Solver for LevenbergMarquardt {
                 };
                 let accepted = rho > 1e-4;
                 observer.iteration(&Iteration {
-                    iteration: summary.iterations,
-                    evaluations: summary.evaluations,
+                    iteration: run.summary.iterations,
+                    evaluations: run.summary.evaluations,
                     cost: if accepted { cost_new } else { cost },
                     emm_um: if accepted {
                         norms_new.iter().sum::<f64>() / np as f64 * 1e3
@@ -552,6 +464,6 @@ impl Solver for LevenbergMarquardt {
                 }
             }
         };
-        finish(summary, p, termination)
+        run.finish(p, termination)
     }
 }

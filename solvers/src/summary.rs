@@ -21,6 +21,11 @@ pub enum Termination {
     EvaluationLimit,
     /// The gradient vanished (a stationary point).
     Gradient,
+    /// The engine stopped without meeting a tolerance or a limit, at a finite point it did not
+    /// reject: NLopt's `ROUNDOFF_LIMITED` or generic `FAILURE` (typically its line search near
+    /// the optimum, where rounding dominates). The result is usually near the optimum but not
+    /// certified; the text says what the engine reported.
+    Stalled(String),
     /// Nothing to identify: no free parameter.
     NoFreeParameters,
     /// The objective or a step became non-finite, or a factorisation failed; the text says
@@ -60,6 +65,7 @@ impl fmt::Display for Termination {
             Termination::IterationLimit => f.write_str("stopped: iteration limit"),
             Termination::EvaluationLimit => f.write_str("stopped: evaluation limit"),
             Termination::Gradient => f.write_str("converged: gradient vanished"),
+            Termination::Stalled(s) => write!(f, "stopped: no further progress ({s})"),
             Termination::NoFreeParameters => f.write_str("nothing to identify: no free parameter"),
             Termination::NumericalFailure(s) => write!(f, "failed: numerical failure ({s})"),
             Termination::InvalidInput(s) => write!(f, "failed: invalid input ({s})"),

@@ -116,7 +116,8 @@ class LinearManifold : public ceres::Manifold {
 
 class Callback : public ceres::IterationCallback {
   public:
-    Callback(volver_ceres_iteration_fn f, void *user) : f_(f), user_(user) {}
+    Callback(volver_ceres_iteration_fn f, void *user, const double *params)
+        : f_(f), user_(user), params_(params) {}
     ceres::CallbackReturnType operator()(const ceres::IterationSummary &s) override {
         volver_ceres_iteration it;
         it.iteration = s.iteration;
@@ -127,6 +128,7 @@ class Callback : public ceres::IterationCallback {
         it.step_norm = s.step_norm;
         it.trust_region_radius = s.trust_region_radius;
         it.cumulative_time_s = s.cumulative_time_in_seconds;
+        it.params = params_;
         switch (f_(user_, &it)) {
         case VOLVER_CERES_ABORT:
             return ceres::SOLVER_ABORT;
@@ -140,6 +142,7 @@ class Callback : public ceres::IterationCallback {
   private:
     volver_ceres_iteration_fn f_;
     void *user_;
+    const double *params_;
 };
 
 }  // namespace
@@ -337,7 +340,7 @@ int volver_ceres_solve(volver_ceres_problem *p, const volver_ceres_options *o,
         options.minimizer_progress_to_stdout = false;
         std::unique_ptr<Callback> cb;
         if (iteration != nullptr) {
-            cb = std::make_unique<Callback>(iteration, iteration_user);
+            cb = std::make_unique<Callback>(iteration, iteration_user, p->params.data());
             options.callbacks.push_back(cb.get());
             options.update_state_every_iteration = true;
         }

@@ -76,6 +76,8 @@ typedef struct {
     double step_norm;
     double trust_region_radius;
     double cumulative_time_s;
+    /* The parameter block after the iteration (n_params values, valid during the call). */
+    const double *params;
 } volver_ceres_iteration;
 
 /* Returned by the iteration callback. */

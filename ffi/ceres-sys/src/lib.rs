@@ -34,7 +34,7 @@
 //! }
 //! let cost = Rosenbrock;
 //! let mut problem = Problem::new(&[-1.2, 1.0], 1, 2, &cost, Loss::None).unwrap();
-//! let summary = problem.solve(&Options::default(), &mut |_| Default::default()).unwrap();
+//! let summary = problem.solve(&Options::default(), &mut |_, _| Default::default()).unwrap();
 //! assert_eq!(summary.termination, Termination::Convergence);
 //! let x = problem.params();
 //! assert!((x[0] - 1.0).abs() < 1e-8 && (x[1] - 1.0).abs() < 1e-8);
@@ -292,27 +292,32 @@ extern "C" fn cost_trampoline(
     matches!(result, Ok(true)) as c_int
 }
 
-type IterationFn<'f> = dyn FnMut(&Iteration) -> Control + 'f;
+type IterationFn<'f> = dyn FnMut(&Iteration, &[f64]) -> Control + 'f;
 
 extern "C" fn iteration_trampoline(
     user: *mut c_void,
     it: *const raw::volver_ceres_iteration,
 ) -> raw::volver_ceres_control {
-    // SAFETY: `user` points at the `&mut dyn FnMut` that `Problem::solve` holds for the duration
-    // of the solve; `it` is a valid summary for the duration of the call.
+    // SAFETY: `user` points at the `&mut dyn FnMut` and parameter count that `Problem::solve`
+    // holds for the duration of the solve; `it` and its parameter block are valid for the
+    // duration of the call.
     let result = catch_unwind(AssertUnwindSafe(|| unsafe {
-        let f = &mut *(user as *mut &mut IterationFn);
+        let (f, n) = &mut *(user as *mut (&mut IterationFn, usize));
         let it = &*it;
-        f(&Iteration {
-            iteration: it.iteration.max(0) as usize,
-            successful: it.step_is_successful != 0,
-            cost: it.cost,
-            cost_change: it.cost_change,
-            gradient_max_norm: it.gradient_max_norm,
-            step_norm: it.step_norm,
-            trust_region_radius: it.trust_region_radius,
-            time_s: it.cumulative_time_s,
-        })
+        let params = std::slice::from_raw_parts(it.params, *n);
+        f(
+            &Iteration {
+                iteration: it.iteration.max(0) as usize,
+                successful: it.step_is_successful != 0,
+                cost: it.cost,
+                cost_change: it.cost_change,
+                gradient_max_norm: it.gradient_max_norm,
+                step_norm: it.step_norm,
+                trust_region_radius: it.trust_region_radius,
+                time_s: it.cumulative_time_s,
+            },
+            params,
+        )
     }));
     match result {
         Ok(Control::Continue) => raw::volver_ceres_control::VOLVER_CERES_CONTINUE,
@@ -345,7 +350,9 @@ impl<'c> Problem<'c> {
         cost: &'c dyn CostFunction,
         loss: Loss,
     ) -> Result<Problem<'c>, Error> {
-        if params.is_empty() || residuals_per_block == 0 || residuals_per_block > c_int::MAX as usize
+        if params.is_empty()
+            || residuals_per_block == 0
+            || residuals_per_block > c_int::MAX as usize
         {
             return Err(Error(
                 "empty parameter block or residual blocks of no residuals".into(),
@@ -412,9 +419,7 @@ impl<'c> Problem<'c> {
                 let mut seen = vec![false; n];
                 for &j in held {
                     if j >= n || std::mem::replace(&mut seen[j], true) {
-                        return Err(Error(format!(
-                            "held index {j} repeated or not below {n}"
-                        )));
+                        return Err(Error(format!("held index {j} repeated or not below {n}")));
                     }
                 }
                 if held.len() >= n {
@@ -458,12 +463,12 @@ impl<'c> Problem<'c> {
         check(unsafe { raw::volver_ceres_set_params(self.raw, params.as_ptr()) })
     }
 
-    /// Solves from the current parameters; `on_iteration` sees every iteration (with the
-    /// parameter block up to date) and may stop the solve.
+    /// Solves from the current parameters; `on_iteration` sees every iteration and the
+    /// parameter block after it, and may stop the solve.
     pub fn solve(
         &mut self,
         options: &Options,
-        on_iteration: &mut dyn FnMut(&Iteration) -> Control,
+        on_iteration: &mut dyn FnMut(&Iteration, &[f64]) -> Control,
     ) -> Result<Summary, Error> {
         let o = raw::volver_ceres_options {
             trust_region: match options.trust_region {
@@ -491,7 +496,7 @@ impl<'c> Problem<'c> {
             jacobi_scaling: options.jacobi_scaling as c_int,
         };
         let mut s = raw::volver_ceres_summary::default();
-        let mut f: &mut IterationFn = on_iteration;
+        let mut f: (&mut IterationFn, usize) = (on_iteration, self.n_params);
         // SAFETY: `self.raw` is live; `o` and `s` are valid for the call; the callback's user
         // pointer is `&mut f`, which lives until the call returns.
         let code = unsafe {
@@ -499,7 +504,7 @@ impl<'c> Problem<'c> {
                 self.raw,
                 &o,
                 Some(iteration_trampoline),
-                &mut f as *mut &mut IterationFn as *mut c_void,
+                &mut f as *mut (&mut IterationFn, usize) as *mut c_void,
                 &mut s,
             )
         };

@@ -1,0 +1,301 @@
+//! Ceres Solver as a volver engine (feature `ceres`), through our own FFI crate
+//! `volver-ceres-sys` (a C++ shim over Ceres 2.1 read by bindgen).
+//!
+//! * **One parameter block**, the model's parameters scaled by the column norms of the
+//!   Jacobian at the start (`s = p / D`, as in the native engine), with Ceres' Jacobi scaling on
+//!   top. Each measured point is a residual block of 3 residuals whose Jacobian block is our
+//!   exact dual-number Jacobian row times D (no automatic or numeric differentiation in Ceres).
+//! * **Constraints**: the start is projected onto `A p = b`; held parameters become a
+//!   `SubsetManifold` (exact); general linear constraints (squareness from straightness) a
+//!   linear manifold `s₀ + N t` over the null space of `A D` (the native engine's). No free
+//!   parameter: nothing to solve.
+//! * **Objectives**: ve is plain least squares (Ceres minimises `½ Σ ‖r_i‖²`). Φ uses the loss
+//!   `ρ(s) = 2(√(s + ε²) − ε)` on every block, so Ceres minimises `Σ (√(‖r_i‖² + ε²) − ε)`,
+//!   the smoothed sum of modules, with Ceres' own Triggs correction. ε shrinks tenfold between
+//!   solves (from [`Options::irls_initial_epsilon`] to [`Options::irls_final_epsilon`] × Φ),
+//!   the same continuation as the native engine.
+//! * **Criteria**: Ceres' function, parameter and gradient tolerances take the paper's criteria;
+//!   the iteration limit is Ceres' own; the evaluation limit is enforced by the iteration
+//!   callback. The termination names the criterion Ceres reports.
+//!
+//! ```
+//! # #[cfg(feature = "ceres")] {
+//! use volver_core::machine::Machine;
+//! use volver_core::model::{ErrorModelSpec, Model};
+//! use volver_core::noise::TrackerNoise;
+//! use volver_core::plan::Plan;
+//! use volver_core::problem::Problem;
+//! use volver_core::simulate::{Magnitudes, Simulation, Truth};
+//! use volver_solvers::{ceres::Ceres, Options, Silent, Solver, Task};
+//! let m = Machine::default_xcfz();
+//! let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &Magnitudes::default(), 1).unwrap();
+//! let mut sim = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 1);
+//! sim.noise = TrackerNoise::NONE;
+//! let data = sim.run().unwrap().measurements;
+//! let model = Model::default_xcfz();
+//! let problem = Problem::new(&model, &data).unwrap();
+//! let sol = Ceres::default().solve(&Task::new(problem), &model.initial_params(),
+//!                                  &Options::default(), &mut Silent);
+//! assert!(!sol.summary.termination.failed(), "{}", sol.summary.termination);
+//! assert!(sol.summary.final_.stats.emm_um < 1e-5 * sol.summary.initial.stats.emm_um);
+//! # }
+//! ```
+
+use crate::free::{Run, held_values};
+use crate::options::{Objective, Options};
+use crate::summary::Termination;
+use crate::{Iteration, Observer, Solution, Solver, Task};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use volver_ceres_sys as cs;
+use volver_core::problem::{Problem, norm};
+
+pub use cs::LinearSolver;
+
+/// The Ceres engine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Ceres {
+    /// Linear solver of the trust-region step (default: dense QR, Ceres' default for dense
+    /// problems).
+    pub linear_solver: LinearSolver,
+    /// Threads evaluating residual blocks (default 1).
+    pub threads: usize,
+}
+
+impl Default for Ceres {
+    fn default() -> Self {
+        Ceres {
+            linear_solver: LinearSolver::DenseQr,
+            threads: 1,
+        }
+    }
+}
+
+/// The residual blocks: point i's residual and its dual-number Jacobian row.
+struct Cost<'t, 'a> {
+    problem: &'t Problem<'a>,
+    /// Column scaling: p = s ∘ d.
+    d: &'t [f64],
+    /// Residual passes (block 0 is evaluated once per pass).
+    passes: AtomicUsize,
+    /// A residual or Jacobian was not finite.
+    nonfinite: AtomicBool,
+}
+
+impl cs::CostFunction for Cost<'_, '_> {
+    fn evaluate(
+        &self,
+        block: usize,
+        params: &[f64],
+        residuals: &mut [f64],
+        jacobian: Option<&mut [f64]>,
+    ) -> bool {
+        if block == 0 {
+            self.passes.fetch_add(1, Ordering::Relaxed);
+        }
+        let p: Vec<f64> = params.iter().zip(self.d).map(|(s, d)| s * d).collect();
+        let (r, jac_ok) = match jacobian {
+            Some(j) => {
+                let r = self.problem.residual_and_jacobian(block, &p, j);
+                let n = p.len();
+                for (k, v) in j.iter_mut().enumerate() {
+                    *v *= self.d[k % n];
+                }
+                (r, j.iter().all(|v| v.is_finite()))
+            }
+            None => (self.problem.residual(block, &p), true),
+        };
+        residuals.copy_from_slice(&r);
+        let ok = jac_ok && r.iter().all(|v| v.is_finite());
+        if !ok {
+            self.nonfinite.store(true, Ordering::Relaxed);
+        }
+        ok
+    }
+}
+
+/// The termination of one Ceres solve in volver's terms.
+fn termination_of(s: &cs::Summary, evaluation_limit: bool) -> Termination {
+    match s.termination {
+        cs::Termination::Convergence => {
+            if s.message.starts_with("Parameter tolerance") {
+                Termination::ParameterChange
+            } else if s.message.starts_with("Gradient tolerance") {
+                Termination::Gradient
+            } else {
+                Termination::ObjectiveChange
+            }
+        }
+        cs::Termination::NoConvergence => Termination::IterationLimit,
+        cs::Termination::UserSuccess if evaluation_limit => Termination::EvaluationLimit,
+        cs::Termination::UserSuccess | cs::Termination::UserFailure => {
+            Termination::NumericalFailure(format!("Ceres stopped by its callback: {}", s.message))
+        }
+        cs::Termination::Failure => Termination::NumericalFailure(format!("Ceres: {}", s.message)),
+    }
+}
+
+impl Solver for Ceres {
+    fn name(&self) -> &'static str {
+        "ceres"
+    }
+
+    fn solve(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
+        let run = match Run::start(self.name(), task, start, options) {
+            Ok(run) => run,
+            Err(solution) => return *solution,
+        };
+        let (mut run, free) = match run.free(task, start) {
+            Ok(x) => x,
+            Err(solution) => return *solution,
+        };
+        let problem = &task.problem;
+        let n = start.len();
+        let np = problem.n_points();
+        let nf = free.n_free();
+        // The start projected onto the constraints; held values exactly.
+        let p0 = free.params(&vec![0.0; nf]);
+        if nf == 0 {
+            return run.finish(p0, Termination::NoFreeParameters);
+        }
+        let Some(norms0) = crate::free::norms(problem, &p0) else {
+            let t =
+                Termination::NumericalFailure("the residuals are not finite at the start".into());
+            return run.finish(p0, t);
+        };
+        run.summary.evaluations += 1;
+        let phi0 = norms0.iter().sum::<f64>() / np as f64;
+        let d = &free.d;
+        let s0: Vec<f64> = p0.iter().zip(d).map(|(p, d)| p / d).collect();
+        let held = &free.fixed;
+        let space = if task.constraints.rows.is_empty() {
+            cs::Space::Free
+        } else if held_values(&task.constraints).len() == task.constraints.rows.len() {
+            let mut idx: Vec<usize> = held.iter().map(|&(j, _)| j).collect();
+            idx.sort_unstable();
+            idx.dedup();
+            cs::Space::Subset(idx)
+        } else {
+            let b = free.ns.basis();
+            cs::Space::Linear {
+                basis: (0..n * nf).map(|k| b[(k / nf, k % nf)]).collect(),
+                columns: nf,
+            }
+        };
+        let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
+        let mut eps = (options.irls_initial_epsilon * phi0).max(1e-300);
+        let loss = match options.objective {
+            Objective::Ve => cs::Loss::None,
+            Objective::Phi => cs::Loss::Module { epsilon: eps },
+        };
+        let cost = Cost {
+            problem,
+            d,
+            passes: AtomicUsize::new(0),
+            nonfinite: AtomicBool::new(false),
+        };
+        let mut cp = match cs::Problem::new(&s0, np, 3, &cost, loss)
+            .and_then(|mut cp| cp.set_space(&space).map(|_| cp))
+        {
+            Ok(cp) => cp,
+            Err(e) => return run.finish(p0, Termination::InvalidInput(e.to_string())),
+        };
+        let wants = observer.wants_metrics();
+        let base_evaluations = run.summary.evaluations;
+        let termination = loop {
+            let final_stage = options.objective == Objective::Ve || eps <= eps_final(phi0) * 1.0001;
+            let ceres_options = cs::Options {
+                trust_region: cs::TrustRegion::LevenbergMarquardt,
+                linear_solver: self.linear_solver,
+                max_iterations: options
+                    .max_iterations
+                    .saturating_sub(run.summary.iterations),
+                function_tolerance: if final_stage {
+                    options.objective_tolerance
+                } else {
+                    1e-3
+                },
+                // Ceres' gradient test is absolute, in its cost (≈ n Φ or ½ n ve).
+                gradient_tolerance: options.gradient_tolerance * np as f64 * phi0.max(1e-300),
+                parameter_tolerance: options.parameter_tolerance,
+                // Ceres' radius is the inverse of the LM damping.
+                initial_trust_region_radius: 1.0 / options.initial_damping.max(1e-300),
+                threads: self.threads,
+                jacobi_scaling: true,
+            };
+            if ceres_options.max_iterations == 0 {
+                break Termination::IterationLimit;
+            }
+            let mut evaluation_limit = false;
+            let done_before = run.summary.iterations;
+            let mut on_iteration = |it: &cs::Iteration, params: &[f64]| {
+                let evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
+                if it.iteration > 0 {
+                    let (objective_now, emm) = match options.objective {
+                        Objective::Ve => (2.0 * it.cost / np as f64, f64::NAN),
+                        Objective::Phi => (it.cost / np as f64 + eps, f64::NAN),
+                    };
+                    let emm_um = if wants {
+                        let p: Vec<f64> = params.iter().zip(d).map(|(s, d)| s * d).collect();
+                        (0..np).map(|i| norm(problem.residual(i, &p))).sum::<f64>() / np as f64
+                            * 1e3
+                    } else {
+                        emm
+                    };
+                    observer.iteration(&Iteration {
+                        iteration: done_before + it.iteration,
+                        evaluations,
+                        cost: objective_now,
+                        emm_um,
+                        damping: 1.0 / it.trust_region_radius,
+                        step: it.step_norm,
+                        accepted: it.successful,
+                    });
+                }
+                if evaluations >= options.max_evaluations {
+                    evaluation_limit = true;
+                    cs::Control::Stop
+                } else {
+                    cs::Control::Continue
+                }
+            };
+            let summary = match cp.solve(&ceres_options, &mut on_iteration) {
+                Ok(s) => s,
+                Err(e) => break Termination::NumericalFailure(e.to_string()),
+            };
+            run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
+            run.summary.jacobian_evaluations += summary.jacobian_evaluations;
+            let t = termination_of(&summary, evaluation_limit);
+            if final_stage || !t.converged() {
+                break t;
+            }
+            // Φ: sharpen the smoothing (Ceres' cost is Σ (√(‖r‖² + ε²) − ε) ≈ n Φ).
+            let phi = summary.final_cost / np as f64;
+            eps = (eps / 10.0).max(eps_final(phi));
+            if let Err(e) = cp.set_loss_epsilon(eps) {
+                break Termination::NumericalFailure(e.to_string());
+            }
+        };
+        run.summary.evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
+        let termination = if cost.nonfinite.load(Ordering::Relaxed) && !termination.converged() {
+            match termination {
+                Termination::NumericalFailure(s) => Termination::NumericalFailure(format!(
+                    "{s} (a residual or Jacobian entry was not finite)"
+                )),
+                t => t,
+            }
+        } else {
+            termination
+        };
+        let mut p: Vec<f64> = cp.params().iter().zip(d).map(|(s, d)| s * d).collect();
+        for &(j, v) in held {
+            p[j] = v;
+        }
+        run.finish(p, termination)
+    }
+}

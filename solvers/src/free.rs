@@ -1,0 +1,244 @@
+//! What every engine shares: the start and end of a run (validation, the initial and final
+//! evaluations, the summary), the scaled constraint-free coordinates `p = D (s₀ + N z)`, the
+//! smoothed objectives and their exact gradient from the dual-number Jacobian.
+
+use crate::lm::{Normal, accumulate, scaled_null_space};
+use crate::nullspace::NullSpace;
+use crate::options::{Objective, Options};
+use crate::summary::{Summary, Termination};
+use crate::{Solution, Task, evaluate};
+use faer::Mat;
+use std::time::Instant;
+use volver_core::model::Constraints;
+use volver_core::problem::{Problem, norm};
+
+/// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
+pub(crate) struct Free {
+    /// Column scaling D.
+    pub(crate) d: Vec<f64>,
+    /// Null space of the scaled constraints.
+    pub(crate) ns: NullSpace,
+    /// Parameters held at a value: set exactly, not to rounding.
+    pub(crate) fixed: Vec<(usize, f64)>,
+}
+
+impl Free {
+    pub(crate) fn new(d: Vec<f64>, ns: NullSpace, constraints: &Constraints) -> Free {
+        Free {
+            d,
+            ns,
+            fixed: held_values(constraints),
+        }
+    }
+
+    pub(crate) fn n_free(&self) -> usize {
+        self.ns.n_free()
+    }
+
+    /// The parameters at free coordinates `z`.
+    pub(crate) fn params(&self, z: &[f64]) -> Vec<f64> {
+        let mut p: Vec<f64> = self
+            .ns
+            .expand(z)
+            .iter()
+            .zip(&self.d)
+            .map(|(s, d)| s * d)
+            .collect();
+        for &(j, v) in &self.fixed {
+            p[j] = v;
+        }
+        p
+    }
+
+    /// `M = D N` (n × free): `∂p/∂z`.
+    pub(crate) fn tangent(&self) -> Mat<f64> {
+        let b = self.ns.basis();
+        Mat::from_fn(b.nrows(), b.ncols(), |i, k| self.d[i] * b[(i, k)])
+    }
+}
+
+/// Parameters a constraint holds at a value (a single coefficient).
+pub(crate) fn held_values(constraints: &Constraints) -> Vec<(usize, f64)> {
+    constraints
+        .rows
+        .iter()
+        .filter_map(|r| match r.coeffs.as_slice() {
+            [(j, c)] if *c != 0.0 => Some((*j, r.rhs / c)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// The smoothed objective from residual modules: ve, or `Φ_ε = (1/n) Σ √(‖r‖² + ε²)`.
+pub(crate) fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
+    let n = norms.len() as f64;
+    match objective {
+        Objective::Ve => norms.iter().map(|r| r * r).sum::<f64>() / n,
+        Objective::Phi => {
+            norms
+                .iter()
+                .map(|r| (r * r + eps * eps).sqrt())
+                .sum::<f64>()
+                / n
+        }
+    }
+}
+
+/// Weight of a point in the Gauss–Newton model of the cost: twice the derivative of the
+/// point's loss with respect to ‖r‖², over n (so that `Σ w_i J_iᵀ r_i` is the gradient), and the
+/// radial reduction c of its Hessian.
+pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f64, f64) {
+    match objective {
+        Objective::Ve => (2.0 / n as f64, 0.0),
+        Objective::Phi => {
+            let s = r * r + eps * eps;
+            (1.0 / (s.sqrt() * n as f64), r * r / s)
+        }
+    }
+}
+
+/// Residual modules at `p`; `None` if one is not finite.
+pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
+    let v: Vec<f64> = (0..problem.n_points())
+        .map(|i| norm(problem.residual(i, p)))
+        .collect();
+    v.iter().all(|x| x.is_finite()).then_some(v)
+}
+
+/// The smoothed cost at `p` and its exact gradient with respect to `p` (one dual-number
+/// Jacobian pass, no normal matrix); `None` if a residual or Jacobian entry is not finite.
+pub(crate) fn cost_and_gradient(
+    problem: &Problem,
+    objective: Objective,
+    eps: f64,
+    p: &[f64],
+) -> Option<(f64, Vec<f64>)> {
+    let n = p.len();
+    let np = problem.n_points();
+    let mut g = vec![0.0; n];
+    let mut row = vec![0.0; 3 * n];
+    let mut norms = Vec::with_capacity(np);
+    for i in 0..np {
+        let r = problem.residual_and_jacobian(i, p, &mut row);
+        let nr = norm(r);
+        if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let (w, _) = weight_of(objective, nr, eps, np);
+        for (j, gj) in g.iter_mut().enumerate() {
+            *gj += w * (row[j] * r[0] + row[n + j] * r[1] + row[2 * n + j] * r[2]);
+        }
+        norms.push(nr);
+    }
+    Some((cost_of(objective, &norms, eps), g))
+}
+
+/// The bookkeeping of one solve: validation, the initial evaluation, the summary, the end.
+pub(crate) struct Run<'t, 'a> {
+    pub(crate) problem: &'t Problem<'a>,
+    pub(crate) summary: Summary,
+    t0: Instant,
+}
+
+impl<'t, 'a> Run<'t, 'a> {
+    /// Validates the options and the start and evaluates it; `Err` is the finished solution of
+    /// a run that cannot start.
+    pub(crate) fn start(
+        solver: &str,
+        task: &'t Task<'a>,
+        start: &[f64],
+        options: &Options,
+    ) -> Result<Run<'t, 'a>, Box<Solution>> {
+        let problem = &task.problem;
+        let n = problem.model().n_params();
+        let mut run = Run {
+            problem,
+            summary: Summary {
+                solver: solver.to_string(),
+                objective: options.objective,
+                phase: task.phase.clone(),
+                free_parameters: 0,
+                unidentifiable: 0,
+                points: problem.n_points(),
+                initial: Default::default(),
+                final_: Default::default(),
+                iterations: 0,
+                evaluations: 0,
+                jacobian_evaluations: 0,
+                time_s: 0.0,
+                termination: Termination::NoFreeParameters,
+            },
+            t0: Instant::now(),
+        };
+        if let Err(e) = options.validate() {
+            return Err(Box::new(
+                run.finish(start.to_vec(), Termination::InvalidInput(e)),
+            ));
+        }
+        if start.len() != n || start.iter().any(|v| !v.is_finite()) {
+            let t = Termination::InvalidInput(format!(
+                "the start has {} values (finite: {}), the model {n} parameters",
+                start.len(),
+                start.iter().all(|v| v.is_finite())
+            ));
+            return Err(Box::new(run.finish(start.to_vec(), t)));
+        }
+        run.summary.initial = evaluate(problem, start);
+        run.summary.evaluations += 1;
+        Ok(run)
+    }
+
+    /// The scaled free coordinates of `task` (column scaling from the Jacobian at `start`):
+    /// `Err` is the finished solution when they cannot be built.
+    pub(crate) fn free(
+        self,
+        task: &Task,
+        start: &[f64],
+    ) -> Result<(Run<'t, 'a>, Free), Box<Solution>> {
+        self.free_and_normal(task, start).map(|(r, f, _)| (r, f))
+    }
+
+    /// [`Run::free`], with the unweighted normal equations at the start.
+    pub(crate) fn free_and_normal(
+        self,
+        task: &Task,
+        start: &[f64],
+    ) -> Result<(Run<'t, 'a>, Free, Normal), Box<Solution>> {
+        let mut run = self;
+        let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0)) else {
+            let t = Termination::NumericalFailure("the Jacobian is not finite at the start".into());
+            return Err(Box::new(run.finish(start.to_vec(), t)));
+        };
+        run.summary.evaluations += 1;
+        run.summary.jacobian_evaluations += 1;
+        let (d, ns) = scaled_null_space(&first.h, &task.constraints, start);
+        match ns {
+            Ok(ns) => {
+                let free = Free::new(d, ns, &task.constraints);
+                run.summary.free_parameters = free.n_free();
+                Ok((run, free, first))
+            }
+            Err(e) => Err(Box::new(
+                run.finish(start.to_vec(), Termination::InvalidInput(e.to_string())),
+            )),
+        }
+    }
+
+    /// The solution at `params`, evaluated, with the termination.
+    pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
+        self.summary.final_ = evaluate(self.problem, &params);
+        self.summary.evaluations += 1;
+        // Never report success with a non-finite result.
+        let termination = if !self.summary.final_.phi_mm.is_finite() && !termination.failed() {
+            Termination::NumericalFailure("the objective is not finite at the end".into())
+        } else {
+            termination
+        };
+        self.summary.termination = termination;
+        self.summary.time_s = self.t0.elapsed().as_secs_f64();
+        Solution {
+            params,
+            summary: self.summary,
+        }
+    }
+}

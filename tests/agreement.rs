@@ -1,0 +1,353 @@
+//! The solver agreement suite: every engine of the build minimises the same Φ (and ve) under
+//! the same constraints and must reach the same fit.
+//!
+//! Problems: the paper's tests 1–5 with the paper's model (Legendre cubics for the linear
+//! axes, first harmonics for C; tests 1 and 2 with only the axes they move), and test 4 with
+//! the linear axes in monomial and Chebyshev bases; each noise-free (the truth is inside the model) and with the
+//! paper's tracker noise; each objective. Every engine starts from the same point (errors
+//! zero, tracker by a rigid fit).
+//!
+//! The paper's model is not fully identifiable on these plans (test 1 never turns C; on test 4
+//! six combinations have a curvature below 1e-10 of the largest). Along such flat directions
+//! Φ changes by parts in 10⁴ while the parameters run away, and each engine stops somewhere
+//! else in the valley: that is not a disagreement about the fit. So the suite first finds
+//! those directions at the native LM's solution and holds them (`identifiability::hold_weak`,
+//! gauge fixing); the problem left is well posed and the engines are judged on it, on the
+//! objective and on the residual vector — never on raw parameters.
+//!
+//! Every engine runs; the best objective among the exact engines is the reference, and each
+//! engine is judged against it (measured on this suite, release build: Clarabel, Ceres, SLSQP
+//! and the polished LM agree with each other to ~1e-11 on noisy Φ):
+//! * `clarabel`, `lm+clarabel`, `ceres`: the objective within 1e-6 relative, or within 1e-6 of
+//!   its start for Φ (1e-12 for ve, a square) when the fit is exact — noise-free optima sit at
+//!   the rounding of the 9-decimal measurement file (Φ ≈ 1e-7 … 1e-12 mm), where relative
+//!   differences mean nothing; every residual within 1 µm of the best's (the noise is ~50 µm);
+//! * `lm`: Φ within 2e-5 relative (its IRLS may stop on the parameter-change test slightly
+//!   above the optimum of Φ: 1.25e-5 on test 5; `lm+clarabel` closes the gap), ve within 1e-6,
+//!   residuals within 2 µm;
+//! * `nlopt-lbfgs`, `nlopt-slsqp` (a smoothed Φ, quasi-Newton): 1e-4 relative or 1e-5 of the
+//!   start, residuals within 2 µm;
+//! * constraints (the model's and the gauge) hold to 1e-9 in their own units;
+//! * terminations are honest: a limit is claimed only when the count reached it; a failure is
+//!   never accepted.
+//!
+//! `nlopt-mma` (first-order, no curvature) and `nlopt-bobyqa` (derivative-free) are run for
+//! comparison only, with 300 evaluations: they must lower the objective and report an honest
+//! termination (the evaluation limit), not reach the optimum. On test 4 (condition ~10⁵ in the
+//! scaled coordinates) MMA is still 10⁴ times above the optimum of a noise-free fit after 5000
+//! evaluations, where L-BFGS needs ~800.
+
+use volver::core::machine::Machine;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::{ErrorModelSpec, Model};
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::Plan;
+use volver::core::problem::Problem;
+use volver::core::simulate::{Magnitudes, Simulation, Truth};
+use volver::solvers::identifiability::hold_weak;
+use volver::solvers::init::init_tracker;
+use volver::solvers::lm::LevenbergMarquardt;
+use volver::solvers::{
+    Objective, Options, Silent, Solution, Solver, Task, Termination, engine, engine_names,
+};
+
+/// Records a failed check (every engine and case is run and printed before the test fails).
+macro_rules! check {
+    ($errors:expr, $cond:expr, $($fmt:tt)*) => {
+        {
+            let ok: bool = $cond;
+            if !ok {
+                $errors.push(format!($($fmt)*));
+            }
+        }
+    };
+}
+
+fn data(plan: &str, noisy: bool, seed: u64) -> MeasurementSet {
+    let m = Machine::default_xcfz();
+    let mags = Magnitudes {
+        tracker_mm: 5.0,
+        ..Magnitudes::default()
+    };
+    let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &mags, seed).unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, plan).unwrap(), truth, seed);
+    if !noisy {
+        sim.noise = TrackerNoise::NONE;
+    }
+    sim.run().unwrap().measurements
+}
+
+/// The paper's model (`core/data/xcfz-paper-model.toml`) with the linear axes in `basis`, and
+/// only the errors a plan can see: test 1 never turns C, test 2 never moves X or Z (the
+/// paper's practice for these tests, table 11).
+fn paper_model(basis: &str, linear: bool, rotary: bool) -> Model {
+    let mut text = String::from("squareness = \"from-straightness\"\n");
+    if linear {
+        text += &format!(
+            "[[error]]\nname = [\"EXX\", \"EYX\", \"EZX\", \"EAX\", \"EBX\", \"ECX\", \"EXZ\", \"EYZ\", \"EZZ\", \"EAZ\", \"EBZ\", \"ECZ\"]\n{basis}\n[[error]]\nname = [\"A0Z\", \"B0Z\"]\n"
+        );
+    }
+    if rotary {
+        text += "[[error]]\nname = [\"EXC\", \"EYC\", \"EZC\", \"EAC\", \"EBC\", \"ECC\"]\nbasis = \"fourier\"\norder = 1\n";
+    }
+    text += "[tracker]\nidentify = [\"x\", \"y\", \"z\"]\n";
+    Model::from_toml_str(Machine::default_xcfz(), &text, "inline").unwrap()
+}
+
+const LEGENDRE: &str = "basis = \"legendre\"\ndegree = 3";
+
+fn objective_of(s: &Solution, objective: Objective) -> f64 {
+    match objective {
+        Objective::Phi => s.summary.final_.phi_mm,
+        Objective::Ve => s.summary.final_.ve_mm2,
+    }
+}
+
+/// A claimed limit must have been reached; a failure is never accepted.
+fn check_honest(errors: &mut Vec<String>, name: &str, s: &Solution, options: &Options) {
+    let t = &s.summary.termination;
+    check!(errors, !t.failed(), "{name}: {t}");
+    match t {
+        Termination::IterationLimit => check!(
+            errors,
+            s.summary.iterations >= options.max_iterations,
+            "{name} claims the iteration limit after {} iterations",
+            s.summary.iterations
+        ),
+        Termination::EvaluationLimit => check!(
+            errors,
+            s.summary.evaluations >= options.max_evaluations,
+            "{name} claims the evaluation limit after {} evaluations",
+            s.summary.evaluations
+        ),
+        _ => {}
+    }
+    check!(
+        errors,
+        s.summary.final_.phi_mm.is_finite() && s.params.iter().all(|v| v.is_finite()),
+        "{name}: non-finite result"
+    );
+}
+
+fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> {
+    let mut errors = Vec::new();
+    let problem = Problem::new(model, data).unwrap();
+    let start = init_tracker(&problem, &model.initial_params()).unwrap();
+    for objective in [Objective::Phi, Objective::Ve] {
+        let options = Options {
+            objective,
+            max_iterations: 500,
+            max_evaluations: 5000,
+            ..Options::default()
+        };
+        let task = Task::new(problem);
+        let first = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
+        let gauge = hold_weak(&task, &first.params, 100.0 * options.rank_tolerance).unwrap();
+        let held = gauge.constraints.rows.len() - task.constraints.rows.len();
+        let initial = objective_of_initial(&first, objective);
+        println!(
+            "{label} {objective}: {held} weak directions held; start {initial:.3e}; LM without them held {:.12e} ({})",
+            objective_of(&first, objective),
+            first.summary.termination
+        );
+        // Every engine first; the best objective of the exact engines is the reference.
+        let runs: Vec<(&str, Options, Solution)> = engine_names()
+            .into_iter()
+            .map(|name| {
+                let options = if comparison_only(name) {
+                    Options {
+                        max_evaluations: 300,
+                        ..options.clone()
+                    }
+                } else {
+                    options.clone()
+                };
+                let s = engine(name)
+                    .unwrap()
+                    .solve(&gauge, &start, &options, &mut Silent);
+                (name, options, s)
+            })
+            .collect();
+        let (best_name, best) = runs
+            .iter()
+            .filter(|(name, _, s)| tolerance(name).is_some() && !s.summary.termination.failed())
+            .map(|(name, _, s)| (*name, s))
+            .min_by(|a, b| objective_of(a.1, objective).total_cmp(&objective_of(b.1, objective)))
+            .unwrap();
+        let best_value = objective_of(best, objective);
+        let best_res = problem.residuals(&best.params);
+        println!("  best: {best_name} {best_value:.12e}");
+        for (name, options, s) in &runs {
+            let value = objective_of(s, objective);
+            let res = problem.residuals(&s.params);
+            let dr = res
+                .iter()
+                .zip(&best_res)
+                .map(|(a, b)| {
+                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+                })
+                .fold(0.0, f64::max);
+            let viol_model = model.constraints().max_violation(&s.params);
+            let viol_gauge = gauge.constraints.max_violation(&s.params);
+            println!(
+                "  {name:<12} {value:.12e}  rel {:+.2e}  max Δr {:.2e} mm  viol {:.1e}/{:.1e}  {} it {} ev {:.2} s  {}",
+                value / best_value - 1.0,
+                dr,
+                viol_model,
+                viol_gauge,
+                s.summary.iterations,
+                s.summary.evaluations,
+                s.summary.time_s,
+                s.summary.termination
+            );
+            let tag = format!("{label} {objective} {name}");
+            check_honest(&mut errors, &tag, s, options);
+            check!(
+                errors,
+                viol_model < 1e-9 && viol_gauge < 1e-9,
+                "{tag}: constraints violated"
+            );
+            let Some(tol) = tolerance(name) else {
+                check!(errors, value <= initial, "{tag}: the objective rose");
+                continue;
+            };
+            // Relative to the best, or to the start when the fit is exact (noise-free data: the
+            // optimum is then at the rounding of the measurement file, where relative
+            // differences mean nothing); ve is a square, hence the squared floor.
+            let floor = match objective {
+                Objective::Phi => tol.floor * initial,
+                Objective::Ve => tol.floor * tol.floor * initial,
+            };
+            let rel = match objective {
+                Objective::Phi => tol.phi,
+                Objective::Ve => tol.ve,
+            };
+            check!(
+                errors,
+                value - best_value <= rel * best_value + floor,
+                "{tag}: objective {value} vs best {best_value} ({best_name})"
+            );
+            check!(
+                errors,
+                dr < tol.residual_mm,
+                "{tag}: residuals differ from the best's by {dr} mm"
+            );
+        }
+    }
+    errors
+}
+
+/// How close an engine must come to the best engine.
+struct Tolerance {
+    /// Relative excess of Φ.
+    phi: f64,
+    /// Relative excess of ve.
+    ve: f64,
+    /// Excess as a fraction of the start (exact fits): Φ, and its square for ve.
+    floor: f64,
+    /// Largest difference of a residual from the best's (mm).
+    residual_mm: f64,
+}
+
+fn comparison_only(name: &str) -> bool {
+    tolerance(name).is_none()
+}
+
+/// The tolerances per engine (see the module documentation); `None`: comparison only.
+fn tolerance(name: &str) -> Option<Tolerance> {
+    match name {
+        // The SOCP and Ceres reach the exact optimum; the LM polished by the SOCP too.
+        "clarabel" | "lm+clarabel" | "ceres" => Some(Tolerance {
+            phi: 1e-6,
+            ve: 1e-6,
+            floor: 1e-6,
+            residual_mm: 1e-3,
+        }),
+        // The native LM's IRLS may stop on its parameter-change test a little above the
+        // optimum of Φ (it is exact for ve).
+        "lm" => Some(Tolerance {
+            phi: 2e-5,
+            ve: 1e-6,
+            floor: 1e-6,
+            residual_mm: 2e-3,
+        }),
+        // Quasi-Newton and SQP on a smoothed Φ: a few digits less.
+        "nlopt-lbfgs" | "nlopt-slsqp" => Some(Tolerance {
+            phi: 1e-4,
+            ve: 1e-4,
+            floor: 1e-5,
+            residual_mm: 2e-3,
+        }),
+        _ => None,
+    }
+}
+
+fn objective_of_initial(s: &Solution, objective: Objective) -> f64 {
+    match objective {
+        Objective::Phi => s.summary.initial.phi_mm,
+        Objective::Ve => s.summary.initial.ve_mm2,
+    }
+}
+
+fn check_plan(plan: &str, seed: u64) {
+    let model = match plan {
+        "test1" => paper_model(LEGENDRE, true, false),
+        "test2" => paper_model(LEGENDRE, false, true),
+        _ => paper_model(LEGENDRE, true, true),
+    };
+    if plan == "test4" {
+        // The paper's model exactly.
+        let paper = Model::default_xcfz();
+        assert_eq!(model.params().len(), paper.params().len());
+    }
+    let mut errors = Vec::new();
+    for noisy in [false, true] {
+        let label = format!("{plan} {}", if noisy { "noisy" } else { "noise-free" });
+        errors.extend(check_case(&label, &model, &data(plan, noisy, seed)));
+    }
+    assert!(errors.is_empty(), "{}", errors.join("\n"));
+}
+
+#[test]
+fn engines_agree_on_test1() {
+    check_plan("test1", 21);
+}
+
+#[test]
+fn engines_agree_on_test2() {
+    check_plan("test2", 22);
+}
+
+#[test]
+fn engines_agree_on_test3() {
+    check_plan("test3", 23);
+}
+
+#[test]
+fn engines_agree_on_test4() {
+    check_plan("test4", 24);
+}
+
+#[test]
+fn engines_agree_on_test5() {
+    check_plan("test5", 25);
+}
+
+#[test]
+fn engines_agree_in_monomial_and_chebyshev_bases() {
+    let mut errors = Vec::new();
+    for (basis, text) in [
+        ("monomial", "basis = \"monomial\"\ndegree = 3"),
+        ("chebyshev", "basis = \"chebyshev\"\nnodes = 4"),
+    ] {
+        let model = paper_model(text, true, true);
+        for noisy in [false, true] {
+            let label = format!(
+                "test4 {basis} {}",
+                if noisy { "noisy" } else { "noise-free" }
+            );
+            errors.extend(check_case(&label, &model, &data("test4", noisy, 26)));
+        }
+    }
+    assert!(errors.is_empty(), "{}", errors.join("\n"));
+}
