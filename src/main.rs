@@ -1,5 +1,6 @@
 //! The `volver` command-line tool.
 
+mod compare;
 mod history;
 mod study;
 
@@ -57,6 +58,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Runs every engine of this build on one problem and prints Φ, ve, EMM, iterations,
+    /// evaluations, wall time and termination per engine (or --json).
+    Compare(compare::CompareArgs),
     /// Shows the fits of a diagnosis session: EMM per model revision as a table, and as an SVG
     /// chart with --svg.
     History {
@@ -129,7 +133,9 @@ impl Inputs {
 struct IdentifyArgs {
     #[command(flatten)]
     inputs: Inputs,
-    /// Engine: lm (native Levenberg–Marquardt).
+    /// Engine: lm (native Levenberg–Marquardt, always built), lm+clarabel and clarabel (feature
+    /// `clarabel`, default), ceres (feature `ceres`), nlopt-lbfgs, nlopt-slsqp, nlopt-mma,
+    /// nlopt-bobyqa (feature `nlopt`); `volver compare` runs them all.
     #[arg(long, default_value = "lm")]
     solver: String,
     /// Objective: phi (mean error module, eq. 12) or ve (mean squared error, eq. 1).
@@ -225,6 +231,7 @@ fn main() -> Result<()> {
             print_layout(&model)?;
         }
         Command::Identify(args) => identify_command(args)?,
+        Command::Compare(args) => compare::compare_command(args)?,
         Command::Diagnose { inputs, top, json } => diagnose_command(inputs, top, json)?,
         Command::History { file, svg } => {
             let records = history::read(&file)?;

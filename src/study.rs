@@ -86,7 +86,12 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         sim.noise = noise;
         Ok(sim.run()?.measurements)
     };
-    let options = Options::default();
+    // 1000 iterations: the noise-free Chebyshev-5 fit of table 8 (a quartic against cubic truths
+    // plus constants the model lacks) creeps past 200 before its parameter change settles.
+    let options = Options {
+        max_iterations: 1000,
+        ..Options::default()
+    };
     let lm = LevenbergMarquardt;
     let run = |model: &Model, set: &MeasurementSet, errors, phasing| -> Result<Identification> {
         let problem = Problem::new(model, set)?;

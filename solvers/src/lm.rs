@@ -184,6 +184,31 @@ pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduc
     Some(Reduced { d, ns, hz, gz })
 }
 
+/// The design's curvatures (ascending, Marquardt-scaled) and their directions in the free
+/// coordinates z, from a normal matrix `h` in the parameters.
+fn design_of(free: &crate::free::Free, h: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
+    let n = h.nrows();
+    let dv = &free.d;
+    let basis = free.ns.basis();
+    let hs = Mat::from_fn(n, n, |i, j| dv[i] * h[(i, j)] * dv[j]);
+    design_from_reduced(&(basis.transpose() * (&hs * basis)))
+}
+
+/// [`design_of`] from the reduced normal matrix `H_z`.
+fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
+    let nf = h0.nrows();
+    let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
+    let s0: Vec<f64> = (0..nf)
+        .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+        .collect();
+    let hp0 = Mat::from_fn(nf, nf, |i, j| s0[i] * h0[(i, j)] * s0[j]);
+    let evd = hp0.self_adjoint_eigen(Side::Lower).ok()?;
+    let mu: Vec<f64> = (0..nf).map(|i| evd.S().column_vector()[i]).collect();
+    let u = evd.U();
+    // Directions in z: S₀ v.
+    Some((mu, Mat::from_fn(nf, nf, |k, i| s0[k] * u[(k, i)])))
+}
+
 /// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
 /// pseudo-inverse that drops directions below 1e-14 of the largest singular value.
 fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
@@ -241,39 +266,20 @@ impl Solver for LevenbergMarquardt {
             return run.finish(p, Termination::NoFreeParameters);
         }
         // What the data cannot identify is a property of the design: it is read from the
-        // unweighted normal matrix at the start (Marquardt-scaled, eigen-decomposed), not from
-        // the IRLS-weighted matrices of the iterations, whose weights spread the curvatures by
-        // up to Φ/ε and would hide identifiable directions near the end of a Φ fit.
-        let design = {
-            let dv = &free.d;
-            let basis = free.ns.basis();
-            let hs = Mat::from_fn(n, n, |i, j| dv[i] * first.h[(i, j)] * dv[j]);
-            let h0 = basis.transpose() * (&hs * basis);
-            let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
-            let s0: Vec<f64> = (0..nf)
-                .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
-                .collect();
-            let hp0 = Mat::from_fn(nf, nf, |i, j| s0[i] * h0[(i, j)] * s0[j]);
-            match hp0.self_adjoint_eigen(Side::Lower) {
-                Ok(evd) => {
-                    let mu: Vec<f64> = (0..nf).map(|i| evd.S().column_vector()[i]).collect();
-                    let u = evd.U();
-                    // Directions in z: S₀ v.
-                    let dirs = Mat::from_fn(nf, nf, |k, i| s0[k] * u[(k, i)]);
-                    (mu, dirs)
-                }
-                Err(_) => {
-                    return run.finish(
-                        p,
-                        Termination::NumericalFailure(
-                            "the eigen-decomposition of the design's normal matrix failed".into(),
-                        ),
-                    );
-                }
-            }
+        // unweighted normal matrix (Marquardt-scaled, eigen-decomposed), not from the
+        // IRLS-weighted matrices of a Φ fit, whose weights spread the curvatures by up to Φ/ε and
+        // would hide identifiable directions near its end. For ve the current matrix is the
+        // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
+        // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
+        let Some(mut design) = design_of(&free, &first.h) else {
+            return run.finish(
+                p,
+                Termination::NumericalFailure(
+                    "the eigen-decomposition of the design's normal matrix failed".into(),
+                ),
+            );
         };
-        let (mu0, dirs0) = design;
-        let mu0_max = mu0[nf - 1].max(0.0);
+        let mut refresh = false;
 
         let mut norms: Vec<f64> = (0..problem.n_points())
             .map(|i| norm(problem.residual(i, &p)))
@@ -298,6 +304,22 @@ impl Solver for LevenbergMarquardt {
             // One Jacobian pass at the current point.
             if run.summary.evaluations >= options.max_evaluations {
                 break Termination::EvaluationLimit;
+            }
+            if refresh && objective == Objective::Phi {
+                refresh = false;
+                let refreshed =
+                    accumulate(problem, &p, |_| (1.0, 0.0)).and_then(|h| design_of(&free, &h.h));
+                run.summary.evaluations += 1;
+                run.summary.jacobian_evaluations += 1;
+                match refreshed {
+                    Some(d) => design = d,
+                    None => {
+                        break Termination::NumericalFailure(format!(
+                            "the design's normal matrix failed at iteration {}",
+                            run.summary.iterations
+                        ));
+                    }
+                }
             }
             let Some(normal) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np)) else {
                 break Termination::NumericalFailure(format!(
@@ -328,6 +350,18 @@ impl Solver for LevenbergMarquardt {
             // tolerance relaxes in proportion, so such a fit may use every direction.
             let phi_now = norms.iter().sum::<f64>() / np as f64;
             let tolerance = options.rank_tolerance * (1e4 * phi_now / phi0).min(1.0);
+            if objective == Objective::Ve {
+                // Uniform weights: the current matrix is the design.
+                let Some(d) = design_from_reduced(&hz) else {
+                    break Termination::NumericalFailure(format!(
+                        "the eigen-decomposition of the normal matrix failed at iteration {}",
+                        run.summary.iterations
+                    ));
+                };
+                design = d;
+            }
+            let (mu0, dirs0) = (&design.0, &design.1);
+            let mu0_max = mu0[nf - 1].max(0.0);
             let keep: Vec<usize> = (0..nf).filter(|&i| mu0[i] > tolerance * mu0_max).collect();
             run.summary.unidentifiable = nf - keep.len();
             let q =
@@ -438,6 +472,7 @@ impl Solver for LevenbergMarquardt {
                             };
                         }
                         eps = (eps / 10.0).max(eps_final(phi));
+                        refresh = true;
                         cost = cost_of(objective, &norms, eps);
                     } else if objective == Objective::Phi
                         && !final_stage(eps, phi)
@@ -445,6 +480,7 @@ impl Solver for LevenbergMarquardt {
                     {
                         // The smoothed problem has nearly converged: sharpen it.
                         eps = (eps / 10.0).max(eps_final(phi));
+                        refresh = true;
                         cost = cost_of(objective, &norms, eps);
                     }
                     break;
@@ -457,6 +493,7 @@ impl Solver for LevenbergMarquardt {
                         break 'outer Termination::ParameterChange;
                     }
                     eps = (eps / 10.0).max(eps_final(phi));
+                    refresh = true;
                     cost = cost_of(objective, &norms, eps);
                     lambda = options.initial_damping;
                     nu = 2.0;

@@ -1,0 +1,202 @@
+//! `volver compare`: every engine of this build on one problem, side by side.
+
+use crate::Inputs;
+use anyhow::{Context, Result};
+use clap::Args;
+use serde::Serialize;
+use std::path::PathBuf;
+use volver::core::machine::Machine;
+use volver::core::model::Model;
+use volver::core::plan::Plan;
+use volver::core::problem::Problem;
+use volver::core::simulate::{Magnitudes, Simulation, Truth};
+use volver::solvers::identifiability::hold_weak;
+use volver::solvers::init::init_tracker;
+use volver::solvers::lm::LevenbergMarquardt;
+use volver::solvers::{Objective, Options, Silent, Solver, Task, Termination};
+
+/// Options of `volver compare`.
+#[derive(Args, Debug)]
+pub struct CompareArgs {
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Error model (TOML); the paper's model when absent (with the embedded machine).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Measurement file (CSV); when absent, the demo's problem: test 4 simulated on the
+    /// embedded machine (seed 7, the paper's noise).
+    #[arg(long)]
+    data: Option<PathBuf>,
+    /// Objective: phi (mean error module) or ve (mean squared module).
+    #[arg(long, default_value = "phi")]
+    objective: String,
+    /// Engines to run, comma-separated; every engine of this build when absent.
+    #[arg(long, value_delimiter = ',')]
+    engines: Vec<String>,
+    /// Iteration limit of every engine.
+    #[arg(long)]
+    max_iterations: Option<usize>,
+    /// Evaluation limit of every engine.
+    #[arg(long)]
+    max_evaluations: Option<usize>,
+    /// Hold the directions the data cannot identify first (at the native LM's solution), so
+    /// that the engines are compared on a well-posed problem.
+    #[arg(long)]
+    gauge: bool,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// One engine's result.
+#[derive(Serialize)]
+struct Row {
+    engine: String,
+    phi_mm: f64,
+    ve_mm2: f64,
+    emm_um: f64,
+    emax_um: f64,
+    iterations: usize,
+    evaluations: usize,
+    jacobian_evaluations: usize,
+    time_s: f64,
+    termination: String,
+    reason: Termination,
+}
+
+/// Runs `volver compare`.
+pub fn compare_command(a: CompareArgs) -> Result<()> {
+    let (model, data, source) = match &a.data {
+        Some(path) => {
+            let inputs = Inputs {
+                machine: a.machine.clone(),
+                model: a.model.clone(),
+                data: path.clone(),
+            };
+            let (_, model, data) = inputs.load()?;
+            (model, data, path.display().to_string())
+        }
+        None => {
+            if a.machine.is_some() || a.model.is_some() {
+                anyhow::bail!("--machine and --model need --data");
+            }
+            let model = Model::default_xcfz();
+            let m = Machine::default_xcfz();
+            let truth = Truth::random(&m, model.spec(), &Magnitudes::default(), 7)?;
+            let out = Simulation::new(Plan::preset(&m, "test4")?, truth, 7).run()?;
+            (
+                model,
+                out.measurements,
+                "test 4 simulated (seed 7, paper noise)".to_string(),
+            )
+        }
+    };
+    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
+    let mut options = Options {
+        objective,
+        ..Options::default()
+    };
+    if let Some(v) = a.max_iterations {
+        options.max_iterations = v;
+    }
+    if let Some(v) = a.max_evaluations {
+        options.max_evaluations = v;
+    }
+    options.validate().map_err(anyhow::Error::msg)?;
+    let names: Vec<String> = if a.engines.is_empty() {
+        volver::solvers::engine_names()
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    } else {
+        a.engines.clone()
+    };
+    let engines = names
+        .iter()
+        .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()?;
+    let problem = Problem::new(&model, &data)?;
+    let start = init_tracker(&problem, &model.initial_params())
+        .map_err(anyhow::Error::msg)
+        .context("fitting the tracker pose")?;
+    let task = Task::new(problem);
+    let (task, held) = if a.gauge {
+        let lm = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
+        let t = hold_weak(&task, &lm.params, 100.0 * options.rank_tolerance)
+            .context("the identifiability analysis failed")?;
+        let held = t.constraints.rows.len() - task.constraints.rows.len();
+        (t, held)
+    } else {
+        (task, 0)
+    };
+    let rows: Vec<Row> = engines
+        .iter()
+        .map(|e| {
+            let s = e.solve(&task, &start, &options, &mut Silent).summary;
+            Row {
+                engine: e.name().to_string(),
+                phi_mm: s.final_.phi_mm,
+                ve_mm2: s.final_.ve_mm2,
+                emm_um: s.final_.stats.emm_um,
+                emax_um: s.final_.stats.emax_um,
+                iterations: s.iterations,
+                evaluations: s.evaluations,
+                jacobian_evaluations: s.jacobian_evaluations,
+                time_s: s.time_s,
+                termination: s.termination.to_string(),
+                reason: s.termination,
+            }
+        })
+        .collect();
+    if a.json {
+        let v = serde_json::json!({
+            "data": source,
+            "points": problem.n_points(),
+            "parameters": model.n_params(),
+            "objective": objective,
+            "gauge_directions_held": held,
+            "engines": rows,
+        });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "volver compare — {source}: {} points, {} parameters, objective {objective}{}",
+        problem.n_points(),
+        model.n_params(),
+        if a.gauge {
+            format!(", {held} unidentifiable direction(s) held")
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "\n  {:<12} {:>17} {:>17} {:>10} {:>6} {:>6} {:>9}  termination",
+        "engine", "Φ mm", "ve mm²", "EMM µm", "iter", "eval", "time s"
+    );
+    let best = rows
+        .iter()
+        .map(|r| match objective {
+            Objective::Phi => r.phi_mm,
+            Objective::Ve => r.ve_mm2,
+        })
+        .fold(f64::INFINITY, f64::min);
+    for r in &rows {
+        println!(
+            "  {:<12} {:>17.12} {:>17.14} {:>10.4} {:>6} {:>6} {:>9.3}  {}",
+            r.engine,
+            r.phi_mm,
+            r.ve_mm2,
+            r.emm_um,
+            r.iterations,
+            r.evaluations,
+            r.time_s,
+            r.termination
+        );
+    }
+    println!(
+        "\n  best {objective}: {best:.12e}; NLopt counts objective calls as iterations; lm+clarabel adds both runs."
+    );
+    Ok(())
+}
