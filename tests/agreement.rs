@@ -351,3 +351,96 @@ fn engines_agree_in_monomial_and_chebyshev_bases() {
     }
     assert!(errors.is_empty(), "{}", errors.join("\n"));
 }
+
+mod common;
+
+#[test]
+fn volver_compare_prints_every_engine_and_json() {
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "ve",
+        "--engines",
+        "lm,lm",
+        "--max-iterations",
+        "30",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["engines"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    assert_eq!(v["points"], 1040); // test 4: 520 positions × 2 reflectors
+    for r in rows {
+        assert_eq!(r["engine"], "lm");
+        assert!(r["phi_mm"].as_f64().unwrap() > 0.0);
+        assert!(r["termination"].as_str().unwrap().contains(':'));
+    }
+    // Deterministic: the same engine twice gives the same fit.
+    assert_eq!(rows[0]["ve_mm2"], rows[1]["ve_mm2"]);
+    // The table names every engine of the build.
+    let out = common::volver(&["compare", "--objective", "ve", "--max-iterations", "3"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    for name in engine_names() {
+        assert!(text.contains(name), "{name} missing from\n{text}");
+    }
+    // An unknown engine, or one this build lacks, is a clear error.
+    let out = common::volver(&["compare", "--engines", "simplex"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("unknown solver 'simplex'") && err.contains("lm"),
+        "{err}"
+    );
+}
+
+#[test]
+fn every_engine_reports_invalid_input_instead_of_panicking() {
+    let model = Model::default_xcfz();
+    let data = data("test3", true, 3);
+    let problem = Problem::new(&model, &data).unwrap();
+    let task = Task::new(problem);
+    let mut bad = task.clone();
+    // Two contradicting constraints on one parameter.
+    for rhs in [0.0, 1.0] {
+        bad.constraints.rows.push(volver::core::model::Constraint {
+            kind: volver::core::model::ConstraintKind::Fixed,
+            label: format!("p0 = {rhs}"),
+            coeffs: vec![(0, 1.0)],
+            rhs,
+        });
+    }
+    for name in engine_names() {
+        let e = engine(name).unwrap();
+        let short = e.solve(&task, &[0.0; 3], &Options::default(), &mut Silent);
+        assert!(
+            matches!(short.summary.termination, Termination::InvalidInput(_)),
+            "{name}: {}",
+            short.summary.termination
+        );
+        let mut nan = model.initial_params();
+        nan[0] = f64::NAN;
+        let s = e.solve(&task, &nan, &Options::default(), &mut Silent);
+        assert!(s.summary.termination.failed(), "{name}: NaN start accepted");
+        let s = e.solve(
+            &bad,
+            &model.initial_params(),
+            &Options::default(),
+            &mut Silent,
+        );
+        assert!(
+            matches!(s.summary.termination, Termination::InvalidInput(_)),
+            "{name}: contradicting constraints gave {}",
+            s.summary.termination
+        );
+    }
+}
