@@ -7,10 +7,9 @@ use crate::nullspace::NullSpace;
 use crate::options::{Objective, Options};
 use crate::summary::{Summary, Termination};
 use crate::{Solution, Task, evaluate};
-use faer::Mat;
 use std::time::Instant;
 use volver_core::model::Constraints;
-use volver_core::problem::{Problem, norm};
+use volver_core::problem::Problem;
 
 /// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
 pub(crate) struct Free {
@@ -51,9 +50,10 @@ impl Free {
     }
 
     /// `M = D N` (n × free): `∂p/∂z`.
-    pub(crate) fn tangent(&self) -> Mat<f64> {
+    #[cfg(any(feature = "nlopt", feature = "clarabel"))]
+    pub(crate) fn tangent(&self) -> faer::Mat<f64> {
         let b = self.ns.basis();
-        Mat::from_fn(b.nrows(), b.ncols(), |i, k| self.d[i] * b[(i, k)])
+        faer::Mat::from_fn(b.nrows(), b.ncols(), |i, k| self.d[i] * b[(i, k)])
     }
 }
 
@@ -98,15 +98,17 @@ pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f6
 }
 
 /// Residual modules at `p`; `None` if one is not finite.
+#[cfg(any(feature = "ceres", feature = "nlopt", feature = "clarabel"))]
 pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
     let v: Vec<f64> = (0..problem.n_points())
-        .map(|i| norm(problem.residual(i, p)))
+        .map(|i| volver_core::problem::norm(problem.residual(i, p)))
         .collect();
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
 
 /// The smoothed cost at `p` and its exact gradient with respect to `p` (one dual-number
 /// Jacobian pass, no normal matrix); `None` if a residual or Jacobian entry is not finite.
+#[cfg(feature = "nlopt")]
 pub(crate) fn cost_and_gradient(
     problem: &Problem,
     objective: Objective,
@@ -120,7 +122,7 @@ pub(crate) fn cost_and_gradient(
     let mut norms = Vec::with_capacity(np);
     for i in 0..np {
         let r = problem.residual_and_jacobian(i, p, &mut row);
-        let nr = norm(r);
+        let nr = volver_core::problem::norm(r);
         if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
             return None;
         }
