@@ -192,6 +192,7 @@ impl<'t, 'a> Run<'t, 'a> {
 
     /// The scaled free coordinates of `task` (column scaling from the Jacobian at `start`):
     /// `Err` is the finished solution when they cannot be built.
+    #[cfg(any(feature = "ceres", feature = "nlopt", feature = "clarabel"))]
     pub(crate) fn free(
         self,
         task: &Task,
