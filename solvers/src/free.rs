@@ -229,8 +229,14 @@ impl<'t, 'a> Run<'t, 'a> {
 
     /// The solution at `params`, evaluated, with the termination.
     pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
-        self.summary.final_ = evaluate(self.problem, &params);
-        self.summary.evaluations += 1;
+        // A start of the wrong length cannot be evaluated: it ends as invalid input.
+        if params.len() == self.problem.model().n_params() {
+            self.summary.final_ = evaluate(self.problem, &params);
+            self.summary.evaluations += 1;
+        } else {
+            self.summary.final_.phi_mm = f64::NAN;
+            self.summary.final_.ve_mm2 = f64::NAN;
+        }
         // Never report success with a non-finite result.
         let termination = if !self.summary.final_.phi_mm.is_finite() && !termination.failed() {
             Termination::NumericalFailure("the objective is not finite at the end".into())

@@ -323,12 +323,13 @@ impl Solver for Nlopt {
             let result = opt.optimize(&mut x);
             drop(opt);
             let t = termination_of(&result);
+            // A non-finite trial point is a rejected evaluation, not the end: the run fails
+            // only if NLopt itself gives up on it (its result is then kept only if finite).
             let nonfinite = state.borrow_mut().nonfinite.take();
-            if let Some(why) = nonfinite
-                && !t.converged()
-            {
-                break Termination::NumericalFailure(why);
-            }
+            let t = match (t, nonfinite) {
+                (Termination::Stalled(s), Some(why)) => Termination::Stalled(format!("{s}; {why}")),
+                (t, _) => t,
+            };
             let settled = t.converged() || matches!(t, Termination::Stalled(_));
             if final_stage && settled && restarts < 10 {
                 // A run that still lowered the cost by half restarts, rescaled: L-BFGS's
