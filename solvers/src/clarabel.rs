@@ -38,8 +38,9 @@
 //! let lm = LevenbergMarquardt.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! let socp = ProxLinear.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! assert!(!socp.summary.termination.failed(), "{}", socp.summary.termination);
+//! // The SOCP reaches Φ's optimum exactly; the LM's IRLS stops at or above it.
 //! let (a, b) = (lm.summary.final_.phi_mm, socp.summary.final_.phi_mm);
-//! assert!((a - b).abs() < 1e-6 * a, "Φ: LM {a}, SOCP {b}");
+//! assert!(b <= a * (1.0 + 1e-9) && b > 0.99 * a, "Φ: LM {a}, SOCP {b}");
 //! ```
 
 use crate::free::Run;

@@ -34,8 +34,8 @@
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let sol = LevenbergMarquardt.solve(&Task::new(problem), &model.initial_params(),
 //!                                    &Options::default(), &mut Silent);
-//! assert!(sol.run.summary.termination.converged());
-//! assert!(sol.run.summary.final_.stats.emm_um < 1e-6 * sol.run.summary.initial.stats.emm_um);
+//! assert!(sol.summary.termination.converged());
+//! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
 use crate::free::{Run, cost_of, weight_of};
