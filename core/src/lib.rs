@@ -44,6 +44,7 @@ pub mod machine;
 pub mod measure;
 pub mod metrics;
 pub mod model;
+pub mod nist;
 pub mod noise;
 pub mod plan;
 pub mod problem;

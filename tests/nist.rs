@@ -1,0 +1,131 @@
+//! The NIST StRD nonlinear-regression problems: every file reads, every model written in
+//! `volver_core::nist` reproduces the certified residual sum of squares at the certified
+//! parameters, its dual-number Jacobian matches finite differences, and bad files are refused
+//! with the place named.
+
+use num_dual::Dual64;
+use volver::core::nist::{self, Difficulty, NAMES, lre};
+
+#[test]
+fn every_file_reads_and_counts_agree_with_its_header() {
+    let all = nist::all().unwrap();
+    assert_eq!(all.len(), 27);
+    let count = |d: Difficulty| all.iter().filter(|p| p.difficulty == d).count();
+    assert_eq!(
+        (
+            count(Difficulty::Lower),
+            count(Difficulty::Average),
+            count(Difficulty::Higher)
+        ),
+        (8, 11, 8)
+    );
+    for (ds, name) in all.iter().zip(NAMES) {
+        assert_eq!(ds.name, name);
+        let text = std::fs::read_to_string(format!("core/data/nist/{name}.dat")).unwrap();
+        let obs: usize = text
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("Number of Observations:"))
+            .unwrap()
+            .trim()
+            .parse()
+            .unwrap();
+        assert_eq!(ds.n_obs(), obs, "{name}");
+        assert!(
+            ds.x.iter()
+                .all(|r| r.len() == if name == "Nelson" { 2 } else { 1 })
+        );
+        assert_eq!(ds.starts[0].len(), ds.n_params());
+        assert_eq!(ds.starts[1].len(), ds.n_params());
+    }
+}
+
+#[test]
+fn the_certified_parameters_give_the_certified_residual_sum_of_squares() {
+    let mut worst = (11.0, "");
+    for ds in nist::all().unwrap() {
+        let rss = ds.rss(&ds.certified);
+        let digits = lre(rss, ds.certified_rss);
+        println!(
+            "{:<9} RSS {rss:.10e} certified {:.10e}  LRE {digits:.1}",
+            ds.name, ds.certified_rss
+        );
+        if ds.name == "Lanczos1" {
+            // Generated without noise (certified RSS 1.4e-25): at the certified parameters,
+            // rounded to 11 digits, the residuals are that rounding, ~1e-11 each.
+            assert!(rss < 1e-19, "Lanczos1: {rss}");
+        } else if digits < worst.0 {
+            worst = (digits, ds.name.leak());
+        }
+    }
+    // The certified values are given to 11 digits; the model formulas are right when the RSS
+    // agrees to (nearly) as many.
+    assert!(worst.0 >= 9.0, "{worst:?}");
+}
+
+#[test]
+fn the_dual_number_jacobian_matches_finite_differences() {
+    for ds in nist::all().unwrap() {
+        let n = ds.n_params();
+        for start in &ds.starts {
+            for i in [0, ds.n_obs() / 2, ds.n_obs() - 1] {
+                for k in 0..n {
+                    let h = 1e-6 * start[k].abs().max(1e-6);
+                    let (mut up, mut dn) = (start.clone(), start.clone());
+                    up[k] += h;
+                    dn[k] -= h;
+                    let fd = (ds.residual(i, &up) - ds.residual(i, &dn)) / (2.0 * h);
+                    // Forward mode, one direction at a time.
+                    let b: Vec<Dual64> = (0..n)
+                        .map(|j| Dual64::new(start[j], if j == k { 1.0 } else { 0.0 }))
+                        .collect();
+                    let ad = ds.residual(i, &b).eps;
+                    assert!(
+                        (fd - ad).abs() <= 1e-5 * (fd.abs() + ad.abs()) + 1e-9,
+                        "{} obs {i} b{}: dual {ad} vs finite differences {fd}",
+                        ds.name,
+                        k + 1
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_files_are_refused_with_the_place_named() {
+    let good = std::fs::read_to_string("core/data/nist/Misra1a.dat").unwrap();
+    let lines: Vec<&str> = good.lines().collect();
+    // A start that is not a number (line 41, b1).
+    let mut bad = lines.clone();
+    let b1 = bad[40].replace("500", "5x0");
+    bad[40] = &b1;
+    let err = nist::Dataset::parse("Misra1a", &bad.join("\n"), "bad.dat")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("bad.dat") && err.contains("41") && err.contains("b1"),
+        "{err}"
+    );
+    // A data line with a missing column (line 61).
+    let mut bad = lines.clone();
+    bad[60] = "      10.07E0";
+    let err = nist::Dataset::parse("Misra1a", &bad.join("\n"), "bad.dat")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("bad.dat") && err.contains("61"), "{err}");
+    // A truncated file.
+    let err = nist::Dataset::parse("Misra1a", &lines[..50].join("\n"), "cut.dat")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cut.dat") && err.contains("past the end"),
+        "{err}"
+    );
+    // An unknown problem.
+    assert!(
+        nist::dataset("Rosenbrock")
+            .unwrap_err()
+            .to_string()
+            .contains("Misra1a")
+    );
+}
