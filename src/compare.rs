@@ -47,6 +47,10 @@ pub struct CompareArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
+    /// Run a reference suite instead of one problem: `nist` (NIST's 27 StRD nonlinear
+    /// regression problems, both starts, scored by the log relative error).
+    #[arg(long)]
+    suite: Option<String>,
 }
 
 /// One engine's result.
@@ -67,6 +71,17 @@ struct Row {
 
 /// Runs `volver compare`.
 pub fn compare_command(a: CompareArgs) -> Result<()> {
+    if let Some(suite) = &a.suite {
+        if suite != "nist" {
+            anyhow::bail!("unknown suite '{suite}': the suite is `nist`");
+        }
+        if a.data.is_some() || a.machine.is_some() || a.model.is_some() || a.gauge {
+            anyhow::bail!(
+                "--suite runs its own problems: drop --data, --machine, --model, --gauge"
+            );
+        }
+        return nist_suite(&a);
+    }
     let (model, data, source) = match &a.data {
         Some(path) => {
             let inputs = Inputs {
@@ -197,6 +212,100 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
     }
     println!(
         "\n  best {objective}: {best:.12e}; NLopt counts objective calls as iterations; lm+clarabel adds both runs."
+    );
+    Ok(())
+}
+
+/// `volver compare --suite nist`.
+fn nist_suite(a: &CompareArgs) -> Result<()> {
+    use volver::solvers::strd;
+    let mut options = strd::options();
+    if let Some(v) = a.max_iterations {
+        options.max_iterations = v;
+    }
+    if let Some(v) = a.max_evaluations {
+        options.max_evaluations = v;
+    }
+    options.validate().map_err(anyhow::Error::msg)?;
+    // Every engine that minimises a sum of squares; BOBYQA (derivative-free) is left out.
+    let names: Vec<String> = if a.engines.is_empty() {
+        volver::solvers::engine_names()
+            .into_iter()
+            .filter(|n| *n != "nlopt-bobyqa")
+            .map(str::to_string)
+            .collect()
+    } else {
+        a.engines.clone()
+    };
+    let engines = names
+        .iter()
+        .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()?;
+    let datasets = volver::core::nist::all()?;
+    let mut runs = Vec::new();
+    for ds in &datasets {
+        for start in 0..2 {
+            for e in &engines {
+                runs.push(strd::run(ds, start, e.as_ref(), &options));
+            }
+        }
+    }
+    let mean = |engine: &str, f: fn(&strd::StrdRun) -> f64| {
+        let v: Vec<f64> = runs.iter().filter(|r| r.engine == engine).map(f).collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    if a.json {
+        let means: Vec<serde_json::Value> = names
+            .iter()
+            .map(|n| {
+                serde_json::json!({
+                    "engine": n,
+                    "mean_lre_params": mean(n, |r| r.lre_params),
+                    "mean_lre_rss": mean(n, |r| r.lre_rss),
+                })
+            })
+            .collect();
+        let v = serde_json::json!({ "suite": "nist", "runs": runs, "means": means });
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "volver compare --suite nist — NIST StRD nonlinear regression, 27 problems × 2 starts; LRE = correct digits (0–11) of the worst parameter and of the residual sum of squares\n"
+    );
+    print!("  {:<9} {:<8} st", "problem", "level");
+    for n in &names {
+        print!("  {:>16}", n);
+    }
+    println!(
+        "\n  {:<9} {:<8}   {}",
+        "",
+        "",
+        "   LRE b/RSS  it".repeat(names.len())
+    );
+    for (k, chunk) in runs.chunks(engines.len()).enumerate() {
+        let r0 = &chunk[0];
+        let level = format!("{:?}", r0.difficulty).to_lowercase();
+        print!("  {:<9} {:<8} {:>2}", r0.problem, level, k % 2 + 1);
+        for r in chunk {
+            let flag = if r.termination.failed() { "!" } else { " " };
+            print!(
+                "  {:>4.1}/{:>4.1} {:>4}{flag}",
+                r.lre_params, r.lre_rss, r.iterations
+            );
+        }
+        println!();
+    }
+    print!("\n  {:<9} {:<8}   ", "mean", "");
+    for n in &names {
+        print!(
+            "  {:>4.2}/{:>5.2}      ",
+            mean(n, |r| r.lre_params),
+            mean(n, |r| r.lre_rss)
+        );
+    }
+    println!(
+        "\n\n  ! the engine reported a failure. Options: objective ve, tolerances 1e-15, {} iterations, {} evaluations, nothing held as unidentifiable.",
+        options.max_iterations, options.max_evaluations
     );
     Ok(())
 }

@@ -129,3 +129,60 @@ fn bad_files_are_refused_with_the_place_named() {
             .contains("Misra1a")
     );
 }
+
+/// Starts from which the native LM (and, in our runs, every other engine: Ceres, Clarabel, NLopt)
+/// ends in another local minimum or a flat region: still open (issue 10). BoxBOD from (1, 1)
+/// runs to b2 → ∞ (f → the mean of y); MGH10 and MGH17 from start 1 stall in their valleys.
+const OPEN: [(&str, usize); 3] = [("MGH17", 1), ("BoxBOD", 1), ("MGH10", 1)];
+
+#[test]
+fn the_native_lm_reaches_four_digits_of_the_certified_rss() {
+    use volver::solvers::{lm::LevenbergMarquardt, strd};
+    let mut short = Vec::new();
+    for ds in nist::all().unwrap() {
+        for start in 0..2 {
+            let r = strd::run(&ds, start, &LevenbergMarquardt, &strd::options());
+            println!(
+                "{:<9} start {}  LRE params {:>4.1}  RSS {:>4.1}  {} it  {}",
+                r.problem, r.start, r.lre_params, r.lre_rss, r.iterations, r.termination
+            );
+            assert!(!r.termination.failed(), "{}: {}", r.problem, r.termination);
+            if OPEN.contains(&(r.problem.as_str(), r.start)) {
+                continue;
+            }
+            // Lanczos1's certified RSS (1.4e-25) lies below what a double-precision evaluation
+            // of its model resolves: residuals of ~8e-14 carry rounding of ~1e-16, so every
+            // engine gets ~3 digits of the RSS; its parameters are judged instead.
+            let digits = if r.problem == "Lanczos1" {
+                r.lre_params
+            } else {
+                r.lre_rss
+            };
+            if digits < 4.0 {
+                short.push(format!("{} start {}: {digits:.1}", r.problem, r.start));
+            }
+        }
+    }
+    assert!(short.is_empty(), "fewer than 4 digits: {short:?}");
+}
+
+mod common;
+
+#[test]
+fn volver_compare_runs_the_nist_suite() {
+    let out = common::volver(&["compare", "--suite", "nist", "--engines", "lm", "--json"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["runs"].as_array().unwrap().len(), 54);
+    let mean = v["means"][0]["mean_lre_rss"].as_f64().unwrap();
+    assert!(mean > 9.0, "mean LRE of the RSS {mean}");
+    let out = common::volver(&["compare", "--suite", "nist", "--engines", "lm"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("Bennett5") && text.contains("mean"), "{text}");
+    let out = common::volver(&["compare", "--suite", "strd2"]);
+    assert!(!out.status.success());
+}

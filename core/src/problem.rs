@@ -25,10 +25,24 @@ use crate::metrics::ErrorStats;
 use crate::model::Model;
 
 /// A model and measurements of the same machine.
+///
+/// A problem may also be a plain curve fit ([`Problem::curve`], one of NIST's StRD problems),
+/// so that the engines can be judged on the public reference suite: each observation is then a
+/// "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`, Φ is the mean absolute residual and
+/// `n · ve` the residual sum of squares. [`Problem::model`] and [`Problem::data`] exist only for
+/// machine problems.
 #[derive(Clone, Copy, Debug)]
 pub struct Problem<'a> {
-    model: &'a Model,
-    data: &'a MeasurementSet,
+    source: Source<'a>,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Source<'a> {
+    Machine {
+        model: &'a Model,
+        data: &'a MeasurementSet,
+    },
+    Curve(&'a crate::nist::Dataset),
 }
 
 impl<'a> Problem<'a> {
@@ -53,52 +67,145 @@ impl<'a> Problem<'a> {
                 p.line, p.reflector
             )));
         }
-        Ok(Problem { model, data })
+        Ok(Problem {
+            source: Source::Machine { model, data },
+        })
+    }
+
+    /// A curve fit: one of NIST's StRD problems (see the type's documentation).
+    ///
+    /// ```
+    /// use volver_core::{nist, problem::Problem};
+    /// let ds = nist::dataset("Misra1a").unwrap();
+    /// let p = Problem::curve(&ds);
+    /// let rss = p.ve(&ds.certified) * p.n_points() as f64;
+    /// assert!((rss / ds.certified_rss - 1.0).abs() < 1e-9);
+    /// assert!(p.machine().is_none() && p.constraints().rows.is_empty());
+    /// ```
+    pub fn curve(dataset: &'a crate::nist::Dataset) -> Problem<'a> {
+        Problem {
+            source: Source::Curve(dataset),
+        }
+    }
+
+    /// The model and measurements of a machine problem; `None` for a curve fit.
+    pub fn machine(&self) -> Option<(&'a Model, &'a MeasurementSet)> {
+        match self.source {
+            Source::Machine { model, data } => Some((model, data)),
+            Source::Curve(_) => None,
+        }
     }
 
     /// The model.
+    ///
+    /// # Panics
+    /// For a curve fit ([`Problem::curve`]), which has none; see [`Problem::machine`].
     pub fn model(&self) -> &'a Model {
-        self.model
+        match self.source {
+            Source::Machine { model, .. } => model,
+            Source::Curve(d) => panic!("the curve fit {} has no machine model", d.name),
+        }
     }
 
     /// The measurements.
+    ///
+    /// # Panics
+    /// For a curve fit ([`Problem::curve`]); see [`Problem::machine`].
     pub fn data(&self) -> &'a MeasurementSet {
-        self.data
+        match self.source {
+            Source::Machine { data, .. } => data,
+            Source::Curve(d) => panic!("the curve fit {} has no measurement set", d.name),
+        }
     }
 
-    /// Number of measured points.
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        match self.source {
+            Source::Machine { model, .. } => model.n_params(),
+            Source::Curve(d) => d.n_params(),
+        }
+    }
+
+    /// The linear equality constraints: the model's; none for a curve fit.
+    pub fn constraints(&self) -> std::borrow::Cow<'a, crate::model::Constraints> {
+        match self.source {
+            Source::Machine { model, .. } => std::borrow::Cow::Borrowed(model.constraints()),
+            Source::Curve(_) => std::borrow::Cow::Owned(Default::default()),
+        }
+    }
+
+    /// Names of the parameters (the model's; `b1`, `b2`, … for a curve fit).
+    pub fn param_names(&self) -> Vec<String> {
+        match self.source {
+            Source::Machine { model, .. } => {
+                model.params().iter().map(|p| p.name.clone()).collect()
+            }
+            Source::Curve(d) => (1..=d.n_params()).map(|k| format!("b{k}")).collect(),
+        }
+    }
+
+    /// Number of measured points (observations of a curve fit).
     pub fn n_points(&self) -> usize {
-        self.data.points.len()
+        match self.source {
+            Source::Machine { data, .. } => data.points.len(),
+            Source::Curve(d) => d.n_obs(),
+        }
     }
 
     /// Residual of point `i`: predicted minus measured (mm).
     pub fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
-        let m = &self.data.points[i];
-        let x = self
-            .model
-            .predict_at(&m.commands, m.reflector, m.t_s.unwrap_or(0.0), params);
-        [
-            x[0] - m.measured[0],
-            x[1] - m.measured[1],
-            x[2] - m.measured[2],
-        ]
+        match self.source {
+            Source::Machine { model, data } => {
+                let m = &data.points[i];
+                let x = model.predict_at(&m.commands, m.reflector, m.t_s.unwrap_or(0.0), params);
+                [
+                    x[0] - m.measured[0],
+                    x[1] - m.measured[1],
+                    x[2] - m.measured[2],
+                ]
+            }
+            Source::Curve(d) => [d.residual(i, params), 0.0, 0.0],
+        }
     }
 
     /// Residual of point `i` and its Jacobian (row-major 3 × n_params) in `jac`.
     pub fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
-        let m = &self.data.points[i];
-        let x = self.model.predict_with_jacobian_at(
-            &m.commands,
-            m.reflector,
-            m.t_s.unwrap_or(0.0),
-            params,
-            jac,
-        );
-        [
-            x[0] - m.measured[0],
-            x[1] - m.measured[1],
-            x[2] - m.measured[2],
-        ]
+        match self.source {
+            Source::Machine { model, data } => {
+                let m = &data.points[i];
+                let x = model.predict_with_jacobian_at(
+                    &m.commands,
+                    m.reflector,
+                    m.t_s.unwrap_or(0.0),
+                    params,
+                    jac,
+                );
+                [
+                    x[0] - m.measured[0],
+                    x[1] - m.measured[1],
+                    x[2] - m.measured[2],
+                ]
+            }
+            Source::Curve(d) => {
+                // Forward-mode dual numbers, one direction per parameter (NIST's problems have
+                // at most 9).
+                let n = params.len();
+                jac[n..3 * n].iter_mut().for_each(|v| *v = 0.0);
+                let mut b: Vec<num_dual::Dual64> = params
+                    .iter()
+                    .map(|&v| num_dual::Dual64::from_re(v))
+                    .collect();
+                let mut r = f64::NAN;
+                for k in 0..n {
+                    b[k].eps = 1.0;
+                    let v = d.residual(i, &b);
+                    b[k].eps = 0.0;
+                    jac[k] = v.eps;
+                    r = v.re;
+                }
+                [r, 0.0, 0.0]
+            }
+        }
     }
 
     /// Every residual.

@@ -152,7 +152,7 @@ impl<'t, 'a> Run<'t, 'a> {
         options: &Options,
     ) -> Result<Run<'t, 'a>, Box<Solution>> {
         let problem = &task.problem;
-        let n = problem.model().n_params();
+        let n = problem.n_params();
         let mut run = Run {
             problem,
             summary: Summary {
@@ -230,7 +230,7 @@ impl<'t, 'a> Run<'t, 'a> {
     /// The solution at `params`, evaluated, with the termination.
     pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
         // A start of the wrong length cannot be evaluated: it ends as invalid input.
-        if params.len() == self.problem.model().n_params() {
+        if params.len() == self.problem.n_params() {
             self.summary.final_ = evaluate(self.problem, &params);
             self.summary.evaluations += 1;
         } else {

@@ -12,7 +12,8 @@
 //! - [`candidates`]: what the model misses, ranked by a score test;
 //! - [`identifiability`]: rank, condition, uncertainties, correlations, inseparable parameters;
 //! - [`init`]: the tracker pose's starting value by a rigid best fit (Kabsch);
-//! - [`nullspace`]: constraint elimination, `p = p₀ + N z`.
+//! - [`nullspace`]: constraint elimination, `p = p₀ + N z`;
+//! - [`strd`]: NIST's StRD nonlinear-regression suite, scored by the log relative error.
 #![deny(missing_docs)]
 
 pub mod candidates;
@@ -29,6 +30,7 @@ pub mod nlopt;
 pub mod nullspace;
 pub mod options;
 pub mod strategy;
+pub mod strd;
 pub mod summary;
 
 pub use options::{Objective, Options};
@@ -53,7 +55,7 @@ impl<'a> Task<'a> {
     pub fn new(problem: Problem<'a>) -> Task<'a> {
         Task {
             problem,
-            constraints: problem.model().constraints().clone(),
+            constraints: problem.constraints().into_owned(),
             phase: "all".to_string(),
         }
     }

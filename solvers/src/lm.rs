@@ -257,7 +257,7 @@ impl Solver for LevenbergMarquardt {
             Err(solution) => return *solution,
         };
         let problem = &task.problem;
-        let n = problem.model().n_params();
+        let n = problem.n_params();
         let objective = options.objective;
         let nf = free.n_free();
         let mut z = vec![0.0; nf];

@@ -1,0 +1,94 @@
+//! NIST's StRD nonlinear-regression suite run by the engines: each problem from both certified
+//! starts, scored by the log relative error (LRE, [`volver_core::nist::lre`]) of the parameters
+//! (the worst one) and of the residual sum of squares, as Ceres and MINPACK are scored.
+//!
+//! ```
+//! use volver_core::nist;
+//! use volver_solvers::{lm::LevenbergMarquardt, strd};
+//! let ds = nist::dataset("Misra1a").unwrap();
+//! let run = strd::run(&ds, 0, &LevenbergMarquardt, &strd::options());
+//! assert!(run.lre_rss >= 4.0, "{run:?}");
+//! ```
+
+use crate::{Objective, Options, Silent, Solver, Task, Termination};
+use serde::Serialize;
+use volver_core::nist::{Dataset, Difficulty, lre};
+use volver_core::problem::Problem;
+
+/// The options of the suite: least squares (ve), tolerances at the limit of double precision,
+/// generous limits, and no direction held as unidentifiable (the suite's problems are
+/// ill-conditioned on purpose: that is what it tests).
+pub fn options() -> Options {
+    Options {
+        objective: Objective::Ve,
+        parameter_tolerance: 1e-15,
+        objective_tolerance: 1e-15,
+        gradient_tolerance: 0.0,
+        max_iterations: 1000,
+        max_evaluations: 10_000,
+        rank_tolerance: 0.0,
+        ..Options::default()
+    }
+}
+
+/// One engine on one problem from one start.
+#[derive(Clone, Debug, Serialize)]
+pub struct StrdRun {
+    /// Problem name.
+    pub problem: String,
+    /// NIST's difficulty.
+    pub difficulty: Difficulty,
+    /// Start 1 or 2.
+    pub start: usize,
+    /// Engine name.
+    pub engine: String,
+    /// LRE of the worst parameter (0 to 11).
+    pub lre_params: f64,
+    /// LRE of the residual sum of squares (0 to 11).
+    pub lre_rss: f64,
+    /// Residual sum of squares reached.
+    pub rss: f64,
+    /// Iterations.
+    pub iterations: usize,
+    /// Evaluations.
+    pub evaluations: usize,
+    /// Wall time (s).
+    pub time_s: f64,
+    /// Why it stopped.
+    pub termination: Termination,
+}
+
+/// Runs `engine` on `dataset` from start `start` (0 or 1).
+pub fn run(dataset: &Dataset, start: usize, engine: &dyn Solver, options: &Options) -> StrdRun {
+    let problem = Problem::curve(dataset);
+    let task = Task::new(problem);
+    let s = engine.solve(&task, &dataset.starts[start], options, &mut Silent);
+    let rss = problem.ve(&s.params) * problem.n_points() as f64;
+    let finite = s.params.iter().all(|v| v.is_finite()) && rss.is_finite();
+    let lre_params = if finite {
+        s.params
+            .iter()
+            .zip(&dataset.certified)
+            .map(|(&q, &c)| lre(q, c))
+            .fold(11.0, f64::min)
+    } else {
+        0.0
+    };
+    StrdRun {
+        problem: dataset.name.clone(),
+        difficulty: dataset.difficulty,
+        start: start + 1,
+        engine: engine.name().to_string(),
+        lre_params,
+        lre_rss: if finite {
+            lre(rss, dataset.certified_rss)
+        } else {
+            0.0
+        },
+        rss,
+        iterations: s.summary.iterations,
+        evaluations: s.summary.evaluations,
+        time_s: s.summary.time_s,
+        termination: s.summary.termination,
+    }
+}
