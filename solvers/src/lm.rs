@@ -9,6 +9,9 @@
 //!   with z free ([`crate::nullspace`]).
 //! * **Steps** solve `(H + λ diag H) δ = −g` (Marquardt scaling) by Cholesky; if that fails
 //!   (an ill-conditioned, nearly unidentifiable direction) by a rank-revealing SVD pseudo-inverse.
+//! * **Unidentifiable directions** (curvature below [`Options::rank_tolerance`] of the largest)
+//!   are read from the design, the unweighted normal matrix (current for ve; refreshed at each
+//!   IRLS stage for Φ), and steps stay in the span of the others.
 //!   The damping follows Nielsen's rule on the gain ratio.
 //! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised by iteratively
 //!   reweighted least squares: each pass weights point i by `1/√(‖r_i‖² + ε²)`, with the radial

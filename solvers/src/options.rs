@@ -66,7 +66,8 @@ pub struct Options {
     /// Starting Levenberg–Marquardt damping, relative to the diagonal (Marquardt scaling).
     /// Default 1e-4.
     pub initial_damping: f64,
-    /// Directions of the scaled normal matrix whose curvature is below this fraction of the
+    /// Directions of the scaled, unweighted normal matrix (the design; not the IRLS-weighted
+    /// one) whose curvature is below this fraction of the
     /// largest are not identifiable from the data and are held (no step along them), so that
     /// nearly redundant parameters do not drift to meaningless values while Φ creeps down by
     /// fractions of a nanometre. Once Φ falls below 1e-4 of its start (a nearly exact fit, where
