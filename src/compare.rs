@@ -5,11 +5,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
 use std::path::PathBuf;
-use volver::core::machine::Machine;
 use volver::core::model::Model;
-use volver::core::plan::Plan;
 use volver::core::problem::Problem;
-use volver::core::simulate::{Magnitudes, Simulation, Truth};
 use volver::solvers::identifiability::hold_weak;
 use volver::solvers::init::init_tracker;
 use volver::solvers::lm::LevenbergMarquardt;
@@ -51,6 +48,37 @@ pub struct CompareArgs {
     /// regression problems, both starts, scored by the log relative error).
     #[arg(long)]
     suite: Option<String>,
+}
+
+impl CompareArgs {
+    /// `options` with the limits given on the command line, validated.
+    fn limits(&self, mut options: Options) -> Result<Options> {
+        if let Some(v) = self.max_iterations {
+            options.max_iterations = v;
+        }
+        if let Some(v) = self.max_evaluations {
+            options.max_evaluations = v;
+        }
+        options.validate().map_err(anyhow::Error::msg)?;
+        Ok(options)
+    }
+
+    /// The engines asked for (every engine of the build but `skip` when none is named).
+    fn engines(&self, skip: &[&str]) -> Result<Vec<Box<dyn Solver>>> {
+        let names: Vec<String> = if self.engines.is_empty() {
+            volver::solvers::engine_names()
+                .into_iter()
+                .filter(|n| !skip.contains(n))
+                .map(str::to_string)
+                .collect()
+        } else {
+            self.engines.clone()
+        };
+        names
+            .iter()
+            .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
+            .collect()
+    }
 }
 
 /// One engine's result.
@@ -97,9 +125,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
                 anyhow::bail!("--machine and --model need --data");
             }
             let model = Model::default_xcfz();
-            let m = Machine::default_xcfz();
-            let truth = Truth::random(&m, model.spec(), &Magnitudes::default(), 7)?;
-            let out = Simulation::new(Plan::preset(&m, "test4")?, truth, 7).run()?;
+            let out = crate::demo_test4(&model)?;
             (
                 model,
                 out.measurements,
@@ -108,29 +134,11 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         }
     };
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
-    let mut options = Options {
+    let options = a.limits(Options {
         objective,
         ..Options::default()
-    };
-    if let Some(v) = a.max_iterations {
-        options.max_iterations = v;
-    }
-    if let Some(v) = a.max_evaluations {
-        options.max_evaluations = v;
-    }
-    options.validate().map_err(anyhow::Error::msg)?;
-    let names: Vec<String> = if a.engines.is_empty() {
-        volver::solvers::engine_names()
-            .iter()
-            .map(|s| s.to_string())
-            .collect()
-    } else {
-        a.engines.clone()
-    };
-    let engines = names
-        .iter()
-        .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
-        .collect::<Result<Vec<_>>>()?;
+    })?;
+    let engines = a.engines(&[])?;
     let problem = Problem::new(&model, &data)?;
     let start = init_tracker(&problem, &model.initial_params())
         .map_err(anyhow::Error::msg)
@@ -219,28 +227,10 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
 /// `volver compare --suite nist`.
 fn nist_suite(a: &CompareArgs) -> Result<()> {
     use volver::solvers::strd;
-    let mut options = strd::options();
-    if let Some(v) = a.max_iterations {
-        options.max_iterations = v;
-    }
-    if let Some(v) = a.max_evaluations {
-        options.max_evaluations = v;
-    }
-    options.validate().map_err(anyhow::Error::msg)?;
+    let options = a.limits(strd::options())?;
     // Every engine that minimises a sum of squares; BOBYQA (derivative-free) is left out.
-    let names: Vec<String> = if a.engines.is_empty() {
-        volver::solvers::engine_names()
-            .into_iter()
-            .filter(|n| *n != "nlopt-bobyqa")
-            .map(str::to_string)
-            .collect()
-    } else {
-        a.engines.clone()
-    };
-    let engines = names
-        .iter()
-        .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
-        .collect::<Result<Vec<_>>>()?;
+    let engines = a.engines(&["nlopt-bobyqa"])?;
+    let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
     let datasets = volver::core::nist::all()?;
     let mut runs = Vec::new();
     for ds in &datasets {

@@ -994,14 +994,22 @@ fn print_nominal_points(model: &Model) {
     }
 }
 
+/// Seed of the demo's synthetic test.
+const DEMO_SEED: u64 = 7;
+
+/// The demo's synthetic test 4 on `model`'s machine: random true errors in the model (default
+/// magnitudes), the paper's tracker noise, seed [`DEMO_SEED`]. `volver compare` uses it too.
+fn demo_test4(model: &Model) -> Result<volver::core::simulate::Synthetic> {
+    let m = model.machine();
+    let truth = Truth::random(m, model.spec(), &Magnitudes::default(), DEMO_SEED)?;
+    Ok(Simulation::new(Plan::preset(m, "test4")?, truth, DEMO_SEED).run()?)
+}
+
 /// The demo's synthetic test: the paper's reference mesh (test 4) on the XCFZ grinder with random
 /// true errors and the paper's tracker noise.
 fn demo_simulation(model: &Model) -> Result<()> {
-    let m = model.machine();
-    let seed = 7;
-    let truth = Truth::random(m, model.spec(), &Magnitudes::default(), seed)?;
-    let plan = Plan::preset(m, "test4")?;
-    let out = Simulation::new(plan, truth, seed).run()?;
+    let (m, seed) = (model.machine(), DEMO_SEED);
+    let out = demo_test4(model)?;
     let r = &out.record;
     println!(
         "\nSynthetic test (paper, section 4.1): plan test4, {} positions × {} reflectors = {} points, seed {seed}",

@@ -41,7 +41,7 @@
 //! # }
 //! ```
 
-use crate::free::{Run, held_values};
+use crate::free::{Begun, begin, held_values};
 use crate::options::{Objective, Options};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
@@ -92,18 +92,23 @@ impl cs::CostFunction for Cost<'_, '_> {
         if block == 0 {
             self.passes.fetch_add(1, Ordering::Relaxed);
         }
-        let p: Vec<f64> = params.iter().zip(self.d).map(|(s, d)| s * d).collect();
-        let (r, jac_ok) = match jacobian {
-            Some(j) => {
-                let r = self.problem.residual_and_jacobian(block, &p, j);
-                let n = p.len();
-                for (k, v) in j.iter_mut().enumerate() {
-                    *v *= self.d[k % n];
+        // p = s ∘ d in a per-thread buffer: no allocation per residual block.
+        thread_local!(static P: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) });
+        let (r, jac_ok) = P.with_borrow_mut(|p| {
+            p.clear();
+            p.extend(params.iter().zip(self.d).map(|(s, d)| s * d));
+            match jacobian {
+                Some(j) => {
+                    let r = self.problem.residual_and_jacobian(block, p, j);
+                    let n = p.len();
+                    for (k, v) in j.iter_mut().enumerate() {
+                        *v *= self.d[k % n];
+                    }
+                    (r, j.iter().all(|v| v.is_finite()))
                 }
-                (r, j.iter().all(|v| v.is_finite()))
+                None => (self.problem.residual(block, p), true),
             }
-            None => (self.problem.residual(block, &p), true),
-        };
+        });
         residuals.copy_from_slice(&r);
         let ok = jac_ok && r.iter().all(|v| v.is_finite());
         if !ok {
@@ -146,29 +151,20 @@ impl Solver for Ceres {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let run = match Run::start(self.name(), task, start, options) {
-            Ok(run) => run,
-            Err(solution) => return *solution,
-        };
-        let (mut run, free) = match run.free(task, start) {
-            Ok(x) => x,
+        let Begun {
+            mut run,
+            free,
+            p0,
+            norms0,
+            ..
+        } = match begin(self.name(), task, start, options) {
+            Ok(b) => b,
             Err(solution) => return *solution,
         };
         let problem = &task.problem;
         let n = start.len();
         let np = problem.n_points();
         let nf = free.n_free();
-        // The start projected onto the constraints; held values exactly.
-        let p0 = free.params(&vec![0.0; nf]);
-        if nf == 0 {
-            return run.finish(p0, Termination::NoFreeParameters);
-        }
-        let Some(norms0) = crate::free::norms(problem, &p0) else {
-            let t =
-                Termination::NumericalFailure("the residuals are not finite at the start".into());
-            return run.finish(p0, t);
-        };
-        run.summary.evaluations += 1;
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
         let d = &free.d;
         let s0: Vec<f64> = p0.iter().zip(d).map(|(p, d)| p / d).collect();

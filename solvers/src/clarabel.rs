@@ -43,7 +43,7 @@
 //! assert!(b <= a * (1.0 + 1e-9) && b > 0.99 * a, "Φ: LM {a}, SOCP {b}");
 //! ```
 
-use crate::free::Run;
+use crate::free::{Begun, begin};
 use crate::lm::LevenbergMarquardt;
 use crate::options::{Objective, Options};
 use crate::summary::Termination;
@@ -270,12 +270,14 @@ impl Solver for ProxLinear {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let run = match Run::start(self.name(), task, start, options) {
-            Ok(run) => run,
-            Err(solution) => return *solution,
-        };
-        let (mut run, free) = match run.free(task, start) {
-            Ok(x) => x,
+        let Begun {
+            mut run,
+            free,
+            p0: mut p,
+            norms0: mut norms,
+            ..
+        } = match begin(self.name(), task, start, options) {
+            Ok(b) => b,
             Err(solution) => return *solution,
         };
         let problem = &task.problem;
@@ -283,17 +285,7 @@ impl Solver for ProxLinear {
         let k = free.n_free();
         let objective = options.objective;
         let mut z = vec![0.0; k];
-        let mut p = free.params(&z);
-        if k == 0 {
-            return run.finish(p, Termination::NoFreeParameters);
-        }
         let tangent = free.tangent();
-        let Some(mut norms) = crate::free::norms(problem, &p) else {
-            let t =
-                Termination::NumericalFailure("the residuals are not finite at the start".into());
-            return run.finish(p, t);
-        };
-        run.summary.evaluations += 1;
         let mut cost = objective_value(objective, &norms);
         let ve0 = norms.iter().map(|r| r * r).sum::<f64>() / np as f64;
         // Scaled coordinates: a unit of z moves the residual vector by ~1 mm. A first step may

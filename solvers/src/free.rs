@@ -98,7 +98,6 @@ pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f6
 }
 
 /// Residual modules at `p`; `None` if one is not finite.
-#[cfg(any(feature = "ceres", feature = "nlopt", feature = "clarabel"))]
 pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
     let v: Vec<f64> = (0..problem.n_points())
         .map(|i| volver_core::problem::norm(problem.residual(i, p)))
@@ -190,19 +189,10 @@ impl<'t, 'a> Run<'t, 'a> {
         Ok(run)
     }
 
-    /// The scaled free coordinates of `task` (column scaling from the Jacobian at `start`):
-    /// `Err` is the finished solution when they cannot be built.
-    #[cfg(any(feature = "ceres", feature = "nlopt", feature = "clarabel"))]
-    pub(crate) fn free(
-        self,
-        task: &Task,
-        start: &[f64],
-    ) -> Result<(Run<'t, 'a>, Free), Box<Solution>> {
-        self.free_and_normal(task, start).map(|(r, f, _)| (r, f))
-    }
-
-    /// [`Run::free`], with the unweighted normal equations at the start.
-    pub(crate) fn free_and_normal(
+    /// The scaled free coordinates of `task` (column scaling from the Jacobian at `start`) and
+    /// the unweighted normal equations there; `Err` is the finished solution when they cannot
+    /// be built.
+    fn free_and_normal(
         self,
         task: &Task,
         start: &[f64],
@@ -250,4 +240,44 @@ impl<'t, 'a> Run<'t, 'a> {
             summary: self.summary,
         }
     }
+}
+
+/// Where every engine starts: the run, the scaled free coordinates, the unweighted normal
+/// equations at `start`, the start projected onto the constraints (held values exact) and its
+/// residual modules.
+pub(crate) struct Begun<'t, 'a> {
+    pub(crate) run: Run<'t, 'a>,
+    pub(crate) free: Free,
+    pub(crate) first: Normal,
+    pub(crate) p0: Vec<f64>,
+    pub(crate) norms0: Vec<f64>,
+}
+
+/// Validates and evaluates the start, builds the free coordinates and projects the start;
+/// `Err` is the finished solution of a run with nothing to do (no free parameter) or that
+/// cannot start.
+pub(crate) fn begin<'t, 'a>(
+    solver: &str,
+    task: &'t Task<'a>,
+    start: &[f64],
+    options: &Options,
+) -> Result<Begun<'t, 'a>, Box<Solution>> {
+    let run = Run::start(solver, task, start, options)?;
+    let (mut run, free, first) = run.free_and_normal(task, start)?;
+    let p0 = free.params(&vec![0.0; free.n_free()]);
+    if free.n_free() == 0 {
+        return Err(Box::new(run.finish(p0, Termination::NoFreeParameters)));
+    }
+    let Some(norms0) = norms(run.problem, &p0) else {
+        let t = Termination::NumericalFailure("the residuals are not finite at the start".into());
+        return Err(Box::new(run.finish(p0, t)));
+    };
+    run.summary.evaluations += 1;
+    Ok(Begun {
+        run,
+        free,
+        first,
+        p0,
+        norms0,
+    })
 }

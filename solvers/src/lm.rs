@@ -41,7 +41,7 @@
 //! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
-use crate::free::{Run, cost_of, weight_of};
+use crate::free::{Begun, begin, cost_of, weight_of};
 use crate::nullspace::NullSpace;
 use crate::options::{Objective, Options};
 use crate::summary::Termination;
@@ -251,12 +251,14 @@ impl Solver for LevenbergMarquardt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let run = match Run::start(self.name(), task, start, options) {
-            Ok(run) => run,
-            Err(solution) => return *solution,
-        };
-        let (mut run, free, first) = match run.free_and_normal(task, start) {
-            Ok(x) => x,
+        let Begun {
+            mut run,
+            free,
+            first,
+            p0: mut p,
+            norms0: mut norms,
+        } = match begin(self.name(), task, start, options) {
+            Ok(b) => b,
             Err(solution) => return *solution,
         };
         let problem = &task.problem;
@@ -264,10 +266,6 @@ impl Solver for LevenbergMarquardt {
         let objective = options.objective;
         let nf = free.n_free();
         let mut z = vec![0.0; nf];
-        let mut p = free.params(&z);
-        if nf == 0 {
-            return run.finish(p, Termination::NoFreeParameters);
-        }
         // What the data cannot identify is a property of the design: it is read from the
         // unweighted normal matrix (Marquardt-scaled, eigen-decomposed), not from the
         // IRLS-weighted matrices of a Φ fit, whose weights spread the curvatures by up to Φ/ε and
@@ -284,17 +282,7 @@ impl Solver for LevenbergMarquardt {
         };
         let mut refresh = false;
 
-        let mut norms: Vec<f64> = (0..problem.n_points())
-            .map(|i| norm(problem.residual(i, &p)))
-            .collect();
-        run.summary.evaluations += 1;
         let phi0 = norms.iter().sum::<f64>() / norms.len() as f64;
-        if !phi0.is_finite() {
-            return run.finish(
-                p,
-                Termination::NumericalFailure("the objective is not finite at the start".into()),
-            );
-        }
         let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
         let mut eps = (options.irls_initial_epsilon * phi0).max(1e-300);
         let final_stage = |eps: f64, phi: f64| objective == Objective::Ve || eps <= eps_final(phi);

@@ -40,7 +40,7 @@
 //! # }
 //! ```
 
-use crate::free::{Run, cost_and_gradient, cost_of, norms};
+use crate::free::{Begun, begin, cost_and_gradient, cost_of, norms};
 use crate::options::{Objective, Options};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
@@ -127,28 +127,20 @@ impl Solver for Nlopt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let run = match Run::start(self.name(), task, start, options) {
-            Ok(run) => run,
-            Err(solution) => return *solution,
-        };
-        let (mut run, free) = match run.free(task, start) {
-            Ok(x) => x,
+        let Begun {
+            mut run,
+            free,
+            p0,
+            norms0,
+            ..
+        } = match begin(self.name(), task, start, options) {
+            Ok(b) => b,
             Err(solution) => return *solution,
         };
         let problem = &task.problem;
         let n = start.len();
         let np = problem.n_points();
         let nf = free.n_free();
-        let p0 = free.params(&vec![0.0; nf]);
-        if nf == 0 {
-            return run.finish(p0, Termination::NoFreeParameters);
-        }
-        let Some(norms0) = norms(problem, &p0) else {
-            let t =
-                Termination::NumericalFailure("the residuals are not finite at the start".into());
-            return run.finish(p0, t);
-        };
-        run.summary.evaluations += 1;
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
         let objective = options.objective;
         let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
