@@ -1,6 +1,8 @@
 //! The structured dual-number Jacobian against central finite differences (relative 1e-6), for
 //! every basis and every kind of error: component errors of linear and rotary axes on both sides
-//! of the chain, location errors of rotary axes, squareness of linear axes, the tracker pose.
+//! of the chain, location errors of rotary axes, squareness of linear axes, the tracker pose;
+//! and the second derivative along a direction (geodesic acceleration's curvature term) against
+//! central differences of the exact J·v.
 
 use volver::core::iso::ErrorId;
 use volver::core::machine::{Commands, Machine};
@@ -112,6 +114,29 @@ fn check(machine: Machine, seed: u64) -> usize {
                     );
                     checked += 1;
                 }
+            }
+            // The second derivative along a random direction against central differences of
+            // the exact first derivative J·v.
+            let v = random_params(&model, &mut rng);
+            let jv = |q: &[f64], jac: &mut [f64]| {
+                model.predict_with_jacobian(&c, r, q, jac);
+                (0..3)
+                    .map(|i| (0..n).map(|j| jac[i * n + j] * v[j]).sum::<f64>())
+                    .collect::<Vec<f64>>()
+            };
+            let h = 1e-4;
+            let pp: Vec<f64> = p.iter().zip(&v).map(|(a, b)| a + h * b).collect();
+            let pm: Vec<f64> = p.iter().zip(&v).map(|(a, b)| a - h * b).collect();
+            let (a, b) = (jv(&pp, &mut jac), jv(&pm, &mut jac));
+            let exact = model.predict_second_directional_at(&c, r, 0.0, &p, &v);
+            for i in 0..3 {
+                let fd = (a[i] - b[i]) / (2.0 * h);
+                assert!(
+                    (fd - exact[i]).abs() <= 1e-6 * fd.abs().max(exact[i].abs()) + 1e-9,
+                    "coordinate {i}: second directional derivative {} vs finite difference {fd}",
+                    exact[i]
+                );
+                checked += 1;
             }
         }
     }

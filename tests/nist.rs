@@ -5,6 +5,7 @@
 
 use num_dual::Dual64;
 use volver::core::nist::{self, Difficulty, NAMES, lre};
+use volver::core::problem::Problem;
 
 #[test]
 fn every_file_reads_and_counts_agree_with_its_header() {
@@ -86,6 +87,37 @@ fn the_dual_number_jacobian_matches_finite_differences() {
                         k + 1
                     );
                 }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_second_directional_derivative_matches_finite_differences() {
+    for ds in nist::all().unwrap() {
+        let problem = Problem::curve(&ds);
+        let n = ds.n_params();
+        for start in &ds.starts {
+            // A direction mixing every parameter at its own scale.
+            let v: Vec<f64> = (0..n)
+                .map(|k| start[k].abs().max(1e-6) * if k % 2 == 0 { 1.0 } else { -0.5 })
+                .collect();
+            let h = 1e-5;
+            let at =
+                |t: f64| -> Vec<f64> { start.iter().zip(&v).map(|(p, d)| p + t * d).collect() };
+            let mut jac = vec![0.0; 3 * n];
+            for i in [0, ds.n_obs() / 2, ds.n_obs() - 1] {
+                let mut jv = |q: &[f64]| {
+                    problem.residual_and_jacobian(i, q, &mut jac);
+                    (0..n).map(|k| jac[k] * v[k]).sum::<f64>()
+                };
+                let fd = (jv(&at(h)) - jv(&at(-h))) / (2.0 * h);
+                let exact = problem.residual_second_directional(i, start, &v)[0];
+                assert!(
+                    (fd - exact).abs() <= 1e-5 * (fd.abs() + exact.abs()) + 1e-9,
+                    "{} obs {i}: second directional derivative {exact} vs finite differences {fd}",
+                    ds.name
+                );
             }
         }
     }

@@ -238,6 +238,25 @@ impl Basis {
         }
     }
 
+    /// Second derivative of the value at `x` along the coefficient direction `dir`:
+    /// `d²/dt² value(x, coeffs + t·dir)` at t = 0. Zero for a basis linear in its coefficients;
+    /// for the sine series, `Σ 2 da dφ cos(kx + φ) − a dφ² sin(kx + φ)` over its harmonics.
+    pub fn second_directional(&self, x: f64, coeffs: &[f64], dir: &[f64]) -> f64 {
+        debug_assert_eq!(coeffs.len(), self.n_params());
+        debug_assert_eq!(dir.len(), self.n_params());
+        if self.kind != BasisKind::Sine {
+            return 0.0;
+        }
+        (0..self.degree)
+            .map(|k| {
+                let (a, phi) = (coeffs[1 + 2 * k], coeffs[2 + 2 * k]);
+                let (da, dphi) = (dir[1 + 2 * k], dir[2 + 2 * k]);
+                let (s, c) = ((k + 1) as f64 * x + phi).sin_cos();
+                2.0 * da * dphi * c - a * dphi * dphi * s
+            })
+            .sum()
+    }
+
     /// Value at `x` (normalised position or angle).
     pub fn value(&self, x: f64, coeffs: &[f64]) -> f64 {
         let mut g = [0.0; MAX_COEFFS];

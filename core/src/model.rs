@@ -1081,6 +1081,50 @@ impl Model {
         point
     }
 
+    /// Second derivative of the predicted point along the parameter direction `dir`:
+    /// `d²/dt² x(params + t·dir)` at t = 0 (mm per unit of t², the direction in the parameters'
+    /// units). Exact: each error value and its first and second derivatives along `dir` (the
+    /// basis values, and the sine series' curvature in amplitude and phase) enter the chain as
+    /// second-order dual numbers. The curvature term of geodesic acceleration.
+    ///
+    /// # Panics
+    /// As [`Model::predict`], and when `dir.len() != n_params()`.
+    pub fn predict_second_directional_at(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        dir: &[f64],
+    ) -> [f64; 3] {
+        self.check_len(params);
+        self.check_len(dir);
+        let mut vals = [0.0; MAX_SLOTS];
+        let mut d1 = [0.0; MAX_SLOTS];
+        let mut d2 = [0.0; MAX_SLOTS];
+        let mut grad = [0.0; MAX_COEFFS];
+        for (i, t) in self.terms.iter().enumerate() {
+            let r = t.params.clone();
+            let x = self.argument(t, commands);
+            let g = &mut grad[..r.len()];
+            vals[i] = t.basis.eval(x, &params[r.clone()], g);
+            d1[i] = g.iter().zip(&dir[r.clone()]).map(|(a, b)| a * b).sum();
+            d2[i] = t.basis.second_directional(x, &params[r.clone()], &dir[r]);
+        }
+        let k = self.terms.len();
+        let ts = self.tracker_start;
+        vals[k..k + TRACKER_DOF].copy_from_slice(&params[ts..ts + TRACKER_DOF]);
+        d1[k..k + TRACKER_DOF].copy_from_slice(&dir[ts..ts + TRACKER_DOF]);
+        // Effects are linear in their parameters: their derivative along dir is their value
+        // at dir, and their second derivative is zero.
+        self.effect_values(commands, reflector, t_s, params, &mut vals, None);
+        self.effect_values(commands, reflector, t_s, dir, &mut d1, None);
+        let e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
+        let refl = &self.machine.reflectors()[reflector].offset;
+        let x = predict(&self.machine, commands, refl, &e);
+        [x[0].v2, x[1].v2, x[2].v2]
+    }
+
     /// Point and ∂point/∂(error value) for every slot, by one dual pass with N derivatives.
     #[inline(never)]
     fn value_jacobian<const N: usize>(

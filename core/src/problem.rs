@@ -208,6 +208,32 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// Second derivative of the residual of point `i` along the parameter direction `dir`,
+    /// `d²/dt² r_i(params + t·dir)` at t = 0, exact (second-order dual numbers): the curvature
+    /// that geodesic acceleration corrects a Gauss–Newton step by.
+    pub fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
+        match self.source {
+            Source::Machine { model, data } => {
+                let m = &data.points[i];
+                model.predict_second_directional_at(
+                    &m.commands,
+                    m.reflector,
+                    m.t_s.unwrap_or(0.0),
+                    params,
+                    dir,
+                )
+            }
+            Source::Curve(d) => {
+                let b: Vec<num_dual::Dual2_64> = params
+                    .iter()
+                    .zip(dir)
+                    .map(|(&p, &v)| num_dual::Dual2_64::new(p, v, 0.0))
+                    .collect();
+                [d.residual(i, &b).v2, 0.0, 0.0]
+            }
+        }
+    }
+
     /// Every residual.
     pub fn residuals(&self, params: &[f64]) -> Vec<[f64; 3]> {
         (0..self.n_points())
