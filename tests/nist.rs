@@ -162,11 +162,6 @@ fn bad_files_are_refused_with_the_place_named() {
     );
 }
 
-/// Starts from which the native LM (and, in our runs, every other engine: Ceres, Clarabel, NLopt)
-/// ends in another local minimum or a flat region: still open (issue 10). BoxBOD from (1, 1)
-/// runs to b2 → ∞ (f → the mean of y); MGH10 and MGH17 from start 1 stall in their valleys.
-const OPEN: [(&str, usize); 3] = [("MGH17", 1), ("BoxBOD", 1), ("MGH10", 1)];
-
 #[test]
 fn the_native_lm_reaches_four_digits_of_the_certified_rss() {
     use volver::solvers::{lm::LevenbergMarquardt, strd};
@@ -179,9 +174,6 @@ fn the_native_lm_reaches_four_digits_of_the_certified_rss() {
                 r.problem, r.start, r.lre_params, r.lre_rss, r.iterations, r.termination
             );
             assert!(!r.termination.failed(), "{}: {}", r.problem, r.termination);
-            if OPEN.contains(&(r.problem.as_str(), r.start)) {
-                continue;
-            }
             // Lanczos1's certified RSS (1.4e-25) lies below what a double-precision evaluation
             // of its model resolves: residuals of ~8e-14 carry rounding of ~1e-16, so every
             // engine gets ~3 digits of the RSS; its parameters are judged instead.

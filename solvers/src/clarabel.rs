@@ -341,8 +341,8 @@ impl Solver for ProxLinear {
                         Termination::ObjectiveChange
                     };
                 }
+                let p_new = free.step(&p, &delta);
                 let z_new: Vec<f64> = z.iter().zip(&delta).map(|(a, b)| a + b).collect();
-                let p_new = free.params(&z_new);
                 run.summary.evaluations += 1;
                 let new = crate::free::norms(problem, &p_new);
                 let cost_new = new
@@ -370,8 +370,8 @@ impl Solver for ProxLinear {
                 });
                 if accepted {
                     let old = cost;
-                    z = z_new;
                     p = p_new;
+                    z = z_new;
                     norms = new.unwrap_or_default();
                     cost = cost_new;
                     if rho > 0.75 {

@@ -49,6 +49,22 @@ impl Free {
         p
     }
 
+    /// `p + D N dz`: a step of `dz` in the free coordinates taken from `p` itself (held
+    /// parameters stay exact). Unlike [`Free::params`] of an accumulated z, it keeps every
+    /// parameter's absolute precision: z counts the distance from the anchor, and a parameter
+    /// that travels far from its start (MGH10's b1, from 2 to 10⁻⁵⁰ and back) would otherwise be
+    /// known only to the rounding of that distance.
+    pub(crate) fn step(&self, p: &[f64], dz: &[f64]) -> Vec<f64> {
+        let b = self.ns.basis();
+        let mut out: Vec<f64> = (0..p.len())
+            .map(|i| p[i] + self.d[i] * (0..dz.len()).map(|k| b[(i, k)] * dz[k]).sum::<f64>())
+            .collect();
+        for &(j, v) in &self.fixed {
+            out[j] = v;
+        }
+        out
+    }
+
     /// `M = D N` (n × free): `∂p/∂z`.
     #[cfg(any(feature = "nlopt", feature = "clarabel"))]
     pub(crate) fn tangent(&self) -> faer::Mat<f64> {

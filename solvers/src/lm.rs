@@ -43,7 +43,7 @@
 
 use crate::free::{Begun, begin, cost_of, weight_of};
 use crate::nullspace::NullSpace;
-use crate::options::{Objective, Options};
+use crate::options::{ACCELERATION_RATIO, Objective, Options};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
@@ -212,6 +212,48 @@ fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
     Some((mu, Mat::from_fn(nf, nf, |k, i| s0[k] * u[(k, i)])))
 }
 
+/// Geodesic acceleration's right-hand side in the free coordinates z: `Nᵀ D Σ J_iᵀ W_i r_i''`,
+/// where `r_i''` is the exact second derivative of residual i along the step `delta` (z) and
+/// `W_i` its Gauss–Newton weight (as in [`accumulate`]). One Jacobian and one second-derivative
+/// pass; `None` when a value is not finite.
+fn curvature_gradient(
+    problem: &Problem,
+    free: &crate::free::Free,
+    p: &[f64],
+    delta: &[f64],
+    objective: Objective,
+    eps: f64,
+) -> Option<Vec<f64>> {
+    let n = p.len();
+    let np = problem.n_points();
+    let basis = free.ns.basis();
+    let nf = basis.ncols();
+    let dir: Vec<f64> = (0..n)
+        .map(|i| free.d[i] * (0..nf).map(|k| basis[(i, k)] * delta[k]).sum::<f64>())
+        .collect();
+    let mut b = vec![0.0; n];
+    let mut row = vec![0.0; 3 * n];
+    for i in 0..np {
+        let r = problem.residual_and_jacobian(i, p, &mut row);
+        let rvv = problem.residual_second_directional(i, p, &dir);
+        let nr = norm(r);
+        let (w, c) = weight_of(objective, nr, eps, np);
+        let radial = if nr > 0.0 {
+            (r[0] * rvv[0] + r[1] * rvv[1] + r[2] * rvv[2]) / (nr * nr)
+        } else {
+            0.0
+        };
+        let wr: [f64; 3] = std::array::from_fn(|c3| w * (rvv[c3] - c * radial * r[c3]));
+        for j in 0..n {
+            b[j] += row[j] * wr[0] + row[n + j] * wr[1] + row[2 * n + j] * wr[2];
+        }
+    }
+    let bz: Vec<f64> = (0..nf)
+        .map(|k| (0..n).map(|i| basis[(i, k)] * free.d[i] * b[i]).sum())
+        .collect();
+    bz.iter().all(|v| v.is_finite()).then_some(bz)
+}
+
 /// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
 /// pseudo-inverse that drops directions below 1e-14 of the largest singular value.
 fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
@@ -265,6 +307,8 @@ impl Solver for LevenbergMarquardt {
         let n = problem.n_params();
         let objective = options.objective;
         let nf = free.n_free();
+        // The step's distance from the start in the scaled free coordinates (the parameter
+        // criterion's scale); the parameters themselves are stepped from p (Free::step).
         let mut z = vec![0.0; nf];
         // What the data cannot identify is a property of the design: it is read from the
         // unweighted normal matrix (Marquardt-scaled, eigen-decomposed), not from the
@@ -290,6 +334,10 @@ impl Solver for LevenbergMarquardt {
         let cost0 = cost;
         let mut lambda = options.initial_damping;
         let mut nu = 2.0;
+        let mut dmax: Vec<f64> = Vec::new();
+        let mut reset_scale = false;
+        let mut scale_coords: Option<(usize, usize)> = None;
+        let mut design_generation = 0_usize;
         let np = problem.n_points();
         let termination = 'outer: loop {
             // One Jacobian pass at the current point.
@@ -303,7 +351,10 @@ impl Solver for LevenbergMarquardt {
                 run.summary.evaluations += 1;
                 run.summary.jacobian_evaluations += 1;
                 match refreshed {
-                    Some(d) => design = d,
+                    Some(d) => {
+                        design = d;
+                        design_generation += 1;
+                    }
                     None => {
                         break Termination::NumericalFailure(format!(
                             "the design's normal matrix failed at iteration {}",
@@ -350,10 +401,14 @@ impl Solver for LevenbergMarquardt {
                     ));
                 };
                 design = d;
+                design_generation += 1;
             }
             let (mu0, dirs0) = (&design.0, &design.1);
             let mu0_max = mu0[nf - 1].max(0.0);
-            let keep: Vec<usize> = (0..nf).filter(|&i| mu0[i] > tolerance * mu0_max).collect();
+            // A zero tolerance holds nothing (not even a direction whose curvature rounds to ≤ 0).
+            let keep: Vec<usize> = (0..nf)
+                .filter(|&i| tolerance == 0.0 || mu0[i] > tolerance * mu0_max)
+                .collect();
             run.summary.unidentifiable = nf - keep.len();
             let q =
                 (keep.len() < nf).then(|| Mat::from_fn(nf, keep.len(), |k, c| dirs0[(k, keep[c])]));
@@ -367,14 +422,42 @@ impl Solver for LevenbergMarquardt {
                     (hq, gq)
                 }
             };
-            // Marquardt scaling: H' = S H S, g' = S g with S = diag(H)^-½ (floored).
+            // Damping: λ M with M the diagonal of the largest diag(H) seen in the step's
+            // coordinates (Moré's scaling, as MINPACK: it never shrinks, so a parameter whose
+            // column fades as the fit runs into a flat region is still damped at its earlier
+            // scale). The maximum runs while the coordinates stay the same: z, or the span q of
+            // the identifiable design directions until the design is refreshed (every iteration
+            // for ve, every IRLS stage for Φ); a new IRLS stage also restarts it (a new cost).
             let nr = gq.len();
-            let dmax = (0..nr).map(|i| hq[(i, i)]).fold(0.0_f64, f64::max);
-            let sc: Vec<f64> = (0..nr)
-                .map(|i| 1.0 / hq[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+            let coords = q.as_ref().map(|_| (design_generation, nr));
+            if reset_scale || coords != scale_coords || dmax.len() != nr {
+                reset_scale = false;
+                scale_coords = coords;
+                dmax = vec![0.0; nr];
+            }
+            for (i, v) in dmax.iter_mut().enumerate() {
+                *v = (*v).max(hq[(i, i)]);
+            }
+            // A direction the data have never seen is damped at unit scale (MINPACK's rule); no
+            // floor relative to the others, whose curvatures may legitimately span 10²⁰ along
+            // the path of a strongly nonlinear model (MGH10).
+            // Scaled by S = M^-½: H' = S H S, g' = S g, and the damping is λ I.
+            let sc: Vec<f64> = dmax
+                .iter()
+                .map(|&v| 1.0 / if v > 0.0 { v } else { 1.0 }.sqrt())
                 .collect();
             let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
             let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
+            // From the scaled span coordinates back to z.
+            let to_z = |y: &[f64]| -> Vec<f64> {
+                let y: Vec<f64> = y.iter().zip(&sc).map(|(y, s)| y * s).collect();
+                match &q {
+                    None => y,
+                    Some(q) => (0..nf)
+                        .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
+                        .collect(),
+                }
+            };
             // Try steps until one is accepted or a criterion stops the run.
             loop {
                 if run.summary.iterations >= options.max_iterations {
@@ -390,37 +473,77 @@ impl Solver for LevenbergMarquardt {
                     hp[(i, j)] + if i == j { lambda } else { 0.0 }
                 });
                 let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
-                let y: Vec<f64> = solve_spd(&damped, &rhs)
-                    .unwrap_or_else(|| vec![f64::NAN; nr])
-                    .iter()
-                    .zip(&sc)
-                    .map(|(y, s)| y * s)
-                    .collect();
-                let delta: Vec<f64> = match &q {
-                    None => y,
-                    Some(q) => (0..nf)
-                        .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
-                        .collect(),
-                };
+                let y = solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]);
+                let delta = to_z(&y);
                 if delta.iter().any(|v| !v.is_finite()) {
                     break 'outer Termination::NumericalFailure(format!(
                         "the step is not finite at iteration {}",
                         run.summary.iterations
                     ));
                 }
-                let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+                // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
+                // refused (as a failed step) when 2‖a‖ > α‖δ‖ in the damping norm.
+                let mut total = delta.clone();
+                if options.geodesic_acceleration {
+                    let ynorm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    let accel = (ynorm > 0.0)
+                        .then(|| curvature_gradient(problem, &free, &p, &delta, objective, eps))
+                        .flatten();
+                    run.summary.evaluations += 1;
+                    run.summary.jacobian_evaluations += 1;
+                    let Some(bz) = accel else {
+                        break 'outer Termination::NumericalFailure(format!(
+                            "the second derivative along the step is not finite at iteration {}",
+                            run.summary.iterations
+                        ));
+                    };
+                    let bq: Vec<f64> = match &q {
+                        None => bz,
+                        Some(q) => (0..nr)
+                            .map(|c| (0..nf).map(|k| q[(k, c)] * bz[k]).sum())
+                            .collect(),
+                    };
+                    let rhs: Vec<f64> = bq.iter().zip(&sc).map(|(b, s)| -b * s).collect();
+                    let ya = solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]);
+                    let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if !(2.0 * anorm <= ACCELERATION_RATIO * ynorm) {
+                        observer.iteration(&Iteration {
+                            iteration: run.summary.iterations,
+                            evaluations: run.summary.evaluations,
+                            cost,
+                            emm_um: norms.iter().sum::<f64>() / np as f64 * 1e3,
+                            damping: lambda,
+                            step: delta.iter().map(|v| v * v).sum::<f64>().sqrt(),
+                            accepted: false,
+                        });
+                        lambda *= nu;
+                        nu *= 2.0;
+                        if !lambda.is_finite() || lambda > 1e30 {
+                            break 'outer Termination::NumericalFailure(format!(
+                                "geodesic acceleration refused every step up to damping 1e30 at iteration {}",
+                                run.summary.iterations
+                            ));
+                        }
+                        continue;
+                    }
+                    for (t, a) in total.iter_mut().zip(to_z(&ya)) {
+                        *t += 0.5 * a;
+                    }
+                }
+                let step = total.iter().map(|v| v * v).sum::<f64>().sqrt();
                 let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
                 let small_step =
                     step <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
-                // Predicted decrease of the quadratic model.
+                // Predicted decrease of the quadratic model along δ (the velocity; the
+                // acceleration only bends the path).
                 let hd: Vec<f64> = (0..nf)
                     .map(|i| (0..nf).map(|j| hz[(i, j)] * delta[j]).sum())
                     .collect();
                 let pred = -(0..nf)
                     .map(|i| gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
                     .sum::<f64>();
-                let z_new: Vec<f64> = z.iter().zip(&delta).map(|(a, b)| a + b).collect();
-                let p_new = free.params(&z_new);
+                let p_new = free.step(&p, &total);
+                let z_new: Vec<f64> = z.iter().zip(&total).map(|(a, b)| a + b).collect();
                 let norms_new: Vec<f64> =
                     (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
                 run.summary.evaluations += 1;
@@ -446,8 +569,8 @@ impl Solver for LevenbergMarquardt {
                 });
                 if accepted {
                     let old = cost;
-                    z = z_new;
                     p = p_new;
+                    z = z_new;
                     norms = norms_new;
                     cost = cost_new;
                     lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
@@ -464,6 +587,7 @@ impl Solver for LevenbergMarquardt {
                         }
                         eps = (eps / 10.0).max(eps_final(phi));
                         refresh = true;
+                        reset_scale = true;
                         cost = cost_of(objective, &norms, eps);
                     } else if objective == Objective::Phi
                         && !final_stage(eps, phi)
@@ -472,6 +596,7 @@ impl Solver for LevenbergMarquardt {
                         // The smoothed problem has nearly converged: sharpen it.
                         eps = (eps / 10.0).max(eps_final(phi));
                         refresh = true;
+                        reset_scale = true;
                         cost = cost_of(objective, &norms, eps);
                     }
                     break;
@@ -485,6 +610,7 @@ impl Solver for LevenbergMarquardt {
                     }
                     eps = (eps / 10.0).max(eps_final(phi));
                     refresh = true;
+                    reset_scale = true;
                     cost = cost_of(objective, &norms, eps);
                     lambda = options.initial_damping;
                     nu = 2.0;

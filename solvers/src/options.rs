@@ -80,7 +80,18 @@ pub struct Options {
     pub irls_initial_epsilon: f64,
     /// Φ only: the IRLS ε stops shrinking at this fraction of Φ. Default 1e-9.
     pub irls_final_epsilon: f64,
+    /// Native LM: correct each step by geodesic acceleration (Transtrum & Sethna 2012): the
+    /// exact second directional derivative of the residuals along the step bends it along the
+    /// curved valleys of strongly nonlinear models, and a step whose correction exceeds
+    /// [`ACCELERATION_RATIO`] of it (in the damping norm) is refused. It costs one Jacobian and
+    /// one second-derivative pass per step tried. Default false: the machine models are mildly
+    /// nonlinear; the NIST suite ([`crate::strd::options`]) turns it on.
+    pub geodesic_acceleration: bool,
 }
+
+/// The largest ratio `2‖a‖ / ‖v‖` of geodesic acceleration to step, in the damping norm, that
+/// the native LM accepts (Transtrum & Sethna's α = 0.75).
+pub const ACCELERATION_RATIO: f64 = 0.75;
 
 impl Default for Options {
     fn default() -> Self {
@@ -95,6 +106,7 @@ impl Default for Options {
             rank_tolerance: 1e-10,
             irls_initial_epsilon: 0.1,
             irls_final_epsilon: 1e-9,
+            geodesic_acceleration: false,
         }
     }
 }
