@@ -264,13 +264,13 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
     );
     print!("  {:<9} {:<8} st", "problem", "level");
     for n in &names {
-        print!("  {:>16}", n);
+        print!("  {:>17}", n);
     }
     println!(
         "\n  {:<9} {:<8}   {}",
         "",
         "",
-        "   LRE b/RSS  it".repeat(names.len())
+        "   LRE b/RSS   it".repeat(names.len())
     );
     for (k, chunk) in runs.chunks(engines.len()).enumerate() {
         let r0 = &chunk[0];
@@ -279,7 +279,7 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
         for r in chunk {
             let flag = if r.termination.failed() { "!" } else { " " };
             print!(
-                "  {:>4.1}/{:>4.1} {:>4}{flag}",
+                "  {:>4.1}/{:>4.1} {:>5}{flag}",
                 r.lre_params, r.lre_rss, r.iterations
             );
         }
@@ -288,14 +288,24 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
     print!("\n  {:<9} {:<8}   ", "mean", "");
     for n in &names {
         print!(
-            "  {:>4.2}/{:>5.2}      ",
+            "  {:>4.2}/{:>5.2}       ",
             mean(n, |r| r.lre_params),
             mean(n, |r| r.lre_rss)
         );
     }
+    println!();
+    if runs.iter().any(|r| r.termination.failed()) {
+        println!("\n  ! the engine reported a failure.");
+    }
     println!(
-        "\n\n  ! the engine reported a failure. Options: objective ve, tolerances 1e-15, {} iterations, {} evaluations, nothing held as unidentifiable.",
-        options.max_iterations, options.max_evaluations
+        "\n  Options: objective ve, tolerances 1e-15, {} iterations, {} evaluations, nothing held as unidentifiable{}.",
+        options.max_iterations,
+        options.max_evaluations,
+        if options.geodesic_acceleration {
+            "; the native LM with geodesic acceleration"
+        } else {
+            ""
+        }
     );
     Ok(())
 }
