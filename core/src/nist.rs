@@ -359,14 +359,18 @@ impl Dataset {
         }
     }
 
-    /// Residual of observation `i`: model − y (for Nelson, model − ln y).
-    pub fn residual<T: Real>(&self, i: usize, b: &[T]) -> T {
-        let y = if self.name == "Nelson" {
+    /// Observation `i` as the model predicts it: y (for Nelson, ln y).
+    pub fn observation(&self, i: usize) -> f64 {
+        if self.name == "Nelson" {
             self.y[i].ln()
         } else {
             self.y[i]
-        };
-        self.model(i, b) - y
+        }
+    }
+
+    /// Residual of observation `i`: model − y (for Nelson, model − ln y).
+    pub fn residual<T: Real>(&self, i: usize, b: &[T]) -> T {
+        self.model(i, b) - self.observation(i)
     }
 
     /// Residual sum of squares at `b`.

@@ -168,6 +168,17 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// The magnitude of what point `i` measured (mm; for a curve fit, the observation): a
+    /// residual is rounded relative to it, not to itself, so a cost computed from residuals much
+    /// smaller than their observations carries a rounding of about
+    /// `ε · observation_scale / ‖r‖` relative.
+    pub fn observation_scale(&self, i: usize) -> f64 {
+        match self.source {
+            Source::Machine { data, .. } => norm(data.points[i].measured),
+            Source::Curve(d) => d.observation(i).abs(),
+        }
+    }
+
     /// Residual of point `i` and its Jacobian (row-major 3 × n_params) in `jac`.
     pub fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
         match self.source {

@@ -214,7 +214,7 @@ impl<'t, 'a> Run<'t, 'a> {
         start: &[f64],
     ) -> Result<(Run<'t, 'a>, Free, Normal), Box<Solution>> {
         let mut run = self;
-        let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0)) else {
+        let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0), false) else {
             let t = Termination::NumericalFailure("the Jacobian is not finite at the start".into());
             return Err(Box::new(run.finish(start.to_vec(), t)));
         };

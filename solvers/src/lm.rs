@@ -1,18 +1,29 @@
 //! The native Levenberg–Marquardt engine on `faer`.
 //!
-//! * **Normal equations in row blocks.** Each pass runs over the points in blocks of
-//!   [`BLOCK`] points: the block's weighted Jacobian rows (3 per point) are multiplied into the
-//!   lower triangle of `JᵀWJ` and into `JᵀWr`; no dense Jacobian of the whole problem is kept.
+//! * **Row blocks.** Each pass runs over the points in blocks of [`BLOCK`] points; no dense
+//!   Jacobian of the whole problem is kept. For Φ the block's weighted Jacobian rows (3 per
+//!   point) are multiplied into the lower triangle of `JᵀWJ`; for least squares (ve) they update
+//!   the triangular factor R of the rows by a QR of `[R; block]` (a sequential QR), with the
+//!   residuals as one more column.
 //! * **Scaling.** Parameters are scaled by the inverse column norms of the starting Jacobian, so
 //!   millimetres and radians (whose columns differ by the lever arms, ~10³) weigh alike.
 //! * **Constraints** by null-space elimination in the scaled coordinates: `p = D (s₀ + N z)`,
-//!   with z free ([`crate::nullspace`]).
-//! * **Steps** solve `(H + λ diag H) δ = −g` (Marquardt scaling) by Cholesky; if that fails
-//!   (an ill-conditioned, nearly unidentifiable direction) by a rank-revealing SVD pseudo-inverse.
+//!   with z free ([`crate::nullspace`]). Each step is added to the parameters themselves
+//!   (`p + D N δ`), so a parameter that travels far keeps its absolute precision.
+//! * **Steps** solve `(H + λ M) δ = −g`, M the largest diagonal of H seen in the step's
+//!   coordinates (Moré's scaling, as MINPACK): by Cholesky (an SVD pseudo-inverse if it fails)
+//!   for Φ; for least squares as `min ‖R δ + c‖² + λ‖M^½ δ‖²` by QR, which keeps the Jacobian's
+//!   condition number instead of its square. The damping follows Nielsen's rule on the gain
+//!   ratio.
+//! * **Geodesic acceleration** ([`Options::geodesic_acceleration`], off by default): the step
+//!   `δ + a/2` with `a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ)`, the exact second directional derivative of
+//!   the residuals by second-order duals; a step whose correction is too large is refused.
 //! * **Unidentifiable directions** (curvature below [`Options::rank_tolerance`] of the largest)
 //!   are read from the design, the unweighted normal matrix (current for ve; refreshed at each
-//!   IRLS stage for Φ), and steps stay in the span of the others.
-//!   The damping follows Nielsen's rule on the gain ratio.
+//!   IRLS stage for Φ), and steps stay in the span of the others. A zero tolerance holds
+//!   nothing.
+//! * **Refinement** (least squares, nothing held): after convergence, undamped Gauss–Newton
+//!   steps from the QR factor, while they contract and the cost is no worse than its rounding.
 //! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised by iteratively
 //!   reweighted least squares: each pass weights point i by `1/√(‖r_i‖² + ε²)`, with the radial
 //!   direction's curvature reduced by `‖r_i‖²/(‖r_i‖² + ε²)` (Ceres' Triggs correction), which is
@@ -54,35 +65,61 @@ use volver_core::problem::{Problem, norm};
 /// Points per block of the normal-equation accumulation.
 pub const BLOCK: usize = 128;
 
+/// Gauss–Newton refinements of a converged least-squares fit, at most.
+const REFINEMENTS: usize = 100;
+
 /// The native engine (always available).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct LevenbergMarquardt;
 
-/// Normal equations of one pass at a point: `H` (accumulated in its lower triangle, then
-/// mirrored) and `g`.
+/// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
+/// they come from.
 pub(crate) struct Normal {
     pub(crate) h: Mat<f64>,
     pub(crate) g: Vec<f64>,
+    /// With `factor`: see [`Factor`].
+    pub(crate) factor: Option<Factor>,
+}
+
+/// The triangular factor of a pass, for plain least squares (no radial correction on any
+/// point).
+pub(crate) struct Factor {
+    /// R (n × n) of the weighted Jacobian rows `W^½ J`, accumulated block by block (a
+    /// sequential QR: only R is kept, never the rows): `H = RᵀR`.
+    pub(crate) r: Mat<f64>,
+    /// `c = Qᵀ W^½ r`: the cost's quadratic model is `½‖R δ + c‖²` up to a constant and
+    /// `g = Rᵀ c`. Solving with R and c instead of H and g keeps the condition number of the
+    /// Jacobian instead of its square (as MINPACK and Ceres' dense QR do).
+    pub(crate) c: Vec<f64>,
 }
 
 /// `H = Σ J_iᵀ W_i J_i` and `g = Σ w_i J_iᵀ r_i`, where `weight(‖r_i‖)` gives `(w_i, c_i)` and
 /// `W_i = w_i (I − c_i r̂_i r̂_iᵀ)` (the exact Gauss–Newton Hessian of the loss on each point:
 /// `c = 0` for ve; for Φ_ε the radial direction carries less curvature than the tangential ones,
-/// Ceres' "Triggs correction"). `None` when a residual or Jacobian entry is not finite.
+/// Ceres' "Triggs correction"). H is accumulated block by block from the rows `W_i^½ J_i`:
+/// with `factor` (least squares only) as `RᵀR`, R updated by a QR of `[R; block]`, else by a
+/// rank-k update. `None` when a residual or Jacobian entry is not finite, or when `factor` is
+/// asked of a pass that is not plain least squares.
 pub(crate) fn accumulate(
     problem: &Problem,
     p: &[f64],
     weight: impl Fn(f64) -> (f64, f64),
+    factor: bool,
 ) -> Option<Normal> {
     let n = p.len();
     let np = problem.n_points();
-    let mut h = Mat::<f64>::zeros(n, n);
     let mut g = vec![0.0; n];
-    let mut jb = Mat::<f64>::zeros(3 * BLOCK, n);
+    let mut h = Mat::<f64>::zeros(n, n);
+    // With `factor`: R and the residual column (column-major, (n+1)²). A block's rows
+    // (column-major, the weighted residuals in column n).
+    let nc = n + 1;
+    let mut rf = vec![0.0; if factor { nc * nc } else { 0 }];
+    let mut blk = vec![0.0; 3 * BLOCK * nc];
     let mut row = vec![0.0; 3 * n];
     let mut start = 0;
     while start < np {
         let m = (np - start).min(BLOCK);
+        let rows = 3 * m;
         for b in 0..m {
             let r = problem.residual_and_jacobian(start + b, p, &mut row);
             let nr = norm(r);
@@ -90,6 +127,9 @@ pub(crate) fn accumulate(
                 return None;
             }
             let (w, c) = weight(nr);
+            if factor && c != 0.0 {
+                return None;
+            }
             // W^½ = √w (I − k r̂ r̂ᵀ) with (1 − k)² = 1 − c.
             let k = 1.0 - (1.0 - c).max(0.0).sqrt();
             let rhat = if nr > 0.0 {
@@ -103,30 +143,94 @@ pub(crate) fn accumulate(
                 let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
                 g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
                 for c in 0..3 {
-                    jb[(3 * b + c, j)] = sw * (col[c] - k * rhat[c] * radial);
+                    blk[j * rows + 3 * b + c] = sw * (col[c] - k * rhat[c] * radial);
                 }
             }
+            for c in 0..3 {
+                blk[n * rows + 3 * b + c] = sw * r[c];
+            }
         }
-        let jv = jb.as_ref().subrows(0, 3 * m);
-        triangular_matmul(
-            h.as_mut(),
-            BlockStructure::TriangularLower,
-            Accum::Add,
-            jv.transpose(),
-            BlockStructure::Rectangular,
-            jv,
-            BlockStructure::Rectangular,
-            1.0,
-            Par::Seq,
-        );
+        if factor {
+            qr_update(&mut rf, nc, &mut blk[..rows * nc], rows);
+        } else {
+            let jv =
+                faer::MatRef::from_column_major_slice(&blk[..rows * nc], rows, nc).subcols(0, n);
+            triangular_matmul(
+                h.as_mut(),
+                BlockStructure::TriangularLower,
+                Accum::Add,
+                jv.transpose(),
+                BlockStructure::Rectangular,
+                jv,
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
+        }
         start += m;
     }
+    let factor = factor.then(|| {
+        let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);
+        h = r.transpose() * &r;
+        Factor {
+            r,
+            c: (0..n).map(|i| rf[n * nc + i]).collect(),
+        }
+    });
     for j in 0..n {
         for i in 0..j {
             h[(i, j)] = h[(j, i)];
         }
     }
-    Some(Normal { h, g })
+    Some(Normal { h, g, factor })
+}
+
+/// `Σ aᵢ bᵢ` with four running sums (so that the loop vectorises).
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ac.zip(bc) {
+        for k in 0..4 {
+            acc[k] += x[k] * y[k];
+        }
+    }
+    acc[0] + acc[1] + acc[2] + acc[3] + tail
+}
+
+/// One step of a sequential QR: the upper-triangular `r` (`nc` × `nc`, column-major) becomes
+/// the R factor of `[r; b]`, where `b` holds `rows` rows (column-major); `b` is overwritten.
+/// Householder reflections that exploit r's zeros: only row j of r and the block change when
+/// column j is eliminated, so the cost is about twice that of adding `bᵀb` to a normal matrix.
+fn qr_update(r: &mut [f64], nc: usize, b: &mut [f64], rows: usize) {
+    for j in 0..nc {
+        let (left, right) = b.split_at_mut((j + 1) * rows);
+        let x = &mut left[j * rows..];
+        let sigma = dot(x, x);
+        if sigma == 0.0 {
+            continue;
+        }
+        let x0 = r[j * nc + j];
+        let alpha = -x0.signum() * (x0 * x0 + sigma).sqrt();
+        let v0 = x0 - alpha;
+        let beta = 2.0 / (v0 * v0 + sigma);
+        r[j * nc + j] = alpha;
+        for col in j + 1..nc {
+            let y = &mut right[(col - j - 1) * rows..(col - j) * rows];
+            let rj = &mut r[col * nc + j];
+            let s = beta * (v0 * *rj + dot(x, y));
+            *rj -= s * v0;
+            for (yi, xi) in y.iter_mut().zip(x.iter()) {
+                *yi -= s * xi;
+            }
+        }
+        x.iter_mut().for_each(|v| *v = 0.0);
+    }
 }
 
 /// Column scaling `D` (inverse column norms of the Jacobian, from the diagonal of `JᵀJ`; 1 for
@@ -174,7 +278,7 @@ pub(crate) struct Reduced {
 /// cannot be eliminated.
 pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
     let n = params.len();
-    let normal = accumulate(&task.problem, params, |_| (1.0, 0.0))?;
+    let normal = accumulate(&task.problem, params, |_| (1.0, 0.0), false)?;
     let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
     let ns = ns.ok()?;
     let nf = ns.n_free();
@@ -252,6 +356,41 @@ fn curvature_gradient(
         .map(|k| (0..n).map(|i| basis[(i, k)] * free.d[i] * b[i]).sum())
         .collect();
     bz.iter().all(|v| v.is_finite()).then_some(bz)
+}
+
+/// The damped least-squares step `argmin ‖R' y + c‖² + λ‖y‖²` by a QR of `[R'; √λ I]`, and that
+/// QR's triangular factor `R_λ` (`R_λᵀ R_λ = R'ᵀR' + λI`); `None` if not finite.
+fn damped_lstsq(rps: &Mat<f64>, c: &[f64], lambda: f64) -> Option<(Vec<f64>, Mat<f64>)> {
+    let (n, nr) = (rps.nrows(), rps.ncols());
+    let sl = lambda.sqrt();
+    let a = Mat::from_fn(n + nr, nr, |i, j| {
+        if i < n {
+            rps[(i, j)]
+        } else if i - n == j {
+            sl
+        } else {
+            0.0
+        }
+    });
+    let b = Mat::from_fn(n + nr, 1, |i, _| if i < n { -c[i] } else { 0.0 });
+    let qr = a.qr();
+    let y = qr.solve_lstsq(&b);
+    let y: Vec<f64> = (0..nr).map(|i| y[(i, 0)]).collect();
+    let rl = qr.thin_R().to_owned();
+    y.iter().all(|v| v.is_finite()).then_some((y, rl))
+}
+
+/// `(R_λᵀ R_λ)⁻¹ rhs` by two triangular solves; `None` if not finite.
+fn normal_solve(rl: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
+    use faer::linalg::triangular_solve::{
+        solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+    };
+    let k = rhs.len();
+    let mut x = Mat::from_fn(k, 1, |i, _| rhs[i]);
+    solve_lower_triangular_in_place(rl.transpose(), x.as_mut(), Par::Seq);
+    solve_upper_triangular_in_place(rl.as_ref(), x.as_mut(), Par::Seq);
+    let x: Vec<f64> = (0..k).map(|i| x[(i, 0)]).collect();
+    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 /// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
@@ -346,8 +485,8 @@ impl Solver for LevenbergMarquardt {
             }
             if refresh && objective == Objective::Phi {
                 refresh = false;
-                let refreshed =
-                    accumulate(problem, &p, |_| (1.0, 0.0)).and_then(|h| design_of(&free, &h.h));
+                let refreshed = accumulate(problem, &p, |_| (1.0, 0.0), false)
+                    .and_then(|h| design_of(&free, &h.h));
                 run.summary.evaluations += 1;
                 run.summary.jacobian_evaluations += 1;
                 match refreshed {
@@ -363,7 +502,12 @@ impl Solver for LevenbergMarquardt {
                     }
                 }
             }
-            let Some(normal) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np)) else {
+            let Some(normal) = accumulate(
+                problem,
+                &p,
+                |r| weight_of(objective, r, eps, np),
+                objective == Objective::Ve,
+            ) else {
                 break Termination::NumericalFailure(format!(
                     "the Jacobian is not finite at iteration {}",
                     run.summary.iterations
@@ -448,6 +592,18 @@ impl Solver for LevenbergMarquardt {
                 .collect();
             let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
             let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
+            // Least squares: the factor in the same coordinates, R_z = R D N and R' = R_z Q S,
+            // so that each step solves min ‖R' y + c‖² + λ‖y‖² by QR.
+            let factor = normal.factor.as_ref().map(|f| {
+                let rd = Mat::from_fn(n, n, |i, j| f.r[(i, j)] * dv[j]);
+                let rz = &rd * basis;
+                let rq = match &q {
+                    None => rz.clone(),
+                    Some(q) => &rz * q,
+                };
+                let rps = Mat::from_fn(n, nr, |i, j| rq[(i, j)] * sc[j]);
+                (rz, rps, &f.c)
+            });
             // From the scaled span coordinates back to z.
             let to_z = |y: &[f64]| -> Vec<f64> {
                 let y: Vec<f64> = y.iter().zip(&sc).map(|(y, s)| y * s).collect();
@@ -473,7 +629,15 @@ impl Solver for LevenbergMarquardt {
                     hp[(i, j)] + if i == j { lambda } else { 0.0 }
                 });
                 let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
-                let y = solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]);
+                // With the factor: the QR of [R'; √λ I], whose R_λ also gives (H' + λI)⁻¹ for
+                // the acceleration; else Cholesky of the damped normal matrix.
+                let lsq = factor
+                    .as_ref()
+                    .and_then(|(_, rps, c)| damped_lstsq(rps, c, lambda));
+                let y = match &lsq {
+                    Some((y, _)) => y.clone(),
+                    None => solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]),
+                };
                 let delta = to_z(&y);
                 if delta.iter().any(|v| !v.is_finite()) {
                     break 'outer Termination::NumericalFailure(format!(
@@ -504,9 +668,15 @@ impl Solver for LevenbergMarquardt {
                             .collect(),
                     };
                     let rhs: Vec<f64> = bq.iter().zip(&sc).map(|(b, s)| -b * s).collect();
-                    let ya = solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]);
+                    let ya = match &lsq {
+                        Some((_, rl)) => normal_solve(rl, &rhs),
+                        None => solve_spd(&damped, &rhs),
+                    }
+                    .unwrap_or_else(|| vec![f64::NAN; nr]);
                     let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
-                    if !(2.0 * anorm <= ACCELERATION_RATIO * ynorm) {
+                    // A NaN ratio refuses the step too.
+                    let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
+                    if !small_enough {
                         observer.iteration(&Iteration {
                             iteration: run.summary.iterations,
                             evaluations: run.summary.evaluations,
@@ -535,13 +705,24 @@ impl Solver for LevenbergMarquardt {
                 let small_step =
                     step <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
                 // Predicted decrease of the quadratic model along δ (the velocity; the
-                // acceleration only bends the path).
-                let hd: Vec<f64> = (0..nf)
-                    .map(|i| (0..nf).map(|j| hz[(i, j)] * delta[j]).sum())
-                    .collect();
-                let pred = -(0..nf)
-                    .map(|i| gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
-                    .sum::<f64>();
+                // acceleration only bends the path): from the factor, −(cᵀv + ½‖v‖²) with
+                // v = R_z δ, else from H_z and g_z.
+                let pred = match &factor {
+                    Some((rz, _, c)) => {
+                        let v: Vec<f64> = (0..n)
+                            .map(|i| (0..nf).map(|k| rz[(i, k)] * delta[k]).sum())
+                            .collect();
+                        -(0..n).map(|i| c[i] * v[i] + 0.5 * v[i] * v[i]).sum::<f64>()
+                    }
+                    None => {
+                        let hd: Vec<f64> = (0..nf)
+                            .map(|i| (0..nf).map(|j| hz[(i, j)] * delta[j]).sum())
+                            .collect();
+                        -(0..nf)
+                            .map(|i| gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
+                            .sum::<f64>()
+                    }
+                };
                 let p_new = free.step(&p, &total);
                 let z_new: Vec<f64> = z.iter().zip(&total).map(|(a, b)| a + b).collect();
                 let norms_new: Vec<f64> =
@@ -618,6 +799,77 @@ impl Solver for LevenbergMarquardt {
                 }
             }
         };
+        // Least squares: Gauss–Newton refinement of the converged point. The damped steps
+        // stop once the cost can no longer tell better from worse (steps refused at rounding
+        // raise λ until the step is negligible); the undamped steps from the QR factor go on to
+        // the minimum (to the Jacobian's condition, not its square) while they contract and the
+        // cost is no worse than its own rounding. Skipped when directions are held as
+        // unidentifiable.
+        if objective == Objective::Ve && termination.converged() && run.summary.unidentifiable == 0
+        {
+            // The cost's rounding: each residual is rounded to a few ε of its observation.
+            let rounding = 8.0 * f64::EPSILON * 2.0 / np as f64
+                * (0..np)
+                    .map(|i| norms[i] * (norms[i] + problem.observation_scale(i)))
+                    .sum::<f64>();
+            let mut last_step = f64::INFINITY;
+            for _ in 0..REFINEMENTS {
+                if run.summary.iterations >= options.max_iterations
+                    || run.summary.evaluations + 2 > options.max_evaluations
+                {
+                    break;
+                }
+                let Some(f) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np), true)
+                    .and_then(|normal| normal.factor)
+                else {
+                    break;
+                };
+                run.summary.evaluations += 1;
+                run.summary.jacobian_evaluations += 1;
+                run.summary.iterations += 1;
+                let rz = &Mat::from_fn(n, n, |i, j| f.r[(i, j)] * free.d[j]) * free.ns.basis();
+                let Some((dz, _)) = damped_lstsq(&rz, &f.c, 0.0) else {
+                    break;
+                };
+                // Gauss–Newton converges linearly on a problem with residuals: go on while the
+                // steps contract and are not negligible.
+                let step = dz.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let contracting = step < last_step;
+                if !contracting
+                    || step <= options.parameter_tolerance * (znorm + options.parameter_tolerance)
+                {
+                    break;
+                }
+                last_step = step;
+                let p_new = free.step(&p, &dz);
+                let norms_new: Vec<f64> =
+                    (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
+                run.summary.evaluations += 1;
+                let cost_new = cost_of(objective, &norms_new, eps);
+                let accepted = cost_new <= cost + rounding;
+                observer.iteration(&Iteration {
+                    iteration: run.summary.iterations,
+                    evaluations: run.summary.evaluations,
+                    cost: if accepted { cost_new } else { cost },
+                    emm_um: if accepted { &norms_new } else { &norms }
+                        .iter()
+                        .sum::<f64>()
+                        / np as f64
+                        * 1e3,
+                    damping: 0.0,
+                    step,
+                    accepted,
+                });
+                if !accepted {
+                    break;
+                }
+                z.iter_mut().zip(&dz).for_each(|(a, b)| *a += b);
+                p = p_new;
+                norms = norms_new;
+                cost = cost_new;
+            }
+        }
         run.finish(p, termination)
     }
 }

@@ -63,8 +63,8 @@ pub struct Options {
     /// Stop when the largest scaled gradient component is below this times the objective.
     /// Default 1e-13.
     pub gradient_tolerance: f64,
-    /// Starting Levenberg–Marquardt damping, relative to the diagonal (Marquardt scaling).
-    /// Default 1e-4.
+    /// Starting Levenberg–Marquardt damping λ, relative to the damping scale (the diagonal of
+    /// the normal matrix). Default 1e-4.
     pub initial_damping: f64,
     /// Directions of the scaled, unweighted normal matrix (the design; not the IRLS-weighted
     /// one) whose curvature is below this fraction of the
