@@ -158,6 +158,10 @@ struct IdentifyArgs {
     /// Evaluation limit per phase (criterion 4).
     #[arg(long)]
     max_evaluations: Option<usize>,
+    /// Native LM: bend each step by geodesic acceleration (for strongly nonlinear models; one
+    /// more Jacobian pass per step tried).
+    #[arg(long)]
+    geodesic_acceleration: bool,
     /// Extend the model with a candidate of `volver diagnose` before fitting (e.g. add:EAC,
     /// raise-axis:C, tracker-tilt); repeatable, applied in order.
     #[arg(long = "add", value_name = "ID")]
@@ -482,6 +486,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     let solver: Box<dyn Solver> = volver::solvers::engine(&a.solver).map_err(anyhow::Error::msg)?;
     let mut options = Options {
         objective,
+        geodesic_acceleration: a.geodesic_acceleration,
         ..Options::default()
     };
     if let Some(v) = a.max_iterations {

@@ -436,3 +436,38 @@ fn the_rigid_fit_finds_a_tilted_and_displaced_tracker() {
     .unwrap_err();
     assert!(e.contains("orientation_deg"), "{e}");
 }
+
+#[test]
+fn geodesic_acceleration_reaches_the_same_fit_on_the_machine() {
+    // The machine model is mildly nonlinear: bending the steps must change the path, not the
+    // optimum, for both objectives, with the constraints and held directions in place.
+    let sim = simulate("test3", TrackerNoise::PAPER, 21);
+    let model = Model::default_xcfz();
+    let problem = Problem::new(&model, &sim.measurements).unwrap();
+    for objective in [Objective::Phi, Objective::Ve] {
+        let fit = |geodesic_acceleration| {
+            let options = Options {
+                objective,
+                geodesic_acceleration,
+                ..Options::default()
+            };
+            identify(
+                &LevenbergMarquardt,
+                problem,
+                &model.initial_params(),
+                &Strategy::default(),
+                &options,
+                &mut Silent,
+            )
+        };
+        let (plain, bent) = (fit(false), fit(true));
+        assert!(bent.termination.converged(), "{:?}", bent.termination);
+        assert!(model.constraints().max_violation(&bent.params) < 1e-12);
+        let cost = |p: &[f64]| match objective {
+            Objective::Phi => problem.phi(p),
+            Objective::Ve => problem.ve(p),
+        };
+        let (a, b) = (cost(&plain.params), cost(&bent.params));
+        assert!((a - b).abs() <= 1e-5 * a, "{objective}: {a} vs {b}");
+    }
+}
