@@ -63,7 +63,7 @@ use faer::{Accum, Mat, Par, Side};
 use volver_core::problem::{Problem, norm};
 
 /// Points per block of the normal-equation accumulation.
-pub const BLOCK: usize = 128;
+pub const BLOCK: usize = 512;
 
 /// Gauss–Newton refinements of a converged least-squares fit, at most.
 const REFINEMENTS: usize = 100;
@@ -231,6 +231,26 @@ fn qr_update(r: &mut [f64], nc: usize, b: &mut [f64], rows: usize) {
         }
         x.iter_mut().for_each(|v| *v = 0.0);
     }
+}
+
+/// The Gauss–Newton normal equations of `½ Σ ‖r_i‖²` at `params`: `JᵀJ` (n × n) and `Jᵀr`,
+/// accumulated over row blocks of [`BLOCK`] points exactly as the native engine forms them (no
+/// dense Jacobian is held). `None` when a residual or Jacobian entry is not finite. For
+/// identifiability studies and benchmarks.
+///
+/// ```
+/// use volver_core::{model::Model, plan::Plan, problem::Problem};
+/// use volver_core::simulate::{Magnitudes, Simulation, Truth};
+/// let m = volver_core::machine::Machine::default_xcfz();
+/// let truth = Truth::random_complete(&m, &Magnitudes::default(), 1).unwrap();
+/// let data = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 1).run().unwrap().measurements;
+/// let model = Model::default_xcfz();
+/// let problem = Problem::new(&model, &data).unwrap();
+/// let (jtj, jtr) = volver_solvers::lm::normal_equations(&problem, &model.initial_params()).unwrap();
+/// assert_eq!((jtj.nrows(), jtr.len()), (model.n_params(), model.n_params()));
+/// ```
+pub fn normal_equations(problem: &Problem, params: &[f64]) -> Option<(Mat<f64>, Vec<f64>)> {
+    accumulate(problem, params, |_| (1.0, 0.0), false).map(|n| (n.h, n.g))
 }
 
 /// Column scaling `D` (inverse column norms of the Jacobian, from the diagonal of `JᵀJ`; 1 for

@@ -1,0 +1,470 @@
+//! Speed and memory of identification, the native LM against the other engines, measured in one
+//! run.
+//!
+//! Run: `cargo run --release -p volver-benchmarks --all-features --bin bench`
+//! (`-- --quick` for the two smaller sizes only).
+//!
+//! Three problems: the paper's test 4 (1 040 points, the paper's model), 10 000 points × ~200
+//! parameters and 100 000 points × ~500 parameters (the XCFZ machine with Legendre and Fourier
+//! bases of higher degree, random poses, the paper's noise). For each:
+//!
+//! * kernels (single thread, best of several passes): one f64 evaluation and one exact Jacobian
+//!   row block per point, the JᵀJ formation of the native engine (`lm::normal_equations` minus
+//!   the Jacobian pass) in GF/s and as a fraction of a dense matrix multiply (faer, 1024³)
+//!   measured in the same run;
+//! * each engine identifying Φ from the model's start (tracker fitted rigidly first), in a child
+//!   process of its own so that its peak resident memory (`VmHWM`) is its own: time, steps,
+//!   time per step, ratios to the native LM, and the allocations per LM step (a counting
+//!   allocator). Test 4 runs to convergence (Clarabel to 30 steps); the larger problems get a
+//!   step budget per engine (their Φ creeps for hundreds of steps in every engine), so their
+//!   ratios are per step;
+//! * scaling of the native LM's identification time with points and with parameters.
+//!
+//! No figure here is a test threshold.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::hint::black_box;
+use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+use volver_core::machine::{Commands, Machine};
+use volver_core::measure::MeasurementSet;
+use volver_core::model::Model;
+use volver_core::plan::Plan;
+use volver_core::problem::Problem;
+use volver_core::random::Rng;
+use volver_core::simulate::{Magnitudes, Simulation, Truth};
+use volver_solvers::strategy::{Strategy, identify};
+use volver_solvers::{Iteration, Objective, Observer, Options};
+
+/// Counts heap allocations, to check that an LM step allocates nothing in proportion to the
+/// points.
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: every call is forwarded unchanged to the system allocator; the counter is atomic.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: the caller's contract is passed on.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: the caller's contract is passed on.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        // SAFETY: the caller's contract is passed on.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+/// A problem size: the error model and how many random poses (× 2 reflectors).
+struct Size {
+    key: &'static str,
+    title: &'static str,
+    /// None: the paper's model on the paper's test-4 plan.
+    model: Option<String>,
+    poses: usize,
+    /// Step limit per engine (the smaller problems run to convergence).
+    max_steps: fn(&str) -> usize,
+    engines: &'static [&'static str],
+}
+
+fn model_toml(degree: usize, order: usize) -> String {
+    format!(
+        r#"
+name = "XCFZ, Legendre degree {degree} on X and Z, Fourier order {order} on C"
+[[error]]
+name = ["EXX", "EYX", "EZX", "EAX", "EBX", "ECX", "EXZ", "EYZ", "EZZ", "EAZ", "EBZ", "ECZ"]
+basis = "legendre"
+degree = {degree}
+[[error]]
+name = ["EXC", "EYC", "EZC", "EAC", "EBC", "ECC"]
+basis = "fourier"
+order = {order}
+[[error]]
+name = ["A0Z", "B0Z"]
+"#
+    )
+}
+
+const ALL_ENGINES: &[&str] = &["lm", "ceres", "nlopt-lbfgs", "clarabel"];
+const LARGE_ENGINES: &[&str] = &["lm", "ceres"];
+
+fn sizes() -> Vec<Size> {
+    vec![
+        Size {
+            key: "test4",
+            title: "test 4: the paper's model and plan",
+            model: None,
+            poses: 0,
+            max_steps: |e| if e == "clarabel" { 30 } else { 200 },
+            engines: ALL_ENGINES,
+        },
+        Size {
+            key: "10k",
+            title: "10 000 points, degree-8 Legendre / order-7 Fourier",
+            model: Some(model_toml(8, 7)),
+            poses: 5_000,
+            max_steps: |e| if e == "clarabel" { 2 } else { 30 },
+            engines: ALL_ENGINES,
+        },
+        Size {
+            key: "100k",
+            title: "100 000 points, degree-26 Legendre / order-15 Fourier",
+            model: Some(model_toml(26, 15)),
+            poses: 50_000,
+            max_steps: |e| if e == "lm" { 10 } else { 3 },
+            engines: LARGE_ENGINES,
+        },
+    ]
+}
+
+/// The model and simulated measurements of a size (deterministic).
+fn build(size: &Size) -> (Model, MeasurementSet) {
+    let machine = Machine::default_xcfz();
+    let model = match &size.model {
+        None => Model::default_xcfz(),
+        Some(text) => Model::from_toml_str(machine.clone(), text, size.key).expect("valid model"),
+    };
+    let plan = match size.model {
+        None => Plan::preset(&machine, "test4").expect("preset"),
+        Some(_) => {
+            let mut rng = Rng::new(17);
+            let positions = (0..size.poses)
+                .map(|_| {
+                    let mut c = Commands::default();
+                    for (k, a) in machine.axes().iter().enumerate() {
+                        c.0[k] = a.min + (a.max - a.min) * rng.uniform();
+                    }
+                    c
+                })
+                .collect();
+            Plan {
+                name: format!("{} random poses", size.poses),
+                positions,
+                reflectors: (0..machine.reflectors().len()).collect(),
+            }
+        }
+    };
+    let truth = Truth::random(&machine, model.spec(), &Magnitudes::default(), 7).expect("truth");
+    let data = Simulation::new(plan, truth, 7)
+        .run()
+        .expect("simulation")
+        .measurements;
+    (model, data)
+}
+
+/// Best wall time (s) of `reps` runs.
+fn best(reps: usize, mut f: impl FnMut()) -> f64 {
+    (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Peak resident memory of this process (MB), from /proc.
+fn peak_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Kernel timings of a size, as JSON.
+fn kernels(size: &Size) -> serde_json::Value {
+    let (model, data) = build(size);
+    let problem = Problem::new(&model, &data).expect("problem");
+    let p = model.initial_params();
+    let (np, n) = (problem.n_points(), problem.n_params());
+    let reps = if np > 50_000 { 2 } else { 5 };
+    let mut row = vec![0.0; 3 * n];
+    let f64_s = best(reps, || {
+        for i in 0..np {
+            black_box(problem.residual(i, black_box(&p)));
+        }
+    });
+    let jac_s = best(reps, || {
+        for i in 0..np {
+            black_box(problem.residual_and_jacobian(i, black_box(&p), &mut row));
+        }
+    });
+    let normal_s = best(reps, || {
+        black_box(volver_solvers::lm::normal_equations(&problem, &p));
+    });
+    // A dense matrix multiply, single thread, in the same run.
+    let k = 1024;
+    let a = faer::Mat::<f64>::from_fn(k, k, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0);
+    let b = faer::Mat::<f64>::from_fn(k, k, |i, j| ((i * 5 + j * 2) % 13) as f64 - 6.0);
+    let mut c = faer::Mat::<f64>::zeros(k, k);
+    let gemm_s = best(3, || {
+        faer::linalg::matmul::matmul(
+            c.as_mut(),
+            faer::Accum::Replace,
+            a.as_ref(),
+            b.as_ref(),
+            1.0,
+            faer::Par::Seq,
+        );
+        black_box(&c);
+    });
+    let rows = 3 * np;
+    serde_json::json!({
+        "points": np,
+        "params": n,
+        "f64_ns": f64_s * 1e9 / np as f64,
+        "jacobian_ns": jac_s * 1e9 / np as f64,
+        "normal_s": normal_s,
+        "jacobian_pass_s": jac_s,
+        // Lower triangle of JᵀJ: n(n+1)/2 dot products of length 3·points.
+        "jtj_gflop": rows as f64 * n as f64 * (n + 1) as f64 / 1e9,
+        "gemm_gflops": 2.0 * (k as f64).powi(3) / gemm_s / 1e9,
+    })
+}
+
+/// Counts steps and allocations between the first and the last step.
+#[derive(Default)]
+struct Steps {
+    steps: usize,
+    first: Option<(usize, usize)>,
+    last: Option<(usize, usize)>,
+}
+
+impl Observer for Steps {
+    fn iteration(&mut self, it: &Iteration) {
+        self.steps += 1;
+        let now = (self.steps, ALLOCATIONS.load(Ordering::Relaxed));
+        self.first.get_or_insert(now);
+        self.last = Some(now);
+        if std::env::var_os("VOLVER_BENCH_TRACE").is_some() {
+            eprintln!(
+                "step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {}",
+                it.iteration, it.evaluations, it.cost, it.emm_um, it.damping, it.accepted
+            );
+        }
+    }
+}
+
+/// One engine identifying Φ on a size, as JSON.
+fn run_engine(size: &Size, name: &str) -> serde_json::Value {
+    let (model, data) = build(size);
+    let problem = Problem::new(&model, &data).expect("problem");
+    let engine = match volver_solvers::engine(name) {
+        Ok(e) => e,
+        Err(e) => return serde_json::json!({ "engine": name, "error": e }),
+    };
+    let options = Options {
+        objective: Objective::Phi,
+        max_iterations: (size.max_steps)(name),
+        max_evaluations: 10 * (size.max_steps)(name) + 20,
+        ..Options::default()
+    };
+    let mut steps = Steps::default();
+    let t = Instant::now();
+    let id = identify(
+        engine.as_ref(),
+        problem,
+        &model.initial_params(),
+        &Strategy::default(),
+        &options,
+        &mut steps,
+    );
+    let time_s = t.elapsed().as_secs_f64();
+    let allocs_per_step = match (steps.first, steps.last) {
+        (Some((s0, a0)), Some((s1, a1))) if s1 > s0 => (a1 - a0) as f64 / (s1 - s0) as f64,
+        _ => f64::NAN,
+    };
+    serde_json::json!({
+        "engine": name,
+        "phi_mm": problem.phi(&id.params),
+        "steps": id.iterations(),
+        "evaluations": id.evaluations(),
+        "time_s": time_s,
+        "termination": id.termination.to_string(),
+        "allocations_per_step": allocs_per_step,
+        "peak_mb": peak_mb(),
+        "params": problem.n_params(),
+        "points": problem.n_points(),
+    })
+}
+
+/// Runs `child <what> <size>` in a fresh process and parses its JSON line.
+fn child(what: &str, size: &str) -> serde_json::Value {
+    let exe = std::env::current_exe().expect("own path");
+    let out = Command::new(exe)
+        .args(["child", what, size])
+        .output()
+        .expect("child process");
+    let text = String::from_utf8_lossy(&out.stdout);
+    match text
+        .lines()
+        .last()
+        .map(serde_json::from_str::<serde_json::Value>)
+    {
+        Some(Ok(v)) if out.status.success() => v,
+        _ => serde_json::json!({
+            "engine": what,
+            "error": format!(
+                "child failed ({}): {}",
+                out.status,
+                String::from_utf8_lossy(&out.stderr).lines().last().unwrap_or("")
+            ),
+        }),
+    }
+}
+
+fn f(v: &serde_json::Value, key: &str) -> f64 {
+    v[key].as_f64().unwrap_or(f64::NAN)
+}
+
+fn report(size: &Size) {
+    let k = child("kernels", size.key);
+    let (np, n) = (f(&k, "points"), f(&k, "params"));
+    let jtj_s = f(&k, "normal_s") - f(&k, "jacobian_pass_s");
+    let jtj_rate = f(&k, "jtj_gflop") / jtj_s;
+    println!("\n## {} ({np} points, {n} parameters)\n", size.title);
+    println!(
+        "Kernels, single thread: f64 evaluation {:.0} ns/point; Jacobian {:.0} ns/point ({:.1}× an evaluation); \
+         JᵀJ formation {:.3} s = {:.2} GF/s, {:.0} % of a dense matrix multiply ({:.2} GF/s).\n",
+        f(&k, "f64_ns"),
+        f(&k, "jacobian_ns"),
+        f(&k, "jacobian_ns") / f(&k, "f64_ns"),
+        jtj_s,
+        jtj_rate,
+        100.0 * jtj_rate / f(&k, "gemm_gflops"),
+        f(&k, "gemm_gflops"),
+    );
+    println!(
+        "| engine | Φ mm | steps | evals | time s | s/step | time × LM | s/step × LM | peak MB | allocs/step | termination |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let runs: Vec<serde_json::Value> = size.engines.iter().map(|e| child(e, size.key)).collect();
+    let lm = runs.iter().find(|r| r["engine"] == "lm").cloned();
+    for r in &runs {
+        if let Some(e) = r["error"].as_str() {
+            println!(
+                "| {} | — | | | | | | | | | {e} |",
+                r["engine"].as_str().unwrap_or("?")
+            );
+            continue;
+        }
+        let per = f(r, "time_s") / f(r, "steps");
+        let (ratio, ratio_step) = match &lm {
+            Some(l) => (
+                f(r, "time_s") / f(l, "time_s"),
+                per / (f(l, "time_s") / f(l, "steps")),
+            ),
+            None => (f64::NAN, f64::NAN),
+        };
+        println!(
+            "| {} | {:.9} | {} | {} | {:.3} | {:.4} | {:.2} | {:.2} | {:.0} | {:.1} | {} |",
+            r["engine"].as_str().unwrap_or("?"),
+            f(r, "phi_mm"),
+            r["steps"],
+            r["evaluations"],
+            f(r, "time_s"),
+            per,
+            ratio,
+            ratio_step,
+            f(r, "peak_mb"),
+            f(r, "allocations_per_step"),
+            r["termination"].as_str().unwrap_or("?"),
+        );
+    }
+    if let Some(l) = &lm {
+        let per = f(l, "time_s") / f(l, "steps");
+        println!(
+            "\nNative LM: {:.4} s per step = {:.2} × the JᵀJ formation time.",
+            per,
+            per / jtj_s
+        );
+    }
+}
+
+fn scaling() {
+    println!("\n## Scaling of the native LM (Φ, to convergence or 30 steps)\n");
+    println!("| model | params | points | steps | time s | s/step |");
+    println!("|---|---|---|---|---|---|");
+    for (label, degree, order, poses) in [
+        ("degree 3 / order 1", 3, 1, 500),
+        ("degree 3 / order 1", 3, 1, 2_000),
+        ("degree 3 / order 1", 3, 1, 8_000),
+        ("degree 3 / order 1", 3, 1, 32_000),
+        ("degree 8 / order 7", 8, 7, 5_000),
+        ("degree 16 / order 11", 16, 11, 5_000),
+        ("degree 26 / order 15", 26, 15, 5_000),
+    ] {
+        let key = format!("scale:{degree}:{order}:{poses}");
+        let r = child("lm", &key);
+        let _ = label;
+        println!(
+            "| {label} | {} | {} | {} | {:.3} | {:.4} |",
+            r["params"],
+            r["points"],
+            r["steps"],
+            f(&r, "time_s"),
+            f(&r, "time_s") / f(&r, "steps"),
+        );
+    }
+}
+
+/// The size a child is asked for: a named one or `scale:degree:order:poses`.
+fn size_of(key: &str) -> Size {
+    if let Some(rest) = key.strip_prefix("scale:") {
+        let v: Vec<usize> = rest.split(':').filter_map(|x| x.parse().ok()).collect();
+        return Size {
+            key: "scale",
+            title: "scaling",
+            model: Some(model_toml(v[0], v[1])),
+            poses: v[2],
+            max_steps: |_| 30,
+            engines: &["lm"],
+        };
+    }
+    sizes()
+        .into_iter()
+        .find(|s| s.key == key)
+        .unwrap_or_else(|| panic!("unknown size {key}"))
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if args.len() == 4 && args[1] == "child" {
+        let size = size_of(&args[3]);
+        let v = if args[2] == "kernels" {
+            kernels(&size)
+        } else {
+            run_engine(&size, &args[2])
+        };
+        println!("{v}");
+        return;
+    }
+    let quick = args.iter().any(|a| a == "--quick");
+    let t = Instant::now();
+    println!(
+        "volver bench — engines: {}; one process per measurement; Φ from the model's start",
+        volver_solvers::engine_names().join(", ")
+    );
+    for size in sizes() {
+        if quick && size.key == "100k" {
+            continue;
+        }
+        report(&size);
+    }
+    scaling();
+    println!("\nTotal {:.0} s.", t.elapsed().as_secs_f64());
+}
