@@ -206,6 +206,9 @@ fn kernels(size: &Size) -> serde_json::Value {
     let normal_s = best(reps, || {
         black_box(volver_solvers::lm::normal_equations(&problem, &p));
     });
+    let a0 = ALLOCATIONS.load(Ordering::Relaxed);
+    black_box(volver_solvers::lm::normal_equations(&problem, &p));
+    let normal_allocations = ALLOCATIONS.load(Ordering::Relaxed) - a0;
     // A dense matrix multiply, single thread, in the same run.
     let k = 1024;
     let a = faer::Mat::<f64>::from_fn(k, k, |i, j| ((i * 7 + j * 3) % 11) as f64 - 5.0);
@@ -229,6 +232,7 @@ fn kernels(size: &Size) -> serde_json::Value {
         "f64_ns": f64_s * 1e9 / np as f64,
         "jacobian_ns": jac_s * 1e9 / np as f64,
         "normal_s": normal_s,
+        "normal_allocations": normal_allocations,
         "jacobian_pass_s": jac_s,
         // Lower triangle of JᵀJ: n(n+1)/2 dot products of length 3·points.
         "jtj_gflop": rows as f64 * n as f64 * (n + 1) as f64 / 1e9,
@@ -252,8 +256,8 @@ impl Observer for Steps {
         self.last = Some(now);
         if std::env::var_os("VOLVER_BENCH_TRACE").is_some() {
             eprintln!(
-                "step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {}",
-                it.iteration, it.evaluations, it.cost, it.emm_um, it.damping, it.accepted
+                "step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {} allocations {}",
+                it.iteration, it.evaluations, it.cost, it.emm_um, it.damping, it.accepted, now.1
             );
         }
     }
@@ -339,7 +343,8 @@ fn report(size: &Size) {
     println!("\n## {} ({np} points, {n} parameters)\n", size.title);
     println!(
         "Kernels, single thread: f64 evaluation {:.0} ns/point; Jacobian {:.0} ns/point ({:.1}× an evaluation); \
-         JᵀJ formation {:.3} s = {:.2} GF/s, {:.0} % of a dense matrix multiply ({:.2} GF/s).\n",
+         JᵀJ formation {:.3} s = {:.2} GF/s, {:.0} % of a dense matrix multiply ({:.2} GF/s); \
+         one pass of the normal equations allocates {} times.\n",
         f(&k, "f64_ns"),
         f(&k, "jacobian_ns"),
         f(&k, "jacobian_ns") / f(&k, "f64_ns"),
@@ -347,6 +352,7 @@ fn report(size: &Size) {
         jtj_rate,
         100.0 * jtj_rate / f(&k, "gemm_gflops"),
         f(&k, "gemm_gflops"),
+        k["normal_allocations"],
     );
     println!(
         "| engine | Φ mm | steps | evals | time s | s/step | time × LM | s/step × LM | peak MB | allocs/step | termination |"
