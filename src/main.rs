@@ -246,7 +246,7 @@ fn main() -> Result<()> {
             );
             print!("{}", history::table(&records));
             if let Some(path) = svg {
-                std::fs::write(&path, history::svg(&records))
+                volver::core::fsio::write_atomic(&path, history::svg(&records))
                     .with_context(|| format!("writing {}", path.display()))?;
                 println!("\n  chart written to {}", path.display());
             }
@@ -476,7 +476,8 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     }
     if let Some(path) = &a.write_model {
         let text = toml::to_string(model.spec()).context("writing the error model")?;
-        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        volver::core::fsio::write_atomic(path, text)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
     let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;

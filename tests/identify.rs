@@ -471,3 +471,50 @@ fn geodesic_acceleration_reaches_the_same_fit_on_the_machine() {
         assert!((a - b).abs() <= 1e-5 * a, "{objective}: {a} vs {b}");
     }
 }
+
+#[test]
+fn the_same_input_gives_byte_identical_results_files() {
+    let dir = std::env::temp_dir().join(format!("volver-determinism-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    let out = volver(&["simulate", "--plan", "test3", "--seed", "9", "--out", d]);
+    assert!(out.status.success());
+    let data = dir.join("measurements.csv");
+    let mut files = Vec::new();
+    for k in 0..2 {
+        let results = dir.join(format!("results{k}.json"));
+        let out = volver(&[
+            "identify",
+            "--data",
+            data.to_str().unwrap(),
+            "--out",
+            results.to_str().unwrap(),
+            "--no-history",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        files.push(std::fs::read(&results).unwrap());
+    }
+    assert!(!files[0].is_empty() && files[0] == files[1]);
+    // Written atomically: no temporary file is left beside them.
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().all(|n| !n.ends_with(".tmp")), "{names:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_failed_write_leaves_the_old_file_and_no_temporary() {
+    let dir = std::env::temp_dir().join(format!("volver-atomic-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("target.json")).unwrap();
+    // The target is a directory: the rename fails, the directory stays, the temporary goes.
+    let err = volver::core::fsio::write_atomic(&dir.join("target.json"), "{}");
+    assert!(err.is_err());
+    assert!(dir.join("target.json").is_dir());
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}

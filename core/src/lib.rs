@@ -17,7 +17,8 @@
 //! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
 //! - [`metrics`]: EMM and EMax;
 //! - [`diagnose`]: where a model fails (residual breakdowns, periodograms, repeat noise);
-//! - [`problem`]: a model with its measurements: residuals, Φ, ve.
+//! - [`problem`]: a model with its measurements: residuals, Φ, ve;
+//! - [`fsio`]: atomic file output.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -38,6 +39,7 @@ pub mod basis;
 pub mod chain;
 pub mod diagnose;
 pub mod error;
+pub mod fsio;
 pub mod iso;
 pub mod kinematics;
 pub mod machine;

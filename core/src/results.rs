@@ -137,9 +137,9 @@ impl ResultsFile {
         ResultsFile::from_json_str(&text, &path.display().to_string())
     }
 
-    /// Writes the file.
+    /// Writes the file (atomically: the old file or the new one, never half of one).
     pub fn save(&self, path: &Path) -> Result<()> {
-        std::fs::write(path, self.to_json() + "\n").map_err(|source| Error::Io {
+        crate::fsio::write_atomic(path, self.to_json() + "\n").map_err(|source| Error::Io {
             path: path.to_path_buf(),
             source,
         })

@@ -1212,14 +1212,14 @@ impl Synthetic {
         let machine = self.truth.model.machine();
         let files = &self.record.files;
         let measurements = dir.join(&files.measurements);
-        std::fs::write(&measurements, self.measurements.to_csv_string(machine))
+        crate::fsio::write_atomic(&measurements, self.measurements.to_csv_string(machine))
             .map_err(io(&measurements))?;
         let truth = dir.join(&files.truth);
         self.truth.to_results()?.save(&truth)?;
         let machine_path = dir.join(&files.machine);
         let toml_text = toml::to_string(machine.spec())
             .map_err(|e| Error::Model(format!("writing the machine file: {e}")))?;
-        std::fs::write(
+        crate::fsio::write_atomic(
             &machine_path,
             format!(
                 "# The machine used by `volver simulate` (seed {}, plan {}).\n{toml_text}",
@@ -1229,7 +1229,7 @@ impl Synthetic {
         .map_err(io(&machine_path))?;
         let record = dir.join("simulation.json");
         let json = serde_json::to_string_pretty(&self.record).expect("record serialises");
-        std::fs::write(&record, json + "\n").map_err(io(&record))?;
+        crate::fsio::write_atomic(&record, json + "\n").map_err(io(&record))?;
         Ok(vec![measurements, truth, machine_path, record])
     }
 }
