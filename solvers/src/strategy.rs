@@ -216,6 +216,28 @@ pub fn identify_errors(
         }
     }
     let initial = evaluate(&problem, &p);
+    // A mesh too small for the model: fewer equations (3 per point) than free parameters (at
+    // least the eligible ones less one per constraint) can identify nothing reliably.
+    let eligible_count = model
+        .params()
+        .iter()
+        .filter(|info| eligible(model, info, errors))
+        .count();
+    let free = eligible_count.saturating_sub(model.constraints().rows.len());
+    let equations = 3 * problem.n_points();
+    if equations < free {
+        return done(
+            p,
+            vec![],
+            initial,
+            Termination::InvalidInput(format!(
+                "{} points give {equations} equations for at least {free} free parameters: the \
+                 mesh is too small for this model (at least {} points, many more in practice)",
+                problem.n_points(),
+                free.div_ceil(3)
+            )),
+        );
+    }
     let mut phases = Vec::new();
     let mut termination = Termination::NoFreeParameters;
     let mut emm = initial.stats.emm_um;
