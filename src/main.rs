@@ -573,6 +573,34 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         results.save(out).context("writing the results file")?;
     }
     let params = serde_json::to_value(&results.parameters)?;
+    // The combinations the data cannot identify, by the parameters they move (the engine held
+    // them; a metrologist needs to know which errors are therefore not determined).
+    let held: usize = id.phases.last().map_or(0, |s| s.unidentifiable);
+    let weak: Vec<(f64, Vec<(String, f64)>)> = if held > 0 {
+        volver::solvers::identifiability::analyse(
+            &volver::solvers::Task::new(problem),
+            &id.params,
+            options.rank_tolerance,
+            0.99,
+        )
+        .map(|a| {
+            a.weak
+                .iter()
+                .map(|w| {
+                    let names = w
+                        .parameters
+                        .iter()
+                        .take(4)
+                        .map(|&(j, share)| (model.params()[j].name.clone(), share))
+                        .collect();
+                    (w.relative_curvature, names)
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+    } else {
+        Vec::new()
+    };
     if a.json {
         let obj = serde_json::json!({
             "solver": solver.name(),
@@ -596,6 +624,10 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             "converged": id.termination.converged(),
             "phases": id.phases,
             "parameters": params,
+            "unidentifiable": weak.iter().map(|(c, names)| serde_json::json!({
+                "relative_curvature": c,
+                "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&obj)?);
     } else {
@@ -633,7 +665,6 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                 id.final_.stats.emm_um / n.emm_um
             );
         }
-        let held: usize = id.phases.last().map_or(0, |s| s.unidentifiable);
         println!(
             "  {} iterations, {} evaluations, {:.2} s; {}{}",
             id.iterations(),
@@ -646,6 +677,15 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                 String::new()
             }
         );
+        if !weak.is_empty() {
+            println!(
+                "  not identifiable from these data (held; the parameters each combination moves):"
+            );
+            for (c, names) in &weak {
+                let list: Vec<String> = names.iter().map(|(n, s)| format!("{n} {s:+.2}")).collect();
+                println!("    {}   (relative curvature {c:.1e})", list.join(", "));
+            }
+        }
         if let Some(out) = &a.out {
             println!("  parameters written to {}", out.display());
         }

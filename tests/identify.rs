@@ -234,6 +234,15 @@ fn volver_identify_prints_json_writes_results_and_rejects_bad_options() {
     }
     assert_eq!(v["solver"], "lm");
     assert_eq!(v["phases"].as_array().unwrap().len(), 2);
+    // Directions the engine held are reported by the parameters they move.
+    let held = v["phases"][1]["unidentifiable"].as_u64().unwrap();
+    let weak = v["unidentifiable"].as_array().unwrap();
+    assert_eq!(weak.is_empty(), held == 0, "{held} held, reported {weak:?}");
+    for w in weak {
+        let names = w["parameters"].as_array().unwrap();
+        assert!(!names.is_empty() && names.iter().all(|p| p["name"].is_string()));
+        assert!(w["relative_curvature"].as_f64().unwrap() < 1e-9);
+    }
     let p = &v["parameters"][0];
     assert!(p["name"].is_string() && p["unit"].is_string() && p["group"].is_string());
     let ratio = v["emm_final_um"].as_f64().unwrap() / v["noise_error_um"].as_f64().unwrap();
@@ -516,5 +525,48 @@ fn a_failed_write_leaves_the_old_file_and_no_temporary() {
     assert!(err.is_err());
     assert!(dir.join("target.json").is_dir());
     assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn identify_names_the_parameters_it_could_not_identify() {
+    // Test 4 of the paper's model holds 6 directions; the weakest is EZC's constant against
+    // the tracker's z (both move the point along z at every pose).
+    let dir = std::env::temp_dir().join(format!("volver-weak-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    assert!(
+        volver(&["simulate", "--plan", "test4", "--seed", "7", "--out", d])
+            .status
+            .success()
+    );
+    let data = dir.join("measurements.csv");
+    let out = volver(&[
+        "identify",
+        "--data",
+        data.to_str().unwrap(),
+        "--json",
+        "--no-history",
+    ]);
+    assert!(out.status.success());
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let held = v["phases"][0]["unidentifiable"].as_u64().unwrap();
+    let weak = v["unidentifiable"].as_array().unwrap();
+    assert!(
+        held > 0 && weak.len() as u64 == held,
+        "{held} held, {weak:?}"
+    );
+    let first: Vec<&str> = weak[0]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["name"].as_str().unwrap())
+        .collect();
+    assert!(
+        first.contains(&"EZC.d") && first.contains(&"tracker.z"),
+        "{first:?}"
+    );
+    let out = volver(&["identify", "--data", data.to_str().unwrap(), "--no-history"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("not identifiable from these data"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
