@@ -32,17 +32,28 @@ fn fit(
     data: &MeasurementSet,
     objective: Objective,
 ) -> volver::solvers::strategy::Identification {
-    let problem = Problem::new(model, data).unwrap();
-    let options = Options {
-        objective,
-        ..Options::default()
-    };
+    fit_with(
+        model,
+        data,
+        &Options {
+            objective,
+            ..Options::default()
+        },
+    )
+}
+
+/// The joint method with the native LM and the default strategy, under `options`.
+fn fit_with(
+    model: &Model,
+    data: &MeasurementSet,
+    options: &Options,
+) -> volver::solvers::strategy::Identification {
     identify(
         &LevenbergMarquardt,
-        problem,
+        Problem::new(model, data).unwrap(),
         &model.initial_params(),
         &Strategy::default(),
-        &options,
+        options,
         &mut Silent,
     )
 }
@@ -460,14 +471,7 @@ fn geodesic_acceleration_reaches_the_same_fit_on_the_machine() {
                 geodesic_acceleration,
                 ..Options::default()
             };
-            identify(
-                &LevenbergMarquardt,
-                problem,
-                &model.initial_params(),
-                &Strategy::default(),
-                &options,
-                &mut Silent,
-            )
+            fit_with(&model, &sim.measurements, &options)
         };
         let (plain, bent) = (fit(false), fit(true));
         assert!(bent.termination.converged(), "{:?}", bent.termination);

@@ -146,8 +146,10 @@ pub(crate) fn accumulate(
                     blk[j * rows + 3 * b + c] = sw * (col[c] - k * rhat[c] * radial);
                 }
             }
-            for c in 0..3 {
-                blk[n * rows + 3 * b + c] = sw * r[c];
+            if factor {
+                for c in 0..3 {
+                    blk[n * rows + 3 * b + c] = sw * r[c];
+                }
             }
         }
         if factor {

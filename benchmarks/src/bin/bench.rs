@@ -416,7 +416,6 @@ fn scaling() {
     ] {
         let key = format!("scale:{degree}:{order}:{poses}");
         let r = child("lm", &key);
-        let _ = label;
         println!(
             "| {label} | {} | {} | {} | {:.3} | {:.4} |",
             r["params"],
