@@ -14,6 +14,7 @@
 //! | `sine` order K | `d, a1, phi1 … aK, phiK` | d + Σ aₖ sin(kθ + φₖ) (eq. 21 with the harmonic index) |
 //! | `constant` | the error's name | a constant (location and squareness errors) |
 
+use crate::kinematics::Real;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::fmt;
@@ -184,15 +185,24 @@ impl Basis {
     /// coefficient, written to `grad` (`grad.len() == n_params()`).
     #[inline]
     pub fn eval(&self, x: f64, coeffs: &[f64], grad: &mut [f64]) -> f64 {
+        self.eval_at(x, coeffs, grad)
+    }
+
+    /// [`Basis::eval`] with the argument a scalar of the forward model: with `x` a dual number,
+    /// the value carries its exact derivative with respect to the position (the inverse model
+    /// differentiates the errors along the commands this way). `grad` holds the basis functions
+    /// at `x` (for the sine series, the derivatives with respect to amplitudes and phases).
+    #[inline]
+    pub fn eval_at<S: Real>(&self, x: S, coeffs: &[f64], grad: &mut [S]) -> S {
         debug_assert_eq!(coeffs.len(), self.n_params());
         debug_assert_eq!(grad.len(), self.n_params());
         match self.kind {
             BasisKind::Constant => {
-                grad[0] = 1.0;
-                coeffs[0]
+                grad[0] = S::one();
+                S::from(coeffs[0])
             }
             BasisKind::Monomial => {
-                let mut p = 1.0;
+                let mut p = S::one();
                 for g in grad.iter_mut() {
                     *g = p;
                     p *= x;
@@ -205,7 +215,7 @@ impl Basis {
             }
             BasisKind::Chebyshev => {
                 let m = self.degree + 1;
-                let mut t = [0.0; MAX_COEFFS];
+                let mut t = [S::zero(); MAX_COEFFS];
                 chebyshev_t(x, &mut t[..m]);
                 for (i, g) in grad.iter_mut().enumerate() {
                     *g = dot(&self.card[i * m..(i + 1) * m], &t[..m]);
@@ -213,9 +223,9 @@ impl Basis {
                 dot(coeffs, grad)
             }
             BasisKind::Fourier => {
-                grad[0] = 1.0;
+                grad[0] = S::one();
                 let (s1, c1) = x.sin_cos();
-                let (mut s, mut c) = (0.0, 1.0);
+                let (mut s, mut c) = (S::zero(), S::one());
                 for k in 0..self.degree {
                     (s, c) = (s * c1 + c * s1, c * c1 - s * s1);
                     grad[1 + 2 * k] = s;
@@ -224,14 +234,14 @@ impl Basis {
                 dot(coeffs, grad)
             }
             BasisKind::Sine => {
-                grad[0] = 1.0;
-                let mut v = coeffs[0];
+                grad[0] = S::one();
+                let mut v = S::from(coeffs[0]);
                 for k in 0..self.degree {
                     let (a, phi) = (coeffs[1 + 2 * k], coeffs[2 + 2 * k]);
-                    let (s, c) = ((k + 1) as f64 * x + phi).sin_cos();
+                    let (s, c) = (x * (k + 1) as f64 + phi).sin_cos();
                     grad[1 + 2 * k] = s;
-                    grad[2 + 2 * k] = a * c;
-                    v += a * s;
+                    grad[2 + 2 * k] = c * a;
+                    v += s * a;
                 }
                 v
             }
@@ -281,37 +291,38 @@ impl Basis {
     }
 }
 
+/// `Σ aᵢ bᵢ` with constant weights `a`.
 #[inline]
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+fn dot<S: Real>(a: &[f64], b: &[S]) -> S {
+    a.iter().zip(b).fold(S::zero(), |acc, (x, y)| acc + *y * *x)
 }
 
 /// Legendre P_0..P_{n−1} at x into `out`.
-fn legendre_p(x: f64, out: &mut [f64]) {
+fn legendre_p<S: Real>(x: S, out: &mut [S]) {
     let n = out.len();
     if n > 0 {
-        out[0] = 1.0;
+        out[0] = S::one();
     }
     if n > 1 {
         out[1] = x;
     }
     for k in 1..n.saturating_sub(1) {
         let kf = k as f64;
-        out[k + 1] = ((2.0 * kf + 1.0) * x * out[k] - kf * out[k - 1]) / (kf + 1.0);
+        out[k + 1] = (x * (2.0 * kf + 1.0) * out[k] - out[k - 1] * kf) / (kf + 1.0);
     }
 }
 
 /// Chebyshev T_0..T_{n−1} at x into `out` (eq. 15).
-fn chebyshev_t(x: f64, out: &mut [f64]) {
+fn chebyshev_t<S: Real>(x: S, out: &mut [S]) {
     let n = out.len();
     if n > 0 {
-        out[0] = 1.0;
+        out[0] = S::one();
     }
     if n > 1 {
         out[1] = x;
     }
     for k in 1..n.saturating_sub(1) {
-        out[k + 1] = 2.0 * x * out[k] - out[k - 1];
+        out[k + 1] = x * out[k] * 2.0 - out[k - 1];
     }
 }
 

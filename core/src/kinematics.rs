@@ -114,7 +114,7 @@ fn rot_err_inv<S: Real>(w: V3<S>, v: V3<S>) -> V3<S> {
 
 /// Nominal right-handed rotation about coordinate direction `dir` with precomputed sin/cos.
 #[inline]
-fn rot_nominal<S: Real>(dir: usize, sin: f64, cos: f64, v: V3<S>) -> V3<S> {
+fn rot_nominal<S: Real>(dir: usize, sin: S, cos: S, v: V3<S>) -> V3<S> {
     let (b, c) = ((dir + 1) % 3, (dir + 2) % 3);
     let mut out = v;
     out[b] = v[b] * cos - v[c] * sin;
@@ -134,7 +134,7 @@ fn head3<S: Real>(a: &[S; 6]) -> V3<S> {
 
 /// Translation part `O_k + t_k` of axis `k` (everything but the rotations).
 #[inline]
-fn axis_translation<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointErrors<S>) -> V3<S> {
+fn axis_translation<S: Real>(machine: &Machine, k: usize, u: S, e: &PointErrors<S>) -> V3<S> {
     let ax = &machine.axes()[k];
     let s = ax.side.sign();
     let c = &e.component[k];
@@ -145,9 +145,9 @@ fn axis_translation<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointError
     ];
     if !ax.axis.is_rotary() {
         let a = ax.axis.direction();
-        t[a] += s * u;
+        t[a] += u * s;
         if e.has_location[k] {
-            let rel = s * (u - ax.reference);
+            let rel = (u - ax.reference) * s;
             for r in (0..3).filter(|&r| r != a) {
                 t[3 - r - a] -= e.location[k][3 + r] * rel;
             }
@@ -163,7 +163,7 @@ fn axis_translation<S: Real>(machine: &Machine, k: usize, u: f64, e: &PointError
 #[inline]
 fn rotate_about_axis_line<S: Real>(
     dir: usize,
-    angle: f64,
+    angle: S,
     e: &PointErrors<S>,
     k: usize,
     v: V3<S>,
@@ -182,18 +182,12 @@ fn rotate_about_axis_line<S: Real>(
 
 /// Axis k's own frame → the frame it rides on.
 #[inline]
-fn axis_forward<S: Real>(
-    machine: &Machine,
-    k: usize,
-    u: f64,
-    e: &PointErrors<S>,
-    q: V3<S>,
-) -> V3<S> {
+fn axis_forward<S: Real>(machine: &Machine, k: usize, u: S, e: &PointErrors<S>, q: V3<S>) -> V3<S> {
     let ax = &machine.axes()[k];
     let t = axis_translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
     let inner = if ax.axis.is_rotary() {
-        rotate_about_axis_line(ax.axis.direction(), ax.side.sign() * u, e, k, q)
+        rotate_about_axis_line(ax.axis.direction(), u * ax.side.sign(), e, k, q)
     } else {
         q
     };
@@ -202,19 +196,13 @@ fn axis_forward<S: Real>(
 
 /// The frame axis k rides on → axis k's own frame (exact inverse of [`axis_forward`]).
 #[inline]
-fn axis_inverse<S: Real>(
-    machine: &Machine,
-    k: usize,
-    u: f64,
-    e: &PointErrors<S>,
-    p: V3<S>,
-) -> V3<S> {
+fn axis_inverse<S: Real>(machine: &Machine, k: usize, u: S, e: &PointErrors<S>, p: V3<S>) -> V3<S> {
     let ax = &machine.axes()[k];
     let t = axis_translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
     let inner = rot_err(w, sub(p, t));
     if ax.axis.is_rotary() {
-        rotate_about_axis_line(ax.axis.direction(), -ax.side.sign() * u, e, k, inner)
+        rotate_about_axis_line(ax.axis.direction(), u * -ax.side.sign(), e, k, inner)
     } else {
         inner
     }
@@ -265,26 +253,16 @@ pub fn predict_with_tool_shift<S: Real>(
     errors: &PointErrors<S>,
     shift: Option<[f64; 3]>,
 ) -> [S; 3] {
-    let axes = machine.axes();
-    let mut p: V3<S> = add(reflector.map(S::from), errors.reflector_delta);
-    // Tool side: from the axis carrying the tool inward to the frame.
-    for k in (0..axes.len())
-        .rev()
-        .filter(|&k| axes[k].side == Side::Tool)
-    {
-        p = axis_forward(machine, k, commands.0[k], errors, p);
-    }
-    p = add(p, errors.tool_shift);
-    if let Some(d) = shift {
-        p = add(p, d.map(S::from));
-    }
+    let u = commands.0.map(S::from);
     let tracker = machine.tracker();
-    if tracker.mount == TrackerMount::Workpiece {
-        // Workpiece side: from the frame outward to the axis carrying the workpiece.
-        for k in (0..axes.len()).filter(|&k| axes[k].side == Side::Workpiece) {
-            p = axis_inverse(machine, k, commands.0[k], errors, p);
-        }
-    }
+    let p = chain_point(
+        machine,
+        &u,
+        reflector,
+        errors,
+        shift,
+        tracker.mount == TrackerMount::Workpiece,
+    );
     let d = sub(p, head3(&errors.tracker));
     let r0 = &tracker.base_rotation;
     // R0ᵀ·d
@@ -292,4 +270,66 @@ pub fn predict_with_tool_shift<S: Real>(
     let x = rot_err_inv(tail3(&errors.tracker), local);
     let scale = S::one() + errors.range_scale;
     [x[0] * scale, x[1] * scale, x[2] * scale]
+}
+
+/// Where a point of the tool sits relative to the workpiece: `tool` (mm, in the frame of the
+/// last tool-side axis, like a reflector offset) carried outward through the tool-side axes into
+/// the machine frame, then inward through the workpiece-side axes into the workpiece frame (the
+/// frame of the last workpiece-side axis, or the machine frame when there is none). No tracker,
+/// no reflector error, no range scale: this is the point compensation steers.
+///
+/// The commands are scalars too (internal units, chain order), so that dual numbers over the
+/// commands give the exact ∂(tool point)/∂(commands) for the inverse model.
+///
+/// ```
+/// use volver_core::kinematics::{tool_in_workpiece, PointErrors};
+/// use volver_core::machine::Machine;
+/// let m = Machine::default_xcfz();
+/// let e = PointErrors::<f64>::zero();
+/// let at = |c: f64| tool_in_workpiece(&m, &m.commands_from_file_units(&[700.0, c, 300.0]).0, &[0.0; 3], &e);
+/// let (a, b) = (at(0.0), at(90.0));
+/// // Seen from the table, C = +90° turns the tool point (x, y) into (−y, x).
+/// assert!((b[0] + a[1]).abs() < 1e-9 && (b[1] - a[0]).abs() < 1e-9 && (b[2] - a[2]).abs() < 1e-12);
+/// ```
+pub fn tool_in_workpiece<S: Real>(
+    machine: &Machine,
+    commands: &[S; MAX_AXES],
+    tool: &[f64; 3],
+    errors: &PointErrors<S>,
+) -> [S; 3] {
+    chain_point(machine, commands, tool, errors, None, true)
+}
+
+/// The chain shared by [`predict_with_tool_shift`] and [`tool_in_workpiece`]: the point `start`
+/// (plus the reflector error) out through the tool-side axes, shifted, then, when
+/// `into_workpiece`, in through the workpiece-side axes.
+#[inline]
+fn chain_point<S: Real>(
+    machine: &Machine,
+    u: &[S; MAX_AXES],
+    start: &[f64; 3],
+    errors: &PointErrors<S>,
+    shift: Option<[f64; 3]>,
+    into_workpiece: bool,
+) -> V3<S> {
+    let axes = machine.axes();
+    let mut p: V3<S> = add(start.map(S::from), errors.reflector_delta);
+    // Tool side: from the axis carrying the tool inward to the frame.
+    for k in (0..axes.len())
+        .rev()
+        .filter(|&k| axes[k].side == Side::Tool)
+    {
+        p = axis_forward(machine, k, u[k], errors, p);
+    }
+    p = add(p, errors.tool_shift);
+    if let Some(d) = shift {
+        p = add(p, d.map(S::from));
+    }
+    if into_workpiece {
+        // Workpiece side: from the frame outward to the axis carrying the workpiece.
+        for k in (0..axes.len()).filter(|&k| axes[k].side == Side::Workpiece) {
+            p = axis_inverse(machine, k, u[k], errors, p);
+        }
+    }
+    p
 }

@@ -18,6 +18,9 @@
 //! - [`metrics`]: EMM and EMax;
 //! - [`diagnose`]: where a model fails (residual breakdowns, periodograms, repeat noise);
 //! - [`problem`]: a model with its measurements: residuals, Φ, ve;
+//! - [`compensate`]: the inverse model: the command that puts the tool where it belongs;
+//! - [`gcode`]: G-code programs, read and written back compensated;
+//! - [`tables`]: controller tables of the identified errors (ISG CSV, Etalon style, plain CSV);
 //! - [`fsio`]: atomic file output.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
@@ -37,9 +40,11 @@
 
 pub mod basis;
 pub mod chain;
+pub mod compensate;
 pub mod diagnose;
 pub mod error;
 pub mod fsio;
+pub mod gcode;
 pub mod iso;
 pub mod kinematics;
 pub mod machine;
@@ -53,5 +58,6 @@ pub mod problem;
 pub mod random;
 pub mod results;
 pub mod simulate;
+pub mod tables;
 
 pub use error::{Error, Place, Result};

@@ -132,7 +132,13 @@ pub struct MachineAxis {
 impl MachineAxis {
     /// Position mapped to [−1, 1] over the travel range (the argument of polynomial bases).
     pub fn normalise(&self, position: f64) -> f64 {
-        2.0 * (position - self.min) / (self.max - self.min) - 1.0
+        self.normalise_at(position)
+    }
+
+    /// [`MachineAxis::normalise`] for any scalar of the forward model (a dual number carries
+    /// the derivative along the position).
+    pub fn normalise_at<S: crate::kinematics::Real>(&self, position: S) -> S {
+        (position - self.min) * 2.0 / (self.max - self.min) - 1.0
     }
 
     /// Converts a position from file units (mm, or degrees for rotary axes) to internal units.

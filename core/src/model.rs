@@ -819,6 +819,25 @@ impl Model {
         self.initial.clone()
     }
 
+    /// Which of the six component errors of chain axis `k` (EX, EY, EZ, EA, EB, EC of that axis)
+    /// the model describes: a modelled term, or a ball-screw effect on it.
+    pub fn modelled_components(&self, k: usize) -> [bool; 6] {
+        let mut out = [false; 6];
+        for t in self.terms.iter().filter(|t| t.axis == k) {
+            if let ErrorId::Component { component, .. } = t.id {
+                out[component.index()] = true;
+            }
+        }
+        for (slot, _) in &self.effects {
+            if let EffectSlot::Screw { k: a, dir, .. } = *slot
+                && a == k
+            {
+                out[dir] = true;
+            }
+        }
+        out
+    }
+
     /// The modelled error with a given ISO name.
     pub fn term(&self, id: ErrorId) -> Option<&Term> {
         self.terms.iter().find(|t| t.id == id)
@@ -828,11 +847,17 @@ impl Model {
     /// the position normalised to [−1, 1] over the axis range.
     #[inline]
     fn argument(&self, t: &Term, commands: &Commands) -> f64 {
-        let u = commands.0[t.axis];
+        self.argument_at(t, &commands.0)
+    }
+
+    /// [`Model::argument`] for commands of any scalar.
+    #[inline]
+    fn argument_at<S: Real>(&self, t: &Term, commands: &[S; MAX_AXES]) -> S {
+        let u = commands[t.axis];
         if t.basis.kind().is_periodic() {
             u
         } else {
-            self.machine.axes()[t.axis].normalise(u)
+            self.machine.axes()[t.axis].normalise_at(u)
         }
     }
 
@@ -890,13 +915,13 @@ impl Model {
 
     /// Effect values at a point into `vals` (slots after the tracker's) and, when `jac` is
     /// given, each effect parameter's ∂value/∂p into `jac[parameter]`.
-    fn effect_values(
+    fn effect_values<S: Real>(
         &self,
-        commands: &Commands,
+        commands: &[S; MAX_AXES],
         reflector: usize,
         t_s: f64,
         params: &[f64],
-        vals: &mut [f64],
+        vals: &mut [S],
         mut jac: Option<&mut [f64]>,
     ) {
         let base = self.terms.len() + TRACKER_DOF;
@@ -910,16 +935,16 @@ impl Model {
                 EffectSlot::Drift(_) => {
                     let t_h = t_s / 3600.0;
                     set(j, t_h);
-                    params[j] * t_h
+                    S::from(params[j] * t_h)
                 }
                 EffectSlot::Reflector { reflector: r, .. } => {
                     let on = if r == reflector { 1.0 } else { 0.0 };
                     set(j, on);
-                    params[j] * on
+                    S::from(params[j] * on)
                 }
                 EffectSlot::RangeScale => {
                     set(j, 1e-6);
-                    params[j] * 1e-6
+                    S::from(params[j] * 1e-6)
                 }
                 EffectSlot::Screw {
                     k,
@@ -928,11 +953,11 @@ impl Model {
                     ..
                 } => {
                     let phase =
-                        2.0 * std::f64::consts::PI * (commands.0[k] - reference) / period_mm;
+                        (commands[k] - reference) * (2.0 * std::f64::consts::PI) / period_mm;
                     let (sn, cs) = phase.sin_cos();
-                    set(j, sn);
-                    set(j + 1, cs);
-                    params[j] * sn + params[j + 1] * cs
+                    set(j, sn.re());
+                    set(j + 1, cs.re());
+                    sn * params[j] + cs * params[j + 1]
                 }
             };
         }
@@ -991,17 +1016,62 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> PointErrors<f64> {
+        self.errors_with_commands(&commands.0, reflector, t_s, params)
+    }
+
+    /// [`Model::errors_at_point`] with commands of any scalar: with dual numbers over the
+    /// commands, every error value carries its exact derivative along them (for the inverse
+    /// model, [`crate::compensate`]).
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn errors_with_commands<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+    ) -> PointErrors<S> {
         self.check_len(params);
-        let mut vals = [0.0; MAX_SLOTS];
+        let mut vals = [S::zero(); MAX_SLOTS];
+        let mut g = [S::zero(); MAX_COEFFS];
         for (i, t) in self.terms.iter().enumerate() {
-            vals[i] = t
-                .basis
-                .value(self.argument(t, commands), &params[t.params.clone()]);
+            let r = t.params.clone();
+            vals[i] = t.basis.eval_at(
+                self.argument_at(t, commands),
+                &params[r.clone()],
+                &mut g[..r.len()],
+            );
         }
-        vals[self.terms.len()..self.terms.len() + TRACKER_DOF]
-            .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
+        for (k, v) in params[self.tracker_start..self.tracker_start + TRACKER_DOF]
+            .iter()
+            .enumerate()
+        {
+            vals[self.terms.len() + k] = S::from(*v);
+        }
         self.effect_values(commands, reflector, t_s, params, &mut vals, None);
         self.point_errors(|i| vals[i])
+    }
+
+    /// Where the tool point `tool` (mm, in the frame of the last tool-side axis) sits relative
+    /// to the workpiece at `commands` (any scalar, internal units) with the errors of `params`:
+    /// [`crate::kinematics::tool_in_workpiece`] with the model's error values at those commands.
+    /// Effects that belong to the measurement (tracker pose, reflector offsets, range scale,
+    /// thermal drift over the test's time) are left out; ball-screw errors stay.
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn tool_point<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        tool: &[f64; 3],
+        params: &[f64],
+    ) -> [S; 3] {
+        let mut e = self.errors_with_commands(commands, usize::MAX, 0.0, params);
+        e.tool_shift = [S::zero(); 3];
+        e.reflector_delta = [S::zero(); 3];
+        e.range_scale = S::zero();
+        crate::kinematics::tool_in_workpiece(&self.machine, commands, tool, &e)
     }
 
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`
@@ -1056,7 +1126,7 @@ impl Model {
             .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
-        self.effect_values(commands, reflector, t_s, params, &mut vals, Some(jac));
+        self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
         let refl = &self.machine.reflectors()[reflector].offset;
         let mut g = [[0.0; MAX_SLOTS]; 3];
         let point = match m {
@@ -1117,8 +1187,8 @@ impl Model {
         d1[k..k + TRACKER_DOF].copy_from_slice(&dir[ts..ts + TRACKER_DOF]);
         // Effects are linear in their parameters: their derivative along dir is their value
         // at dir, and their second derivative is zero.
-        self.effect_values(commands, reflector, t_s, params, &mut vals, None);
-        self.effect_values(commands, reflector, t_s, dir, &mut d1, None);
+        self.effect_values(&commands.0, reflector, t_s, params, &mut vals, None);
+        self.effect_values(&commands.0, reflector, t_s, dir, &mut d1, None);
         let e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
         let refl = &self.machine.reflectors()[reflector].offset;
         let x = predict(&self.machine, commands, refl, &e);

@@ -1,0 +1,312 @@
+//! Compensation: the inverse of the forward model.
+//!
+//! A machine with identified errors puts its tool somewhere else than commanded. Compensation
+//! asks the opposite question: which command puts the tool point where the *nominal* machine
+//! would put it for the programmed command? With `T(q, p)` the tool point relative to the
+//! workpiece ([`Model::tool_point`]) at commands `q` and errors `p`, the compensated command
+//! `q*` solves
+//!
+//! ```text
+//! T(q*, p) = T(q_programmed, 0)
+//! ```
+//!
+//! by Newton's method from `q = q_programmed`, with the exact 3 × m Jacobian `∂T/∂q` from dual
+//! numbers over the commands (the error functions are differentiated along their axes too).
+//! Three equations fix three axes: by default the linear axes when the machine has three of
+//! them (rotary axes keep their programmed angle: the tool *position* is compensated, not its
+//! orientation), otherwise every axis. [`Compensator::holding`] picks other axes. With fewer
+//! than three free axes the command is a least-squares fit and the deviation says what is left.
+//!
+//! Every compensated command is verified: the tool point it gives through the forward model
+//! (an independent `f64` evaluation) is compared with the target, and the deviation is
+//! reported. Units: mm and rad.
+//!
+//! ```
+//! use volver_core::compensate::Compensator;
+//! use volver_core::model::Model;
+//! let model = Model::default_xcfz();
+//! let mut p = model.initial_params();
+//! p[model.param_index("EXX.c1").unwrap()] = 0.05; // 50 µm of positioning error at the end of X
+//! let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+//! let programmed = model.machine().commands_from_file_units(&[1400.0, 30.0, 300.0]);
+//! let c = comp.compensate(&programmed).unwrap();
+//! assert!(c.deviation_mm < 1e-9);
+//! assert!((c.commands.0[0] - 1400.0).abs() > 0.01); // X moved to cancel EXX
+//! ```
+
+use crate::chain::MAX_AXES;
+use crate::error::{Error, Result};
+use crate::iso::Axis;
+use crate::kinematics::{PointErrors, tool_in_workpiece};
+use crate::machine::Commands;
+use crate::model::Model;
+use num_dual::DualSVec64;
+
+/// Deviation below which Newton's iteration stops (mm).
+pub const NEWTON_TOLERANCE_MM: f64 = 1e-11;
+
+/// Most Newton steps per point.
+pub const MAX_NEWTON_STEPS: usize = 50;
+
+/// The inverse model of one machine with one set of identified errors.
+#[derive(Clone, Debug)]
+pub struct Compensator<'a> {
+    model: &'a Model,
+    params: &'a [f64],
+    tool: [f64; 3],
+    /// Chain positions of the axes Newton moves.
+    free: Vec<usize>,
+}
+
+/// One compensated command.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Compensated {
+    /// The compensated command (internal units: mm, rad; chain order).
+    pub commands: Commands,
+    /// The target: the nominal machine's tool point at the programmed command (mm, workpiece
+    /// frame).
+    pub target: [f64; 3],
+    /// How far the tool point of the compensated command is from the target, through the
+    /// forward model (mm).
+    pub deviation_mm: f64,
+    /// How far the uncompensated machine's tool point is from the target (mm): what
+    /// compensation removes.
+    pub error_mm: f64,
+    /// Newton steps taken.
+    pub steps: usize,
+    /// Axes (chain positions) whose compensated command leaves the travel range.
+    pub outside_travel: Vec<usize>,
+}
+
+impl<'a> Compensator<'a> {
+    /// The inverse model of `model` with errors `params`, steering the tool point `tool` (mm, in
+    /// the frame of the last tool-side axis, like a reflector offset). The free axes are the
+    /// linear ones when the machine has exactly three, otherwise every axis (at most three).
+    pub fn new(model: &'a Model, params: &'a [f64], tool: [f64; 3]) -> Result<Compensator<'a>> {
+        let axes = model.machine().axes();
+        let linear = axes.iter().filter(|a| !a.axis.is_rotary()).count();
+        let held: Vec<Axis> = if linear == 3 {
+            axes.iter()
+                .filter(|a| a.axis.is_rotary())
+                .map(|a| a.axis)
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Compensator::holding(model, params, tool, &held)
+    }
+
+    /// [`Compensator::new`] with the axes `held` at their programmed values and every other
+    /// axis free. More than three free axes leave the inverse undetermined and are refused.
+    pub fn holding(
+        model: &'a Model,
+        params: &'a [f64],
+        tool: [f64; 3],
+        held: &[Axis],
+    ) -> Result<Compensator<'a>> {
+        if params.len() != model.n_params() {
+            return Err(Error::Model(format!(
+                "compensation needs {} parameters, got {}",
+                model.n_params(),
+                params.len()
+            )));
+        }
+        let m = model.machine();
+        for h in held {
+            if m.axis(*h).is_none() {
+                return Err(Error::Model(format!(
+                    "axis {h} is held but the machine ({}) has no such axis",
+                    m.chain()
+                )));
+            }
+        }
+        let free: Vec<usize> = (0..m.axes().len())
+            .filter(|&k| !held.contains(&m.axes()[k].axis))
+            .collect();
+        if free.len() > 3 {
+            return Err(Error::Model(format!(
+                "{} free axes for the three coordinates of the tool point: hold {} of them",
+                free.len(),
+                free.len() - 3
+            )));
+        }
+        if free.is_empty() {
+            return Err(Error::Model(
+                "every axis is held: nothing left to compensate with".into(),
+            ));
+        }
+        Ok(Compensator {
+            model,
+            params,
+            tool,
+            free,
+        })
+    }
+
+    /// The axes Newton moves (chain positions).
+    pub fn free_axes(&self) -> &[usize] {
+        &self.free
+    }
+
+    /// The nominal machine's tool point at `commands` (mm, workpiece frame).
+    pub fn nominal_point(&self, commands: &Commands) -> [f64; 3] {
+        tool_in_workpiece(
+            self.model.machine(),
+            &commands.0,
+            &self.tool,
+            &PointErrors::<f64>::zero(),
+        )
+    }
+
+    /// The real machine's tool point at `commands`, with the identified errors (mm).
+    pub fn actual_point(&self, commands: &Commands) -> [f64; 3] {
+        self.model.tool_point(&commands.0, &self.tool, self.params)
+    }
+
+    /// The command that puts the tool where the nominal machine puts it for `programmed`.
+    ///
+    /// Fails (naming the deviation) only when Newton's iteration meets a non-finite value or a
+    /// singular Jacobian; a deviation that stays above the tolerance is reported in
+    /// [`Compensated::deviation_mm`] for the caller to judge.
+    pub fn compensate(&self, programmed: &Commands) -> Result<Compensated> {
+        let target = self.nominal_point(programmed);
+        let mut q = *programmed;
+        let start = self.actual_point(&q);
+        let error_mm = distance(start, target);
+        let mut steps = 0;
+        let mut best = (error_mm, q);
+        while steps < MAX_NEWTON_STEPS {
+            let (x, jac) = self.point_and_jacobian(&q);
+            let r = [x[0] - target[0], x[1] - target[1], x[2] - target[2]];
+            let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            if !d.is_finite() {
+                return Err(Error::Model(format!(
+                    "compensation met a non-finite tool point at command {:?}",
+                    q.0
+                )));
+            }
+            if d < best.0 {
+                best = (d, q);
+            }
+            if d <= NEWTON_TOLERANCE_MM {
+                break;
+            }
+            let step = solve_step(&jac, &r, self.free.len()).ok_or_else(|| {
+                Error::Model(format!(
+                    "compensation: the Jacobian of the tool point is singular at command {:?}",
+                    q.0
+                ))
+            })?;
+            for (i, &k) in self.free.iter().enumerate() {
+                q.0[k] -= step[i];
+            }
+            steps += 1;
+            // A least-squares fit (fewer than three free axes) stops when the step vanishes.
+            let size: f64 = step.iter().map(|s| s * s).sum::<f64>().sqrt();
+            if size <= 1e-15 * (1.0 + q.0.iter().map(|v| v.abs()).fold(0.0, f64::max)) {
+                break;
+            }
+        }
+        let q = best.1;
+        let deviation_mm = distance(self.actual_point(&q), target);
+        let axes = self.model.machine().axes();
+        let outside_travel = (0..axes.len())
+            .filter(|&k| {
+                !axes[k].axis.is_rotary() && (q.0[k] < axes[k].min || q.0[k] > axes[k].max)
+            })
+            .collect();
+        Ok(Compensated {
+            commands: q,
+            target,
+            deviation_mm,
+            error_mm,
+            steps,
+            outside_travel,
+        })
+    }
+
+    /// The tool point and its exact Jacobian with respect to the free axes (3 × m, row-major),
+    /// from dual numbers over the commands.
+    fn point_and_jacobian(&self, q: &Commands) -> ([f64; 3], Vec<f64>) {
+        let m = self.free.len();
+        let mut u = q.0.map(DualSVec64::<MAX_AXES>::from_re);
+        for (i, &k) in self.free.iter().enumerate() {
+            u[k] = DualSVec64::<MAX_AXES>::from_re(q.0[k]).derivative(i);
+        }
+        let x = self.model.tool_point(&u, &self.tool, self.params);
+        let mut jac = vec![0.0; 3 * m];
+        for c in 0..3 {
+            if let Some(eps) = &x[c].eps.0 {
+                jac[c * m..(c + 1) * m].copy_from_slice(&eps.as_slice()[..m]);
+            }
+        }
+        ([x[0].re, x[1].re, x[2].re], jac)
+    }
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// The Newton step `s` with `J s = r` (three free axes), or the least-squares step
+/// `JᵀJ s = Jᵀ r` (fewer). `None` when the system is singular.
+fn solve_step(jac: &[f64], r: &[f64; 3], m: usize) -> Option<Vec<f64>> {
+    let (mut a, mut b) = if m == 3 {
+        (jac.to_vec(), r.to_vec())
+    } else {
+        let mut a = vec![0.0; m * m];
+        let mut b = vec![0.0; m];
+        for i in 0..m {
+            for j in 0..m {
+                a[i * m + j] = (0..3).map(|c| jac[c * m + i] * jac[c * m + j]).sum();
+            }
+            b[i] = (0..3).map(|c| jac[c * m + i] * r[c]).sum();
+        }
+        (a, b)
+    };
+    let scale = a.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    // Gaussian elimination with partial pivoting.
+    for col in 0..m {
+        let piv =
+            (col..m).max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))?;
+        if a[piv * m + col].abs() <= 1e-14 * scale || !a[piv * m + col].is_finite() {
+            return None;
+        }
+        if piv != col {
+            for j in 0..m {
+                a.swap(piv * m + j, col * m + j);
+            }
+            b.swap(piv, col);
+        }
+        for i in col + 1..m {
+            let f = a[i * m + col] / a[col * m + col];
+            for j in col..m {
+                a[i * m + j] -= f * a[col * m + j];
+            }
+            b[i] -= f * b[col];
+        }
+    }
+    let mut x = vec![0.0; m];
+    for i in (0..m).rev() {
+        let s: f64 = (i + 1..m).map(|j| a[i * m + j] * x[j]).sum();
+        x[i] = (b[i] - s) / a[i * m + i];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_step_solves_small_systems() {
+        let jac = [2.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 4.0];
+        let r = [3.0, 5.0, 5.0];
+        let s = solve_step(&jac, &r, 3).unwrap();
+        for c in 0..3 {
+            let v: f64 = (0..3).map(|j| jac[c * 3 + j] * s[j]).sum();
+            assert!((v - r[c]).abs() < 1e-12);
+        }
+        assert!(solve_step(&[1.0, 2.0, 2.0, 4.0, 0.0, 0.0], &r, 2).is_none());
+    }
+}

@@ -1,0 +1,346 @@
+//! Compensation (the inverse model), G-code programs and controller tables.
+
+mod common;
+
+use volver::core::chain::MAX_AXES;
+use volver::core::compensate::Compensator;
+use volver::core::gcode::{Linearise, Program};
+use volver::core::machine::{Commands, Machine};
+use volver::core::model::{ErrorModelSpec, Model};
+use volver::core::random::Rng;
+use volver::core::simulate::{Magnitudes, Truth};
+use volver::core::tables::ErrorTables;
+
+/// Random true errors of the paper's model on the XCFZ grinder (noise-free).
+fn truth(seed: u64) -> Truth {
+    let m = Machine::default_xcfz();
+    let spec = Model::default_xcfz().spec().clone();
+    Truth::random(&m, &spec, &Magnitudes::default(), seed).unwrap()
+}
+
+fn random_command(m: &Machine, rng: &mut Rng) -> Commands {
+    let mut c = Commands::default();
+    for (k, a) in m.axes().iter().enumerate() {
+        c.0[k] = a.min + (a.max - a.min) * rng.uniform();
+    }
+    c
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// forward(compensated command) = target within 1e-9 mm over the whole work volume, for
+/// several random machines, with the tool at the spindle and at a reflector's offset.
+#[test]
+fn compensated_commands_reach_the_nominal_tool_point() {
+    for seed in 1..=4 {
+        let t = truth(seed);
+        let m = t.model.machine();
+        let mut rng = Rng::new(100 + seed);
+        for tool in [[0.0; 3], m.reflectors()[1].offset] {
+            let comp = Compensator::new(&t.model, &t.params, tool).unwrap();
+            assert_eq!(comp.free_axes(), &[0, 1, 2], "XCFZ: X, C, Z all free");
+            let (mut worst, mut largest_error) = (0.0_f64, 0.0_f64);
+            for _ in 0..200 {
+                let q = random_command(m, &mut rng);
+                let c = comp.compensate(&q).unwrap();
+                // Verified independently here, not only by the compensator's own figure.
+                let reached = t.model.tool_point(&c.commands.0, &tool, &t.params);
+                let d = dist(reached, comp.nominal_point(&q));
+                assert!(d < 1e-9, "seed {seed}: {d:e} mm off at {:?}", q.0);
+                assert!((d - c.deviation_mm).abs() < 1e-12);
+                assert!(c.steps <= 6, "Newton took {} steps", c.steps);
+                worst = worst.max(d);
+                largest_error = largest_error.max(c.error_mm);
+            }
+            // The test is not vacuous: the uncompensated machine misses by tens of µm.
+            assert!(largest_error > 0.02, "largest error {largest_error} mm");
+            assert!(worst < 1e-9);
+        }
+    }
+}
+
+/// With the machine's errors all zero the compensated command is the programmed one.
+#[test]
+fn a_perfect_machine_needs_no_compensation() {
+    let model = Model::default_xcfz();
+    let p = model.initial_params();
+    let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    let q = model
+        .machine()
+        .commands_from_file_units(&[350.0, 123.0, 420.0]);
+    let c = comp.compensate(&q).unwrap();
+    assert_eq!(c.steps, 0);
+    assert_eq!(c.commands, q);
+    assert_eq!(c.error_mm, 0.0);
+}
+
+/// A pure positioning error is cancelled by moving that axis by minus the error (to first
+/// order; exactly here since EXX is the only error and it varies slowly).
+#[test]
+fn a_positioning_error_is_cancelled_along_its_axis() {
+    let model = Model::default_xcfz();
+    let mut p = model.initial_params();
+    p[model.param_index("EXX.c1").unwrap()] = 0.05;
+    let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    let q = model
+        .machine()
+        .commands_from_file_units(&[1400.0, 0.0, 300.0]);
+    let c = comp.compensate(&q).unwrap();
+    let e = model
+        .error_value("EXX".parse().unwrap(), q.0[0], &p)
+        .unwrap();
+    // X carries the workpiece in XCFZ: the command moves by the error itself (to first order;
+    // the difference is EXX·dEXX/dX), and the other axes do not move.
+    let dx = c.commands.0[0] - q.0[0];
+    assert!((dx - e).abs() < 1e-3 * e.abs(), "dx {dx} against EXX {e}");
+    assert!((c.commands.0[1] - q.0[1]).abs() < 1e-12 && (c.commands.0[2] - q.0[2]).abs() < 1e-9);
+}
+
+/// The dual-number Jacobian of the tool point with respect to the commands matches central
+/// finite differences (errors of every kind differentiated along their axes).
+#[test]
+fn the_tool_point_jacobian_matches_finite_differences() {
+    use num_dual::DualSVec64;
+    let t = truth(9);
+    let m = t.model.machine();
+    let mut rng = Rng::new(5);
+    let tool = m.reflectors()[0].offset;
+    for _ in 0..20 {
+        let q = random_command(m, &mut rng);
+        for k in 0..m.axes().len() {
+            let mut u = q.0.map(DualSVec64::<MAX_AXES>::from_re);
+            u[k] = DualSVec64::<MAX_AXES>::from_re(q.0[k]).derivative(k);
+            let x = t.model.tool_point(&u, &tool, &t.params);
+            let h = if m.axes()[k].axis.is_rotary() {
+                1e-6
+            } else {
+                1e-4
+            };
+            let (mut a, mut b) = (q, q);
+            a.0[k] += h;
+            b.0[k] -= h;
+            let (xa, xb) = (
+                t.model.tool_point(&a.0, &tool, &t.params),
+                t.model.tool_point(&b.0, &tool, &t.params),
+            );
+            for c in 0..3 {
+                let fd = (xa[c] - xb[c]) / (2.0 * h);
+                let exact = x[c].eps.0.as_ref().map_or(0.0, |e| e[k]);
+                assert!(
+                    (fd - exact).abs() < 1e-6 * (1.0 + exact.abs()),
+                    "axis {k} coordinate {c}: {exact} against {fd}"
+                );
+            }
+        }
+    }
+}
+
+/// The tool point with errors is the forward model's point before the tracker: with the
+/// tracker at the identity pose and the tool at a reflector, both agree.
+#[test]
+fn the_tool_point_is_the_forward_model_without_the_tracker() {
+    let t = truth(3);
+    let m = t.model.machine();
+    let mut p = t.params.clone();
+    let ts = t.model.tracker_start();
+    p[ts..ts + 6].fill(0.0);
+    let mut rng = Rng::new(11);
+    for _ in 0..50 {
+        let q = random_command(m, &mut rng);
+        let x = t.model.predict(&q, 0, &p);
+        let r0 = &m.tracker().base_rotation;
+        let tp = t.model.tool_point(&q.0, &m.reflectors()[0].offset, &p);
+        // predict = R0ᵀ·(tool point) with the tracker at its origin.
+        let expect = [0, 1, 2].map(|j| (0..3).map(|i| tp[i] * r0[i][j]).sum::<f64>());
+        assert!(dist(x, expect) < 1e-9);
+    }
+}
+
+const PROGRAM: &str = "%
+(a test part on the XCFZ grinder)
+N10 G21 G90 G18
+N20 G0 X100 C0 Z50
+N30 G1 X600 Z250 F800 ; feed move
+N40 G2 X700 Z350 I0 K100 (quarter circle, centre at X600 Z350)
+N50 G91 G1 C45
+N60 G90 G3 X600 Z450 R100
+N70 G1 X650 Z450 C90.0
+N80 M30
+%";
+
+/// A program is read, linearised, compensated and verified: every written command reaches
+/// its target through the forward model.
+#[test]
+fn a_gcode_program_is_compensated_and_verified() {
+    let t = truth(2);
+    let m = t.model.machine();
+    let lin = Linearise {
+        chord_tolerance_mm: 0.001,
+        max_segment_mm: Some(50.0),
+    };
+    let prog = Program::parse(PROGRAM, "part.nc", m, &lin).unwrap();
+    let moves: Vec<_> = prog
+        .blocks
+        .iter()
+        .filter_map(|b| b.motion.as_ref())
+        .collect();
+    assert_eq!(moves.len(), 6);
+    assert_eq!(moves.iter().filter(|m| m.arc).count(), 2);
+    // The quarter circle of radius 100 mm at 1 µm sagitta: θ ≤ 2 acos(1 − 1e-5) ≈ 0.00894 rad.
+    let quarter = &moves[2];
+    assert!(quarter.points.len() >= 176, "{}", quarter.points.len());
+    for w in quarter.points.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        let mid = [(a[0] + b[0]) / 2.0, (a[2] + b[2]) / 2.0];
+        let r = ((mid[0] - 600.0).powi(2) + (mid[1] - 350.0).powi(2)).sqrt();
+        for p in [a, b] {
+            let rp = ((p[0] - 600.0).powi(2) + (p[2] - 350.0).powi(2)).sqrt();
+            assert!((rp - 100.0).abs() < 1e-9);
+        }
+        assert!(100.0 - r <= 0.001 + 1e-12, "sagitta {}", 100.0 - r);
+    }
+    let end = quarter.points.last().unwrap();
+    assert!((end[0] - 700.0).abs() < 1e-12 && (end[2] - 350.0).abs() < 1e-12);
+    // G2 from (X600, Z250) about (X600, Z350) to (X700, Z350): clockwise in the ZX plane
+    // passes X > 600 with Z < 350.
+    let mid = quarter.points[quarter.points.len() / 2];
+    assert!(mid[0] > 650.0 && mid[2] < 300.0, "{mid:?}");
+    // Incremental C45 after C0.
+    assert!((moves[3].points[0][1] - 45.0).abs() < 1e-12);
+    // R100 counter-clockwise (about +Y, from Z towards X) from (X700, Z350) to (X600, Z450):
+    // the short arc is about (X700, Z450), through X < 700 and Z < 450.
+    let r_arc = &moves[4];
+    for p in &r_arc.points {
+        let rp = ((p[0] - 700.0).powi(2) + (p[2] - 450.0).powi(2)).sqrt();
+        assert!((rp - 100.0).abs() < 1e-9, "{p:?}");
+    }
+    let mid = r_arc.points[r_arc.points.len() / 2];
+    assert!(
+        (mid[0] - 629.3).abs() < 1.0 && (mid[2] - 379.3).abs() < 1.0,
+        "{mid:?}"
+    );
+    let comp = Compensator::new(&t.model, &t.params, [0.0; 3]).unwrap();
+    let (text, rep) = prog.compensate(&comp, m, 6, "test").unwrap();
+    assert_eq!(rep.moves, 6);
+    assert!(rep.max_deviation_mm < 1e-9, "{}", rep.max_deviation_mm);
+    // Written with 6 decimals (1 nm; 1e-6°): the rounding stays well below a µm.
+    assert!(
+        rep.max_written_deviation_mm < 5e-5,
+        "{}",
+        rep.max_written_deviation_mm
+    );
+    assert!(rep.max_error_mm > 0.01);
+    // The output reads back as a program with the same number of points.
+    let back = Program::parse(&text, "out.nc", m, &Linearise::default()).unwrap();
+    let n_back: usize = back
+        .blocks
+        .iter()
+        .filter_map(|b| b.motion.as_ref())
+        .map(|m| m.points.len())
+        .sum();
+    assert_eq!(n_back, rep.points);
+    assert!(text.contains("F800") && text.contains("M30") && !text.contains("G91"));
+}
+
+/// Bad programs are refused with the file, the line and the word.
+#[test]
+fn bad_gcode_names_the_place() {
+    let m = Machine::default_xcfz();
+    let lin = Linearise::default();
+    for (text, line, field, what) in [
+        ("G21\nG20 G0 X1", 2, Some("G20"), "inch"),
+        ("G0 X1\nG1 Y5", 2, Some("Y"), "does not have"),
+        ("G0 X1\nG1 X1.2.3", 2, Some("X"), "number"),
+        ("G0 X1 (open", 1, None, "not closed"),
+        (
+            "G18\nG0 X100 Z0\nG2 X300 Z0 I50 K0",
+            3,
+            None,
+            "off its circle",
+        ),
+        (
+            "G17\nG0 X100 Z0\nG2 X300 Z0 I100 J0",
+            3,
+            None,
+            "needs axis Y",
+        ),
+        (
+            "G0 X100 Z0\nG18 G2 X300 Z0 R50",
+            2,
+            Some("R"),
+            "cannot join",
+        ),
+        ("X100", 1, None, "before any motion"),
+        ("G0 X1\nG92 X0", 2, Some("G92"), "another frame"),
+        ("G0 X1\nG1 U3", 2, Some("U"), "secondary"),
+        ("G0 X1\nG1 X#3", 2, Some("X"), "needs a number"),
+        ("G0 X1\nG1 X3 $", 2, Some("$"), "expected a word"),
+    ] {
+        let err = Program::parse(text, "bad.nc", &m, &lin)
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with(&format!("bad.nc:{line}")), "{err}");
+        if let Some(f) = field {
+            assert!(err.contains(&format!("field '{f}'")), "{err}");
+        }
+        assert!(err.contains(what), "{err}");
+    }
+}
+
+/// Every export parses back to the same tables, and the tables hold the model's error values.
+#[test]
+fn controller_tables_parse_back() {
+    // A model with Fourier rotary errors, location errors and squareness constants.
+    let t = truth(4);
+    let tables = ErrorTables::from_model(&t.model, &t.params, 50.0, 15.0).unwrap();
+    assert!(!tables.constants.is_empty());
+    assert_eq!(tables.axes.len(), 3);
+    let x = &tables.axes[0];
+    assert_eq!(x.positions.first(), Some(&0.0));
+    assert_eq!(x.positions.last(), Some(&1400.0));
+    for (name, vals) in &x.errors {
+        let id = name.parse().unwrap();
+        for (p, v) in x.positions.iter().zip(vals) {
+            let e = t.model.error_value(id, *p, &t.params).unwrap();
+            assert!((e - v).abs() < 1e-15, "{name} at {p}");
+        }
+    }
+    let isg = ErrorTables::from_isg_csv(&tables.to_isg_csv(), "t.csv").unwrap();
+    let eta = ErrorTables::from_etalon(&tables.to_etalon(), "t.txt").unwrap();
+    let csv = ErrorTables::from_plain_csv(&tables.to_plain_csv(), "p.csv").unwrap();
+    assert!(tables.max_difference(&isg).unwrap() < 1e-12);
+    assert!(tables.max_difference(&eta).unwrap() < 1e-12);
+    assert!(tables.max_difference(&csv).unwrap() < 1e-12);
+    // A wrong name is refused with its place.
+    let bad = tables.to_etalon().replacen("[EXX]", "[EQX]", 1);
+    let err = ErrorTables::from_etalon(&bad, "e.txt")
+        .unwrap_err()
+        .to_string();
+    assert!(err.starts_with("e.txt:") && err.contains("EQX"), "{err}");
+}
+
+/// Ball-screw errors are part of the exported positioning error.
+#[test]
+fn tables_include_ball_screw_errors() {
+    let m = Machine::default_xcfz();
+    let mut spec: ErrorModelSpec = Model::default_xcfz().spec().clone();
+    spec.effects.ball_screw = vec![volver::core::model::BallScrewSpec {
+        axis: "X".into(),
+        period_mm: 10.0,
+    }];
+    let model = Model::new(m, spec).unwrap();
+    let mut p = model.initial_params();
+    let j = model
+        .params()
+        .iter()
+        .position(|q| q.name.starts_with("screw"))
+        .unwrap();
+    p[j] = 0.002;
+    let tables = ErrorTables::from_model(&model, &p, 2.5, 30.0).unwrap();
+    let exx = &tables.axes[0].errors[0];
+    assert_eq!(exx.0, "EXX");
+    let peak = exx.1.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+    assert!((peak - 0.002).abs() < 1e-4, "{peak}");
+}
