@@ -1,6 +1,7 @@
 //! The `volver` command-line tool.
 
 mod compare;
+mod compensation;
 mod history;
 mod study;
 
@@ -93,6 +94,13 @@ enum Command {
     /// prints the noise error (EMM, EMax of the noise alone, tables 9–10 of the paper).
     #[command(after_help = SIMULATE_HELP)]
     Simulate(SimulateArgs),
+    /// Corrects a point list (CSV) or a G-code program with identified errors: each command
+    /// becomes the one that puts the tool where the nominal machine would (inverse model,
+    /// Newton with the exact Jacobian), verified through the forward model.
+    Compensate(compensation::CompensateArgs),
+    /// Exports identified errors as controller tables over each axis' positions: ISG CSV,
+    /// Etalon exchange style and plain CSV (errors, not corrections).
+    Tables(compensation::TablesArgs),
 }
 
 /// The machine, error model and measurements that `identify` and `diagnose` read.
@@ -262,6 +270,8 @@ fn main() -> Result<()> {
             study::print(&study::paper(seed)?);
         }
         Command::Simulate(args) => simulate(args)?,
+        Command::Compensate(args) => compensation::compensate_command(args)?,
+        Command::Tables(args) => compensation::tables_command(args)?,
     }
     Ok(())
 }

@@ -344,3 +344,123 @@ fn tables_include_ball_screw_errors() {
     let peak = exx.1.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
     assert!((peak - 0.002).abs() < 1e-4, "{peak}");
 }
+
+/// The commands end to end: simulate, identify, then `compensate` (points and G-code) and
+/// `tables`; every output reads back, and a bad point list is refused with its place.
+#[test]
+fn compensate_and_tables_through_the_cli() {
+    use common::volver;
+    let dir = std::env::temp_dir().join(format!("volver-compensate-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |n: &str| dir.join(n).display().to_string();
+    let out = volver(&[
+        "simulate",
+        "--plan",
+        "test3",
+        "--seed",
+        "2",
+        "--out",
+        &d("sim"),
+    ]);
+    assert!(out.status.success());
+    let out = volver(&[
+        "identify",
+        "--data",
+        &d("sim/measurements.csv"),
+        "--out",
+        &d("fit.json"),
+        "--no-history",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::write(d("pts.csv"), "id,X,C,Z\na,100,0,50\nb,700,90,300\n").unwrap();
+    let out = volver(&[
+        "compensate",
+        "--results",
+        &d("fit.json"),
+        "--points",
+        &d("pts.csv"),
+        "--out",
+        &d("pts-out.csv"),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("verified through the forward model"),
+        "{text}"
+    );
+    let csv = std::fs::read_to_string(d("pts-out.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3);
+    assert!(csv.starts_with("line,id,X,C,Z,X_programmed"));
+    std::fs::write(d("part.nc"), PROGRAM).unwrap();
+    let out = volver(&[
+        "compensate",
+        "--results",
+        &d("fit.json"),
+        "--gcode",
+        &d("part.nc"),
+        "--out",
+        &d("part-out.nc"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m = Machine::default_xcfz();
+    let nc = std::fs::read_to_string(d("part-out.nc")).unwrap();
+    Program::parse(&nc, "part-out.nc", &m, &Linearise::default()).unwrap();
+    let out = volver(&["tables", "--results", &d("fit.json"), "--out", &d("tables")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let isg = ErrorTables::from_isg_csv(
+        &std::fs::read_to_string(d("tables/errors-isg.csv")).unwrap(),
+        "i",
+    )
+    .unwrap();
+    let eta = ErrorTables::from_etalon(
+        &std::fs::read_to_string(d("tables/errors-etalon.txt")).unwrap(),
+        "e",
+    )
+    .unwrap();
+    let csv = ErrorTables::from_plain_csv(
+        &std::fs::read_to_string(d("tables/errors.csv")).unwrap(),
+        "c",
+    )
+    .unwrap();
+    assert!(isg.max_difference(&eta).unwrap() < 1e-12 && isg.max_difference(&csv).unwrap() < 1e-12);
+    // Bad point lists: the file, the line and the column.
+    for (text, expect) in [
+        ("id,X,C\na,1,2\n", ":1: field 'Z'"),
+        ("X,C,Z\n1,2,abc\n", ":2: field 'Z'"),
+        ("X,C,Z,Y\n1,2,3,4\n", ":1: field 'Y'"),
+        ("X,C,Z\n", ":1"),
+        ("X,C,Z\n1,NaN,3\n", ":2: field 'C'"),
+    ] {
+        std::fs::write(d("bad.csv"), text).unwrap();
+        let out = volver(&[
+            "compensate",
+            "--results",
+            &d("fit.json"),
+            "--points",
+            &d("bad.csv"),
+            "--out",
+            &d("x.csv"),
+        ]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success() && !err.contains("panicked"), "{err}");
+        assert!(err.contains(&format!("bad.csv{expect}")), "{text:?}: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

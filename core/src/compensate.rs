@@ -310,3 +310,133 @@ mod tests {
         assert!(solve_step(&[1.0, 2.0, 2.0, 4.0, 0.0, 0.0], &r, 2).is_none());
     }
 }
+
+/// One programmed point of a point list.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ListedPoint {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// The `id` column, when there is one.
+    pub id: Option<String>,
+    /// The programmed command (internal units, chain order).
+    pub commands: Commands,
+}
+
+/// Reads a point list: CSV with one column per machine axis, named by its letter (file units:
+/// mm, degrees), and an optional `id` column. Any other column, a missing or repeated axis, a
+/// value that is not a finite number or an empty list is refused with the file, line and column.
+///
+/// ```
+/// use volver_core::compensate::read_points;
+/// use volver_core::machine::Machine;
+/// let m = Machine::default_xcfz();
+/// let pts = read_points("id,X,C,Z\np1,100,90,50\n", "pts.csv", &m).unwrap();
+/// assert_eq!(pts[0].line, 2);
+/// assert!((pts[0].commands.0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
+/// let err = read_points("X,C\n1,2\n", "pts.csv", &m).unwrap_err().to_string();
+/// assert!(err.contains("pts.csv:1") && err.contains("'Z'"));
+/// ```
+pub fn read_points(
+    text: &str,
+    file: &str,
+    machine: &crate::machine::Machine,
+) -> Result<Vec<ListedPoint>> {
+    use crate::error::Place;
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let Some((h_i, header)) = lines.next() else {
+        return Err(Error::input(
+            Place::file(file),
+            "empty file: expected a header with one column per axis (and an optional id)",
+        ));
+    };
+    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let place = |line: usize, field: &str| Place::file(file).at_line(line).at_field(field);
+    let mut id_col = None;
+    let mut axis_col = vec![None; machine.axes().len()];
+    for (c, n) in names.iter().enumerate() {
+        let k = if *n == "id" {
+            None
+        } else {
+            let mut ch = n.chars();
+            let axis = match (ch.next(), ch.next()) {
+                (Some(l), None) => Axis::from_letter(l),
+                _ => None,
+            };
+            match axis.and_then(|a| machine.axis(a)) {
+                Some((k, _)) => Some(k),
+                None => {
+                    return Err(Error::input(
+                        place(h_i + 1, n),
+                        format!(
+                            "unexpected column '{n}': expected the axes of {} and an optional id",
+                            machine.chain()
+                        ),
+                    ));
+                }
+            }
+        };
+        let slot = match k {
+            None => &mut id_col,
+            Some(k) => &mut axis_col[k],
+        };
+        if slot.is_some() {
+            return Err(Error::input(
+                place(h_i + 1, n),
+                format!("column '{n}' appears twice"),
+            ));
+        }
+        *slot = Some(c);
+    }
+    for (k, a) in machine.axes().iter().enumerate() {
+        if axis_col[k].is_none() {
+            let l = a.axis.letter().to_string();
+            return Err(Error::input(
+                place(h_i + 1, &l),
+                format!("missing column '{l}' (axis {l}, in {})", a.file_unit()),
+            ));
+        }
+    }
+    let mut out = Vec::new();
+    for (i, raw) in lines {
+        let cells: Vec<&str> = raw.split(',').map(str::trim).collect();
+        if cells.len() != names.len() {
+            return Err(Error::input(
+                Place::file(file).at_line(i + 1),
+                format!("{} fields, the header has {}", cells.len(), names.len()),
+            ));
+        }
+        let mut commands = Commands::default();
+        for (k, a) in machine.axes().iter().enumerate() {
+            let c = axis_col[k].expect("checked");
+            let v: f64 = match cells[c].parse::<f64>() {
+                Ok(v) if v.is_finite() => v,
+                _ => {
+                    return Err(Error::input(
+                        place(i + 1, names[c]),
+                        format!(
+                            "expected a finite number in {}, found \"{}\"",
+                            a.file_unit(),
+                            cells[c]
+                        ),
+                    ));
+                }
+            };
+            commands.0[k] = a.from_file_units(v);
+        }
+        out.push(ListedPoint {
+            line: i + 1,
+            id: id_col.map(|c| cells[c].to_string()),
+            commands,
+        });
+    }
+    if out.is_empty() {
+        return Err(Error::input(
+            Place::file(file).at_line(h_i + 1),
+            "a header but no points",
+        ));
+    }
+    Ok(out)
+}

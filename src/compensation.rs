@@ -1,0 +1,336 @@
+//! `volver compensate` and `volver tables`: using the identified errors on the machine.
+
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+use volver::core::compensate::{Compensator, read_points};
+use volver::core::fsio::write_atomic;
+use volver::core::gcode::{Linearise, Program};
+use volver::core::iso::Axis;
+use volver::core::model::Model;
+use volver::core::results::ResultsFile;
+use volver::core::tables::ErrorTables;
+
+/// Options of `volver compensate`.
+#[derive(clap::Args)]
+pub struct CompensateArgs {
+    /// Results file of `volver identify` (machine, error model and identified errors).
+    #[arg(long)]
+    results: PathBuf,
+    /// A point list to correct: CSV with one column per axis (mm, degrees) and an optional id.
+    #[arg(long, conflicts_with = "gcode", required_unless_present = "gcode")]
+    points: Option<PathBuf>,
+    /// A G-code program to correct (G0/G1 moves, G2/G3 arcs linearised; mm).
+    #[arg(long)]
+    gcode: Option<PathBuf>,
+    /// Where to write the corrected points or program.
+    #[arg(long)]
+    out: PathBuf,
+    /// The tool point, mm in the frame of the last tool-side axis (like a reflector offset);
+    /// default: the centroid of the reflectors, where the measurement sees best.
+    #[arg(long, value_name = "X,Y,Z", conflicts_with = "tool_reflector")]
+    tool: Option<String>,
+    /// Use a reflector's offset as the tool point.
+    #[arg(long, value_name = "ID")]
+    tool_reflector: Option<String>,
+    /// Axes kept at their programmed value (letters, e.g. `C`); default: the rotary axes when
+    /// the machine has three linear ones, else none.
+    #[arg(long, value_name = "AXES")]
+    hold: Option<String>,
+    /// Largest distance between an arc and its chords (mm).
+    #[arg(long, default_value_t = 0.001)]
+    chord_tolerance: f64,
+    /// Split linear moves longer than this (mm) so the corrected path follows the bent one.
+    #[arg(long)]
+    max_segment: Option<f64>,
+    /// Decimals of the written commands (mm, degrees).
+    #[arg(long, default_value_t = 4)]
+    decimals: usize,
+    /// Largest accepted deviation of a corrected command from its target, as solved (mm).
+    #[arg(long, default_value_t = 1e-9)]
+    tolerance: f64,
+}
+
+fn load_results(path: &Path) -> Result<(Model, Vec<f64>)> {
+    let label = path.display().to_string();
+    let file = ResultsFile::load(path).context("reading the results file")?;
+    Ok(file.to_model(&label)?)
+}
+
+fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
+    if let Some(id) = &a.tool_reflector {
+        let m = model.machine();
+        let Some(r) = m.reflector_index(id) else {
+            let ids: Vec<&str> = m.reflectors().iter().map(|r| r.id.as_str()).collect();
+            bail!(
+                "--tool-reflector {id}: the machine's reflectors are {}",
+                ids.join(", ")
+            );
+        };
+        return Ok(m.reflectors()[r].offset);
+    }
+    let Some(text) = &a.tool else {
+        return Ok(reflector_centroid(model));
+    };
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| anyhow::anyhow!("--tool {text}: expected X,Y,Z in mm"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        _ => bail!("--tool {text}: expected three finite numbers X,Y,Z in mm"),
+    }
+}
+
+/// The centroid of the reflector offsets (mm).
+pub fn reflector_centroid(model: &Model) -> [f64; 3] {
+    let r = model.machine().reflectors();
+    let mut c = [0.0; 3];
+    for x in r {
+        for i in 0..3 {
+            c[i] += x.offset[i] / r.len() as f64;
+        }
+    }
+    c
+}
+
+/// With one or two reflectors the rotation of the tool side about the line through them is
+/// invisible to the tracker, so a tool point off that line is compensated with errors the
+/// measurement did not see. The distance of the tool point from that line (mm), or `None`
+/// with three reflectors or more (not collinear: they see every rotation).
+pub fn distance_from_reflector_line(model: &Model, tool: [f64; 3]) -> Option<f64> {
+    let r = model.machine().reflectors();
+    let d = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    match r.len() {
+        1 => Some(norm(d(tool, r[0].offset))),
+        2 => {
+            let u = d(r[1].offset, r[0].offset);
+            let w = d(tool, r[0].offset);
+            let cross = [
+                u[1] * w[2] - u[2] * w[1],
+                u[2] * w[0] - u[0] * w[2],
+                u[0] * w[1] - u[1] * w[0],
+            ];
+            Some(norm(cross) / norm(u))
+        }
+        _ => None,
+    }
+}
+
+/// Runs `volver compensate`.
+pub fn compensate_command(a: CompensateArgs) -> Result<()> {
+    let (model, params) = load_results(&a.results)?;
+    let m = model.machine();
+    let tool = parse_tool(&a, &model)?;
+    let comp = match &a.hold {
+        Some(h) => {
+            let held: Vec<Axis> = h
+                .chars()
+                .filter(|c| !c.is_whitespace() && *c != ',')
+                .map(|c| {
+                    Axis::from_letter(c)
+                        .ok_or_else(|| anyhow::anyhow!("--hold {h}: '{c}' is not an axis letter"))
+                })
+                .collect::<Result<_>>()?;
+            Compensator::holding(&model, &params, tool, &held)?
+        }
+        None => Compensator::new(&model, &params, tool)?,
+    };
+    if let Some(d) = distance_from_reflector_line(&model, tool)
+        && d > 1.0
+    {
+        println!(
+            "  warning: the tool point is {d:.1} mm off the line through the reflectors; the tracker does not see the tool side's rotation about that line, so its compensation there rests on unmeasured errors"
+        );
+    }
+    let free: String = comp
+        .free_axes()
+        .iter()
+        .map(|&k| m.axes()[k].axis.letter())
+        .collect();
+    println!(
+        "volver compensate — {} with the errors of {} (model \"{}\"), tool point ({}, {}, {}) mm, solving for {free}",
+        m.chain(),
+        a.results.display(),
+        model.spec().name,
+        tool[0],
+        tool[1],
+        tool[2]
+    );
+    let (worst_solved, worst_written, outside) = if let Some(path) = &a.points {
+        let label = path.display().to_string();
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
+        let pts = read_points(&text, &label, m)?;
+        let axes = m.axes();
+        let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
+        let mut out = format!(
+            "line,id,{},{},error_um,deviation_um,outside_travel\n",
+            letters.join(","),
+            letters
+                .iter()
+                .map(|l| format!("{l}_programmed"))
+                .collect::<Vec<_>>()
+                .join(",")
+        );
+        let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
+        for p in &pts {
+            let c = comp
+                .compensate(&p.commands)
+                .with_context(|| format!("{label}:{}", p.line))?;
+            let dec = a.decimals;
+            let mut written = p.commands;
+            let cells: Vec<String> = axes
+                .iter()
+                .enumerate()
+                .map(|(k, x)| {
+                    let t = format!("{:.dec$}", x.to_file_units(c.commands.0[k]));
+                    written.0[k] = x.from_file_units(t.parse().expect("formatted"));
+                    t
+                })
+                .collect();
+            let prog: Vec<String> = axes
+                .iter()
+                .enumerate()
+                .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
+                .collect();
+            let wd = distance(comp.actual_point(&written), c.target);
+            ws = ws.max(c.deviation_mm);
+            ww = ww.max(wd);
+            largest = largest.max(c.error_mm);
+            let off: String = c
+                .outside_travel
+                .iter()
+                .map(|&k| axes[k].axis.letter())
+                .collect();
+            outside += usize::from(!off.is_empty());
+            out.push_str(&format!(
+                "{},{},{},{},{:.4},{:.6},{off}\n",
+                p.line,
+                p.id.clone().unwrap_or_default(),
+                cells.join(","),
+                prog.join(","),
+                c.error_mm * 1e3,
+                wd * 1e3
+            ));
+        }
+        write_atomic(&a.out, out).with_context(|| format!("writing {}", a.out.display()))?;
+        println!(
+            "  {} points from {label}: uncompensated error up to {:.4} µm",
+            pts.len(),
+            largest * 1e3
+        );
+        (ws, ww, outside)
+    } else {
+        let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
+        let label = path.display().to_string();
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
+        let lin = Linearise {
+            chord_tolerance_mm: a.chord_tolerance,
+            max_segment_mm: a.max_segment,
+        };
+        let prog = Program::parse(&text, &label, m, &lin)?;
+        let header = format!(
+            "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {:?} mm; errors of model {}",
+            env!("CARGO_PKG_VERSION"),
+            a.results.display(),
+            a.chord_tolerance,
+            tool,
+            model.spec().name
+        );
+        let (out, rep) = prog.compensate(&comp, m, a.decimals, &header)?;
+        write_atomic(&a.out, out).with_context(|| format!("writing {}", a.out.display()))?;
+        println!(
+            "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
+            rep.moves,
+            rep.arcs,
+            a.chord_tolerance,
+            rep.points,
+            rep.max_error_mm * 1e3
+        );
+        (
+            rep.max_deviation_mm,
+            rep.max_written_deviation_mm,
+            rep.outside_travel.len(),
+        )
+    };
+    println!(
+        "  verified through the forward model: largest deviation {:.3e} mm as solved, {:.3e} mm as written ({} decimals)",
+        worst_solved, worst_written, a.decimals
+    );
+    if outside > 0 {
+        println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
+    }
+    println!("  written to {}", a.out.display());
+    if !(worst_solved <= a.tolerance) {
+        bail!(
+            "a corrected command misses its target by {worst_solved:.3e} mm, above the tolerance {:.1e} mm",
+            a.tolerance
+        );
+    }
+    Ok(())
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Options of `volver tables`.
+#[derive(clap::Args)]
+pub struct TablesArgs {
+    /// Results file of `volver identify`.
+    #[arg(long)]
+    results: PathBuf,
+    /// Output folder: writes errors-isg.csv, errors-etalon.txt and errors.csv.
+    #[arg(long)]
+    out: PathBuf,
+    /// Step over linear axes (mm).
+    #[arg(long, default_value_t = 10.0)]
+    step: f64,
+    /// Step over rotary axes (degrees).
+    #[arg(long, default_value_t = 5.0)]
+    rotary_step: f64,
+}
+
+/// Writes the three table formats into `dir`; returns their paths.
+pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let files = [
+        ("errors-isg.csv", tables.to_isg_csv()),
+        ("errors-etalon.txt", tables.to_etalon()),
+        ("errors.csv", tables.to_plain_csv()),
+    ];
+    let mut out = Vec::new();
+    for (name, text) in files {
+        let p = dir.join(name);
+        write_atomic(&p, text).with_context(|| format!("writing {}", p.display()))?;
+        out.push(p);
+    }
+    Ok(out)
+}
+
+/// Runs `volver tables`.
+pub fn tables_command(a: TablesArgs) -> Result<()> {
+    let (model, params) = load_results(&a.results)?;
+    let tables = ErrorTables::from_model(&model, &params, a.step, a.rotary_step)?;
+    let paths = write_tables(&tables, &a.out)?;
+    println!(
+        "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
+        a.results.display()
+    );
+    for t in &tables.axes {
+        let names: Vec<&str> = t.errors.iter().map(|e| e.0.as_str()).collect();
+        println!(
+            "  axis {}: {} positions, {}",
+            t.axis,
+            t.positions.len(),
+            names.join(" ")
+        );
+    }
+    let consts: Vec<&str> = tables.constants.iter().map(|c| c.0.as_str()).collect();
+    println!("  constants: {}", consts.join(" "));
+    for p in paths {
+        println!("  written {}", p.display());
+    }
+    Ok(())
+}
