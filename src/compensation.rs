@@ -87,8 +87,8 @@ pub fn reflector_centroid(model: &Model) -> [f64; 3] {
     let r = model.machine().reflectors();
     let mut c = [0.0; 3];
     for x in r {
-        for i in 0..3 {
-            c[i] += x.offset[i] / r.len() as f64;
+        for (ci, oi) in c.iter_mut().zip(x.offset) {
+            *ci += oi / r.len() as f64;
         }
     }
     c
@@ -262,7 +262,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
     }
     println!("  written to {}", a.out.display());
-    if !(worst_solved <= a.tolerance) {
+    if worst_solved.is_nan() || worst_solved > a.tolerance {
         bail!(
             "a corrected command misses its target by {worst_solved:.3e} mm, above the tolerance {:.1e} mm",
             a.tolerance
