@@ -2,7 +2,10 @@
 
 mod compare;
 mod compensation;
+mod demo;
 mod history;
+mod plot;
+mod report;
 mod study;
 
 use anyhow::{Context, Result};
@@ -10,7 +13,6 @@ use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use volver::core::machine::{Machine, TrackerMount};
 use volver::core::measure::MeasurementSet;
-use volver::core::metrics::ErrorStats;
 use volver::core::model::{ConstraintKind, ErrorModelSpec, Model};
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
@@ -33,8 +35,18 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// The main job on the embedded default: the paper's XCFZ grinder and its error model.
-    Demo,
+    /// The main job on the embedded default: a synthetic verification of the paper's XCFZ
+    /// grinder with an effect the paper's model lacks — identify, diagnose, add the missing
+    /// effect, cross-validate, compensate; writes the HTML report and controller tables.
+    Demo {
+        /// Output folder.
+        #[arg(long, default_value = demo::DEMO_DIR)]
+        out: PathBuf,
+    },
+    /// Identifies, diagnoses and writes one self-contained HTML report (inline SVG): machine,
+    /// model, summary, colour maps and vector diagrams before/after, error functions with
+    /// uncertainty bands, residual breakdowns, candidates, identifiability, cross-validation.
+    Report(ReportArgs),
     /// Shows a machine and error model: chain, axes, reflectors, parameter layout, constraints.
     Layout {
         /// Machine file (TOML); the embedded XCFZ grinder when absent.
@@ -219,15 +231,8 @@ Example:
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Demo => {
-            println!(
-                "volver demo — the embedded XCFZ grinder of Aguado et al. (2014) and the paper's error model\n"
-            );
-            let model = Model::default_xcfz();
-            print_layout(&model)?;
-            print_nominal_points(&model);
-            demo_simulation(&model)?;
-        }
+        Command::Demo { out } => demo::run(&out)?,
+        Command::Report(args) => report_command(args)?,
         Command::Layout { machine, model } => {
             let m = match &machine {
                 Some(p) => Machine::load(p).with_context(|| "reading the machine file")?,
@@ -452,6 +457,123 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
             }
         );
     }
+    Ok(())
+}
+
+/// Options of `volver report`.
+#[derive(clap::Args)]
+struct ReportArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Candidates to add to the model before the final fit (ids from `volver diagnose`); the
+    /// report shows the fit without and with them.
+    #[arg(long)]
+    add: Vec<String>,
+    /// True errors (results file), for synthetic data: overlaid on the error functions.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// A reference measurement file: the identified errors compensate it (cross-validation).
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// The HTML file to write.
+    #[arg(long, default_value = "volver-report.html")]
+    out: PathBuf,
+}
+
+fn report_command(a: ReportArgs) -> Result<()> {
+    let (machine, model, data) = a.inputs.load()?;
+    let problem = Problem::new(&model, &data)?;
+    let id1 = volver::solvers::strategy::fit(problem);
+    if id1.termination.failed() {
+        anyhow::bail!("the fit failed: {}", id1.termination);
+    }
+    let options = Options::default();
+    let candidates =
+        volver::solvers::candidates::rank(&problem, &id1.params, options.rank_tolerance);
+    let mut extended = model.clone();
+    for id in &a.add {
+        let library = volver::solvers::candidates::library(&extended);
+        let Some(c) = library.iter().find(|c| &c.id == id) else {
+            let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
+            anyhow::bail!(
+                "--add {id}: not a candidate for this model; candidates are {}",
+                ids.join(", ")
+            );
+        };
+        extended = Model::new(machine.clone(), c.spec.clone())?;
+    }
+    let id2 = if a.add.is_empty() {
+        None
+    } else {
+        let id = volver::solvers::strategy::fit(Problem::new(&extended, &data)?);
+        if id.termination.failed() {
+            anyhow::bail!(
+                "the fit with {} failed: {}",
+                a.add.join(", "),
+                id.termination
+            );
+        }
+        Some(id)
+    };
+    let truth = match &a.truth {
+        Some(p) => Some(
+            ResultsFile::load(p)
+                .context("reading the truth file")?
+                .to_model(&p.display().to_string())?,
+        ),
+        None => None,
+    };
+    let (last_model, last_params) = match &id2 {
+        Some(id) => (&extended, &id.params),
+        None => (&model, &id1.params),
+    };
+    let mut cross = Vec::new();
+    if let Some(path) = &a.reference {
+        let set =
+            MeasurementSet::load(&machine, path).context("reading the reference measurements")?;
+        let lm = volver::solvers::lm::LevenbergMarquardt;
+        let cv = volver::solvers::strategy::cross_validate(
+            &lm,
+            Problem::new(last_model, &set)?,
+            last_params,
+            &options,
+            &mut volver::solvers::Silent,
+        );
+        cross.push((
+            a.inputs.data.display().to_string(),
+            cv.initial.stats.emm_um,
+            cv.final_.stats.emm_um,
+            cv.residual_percent(),
+        ));
+    }
+    let mut fits = vec![report::Fit {
+        label: model.spec().name.clone(),
+        model: &model,
+        id: &id1,
+    }];
+    if let Some(id) = &id2 {
+        fits.push(report::Fit {
+            label: format!("+ {}", a.add.join(" + ")),
+            model: &extended,
+            id,
+        });
+    }
+    let input = report::ReportInput {
+        title: format!("volver report — {}", a.inputs.data.display()),
+        data_label: a.inputs.data.display().to_string(),
+        data: &data,
+        fits,
+        truth: truth.as_ref().map(|(m, p)| (m, p.as_slice())),
+        noise_um: None,
+        candidates,
+        engines: Vec::new(),
+        cross,
+        notes: Vec::new(),
+    };
+    let html = report::html(&input)?;
+    volver::core::fsio::write_atomic(&a.out, html)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    println!("volver report — written to {}", a.out.display());
     Ok(())
 }
 
@@ -1002,140 +1124,13 @@ fn print_layout(model: &Model) -> Result<()> {
     Ok(())
 }
 
-/// Nominal predicted points (every error zero) at a few commands, with the Jacobian's size.
-fn print_nominal_points(model: &Model) {
-    let m = model.machine();
-    let p = model.initial_params();
-    let mut jac = vec![0.0; 3 * model.n_params()];
-    println!("\nForward model (eq. 11), every error zero, tracker at its nominal pose:");
-    let header: Vec<String> = m
-        .axes()
-        .iter()
-        .map(|a| format!("{} ({})", a.axis, a.file_unit()))
-        .collect();
-    println!(
-        "  {:<28} refl.  predicted point in the tracker frame (mm)   |∂x/∂p| (largest column)",
-        header.join(" ")
-    );
-    for pos in [
-        [0.0, 0.0, 0.0],
-        [700.0, 90.0, 300.0],
-        [1400.0, 225.0, 600.0],
-    ] {
-        let cmd = m.commands_from_file_units(&pos);
-        for r in 0..m.reflectors().len() {
-            let x = model.predict_with_jacobian(&cmd, r, &p, &mut jac);
-            let n = model.n_params();
-            let (best, norm) = (0..n)
-                .map(|j| {
-                    (
-                        j,
-                        (jac[j].powi(2) + jac[n + j].powi(2) + jac[2 * n + j].powi(2)).sqrt(),
-                    )
-                })
-                .fold((0, 0.0), |a, b| if b.1 > a.1 { b } else { a });
-            let cmd_text: Vec<String> = pos.iter().map(|v| format!("{v}")).collect();
-            println!(
-                "  {:<28} {:<5}  ({:>10.3}, {:>10.3}, {:>10.3})   {} = {:.1} mm/{}",
-                cmd_text.join(", "),
-                m.reflectors()[r].id,
-                x[0],
-                x[1],
-                x[2],
-                model.params()[best].name,
-                norm,
-                model.params()[best].unit
-            );
-        }
-    }
-}
-
-/// Seed of the demo's synthetic test.
-const DEMO_SEED: u64 = 7;
-
 /// The demo's synthetic test 4 on `model`'s machine: random true errors in the model (default
-/// magnitudes), the paper's tracker noise, seed [`DEMO_SEED`]. `volver compare` uses it too.
+/// magnitudes), the paper's tracker noise, seed [`demo::DEMO_SEED`], no hidden effect.
+/// `volver compare` uses it.
 fn demo_test4(model: &Model) -> Result<volver::core::simulate::Synthetic> {
     let m = model.machine();
-    let truth = Truth::random(m, model.spec(), &Magnitudes::default(), DEMO_SEED)?;
-    Ok(Simulation::new(Plan::preset(m, "test4")?, truth, DEMO_SEED).run()?)
-}
-
-/// The demo's synthetic test: the paper's reference mesh (test 4) on the XCFZ grinder with random
-/// true errors and the paper's tracker noise.
-fn demo_simulation(model: &Model) -> Result<()> {
-    let (m, seed) = (model.machine(), DEMO_SEED);
-    let out = demo_test4(model)?;
-    let r = &out.record;
-    println!(
-        "\nSynthetic test (paper, section 4.1): plan test4, {} positions × {} reflectors = {} points, seed {seed}",
-        r.positions,
-        r.reflectors.len(),
-        r.points
-    );
-    println!(
-        "  true errors drawn at the default magnitudes (50 µm positioning, 30 µm straightness, 50 µrad angular …)"
-    );
-    println!(
-        "  machine error (noise-free vs nominal points): EMM {:7.2} µm  EMax {:7.2} µm",
-        r.machine_error.emm_um, r.machine_error.emax_um
-    );
-    println!(
-        "  noise error (30 µrad, 30 µrad, 4 µm + 0.8 µm/m): EMM {:7.2} µm  EMax {:7.2} µm",
-        r.noise_error.emm_um, r.noise_error.emax_um
-    );
-    println!("  first points of the measurement file:");
-    let csv = out.measurements.to_csv_string(m);
-    for line in csv.lines().take(3) {
-        println!("    {line}");
-    }
-    let id = volver::solvers::strategy::fit(Problem::new(model, &out.measurements)?);
-    println!(
-        "\nIdentification (native Levenberg–Marquardt, objective Φ, one phase, {} free parameters):",
-        id.phases.first().map_or(0, |s| s.free_parameters)
-    );
-    println!(
-        "  EMM {} → {} µm, EMax {} → {} µm, residual {:.2} % (the paper's test 4: 5.83 %)",
-        um(id.initial.stats.emm_um),
-        um(id.final_.stats.emm_um),
-        um(id.initial.stats.emax_um),
-        um(id.final_.stats.emax_um),
-        id.residual_percent()
-    );
-    println!(
-        "  final EMM / noise error = {:.4}: the model explains everything but the noise",
-        id.final_.stats.emm_um / r.noise_error.emm_um
-    );
-    println!(
-        "  {} iterations, {} evaluations, {:.2} s, {}",
-        id.iterations(),
-        id.evaluations(),
-        id.time_s,
-        id.termination
-    );
-    // How well the identified model knows the true machine: its predictions against the
-    // noise-free points (the truth), which no real test has.
-    let predicted: Vec<[f64; 3]> = out
-        .measurements
-        .points
-        .iter()
-        .map(|pt| model.predict(&pt.commands, pt.reflector, &id.params))
-        .collect();
-    let known = ErrorStats::between(&predicted, &out.noise_free);
-    println!(
-        "  identified model vs the true machine (noise-free points): EMM {} µm, EMax {} µm",
-        um(known.emm_um),
-        um(known.emax_um)
-    );
-    println!(
-        "  (single error functions are not compared: the model's squareness rule and its nearly\n  \
-         redundant parameters let different functions give the same points)"
-    );
-    println!(
-        "\nRun it yourself: `volver simulate --plan test4 --seed 7 --out sim`, then\n\
-         `volver identify --data sim/measurements.csv --truth sim/truth.json`. Diagnosis comes next."
-    );
-    Ok(())
+    let truth = Truth::random(m, model.spec(), &Magnitudes::default(), demo::DEMO_SEED)?;
+    Ok(Simulation::new(Plan::preset(m, "test4")?, truth, demo::DEMO_SEED).run()?)
 }
 
 fn letters(v: &[volver::core::iso::Axis]) -> String {

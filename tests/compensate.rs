@@ -464,3 +464,70 @@ fn compensate_and_tables_through_the_cli() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `volver report` writes one self-contained HTML file: inline SVG, no scripts, no network,
+/// no NaN, with every section.
+#[test]
+fn the_report_is_one_self_contained_html_file() {
+    use common::volver;
+    let dir = std::env::temp_dir().join(format!("volver-report-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = |n: &str| dir.join(n).display().to_string();
+    let out = volver(&[
+        "simulate",
+        "--plan",
+        "test3",
+        "--seed",
+        "4",
+        "--out",
+        &d("sim"),
+    ]);
+    assert!(out.status.success());
+    let out = volver(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--seed",
+        "5",
+        "--out",
+        &d("ref"),
+    ]);
+    assert!(out.status.success());
+    let out = volver(&[
+        "report",
+        "--data",
+        &d("sim/measurements.csv"),
+        "--truth",
+        &d("sim/truth.json"),
+        "--reference",
+        &d("ref/measurements.csv"),
+        "--add",
+        "tracker-tilt",
+        "--out",
+        &d("r.html"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(d("r.html")).unwrap();
+    assert!(html.starts_with("<!DOCTYPE html>") && html.ends_with("</html>\n"));
+    for section in [
+        "Machine and model",
+        "Summary",
+        "Error over the measured volume",
+        "Identified error functions",
+        "Diagnosis",
+        "Identifiability",
+        "Cross-validation",
+    ] {
+        assert!(html.contains(section), "missing {section}");
+    }
+    assert!(html.matches("<svg").count() >= 8);
+    assert!(html.contains("class=\"truth\"") && html.contains("class=\"band\""));
+    assert!(!html.contains("<script"));
+    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
+    assert!(!html.contains("NaN") && !html.contains("inf µm"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

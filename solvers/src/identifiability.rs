@@ -44,6 +44,22 @@ pub struct Identifiability {
     pub correlations: Vec<(usize, usize, f64)>,
     /// The directions that are not identified, weakest first.
     pub weak: Vec<WeakDirection>,
+    /// A factor `F` of the parameters' covariance, `Cov(p) = F Fᵀ`: one column (length
+    /// n_params, in the parameters' units) per identified direction. The standard uncertainty
+    /// of any linear function `gᵀp` is `‖Fᵀg‖` — of an error function at a position, say.
+    pub covariance_factor: Vec<Vec<f64>>,
+}
+
+impl Identifiability {
+    /// Standard uncertainty of the linear function `gᵀp` of the parameters (identified
+    /// directions only).
+    pub fn uncertainty_of(&self, g: &[f64]) -> f64 {
+        self.covariance_factor
+            .iter()
+            .map(|c| c.iter().zip(g).map(|(a, b)| a * b).sum::<f64>().powi(2))
+            .sum::<f64>()
+            .sqrt()
+    }
 }
 
 /// Analyses `task` (its problem and constraints) at `params`. `tolerance` is the relative
@@ -76,6 +92,7 @@ pub fn analyse(
             uncertainty: vec![0.0; n],
             correlations: vec![],
             weak: vec![],
+            covariance_factor: vec![],
         });
     }
     let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
@@ -145,6 +162,10 @@ pub fn analyse(
         uncertainty,
         correlations,
         weak,
+        covariance_factor: w
+            .iter()
+            .map(|c| c.iter().map(|x| x * sigma2.sqrt()).collect())
+            .collect(),
     })
 }
 

@@ -1,0 +1,580 @@
+//! Self-contained SVG charts for the report: colour maps, vector diagrams, error functions with
+//! uncertainty bands, bar charts. No scripts, no fonts beyond the viewer's sans-serif, so the
+//! SVG can be inlined in HTML or opened on its own.
+
+use std::fmt::Write;
+
+/// Escapes text for SVG/HTML.
+pub fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn header(w: f64, h: f64, title: &str) -> String {
+    format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"11\">\n\
+         <rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n\
+         <text x=\"10\" y=\"18\" font-size=\"14\" font-weight=\"bold\">{}</text>\n",
+        escape(title)
+    )
+}
+
+/// About five round tick values covering [lo, hi].
+fn ticks(lo: f64, hi: f64) -> Vec<f64> {
+    let span = (hi - lo).abs().max(1e-12);
+    let raw = span / 5.0;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let mut v = (lo / step).ceil() * step;
+    let mut out = Vec::new();
+    while v <= hi + 1e-9 * span {
+        out.push(if v.abs() < 1e-12 * span { 0.0 } else { v });
+        v += step;
+    }
+    out
+}
+
+fn fmt_tick(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if v.abs() >= 1000.0 || v.fract() == 0.0 {
+        format!("{v:.0}")
+    } else if v.abs() >= 1.0 {
+        format!("{v:.1}")
+    } else {
+        format!("{v:.3}")
+            .trim_end_matches('0')
+            .trim_end_matches('.')
+            .to_string()
+    }
+}
+
+/// A rectangular plotting area with linear scales.
+#[derive(Clone, Copy)]
+struct Frame {
+    x0: f64,
+    y0: f64,
+    w: f64,
+    h: f64,
+    xr: (f64, f64),
+    yr: (f64, f64),
+}
+
+impl Frame {
+    fn x(&self, v: f64) -> f64 {
+        self.x0 + self.w * (v - self.xr.0) / (self.xr.1 - self.xr.0)
+    }
+    fn y(&self, v: f64) -> f64 {
+        self.y0 + self.h * (1.0 - (v - self.yr.0) / (self.yr.1 - self.yr.0))
+    }
+    /// Axes, ticks and labels.
+    fn axes(&self, s: &mut String, xlabel: &str, ylabel: &str) {
+        let _ = writeln!(
+            s,
+            "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>",
+            self.x0, self.y0, self.w, self.h
+        );
+        for t in ticks(self.xr.0, self.xr.1) {
+            let x = self.x(t);
+            let _ = writeln!(
+                s,
+                "<line x1=\"{x:.1}\" y1=\"{:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#444\"/><text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                self.y0 + self.h,
+                self.y0 + self.h + 4.0,
+                self.y0 + self.h + 15.0,
+                fmt_tick(t)
+            );
+        }
+        for t in ticks(self.yr.0, self.yr.1) {
+            let y = self.y(t);
+            let _ = writeln!(
+                s,
+                "<line x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#444\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
+                self.x0 - 4.0,
+                self.x0,
+                self.x0 - 6.0,
+                y + 4.0,
+                fmt_tick(t)
+            );
+        }
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+            self.x0 + self.w / 2.0,
+            self.y0 + self.h + 30.0,
+            escape(xlabel)
+        );
+        let _ = writeln!(
+            s,
+            "<text transform=\"translate({:.1},{:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
+            self.x0 - 40.0,
+            self.y0 + self.h / 2.0,
+            escape(ylabel)
+        );
+    }
+}
+
+/// A colour of the viridis-like scale for t in [0, 1].
+fn colour(t: f64) -> String {
+    const STOPS: [(f64, [f64; 3]); 5] = [
+        (0.0, [68.0, 1.0, 84.0]),
+        (0.25, [59.0, 82.0, 139.0]),
+        (0.5, [33.0, 145.0, 140.0]),
+        (0.75, [94.0, 201.0, 98.0]),
+        (1.0, [253.0, 231.0, 37.0]),
+    ];
+    let t = t.clamp(0.0, 1.0);
+    let i = STOPS.iter().rposition(|s| s.0 <= t).unwrap_or(0).min(3);
+    let (a, b) = (STOPS[i], STOPS[i + 1]);
+    let f = (t - a.0) / (b.0 - a.0);
+    let c: Vec<u8> = (0..3)
+        .map(|k| (a.1[k] + (b.1[k] - a.1[k]) * f).round() as u8)
+        .collect();
+    format!("#{:02x}{:02x}{:02x}", c[0], c[1], c[2])
+}
+
+/// One cell of a colour map or one arrow of a vector diagram: a position on the two plotted
+/// axes and a value (µm) or an in-plane vector (µm).
+#[derive(Clone, Debug)]
+pub struct Cell {
+    /// Position on the horizontal axis.
+    pub x: f64,
+    /// Position on the vertical axis.
+    pub y: f64,
+    /// The error module (µm) for a map; the horizontal component (µm) for a vector.
+    pub a: f64,
+    /// The vertical component (µm) for a vector; unused for a map.
+    pub b: f64,
+}
+
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), x| {
+        (l.min(x), h.max(x))
+    });
+    if !lo.is_finite() {
+        (0.0, 1.0)
+    } else if hi - lo < 1e-9 {
+        (lo - 1.0, hi + 1.0)
+    } else {
+        (lo, hi)
+    }
+}
+
+/// Side-by-side colour maps (fig. 16 of the paper) on one colour scale: each panel a title and
+/// its cells (cell width and height from the grid spacing).
+pub fn colour_maps(
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    panels: &[(&str, Vec<Cell>)],
+) -> String {
+    let pw = 330.0;
+    let (w, h) = (pw * panels.len() as f64 + 90.0, 360.0);
+    let mut s = header(w, h, title);
+    let vmax = panels
+        .iter()
+        .flat_map(|p| p.1.iter().map(|c| c.a))
+        .fold(0.0_f64, f64::max)
+        .max(1e-9);
+    for (i, (name, cells)) in panels.iter().enumerate() {
+        let xs = distinct(cells.iter().map(|c| c.x));
+        let ys = distinct(cells.iter().map(|c| c.y));
+        let dx = spacing(&xs);
+        let dy = spacing(&ys);
+        let f = Frame {
+            x0: 60.0 + pw * i as f64,
+            y0: 50.0,
+            w: pw - 80.0,
+            h: 250.0,
+            xr: (xs[0] - dx / 2.0, xs[xs.len() - 1] + dx / 2.0),
+            yr: (ys[0] - dy / 2.0, ys[ys.len() - 1] + dy / 2.0),
+        };
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"40\" text-anchor=\"middle\" font-size=\"12\">{}</text>",
+            f.x0 + f.w / 2.0,
+            escape(name)
+        );
+        for c in cells {
+            let (x, y) = (f.x(c.x - dx / 2.0), f.y(c.y + dy / 2.0));
+            let _ = writeln!(
+                s,
+                "<rect class=\"cell\" x=\"{x:.1}\" y=\"{y:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"{}\"><title>{:.1} µm</title></rect>",
+                f.x(c.x + dx / 2.0) - x + 0.3,
+                f.y(c.y - dy / 2.0) - y + 0.3,
+                colour(c.a / vmax),
+                c.a
+            );
+        }
+        f.axes(&mut s, xlabel, ylabel);
+    }
+    // Colour bar.
+    let (bx, by, bh) = (w - 60.0, 50.0, 250.0);
+    for k in 0..50 {
+        let t = k as f64 / 49.0;
+        let _ = writeln!(
+            s,
+            "<rect x=\"{bx}\" y=\"{:.1}\" width=\"14\" height=\"{:.1}\" fill=\"{}\"/>",
+            by + bh * (1.0 - t) - bh / 50.0,
+            bh / 50.0 + 0.5,
+            colour(t)
+        );
+    }
+    for t in ticks(0.0, vmax) {
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\">{}</text>",
+            bx + 18.0,
+            by + bh * (1.0 - t / vmax) + 4.0,
+            fmt_tick(t)
+        );
+    }
+    let _ = writeln!(s, "<text x=\"{bx}\" y=\"{:.1}\">µm</text>", by + bh + 18.0);
+    s.push_str("</svg>\n");
+    s
+}
+
+fn distinct(v: impl Iterator<Item = f64>) -> Vec<f64> {
+    let mut v: Vec<f64> = v.collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+    if v.is_empty() {
+        v.push(0.0);
+    }
+    v
+}
+
+fn spacing(v: &[f64]) -> f64 {
+    v.windows(2)
+        .map(|w| w[1] - w[0])
+        .fold(f64::INFINITY, f64::min)
+        .min(1e300)
+        .max(if v.len() < 2 { 1.0 } else { 1e-9 })
+}
+
+/// Side-by-side vector diagrams (fig. 17 of the paper): arrows of the in-plane error at each
+/// cell, magnified by `magnification` (stated in the chart).
+pub fn vector_diagrams(
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    magnification: f64,
+    panels: &[(&str, Vec<Cell>)],
+) -> String {
+    let pw = 330.0;
+    let (w, h) = (pw * panels.len() as f64 + 40.0, 370.0);
+    let mut s = header(w, h, &format!("{title} (arrows × {magnification:.0})"));
+    let _ = writeln!(
+        s,
+        "<defs><marker id=\"head\" viewBox=\"0 0 10 10\" refX=\"9\" refY=\"5\" markerWidth=\"5\" markerHeight=\"5\" orient=\"auto\"><path d=\"M0,0 L10,5 L0,10 z\" fill=\"#b03a2e\"/></marker></defs>"
+    );
+    for (i, (name, cells)) in panels.iter().enumerate() {
+        let (xr, yr) = (
+            range(cells.iter().map(|c| c.x)),
+            range(cells.iter().map(|c| c.y)),
+        );
+        let pad = |r: (f64, f64)| {
+            let m = 0.12 * (r.1 - r.0);
+            (r.0 - m, r.1 + m)
+        };
+        let f = Frame {
+            x0: 60.0 + pw * i as f64,
+            y0: 50.0,
+            w: pw - 80.0,
+            h: 250.0,
+            xr: pad(xr),
+            yr: pad(yr),
+        };
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"40\" text-anchor=\"middle\" font-size=\"12\">{}</text>",
+            f.x0 + f.w / 2.0,
+            escape(name)
+        );
+        f.axes(&mut s, xlabel, ylabel);
+        for c in cells {
+            // Components in µm, positions in mm: the arrow's length in mm is a·magnification/1000.
+            let (x1, y1) = (f.x(c.x), f.y(c.y));
+            let (x2, y2) = (
+                f.x(c.x + c.a * magnification * 1e-3),
+                f.y(c.y + c.b * magnification * 1e-3),
+            );
+            let _ = writeln!(
+                s,
+                "<circle cx=\"{x1:.1}\" cy=\"{y1:.1}\" r=\"1.5\" fill=\"#444\"/><line class=\"arrow\" x1=\"{x1:.1}\" y1=\"{y1:.1}\" x2=\"{x2:.1}\" y2=\"{y2:.1}\" stroke=\"#b03a2e\" stroke-width=\"1.3\" marker-end=\"url(#head)\"><title>({:.1}, {:.1}) µm</title></line>",
+                c.a, c.b
+            );
+        }
+    }
+    let _ = writeln!(
+        s,
+        "<text x=\"10\" y=\"{:.1}\">An arrow of 10 µm is drawn {:.0} mm long on the axes' scale.</text>",
+        h - 10.0,
+        10.0 * magnification * 1e-3
+    );
+    s.push_str("</svg>\n");
+    s
+}
+
+/// One error function for [`error_functions`].
+#[derive(Clone, Debug)]
+pub struct FunctionPanel {
+    /// ISO name.
+    pub name: String,
+    /// Axis label with unit (e.g. `X (mm)`).
+    pub xlabel: String,
+    /// Unit of the values (µm or µrad).
+    pub unit: String,
+    /// Positions.
+    pub x: Vec<f64>,
+    /// Identified values.
+    pub value: Vec<f64>,
+    /// Standard uncertainty of each value (same unit); the band is ± 2 of them.
+    pub sigma: Vec<f64>,
+    /// The true values, when known.
+    pub truth: Option<Vec<f64>>,
+}
+
+/// Small multiples of error functions against their axis position (fig. 15 of the paper):
+/// the identified function, a ±2σ band, and the truth (dashed) when known.
+pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
+    let cols = 3usize;
+    let rows = panels.len().div_ceil(cols).max(1);
+    let (pw, ph) = (290.0, 200.0);
+    let (w, h) = (pw * cols as f64 + 20.0, ph * rows as f64 + 60.0);
+    let mut s = header(w, h, title);
+    let _ = writeln!(
+        s,
+        "<text x=\"10\" y=\"36\"><tspan fill=\"#1f4e79\">— identified</tspan>  <tspan fill=\"#9dc3e6\">■ ±2σ (identified directions)</tspan>  <tspan fill=\"#c0392b\">- - truth</tspan></text>"
+    );
+    for (i, p) in panels.iter().enumerate() {
+        let (r, c) = (i / cols, i % cols);
+        let lo_hi = p
+            .value
+            .iter()
+            .zip(&p.sigma)
+            .flat_map(|(v, s)| [v - 2.0 * s, v + 2.0 * s])
+            .chain(p.truth.iter().flatten().copied());
+        let yr = range(lo_hi);
+        let m = 0.08 * (yr.1 - yr.0);
+        let f = Frame {
+            x0: 65.0 + pw * c as f64,
+            y0: 60.0 + ph * r as f64,
+            w: pw - 85.0,
+            h: ph - 70.0,
+            xr: range(p.x.iter().copied()),
+            yr: (yr.0 - m, yr.1 + m),
+        };
+        let mut band: Vec<String> =
+            p.x.iter()
+                .zip(p.value.iter().zip(&p.sigma))
+                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v + 2.0 * s)))
+                .collect();
+        band.extend(
+            p.x.iter()
+                .zip(p.value.iter().zip(&p.sigma))
+                .rev()
+                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v - 2.0 * s))),
+        );
+        let _ = writeln!(
+            s,
+            "<polygon class=\"band\" points=\"{}\" fill=\"#9dc3e6\" stroke=\"none\"/>",
+            band.join(" ")
+        );
+        let line = |v: &[f64]| -> String {
+            p.x.iter()
+                .zip(v)
+                .map(|(x, y)| format!("{:.1},{:.1}", f.x(*x), f.y(*y)))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        if let Some(t) = &p.truth {
+            let _ = writeln!(
+                s,
+                "<polyline class=\"truth\" points=\"{}\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"5 3\" stroke-width=\"1.5\"/>",
+                line(t)
+            );
+        }
+        let _ = writeln!(
+            s,
+            "<polyline class=\"identified\" points=\"{}\" fill=\"none\" stroke=\"#1f4e79\" stroke-width=\"1.8\"/>",
+            line(&p.value)
+        );
+        f.axes(&mut s, &p.xlabel, &p.unit);
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" font-weight=\"bold\">{}</text>",
+            f.x0 + 6.0,
+            f.y0 + 14.0,
+            escape(&p.name)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// A bar chart: one bar per (label, value), with an optional dashed reference line (label,
+/// value).
+pub fn bars(
+    title: &str,
+    unit: &str,
+    data: &[(String, f64)],
+    reference: Option<(&str, f64)>,
+) -> String {
+    let n = data.len().max(1) as f64;
+    let bw = (560.0 / n).clamp(14.0, 70.0);
+    let (w, h) = ((bw * n + 110.0).max(440.0), 300.0);
+    let mut s = header(w, h, title);
+    let vmax = data
+        .iter()
+        .map(|d| d.1)
+        .chain(reference.map(|r| r.1))
+        .fold(0.0_f64, f64::max)
+        .max(1e-12)
+        * 1.12;
+    let f = Frame {
+        x0: 70.0,
+        y0: 40.0,
+        w: bw * n,
+        h: 190.0,
+        xr: (0.0, n),
+        yr: (0.0, vmax),
+    };
+    let _ = writeln!(
+        s,
+        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>",
+        f.x0, f.y0, f.w, f.h
+    );
+    for t in ticks(0.0, vmax) {
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text><line x1=\"{:.1}\" y1=\"{2:.1}\" x2=\"{:.1}\" y2=\"{2:.1}\" stroke=\"#ddd\"/>",
+            f.x0 - 6.0,
+            f.y(t) + 4.0,
+            fmt_tick(t),
+            f.x0,
+            f.x0 + f.w
+        );
+    }
+    let _ = writeln!(
+        s,
+        "<text transform=\"translate(20,{:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
+        f.y0 + f.h / 2.0,
+        escape(unit)
+    );
+    let rotate = bw < 50.0;
+    for (i, (label, v)) in data.iter().enumerate() {
+        let x = f.x(i as f64 + 0.15);
+        let _ = writeln!(
+            s,
+            "<rect class=\"bar\" x=\"{x:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#4a7ab5\"><title>{}: {v:.4}</title></rect>",
+            f.y(*v),
+            0.7 * bw,
+            (f.y(0.0) - f.y(*v)).max(0.0),
+            escape(label)
+        );
+        let cx = x + 0.35 * bw;
+        if rotate {
+            let _ = writeln!(
+                s,
+                "<text transform=\"translate({cx:.1},{:.1}) rotate(45)\">{}</text>",
+                f.y0 + f.h + 10.0,
+                escape(label)
+            );
+        } else {
+            let _ = writeln!(
+                s,
+                "<text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text><text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                f.y0 + f.h + 14.0,
+                escape(label),
+                f.y(*v) - 3.0,
+                fmt_tick((v * 100.0).round() / 100.0)
+            );
+        }
+    }
+    if let Some((label, v)) = reference {
+        let y = f.y(v);
+        let _ = writeln!(
+            s,
+            "<line class=\"reference\" x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#c0392b\" stroke-dasharray=\"6 4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\" fill=\"#c0392b\">{} {v:.2}</text>",
+            f.x0,
+            f.x0 + f.w,
+            f.x0 + f.w,
+            y - 4.0,
+            escape(label)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_round_and_cover_the_range() {
+        assert_eq!(
+            ticks(0.0, 1400.0),
+            vec![0.0, 250.0, 500.0, 750.0, 1000.0, 1250.0]
+        );
+        let t = ticks(-0.013, 0.021);
+        assert!(
+            t.len() >= 3 && t.iter().all(|v| (-0.013..=0.021).contains(v)),
+            "{t:?}"
+        );
+    }
+
+    #[test]
+    fn charts_draw_what_they_are_given() {
+        let cells: Vec<Cell> = (0..4)
+            .flat_map(|i| {
+                (0..3).map(move |j| Cell {
+                    x: 100.0 * i as f64,
+                    y: 50.0 * j as f64,
+                    a: (i + j) as f64,
+                    b: 1.0,
+                })
+            })
+            .collect();
+        let m = colour_maps(
+            "t",
+            "X",
+            "Z",
+            &[("before", cells.clone()), ("after", cells.clone())],
+        );
+        assert_eq!(m.matches("class=\"cell\"").count(), 24);
+        let v = vector_diagrams("t", "X", "Z", 2000.0, &[("before", cells)]);
+        assert_eq!(v.matches("class=\"arrow\"").count(), 12);
+        assert!(v.contains("× 2000"));
+        let b = bars(
+            "t",
+            "µm",
+            &[("a".into(), 1.0), ("b".into(), 2.0)],
+            Some(("noise", 1.5)),
+        );
+        assert_eq!(b.matches("class=\"bar\"").count(), 2);
+        assert!(b.contains("class=\"reference\""));
+        let f = error_functions(
+            "t",
+            &[FunctionPanel {
+                name: "EXX".into(),
+                xlabel: "X (mm)".into(),
+                unit: "µm".into(),
+                x: vec![0.0, 1.0, 2.0],
+                value: vec![0.0, 1.0, 0.5],
+                sigma: vec![0.0, 0.1, 0.1],
+                truth: Some(vec![0.0, 1.1, 0.4]),
+            }],
+        );
+        assert!(f.contains("class=\"band\"") && f.contains("class=\"truth\""));
+        assert_eq!(colour(0.0), "#440154");
+        assert_eq!(colour(1.0), "#fde725");
+    }
+}

@@ -1,0 +1,582 @@
+//! `volver report`: one self-contained HTML file (inline SVG, no scripts, no network) with the
+//! machine, the model, the summary tables, the plots, the diagnosis and the identifiability.
+
+use crate::plot::{self, Cell, FunctionPanel, escape};
+use anyhow::Result;
+use std::collections::BTreeMap;
+use std::fmt::Write;
+use volver::core::diagnose;
+use volver::core::iso::{ErrorId, Unit};
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
+use volver::core::problem::{Problem, norm};
+use volver::solvers::Options;
+use volver::solvers::candidates::Score;
+use volver::solvers::identifiability::{Identifiability, analyse};
+use volver::solvers::init::init_tracker;
+use volver::solvers::strategy::Identification;
+
+/// One fitted model revision shown in the report.
+pub struct Fit<'a> {
+    /// What it is ("paper model", "+ raise-axis:C" …).
+    pub label: String,
+    /// The model.
+    pub model: &'a Model,
+    /// The identification.
+    pub id: &'a Identification,
+}
+
+/// Everything the report shows.
+pub struct ReportInput<'a> {
+    /// Title.
+    pub title: String,
+    /// The measurement file's name.
+    pub data_label: String,
+    /// The measurements.
+    pub data: &'a MeasurementSet,
+    /// The fits, first to last; the last is the one plotted.
+    pub fits: Vec<Fit<'a>>,
+    /// The true errors, when known (synthetic data).
+    pub truth: Option<(&'a Model, &'a [f64])>,
+    /// The noise error of the measurements (EMM µm), when known.
+    pub noise_um: Option<f64>,
+    /// Candidate effects ranked for the first fit (diagnosis).
+    pub candidates: Vec<Score>,
+    /// Per-engine rows (engine, EMM µm, EMax µm, residual %, termination), when compared.
+    pub engines: Vec<(String, f64, f64, f64, String)>,
+    /// Cross-validation rows (identified on, EMM before µm, after µm, residual %).
+    pub cross: Vec<(String, f64, f64, f64)>,
+    /// Free text paragraphs (what the demo did, where the files are).
+    pub notes: Vec<String>,
+}
+
+/// Per-cell means over the points that share the two plotted axes' positions.
+fn cells(
+    problem: &Problem,
+    axes: (usize, usize),
+    vectors: &[[f64; 3]],
+    dirs: (usize, usize),
+) -> (Vec<Cell>, Vec<Cell>) {
+    let data = problem.data();
+    let m = problem.model().machine();
+    let (ka, kb) = axes;
+    // Per cell: position, sum of modules, sum of vectors, count.
+    type Sums = (f64, f64, f64, [f64; 3], usize);
+    let mut groups: BTreeMap<(i64, i64), Sums> = BTreeMap::new();
+    for (p, v) in data.points.iter().zip(vectors) {
+        let (x, y) = (
+            m.axes()[ka].to_file_units(p.commands.0[ka]),
+            m.axes()[kb].to_file_units(p.commands.0[kb]),
+        );
+        let key = ((x * 1e3).round() as i64, (y * 1e3).round() as i64);
+        let g = groups.entry(key).or_insert((x, y, 0.0, [0.0; 3], 0));
+        g.2 += norm(*v) * 1e3;
+        for (acc, vc) in g.3.iter_mut().zip(v) {
+            *acc += vc * 1e3;
+        }
+        g.4 += 1;
+    }
+    let map = groups
+        .values()
+        .map(|g| Cell {
+            x: g.0,
+            y: g.1,
+            a: g.2 / g.4 as f64,
+            b: 0.0,
+        })
+        .collect();
+    let arrows = groups
+        .values()
+        .map(|g| Cell {
+            x: g.0,
+            y: g.1,
+            a: g.3[dirs.0] / g.4 as f64,
+            b: g.3[dirs.1] / g.4 as f64,
+        })
+        .collect();
+    (map, arrows)
+}
+
+/// The two linear axes with the most distinct positions in the data (chain positions).
+fn plotted_axes(problem: &Problem) -> Option<(usize, usize)> {
+    let m = problem.model().machine();
+    let mut counts: Vec<(usize, usize)> = (0..m.axes().len())
+        .filter(|&k| !m.axes()[k].axis.is_rotary())
+        .map(|k| {
+            let mut v: Vec<i64> = problem
+                .data()
+                .points
+                .iter()
+                .map(|p| (p.commands.0[k] * 1e3).round() as i64)
+                .collect();
+            v.sort_unstable();
+            v.dedup();
+            (v.len(), k)
+        })
+        .collect();
+    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+    match counts[..] {
+        [(_, a), (_, b), ..] => Some((a.min(b), a.max(b))),
+        _ => None,
+    }
+}
+
+/// The error functions of a fit against their axis positions, with ±2σ bands.
+fn function_panels(
+    model: &Model,
+    params: &[f64],
+    ident: Option<&Identifiability>,
+    truth: Option<(&Model, &[f64])>,
+) -> Vec<FunctionPanel> {
+    let m = model.machine();
+    let mut out = Vec::new();
+    for t in model.terms() {
+        let ErrorId::Component { .. } = t.id else {
+            continue;
+        };
+        let ax = &m.axes()[t.axis];
+        let (scale, unit) = micro(t.id);
+        let n = 61;
+        let (mut x, mut value, mut sigma, mut tv) = (vec![], vec![], vec![], vec![]);
+        let mut g = vec![0.0; model.n_params()];
+        let mut gb = vec![0.0; t.params.len()];
+        for i in 0..n {
+            let u = ax.min + (ax.max - ax.min) * i as f64 / (n - 1) as f64;
+            let arg = if t.basis.kind().is_periodic() {
+                u
+            } else {
+                ax.normalise(u)
+            };
+            let v = t.basis.eval(arg, &params[t.params.clone()], &mut gb);
+            g.fill(0.0);
+            g[t.params.clone()].copy_from_slice(&gb);
+            x.push(ax.to_file_units(u));
+            value.push(v * scale);
+            sigma.push(ident.map_or(0.0, |a| a.uncertainty_of(&g)) * scale);
+            if let Some((tm, tp)) = truth {
+                tv.push(tm.error_value(t.id, u, tp).map(|v| v * scale));
+            }
+        }
+        let truth_values = if tv.iter().all(Option::is_some) && !tv.is_empty() {
+            Some(tv.into_iter().flatten().collect())
+        } else {
+            None
+        };
+        out.push(FunctionPanel {
+            name: t.id.to_string(),
+            xlabel: format!("{} ({})", ax.axis, ax.file_unit()),
+            unit: unit.into(),
+            x,
+            value,
+            sigma,
+            truth: truth_values,
+        });
+    }
+    out
+}
+
+/// Scale from internal units (mm, rad) to µm or µrad, and the unit's name.
+fn micro(id: ErrorId) -> (f64, &'static str) {
+    if id.unit() == Unit::Rad {
+        (1e6, "µrad")
+    } else {
+        (1e3, "µm")
+    }
+}
+
+fn table(head: &[&str], rows: &[Vec<String>]) -> String {
+    let mut s = String::from("<table><tr>");
+    for h in head {
+        let _ = write!(s, "<th>{}</th>", escape(h));
+    }
+    s.push_str("</tr>\n");
+    for r in rows {
+        s.push_str("<tr>");
+        for c in r {
+            let _ = write!(s, "<td>{}</td>", escape(c));
+        }
+        s.push_str("</tr>\n");
+    }
+    s.push_str("</table>\n");
+    s
+}
+
+/// The HTML text.
+pub fn html(input: &ReportInput) -> Result<String> {
+    let last = input
+        .fits
+        .last()
+        .ok_or_else(|| anyhow::anyhow!("no fit to report"))?;
+    let model = last.model;
+    let m = model.machine();
+    let problem = Problem::new(model, input.data)?;
+    let params = &last.id.params;
+    let before_params =
+        init_tracker(&problem, &model.initial_params()).map_err(anyhow::Error::msg)?;
+    let before = problem.residuals(&before_params);
+    let after = problem.residuals(params);
+    let options = Options::default();
+    let task = volver::solvers::Task::new(problem);
+    let ident = analyse(&task, params, options.rank_tolerance, 0.95);
+    let mut s = String::new();
+    let _ = write!(
+        s,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>\
+         body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222;line-height:1.4}}\
+         h1{{font-size:1.6em}} h2{{border-bottom:1px solid #ccc;margin-top:2em}}\
+         table{{border-collapse:collapse;margin:0.6em 0}} td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
+         th{{background:#eef2f7}} td:first-child{{text-align:left}} .note{{background:#f6f8fa;padding:0.6em 1em;border-left:4px solid #4a7ab5}}\
+         svg{{max-width:100%;height:auto}}</style></head><body>\n<h1>{}</h1>\n",
+        escape(&input.title),
+        escape(&input.title)
+    );
+    for n in &input.notes {
+        let _ = writeln!(s, "<p class=\"note\">{}</p>", escape(n));
+    }
+    // Machine and model.
+    let _ = writeln!(
+        s,
+        "<h2>Machine and model</h2><p>Machine <b>{}</b>, chain <b>{}</b>; measurements <b>{}</b> ({} points). Final model <b>{}</b>: {} parameters, {} constraints.</p>",
+        escape(&m.spec().name),
+        m.chain(),
+        escape(&input.data_label),
+        input.data.points.len(),
+        escape(&model.spec().name),
+        model.n_params(),
+        model.constraints().rows.len()
+    );
+    let axis_rows: Vec<Vec<String>> = m
+        .axes()
+        .iter()
+        .map(|a| {
+            vec![
+                a.axis.to_string(),
+                format!("{:?}", a.side).to_lowercase(),
+                format!(
+                    "{} … {} {}",
+                    a.to_file_units(a.min),
+                    a.to_file_units(a.max),
+                    a.file_unit()
+                ),
+                model
+                    .terms()
+                    .iter()
+                    .filter(|t| m.axes()[t.axis].axis == a.axis)
+                    .map(|t| format!("{} ({} {})", t.id, t.basis.kind(), t.basis.degree()))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            ]
+        })
+        .collect();
+    s.push_str(&table(
+        &[
+            "axis",
+            "side",
+            "travel",
+            "modelled errors (basis, degree/order)",
+        ],
+        &axis_rows,
+    ));
+    // Summary.
+    let _ = writeln!(s, "<h2>Summary</h2>");
+    let rows: Vec<Vec<String>> = input
+        .fits
+        .iter()
+        .map(|f| {
+            vec![
+                f.label.clone(),
+                f.model.n_params().to_string(),
+                format!("{:.3}", f.id.initial.stats.emm_um),
+                format!("{:.3}", f.id.final_.stats.emm_um),
+                format!("{:.3}", f.id.final_.stats.emax_um),
+                format!("{:.2} %", f.id.residual_percent()),
+                input.noise_um.map_or("–".into(), |n| {
+                    format!("{:.3}", f.id.final_.stats.emm_um / n)
+                }),
+                f.id.termination.to_string(),
+            ]
+        })
+        .collect();
+    s.push_str(&table(
+        &[
+            "model",
+            "parameters",
+            "EMM before µm",
+            "EMM after µm",
+            "EMax after µm",
+            "residual",
+            "EMM / noise",
+            "termination",
+        ],
+        &rows,
+    ));
+    if let Some(n) = input.noise_um {
+        let _ = writeln!(
+            s,
+            "<p>Noise error of the measurements (known for synthetic data): EMM {n:.3} µm. A model that explains everything but the noise ends at EMM / noise ≈ 1.</p>"
+        );
+    }
+    if !input.engines.is_empty() {
+        let rows: Vec<Vec<String>> = input
+            .engines
+            .iter()
+            .map(|e| {
+                vec![
+                    e.0.clone(),
+                    format!("{:.4}", e.1),
+                    format!("{:.4}", e.2),
+                    format!("{:.3} %", e.3),
+                    e.4.clone(),
+                ]
+            })
+            .collect();
+        let _ = writeln!(s, "<h3>Per engine</h3>");
+        s.push_str(&table(
+            &["engine", "EMM µm", "EMax µm", "residual", "termination"],
+            &rows,
+        ));
+    }
+    // Maps and vectors.
+    if let Some((ka, kb)) = plotted_axes(&problem) {
+        let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
+        let dirs = (la.direction(), lb.direction());
+        let mb = diagnose::to_machine_frame(&problem, &before_params, &before);
+        let ma = diagnose::to_machine_frame(&problem, params, &after);
+        let (map_b, vec_b) = cells(&problem, (ka, kb), &mb, dirs);
+        let (map_a, vec_a) = cells(&problem, (ka, kb), &ma, dirs);
+        let _ = writeln!(
+            s,
+            "<h2>Error over the measured volume</h2><p>Mean error module per {la}–{lb} position (over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.</p>"
+        );
+        s.push_str(&plot::colour_maps(
+            "Error module (µm)",
+            &format!("{la} (mm)"),
+            &format!("{lb} (mm)"),
+            &[
+                ("before compensation", map_b),
+                ("after compensation", map_a),
+            ],
+        ));
+        let peak = vec_b
+            .iter()
+            .map(|c| c.a.hypot(c.b))
+            .fold(0.0_f64, f64::max)
+            .max(1e-9);
+        let span = (m.axes()[ka].max - m.axes()[ka].min).max(m.axes()[kb].max - m.axes()[kb].min);
+        let magnification = (0.08 * span / (peak * 1e-3)).max(1.0).round();
+        s.push_str(&plot::vector_diagrams(
+            &format!("Error vectors in the {la}{lb} plane (machine frame)"),
+            &format!("{la} (mm)"),
+            &format!("{lb} (mm)"),
+            magnification,
+            &[
+                ("before compensation", vec_b),
+                ("after compensation", vec_a),
+            ],
+        ));
+    }
+    // Error functions.
+    let _ = writeln!(
+        s,
+        "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is ±2 standard uncertainties from the Jacobian and the residual variance (identified directions only){}. Single functions can differ from the truth where the model's parameters are nearly redundant while the points agree.</p>",
+        if input.truth.is_some() {
+            "; the dashed line is the truth"
+        } else {
+            ""
+        }
+    );
+    s.push_str(&plot::error_functions(
+        "Component errors",
+        &function_panels(model, params, ident.as_ref(), input.truth),
+    ));
+    let consts: Vec<Vec<String>> = model
+        .terms()
+        .iter()
+        .filter(|t| matches!(t.id, ErrorId::Location { .. }))
+        .map(|t| {
+            let v = params[t.params.start];
+            let sd = ident
+                .as_ref()
+                .map_or(0.0, |a| a.uncertainty[t.params.start]);
+            let (scale, unit) = micro(t.id);
+            vec![
+                t.id.to_string(),
+                format!("{:.3} ± {:.3} {unit}", v * scale, sd * scale),
+            ]
+        })
+        .collect();
+    if !consts.is_empty() {
+        s.push_str(&table(
+            &["location / squareness error", "value ± u"],
+            &consts,
+        ));
+    }
+    let sq: Vec<Vec<String>> = model
+        .squareness(params)
+        .iter()
+        .map(|(id, v)| vec![id.to_string(), format!("{:.3} µrad", v * 1e6)])
+        .collect();
+    if !sq.is_empty() {
+        let _ = writeln!(
+            s,
+            "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}):</p>",
+            model.spec().squareness
+        );
+        s.push_str(&table(&["squareness", "value"], &sq));
+    }
+    // Diagnosis.
+    let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");
+    let mut breakdowns: Vec<diagnose::Breakdown> = (0..m.axes().len())
+        .map(|k| diagnose::by_axis(&problem, &after, k, 24))
+        .collect();
+    breakdowns.push(diagnose::by_reflector(&problem, &after));
+    if let Some(t) = diagnose::by_time(&problem, &after, 8) {
+        breakdowns.push(t);
+    }
+    breakdowns.push(diagnose::by_distance(&problem, &after, 8));
+    let noise_ref = diagnose::repeat_noise(&problem).map(|(n, _)| n.emm_um);
+    for b in &breakdowns {
+        let data: Vec<(String, f64)> = b
+            .bins
+            .iter()
+            .map(|x| (x.label.clone(), x.stats.emm_um))
+            .collect();
+        s.push_str(&plot::bars(
+            &format!(
+                "Residual EMM by {} {} (spread {:.2})",
+                b.by,
+                b.unit,
+                b.spread()
+            ),
+            "EMM (µm)",
+            &data,
+            noise_ref.map(|n| ("repeat noise", n)),
+        ));
+    }
+    if !input.candidates.is_empty() {
+        let _ = writeln!(
+            s,
+            "<h3>Effects the first model most likely missed (ranked by ΔBIC; below −10 is strong evidence)</h3>"
+        );
+        let rows: Vec<Vec<String>> = input
+            .candidates
+            .iter()
+            .take(8)
+            .map(|c| {
+                vec![
+                    c.id.clone(),
+                    format!("{:.1}", c.delta_bic),
+                    format!("{:.3}", c.emm_um),
+                    format!("{:.2} {}", c.size, c.size_unit),
+                    c.description.clone(),
+                ]
+            })
+            .collect();
+        s.push_str(&table(
+            &["candidate", "ΔBIC", "EMM µm", "size", "meaning"],
+            &rows,
+        ));
+    }
+    if input.fits.len() > 1 {
+        let data: Vec<(String, f64)> = input
+            .fits
+            .iter()
+            .map(|f| (f.label.clone(), f.id.final_.stats.emm_um))
+            .collect();
+        s.push_str(&plot::bars(
+            "EMM per model revision",
+            "EMM (µm)",
+            &data,
+            input.noise_um.map(|n| ("noise error", n)),
+        ));
+    }
+    // Identifiability.
+    let _ = writeln!(s, "<h2>Identifiability</h2>");
+    match &ident {
+        Some(a) => {
+            let _ = writeln!(
+                s,
+                "<p>{} of {} free directions identified; condition number {:.3e}; residual σ {:.2} µm per coordinate.</p>",
+                a.rank,
+                a.free,
+                a.condition,
+                a.sigma_mm * 1e3
+            );
+            let rows: Vec<Vec<String>> = a
+                .weak
+                .iter()
+                .map(|w| {
+                    vec![
+                        format!("{:.1e}", w.relative_curvature),
+                        w.parameters
+                            .iter()
+                            .take(5)
+                            .map(|(j, x)| format!("{} {x:+.2}", model.params()[*j].name))
+                            .collect::<Vec<_>>()
+                            .join(", "),
+                    ]
+                })
+                .collect();
+            if !rows.is_empty() {
+                s.push_str(&table(
+                    &["relative curvature", "combination the data cannot identify"],
+                    &rows,
+                ));
+            }
+            let rows: Vec<Vec<String>> = a
+                .correlations
+                .iter()
+                .take(10)
+                .map(|(i, j, c)| {
+                    vec![
+                        model.params()[*i].name.clone(),
+                        model.params()[*j].name.clone(),
+                        format!("{c:+.3}"),
+                    ]
+                })
+                .collect();
+            if !rows.is_empty() {
+                let _ = writeln!(s, "<p>Most correlated parameter pairs:</p>");
+                s.push_str(&table(&["parameter", "parameter", "correlation"], &rows));
+            }
+        }
+        None => {
+            let _ = writeln!(s, "<p>The analysis failed (non-finite Jacobian).</p>");
+        }
+    }
+    if !input.cross.is_empty() {
+        let _ = writeln!(
+            s,
+            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test; only the tracker pose is fitted there. Residual % = EMM after / EMM before.</p>"
+        );
+        let rows: Vec<Vec<String>> = input
+            .cross
+            .iter()
+            .map(|c| {
+                vec![
+                    c.0.clone(),
+                    format!("{:.3}", c.1),
+                    format!("{:.3}", c.2),
+                    format!("{:.2} %", c.3),
+                ]
+            })
+            .collect();
+        s.push_str(&table(
+            &["identified on", "EMM before µm", "EMM after µm", "residual"],
+            &rows,
+        ));
+        let data: Vec<(String, f64)> = input.cross.iter().map(|c| (c.0.clone(), c.3)).collect();
+        s.push_str(&plot::bars(
+            "Residual on the reference after compensation",
+            "residual (%)",
+            &data,
+            None,
+        ));
+    }
+    let _ = writeln!(
+        s,
+        "<p style=\"color:#777\">Written by volver {}. Units: mm and rad in the files, µm and µrad here.</p></body></html>",
+        env!("CARGO_PKG_VERSION")
+    );
+    Ok(s)
+}
