@@ -92,6 +92,10 @@ enum Command {
         /// Seed of the true errors and the noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Also draw table 12 (cross-validation: residual % on the reference test 4 after
+        /// compensation with each test's errors, ours beside the paper's) as an SVG chart here.
+        #[arg(long)]
+        svg: Option<PathBuf>,
     },
     /// Identifies the geometric errors and the tracker pose from measurements.
     ///
@@ -264,7 +268,7 @@ fn main() -> Result<()> {
                 println!("\n  chart written to {}", path.display());
             }
         }
-        Command::Study { which, seed } => {
+        Command::Study { which, seed, svg } => {
             if which != "paper" {
                 anyhow::bail!("unknown study '{which}': the study is `paper`");
             }
@@ -272,7 +276,17 @@ fn main() -> Result<()> {
                 "volver study paper — the paper's studies on synthetic data (seed {seed}, default magnitudes × {})",
                 study::MAGNITUDE_SCALE
             );
-            study::print(&study::paper(seed)?);
+            let tables = study::paper(seed)?;
+            study::print(&tables);
+            if let Some(path) = svg {
+                let t12 = tables
+                    .iter()
+                    .find(|t| t.title.starts_with("Table 12"))
+                    .ok_or_else(|| anyhow::anyhow!("the study has no table 12"))?;
+                volver::core::fsio::write_atomic(&path, study::table12_svg(t12))
+                    .with_context(|| format!("writing {}", path.display()))?;
+                println!("\n  table 12 drawn in {}", path.display());
+            }
         }
         Command::Simulate(args) => simulate(args)?,
         Command::Compensate(args) => compensation::compensate_command(args)?,

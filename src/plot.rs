@@ -429,7 +429,14 @@ pub fn bars(
 ) -> String {
     let n = data.len().max(1) as f64;
     let bw = (560.0 / n).clamp(14.0, 70.0);
-    let (w, h) = ((bw * n + 110.0).max(440.0), 300.0);
+    // Narrow bars get their labels at 45°, which need room below the axis.
+    let longest = data.iter().map(|d| d.0.chars().count()).max().unwrap_or(0) as f64;
+    let below = if bw < 50.0 {
+        20.0 + 4.6 * longest
+    } else {
+        70.0
+    };
+    let (w, h) = ((bw * n + 110.0 + 3.3 * longest).max(440.0), 230.0 + below);
     let mut s = header(w, h, title);
     let vmax = data
         .iter()
