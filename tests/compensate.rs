@@ -242,6 +242,10 @@ fn a_gcode_program_is_compensated_and_verified() {
         .sum();
     assert_eq!(n_back, rep.points);
     assert!(text.contains("F800") && text.contains("M30") && !text.contains("G91"));
+    assert!(
+        text.starts_with("%\n(") && text.ends_with("%\n"),
+        "the tape marks stay first and last"
+    );
 }
 
 /// Bad programs are refused with the file, the line and the word.

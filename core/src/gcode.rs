@@ -339,12 +339,22 @@ impl Program {
     ) -> Result<(String, Report)> {
         let axes = machine.axes();
         let mut out = String::new();
+        // A leading tape mark (%) stays the first line.
+        let skip = usize::from(
+            self.blocks
+                .first()
+                .is_some_and(|b| b.source.trim_start().starts_with('%')),
+        );
+        if skip == 1 {
+            out.push_str(&self.blocks[0].source);
+            out.push('\n');
+        }
         for l in header.lines() {
             out.push_str(&format!("({})\n", l.replace(['(', ')'], "")));
         }
         out.push_str("G90 G21\n");
         let mut rep = Report::default();
-        for b in &self.blocks {
+        for b in &self.blocks[skip..] {
             let Some(m) = &b.motion else {
                 out.push_str(&b.source.replace("G91", "G90").replace("g91", "G90"));
                 out.push('\n');
