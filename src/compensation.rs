@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
-use volver::core::compensate::{Compensator, read_points};
+use volver::core::compensate::{Compensator, read_points, written};
 use volver::core::fsio::write_atomic;
 use volver::core::gcode::{Linearise, Program};
 use volver::core::iso::Axis;
@@ -178,23 +178,13 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             let c = comp
                 .compensate(&p.commands)
                 .with_context(|| format!("{label}:{}", p.line))?;
-            let dec = a.decimals;
-            let mut written = p.commands;
-            let cells: Vec<String> = axes
-                .iter()
-                .enumerate()
-                .map(|(k, x)| {
-                    let t = format!("{:.dec$}", x.to_file_units(c.commands.0[k]));
-                    written.0[k] = x.from_file_units(t.parse().expect("formatted"));
-                    t
-                })
-                .collect();
+            let (cells, written) = written(m, &c.commands, a.decimals);
             let prog: Vec<String> = axes
                 .iter()
                 .enumerate()
                 .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
                 .collect();
-            let wd = distance(comp.actual_point(&written), c.target);
+            let wd = comp.deviation_mm(&written, c.target);
             ws = ws.max(c.deviation_mm);
             ww = ww.max(wd);
             largest = largest.max(c.error_mm);
@@ -269,10 +259,6 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Options of `volver tables`.

@@ -494,6 +494,22 @@ struct ReportArgs {
     out: PathBuf,
 }
 
+/// `model` with the candidates `ids` (from `volver diagnose`) added in turn.
+fn with_candidates(machine: &Machine, mut model: Model, ids: &[String]) -> Result<Model> {
+    for id in ids {
+        let library = volver::solvers::candidates::library(&model);
+        let Some(c) = library.iter().find(|c| &c.id == id) else {
+            let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
+            anyhow::bail!(
+                "--add {id}: not a candidate for this model; candidates are {}",
+                ids.join(", ")
+            );
+        };
+        model = Model::new(machine.clone(), c.spec.clone())?;
+    }
+    Ok(model)
+}
+
 fn report_command(a: ReportArgs) -> Result<()> {
     let (machine, model, data) = a.inputs.load()?;
     let problem = Problem::new(&model, &data)?;
@@ -504,18 +520,7 @@ fn report_command(a: ReportArgs) -> Result<()> {
     let options = Options::default();
     let candidates =
         volver::solvers::candidates::rank(&problem, &id1.params, options.rank_tolerance);
-    let mut extended = model.clone();
-    for id in &a.add {
-        let library = volver::solvers::candidates::library(&extended);
-        let Some(c) = library.iter().find(|c| &c.id == id) else {
-            let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
-            anyhow::bail!(
-                "--add {id}: not a candidate for this model; candidates are {}",
-                ids.join(", ")
-            );
-        };
-        extended = Model::new(machine.clone(), c.spec.clone())?;
-    }
+    let extended = with_candidates(&machine, model.clone(), &a.add)?;
     let id2 = if a.add.is_empty() {
         None
     } else {
@@ -608,18 +613,8 @@ impl Observer for Progress {
 }
 
 fn identify_command(a: IdentifyArgs) -> Result<()> {
-    let (machine, mut model, data) = a.inputs.load()?;
-    for id in &a.add {
-        let library = volver::solvers::candidates::library(&model);
-        let Some(c) = library.iter().find(|c| &c.id == id) else {
-            let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
-            anyhow::bail!(
-                "--add {id}: not a candidate for this model; candidates are {}",
-                ids.join(", ")
-            );
-        };
-        model = Model::new(machine.clone(), c.spec.clone())?;
-    }
+    let (machine, model, data) = a.inputs.load()?;
+    let model = with_candidates(&machine, model, &a.add)?;
     if let Some(path) = &a.write_model {
         let text = toml::to_string(model.spec()).context("writing the error model")?;
         volver::core::fsio::write_atomic(path, text)

@@ -171,10 +171,11 @@ impl<'a> Compensator<'a> {
     pub fn compensate(&self, programmed: &Commands) -> Result<Compensated> {
         let target = self.nominal_point(programmed);
         let mut q = *programmed;
-        let start = self.actual_point(&q);
-        let error_mm = distance(start, target);
+        // The first iterate's point is the uncompensated machine's (the duals' real parts are
+        // the f64 evaluation).
+        let mut error_mm = None;
         let mut steps = 0;
-        let mut best = (error_mm, q);
+        let mut best = (f64::INFINITY, q);
         while steps < MAX_NEWTON_STEPS {
             let (x, jac) = self.point_and_jacobian(&q);
             let r = [x[0] - target[0], x[1] - target[1], x[2] - target[2]];
@@ -185,6 +186,7 @@ impl<'a> Compensator<'a> {
                     q.0
                 )));
             }
+            error_mm.get_or_insert(d);
             if d < best.0 {
                 best = (d, q);
             }
@@ -208,7 +210,7 @@ impl<'a> Compensator<'a> {
             }
         }
         let q = best.1;
-        let deviation_mm = distance(self.actual_point(&q), target);
+        let deviation_mm = self.deviation_mm(&q, target);
         let axes = self.model.machine().axes();
         let outside_travel = (0..axes.len())
             .filter(|&k| {
@@ -219,10 +221,17 @@ impl<'a> Compensator<'a> {
             commands: q,
             target,
             deviation_mm,
-            error_mm,
+            error_mm: error_mm.unwrap_or(f64::NAN),
             steps,
             outside_travel,
         })
+    }
+
+    /// How far the real machine's tool point at `commands` is from `target` (mm), through an
+    /// independent `f64` evaluation of the forward model: the verification of a command.
+    pub fn deviation_mm(&self, commands: &Commands, target: [f64; 3]) -> f64 {
+        let x = self.actual_point(commands);
+        crate::problem::norm([x[0] - target[0], x[1] - target[1], x[2] - target[2]])
     }
 
     /// The tool point and its exact Jacobian with respect to the free axes (3 × m, row-major),
@@ -244,8 +253,26 @@ impl<'a> Compensator<'a> {
     }
 }
 
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+/// `commands` as a controller gets them: each axis in file units (mm, degrees) with `decimals`
+/// decimals, and the commands those texts stand for (internal units), so that what is written
+/// can be verified.
+pub fn written(
+    machine: &crate::machine::Machine,
+    commands: &Commands,
+    decimals: usize,
+) -> (Vec<String>, Commands) {
+    let mut out = *commands;
+    let texts = machine
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(k, a)| {
+            let t = format!("{:.decimals$}", a.to_file_units(commands.0[k]));
+            out.0[k] = a.from_file_units(t.parse().expect("a formatted number parses"));
+            t
+        })
+        .collect();
+    (texts, out)
 }
 
 /// The Newton step `s` with `J s = r` (three free axes), or the least-squares step

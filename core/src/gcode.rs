@@ -370,13 +370,9 @@ impl Program {
                 let c = comp.compensate(&programmed).map_err(|e| {
                     Error::input(Place::file(&self.file).at_line(b.line), e.to_string())
                 })?;
-                let mut written = Commands::default();
+                let (texts, written) = crate::compensate::written(machine, &c.commands, decimals);
                 let mut line = String::from(if m.rapid { "G0" } else { "G1" });
-                for (k, a) in axes.iter().enumerate() {
-                    let v = a.to_file_units(c.commands.0[k]);
-                    let text = format!("{v:.decimals$}");
-                    let rounded: f64 = text.parse().expect("formatted number");
-                    written.0[k] = a.from_file_units(rounded);
+                for (a, text) in axes.iter().zip(&texts) {
                     line.push_str(&format!(" {}{text}", a.axis.letter()));
                 }
                 if j == 0 && !m.kept.is_empty() {
@@ -388,7 +384,7 @@ impl Program {
                 }
                 out.push_str(&line);
                 out.push('\n');
-                let written_dev = distance(comp.actual_point(&written), c.target);
+                let written_dev = comp.deviation_mm(&written, c.target);
                 rep.points += 1;
                 rep.max_error_mm = rep.max_error_mm.max(c.error_mm);
                 rep.max_deviation_mm = rep.max_deviation_mm.max(c.deviation_mm);
@@ -400,10 +396,6 @@ impl Program {
         }
         Ok((out, rep))
     }
-}
-
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Length of a move over the linear axes (mm).

@@ -92,14 +92,16 @@ impl ErrorTables {
         for (k, a) in m.axes().iter().enumerate() {
             reference.0[k] = a.reference;
         }
-        let mut constants = Vec::new();
-        for t in model.terms() {
-            if let ErrorId::Location { .. } = t.id {
-                let v =
-                    model.errors_at(&reference, params).location[t.axis][t.id.component().index()];
-                constants.push((t.id.to_string(), v));
-            }
-        }
+        let at_reference = model.errors_at(&reference, params);
+        let constants = model
+            .terms()
+            .iter()
+            .filter(|t| matches!(t.id, ErrorId::Location { .. }))
+            .map(|t| {
+                let v = at_reference.location[t.axis][t.id.component().index()];
+                (t.id.to_string(), v)
+            })
+            .collect();
         let mut axes = Vec::new();
         for (k, a) in m.axes().iter().enumerate() {
             let comps = model.modelled_components(k);
