@@ -4,7 +4,7 @@
 
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
-use std::io::Write;
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Name of the history file written beside the measurements.
@@ -44,14 +44,22 @@ pub fn default_path(data: &Path) -> PathBuf {
         .join(DEFAULT_NAME)
 }
 
-/// Appends a record.
+/// Appends a record, atomically like every file volver writes: the file is rewritten whole
+/// beside itself and renamed over the old one, so an interrupted append leaves the old history,
+/// never half a line.
 pub fn append(path: &Path, record: &Record) -> Result<()> {
-    let mut f = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .with_context(|| format!("opening the history file {}", path.display()))?;
-    writeln!(f, "{}", serde_json::to_string(record)?)
+    let mut text = match std::fs::read_to_string(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+        Err(e) => {
+            return Err(e).with_context(|| format!("reading the history file {}", path.display()));
+        }
+    };
+    if !text.is_empty() && !text.ends_with('\n') {
+        text.push('\n');
+    }
+    writeln!(text, "{}", serde_json::to_string(record)?)?;
+    volver::core::fsio::write_atomic(path, text)
         .with_context(|| format!("writing the history file {}", path.display()))?;
     Ok(())
 }
@@ -219,13 +227,23 @@ mod tests {
         append(&path, &a).unwrap();
         append(&path, &b).unwrap();
         let back = read(&path).unwrap();
-        assert_eq!(back, vec![a, b]);
+        assert_eq!(back, vec![a.clone(), b]);
         let t = table(&back);
         assert!(t.contains("raise-axis:C") && t.contains("-91.6 %"), "{t}");
         let s = svg(&back);
         assert_eq!(s.matches("class=\"revision\"").count(), 2);
         assert!(s.starts_with("<svg") && s.contains("class=\"noise\""));
+        // The append rewrites the file atomically: no temporary file is left beside it.
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
         std::fs::write(&path, "{not json}\n").unwrap();
+        let e = format!("{:#}", read(&path).unwrap_err());
+        assert!(e.contains("line 1"), "{e}");
+        // A last line cut short (by an older volver, or an editor) stays on its own line and
+        // is named; the new record is whole on the next one.
+        std::fs::write(&path, "{\"data\": \"m.cs").unwrap();
+        append(&path, &a).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert_eq!(text.lines().count(), 2);
         let e = format!("{:#}", read(&path).unwrap_err());
         assert!(e.contains("line 1"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);

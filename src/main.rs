@@ -148,6 +148,7 @@ impl Inputs {
             ),
         };
         let set = MeasurementSet::load(&m, &self.data).context("reading the measurements")?;
+        Problem::new(&model, &set)?.check_scale(&self.data.display().to_string())?;
         Ok((m, model, set))
     }
 }
@@ -550,6 +551,7 @@ fn report_command(a: ReportArgs) -> Result<()> {
     if let Some(path) = &a.reference {
         let set =
             MeasurementSet::load(&machine, path).context("reading the reference measurements")?;
+        Problem::new(&model, &set)?.check_scale(&path.display().to_string())?;
         let lm = volver::solvers::lm::LevenbergMarquardt;
         let cv = volver::solvers::strategy::cross_validate(
             &lm,

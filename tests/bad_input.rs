@@ -118,6 +118,67 @@ fn broken_measurement_files_are_refused_with_the_place_named() {
             with_first(replace_cell(0, "99999")),
             vec![":2:", "'X'", "outside the travel range"],
         ),
+        (
+            "beyond-reach.csv",
+            with_first(replace_cell(4, "2e6")),
+            vec![":2:", "meas_x", "beyond any laser tracker"],
+        ),
+        (
+            "unit-rad.csv",
+            with_first(first.clone())
+                .into_iter()
+                .enumerate()
+                .map(|(i, l)| {
+                    if i == 0 {
+                        l.replacen("C,", "C [rad],", 1)
+                    } else {
+                        l
+                    }
+                })
+                .collect(),
+            vec![":1:", "C [rad]", "expected deg"],
+        ),
+        (
+            "unit-m.csv",
+            with_first(first.clone())
+                .into_iter()
+                .enumerate()
+                .map(|(i, l)| {
+                    if i == 0 {
+                        l.replace("meas_y", "meas_y (m)")
+                    } else {
+                        l
+                    }
+                })
+                .collect(),
+            vec![":1:", "meas_y (m)", "expected mm"],
+        ),
+        (
+            "metres.csv",
+            std::iter::once(header.clone())
+                .chain(lines.iter().map(|r| {
+                    let mut c: Vec<String> = r.split(',').map(String::from).collect();
+                    for v in &mut c[4..7] {
+                        *v = format!("{}", v.parse::<f64>().unwrap() / 1000.0);
+                    }
+                    c.join(",")
+                }))
+                .collect(),
+            vec!["metres.csv", "look like metres"],
+        ),
+        (
+            "inches.csv",
+            std::iter::once(header.clone())
+                .chain(lines.iter().map(|r| {
+                    let mut c: Vec<String> = r.split(',').map(String::from).collect();
+                    for v in &mut c[4..7] {
+                        *v = format!("{}", v.parse::<f64>().unwrap() / 25.4);
+                    }
+                    c.join(",")
+                }))
+                .collect(),
+            vec!["inches.csv", "look like inches"],
+        ),
         ("empty.csv", vec![], vec!["empty.csv", "empty file"]),
         (
             "header-only.csv",
@@ -177,5 +238,116 @@ fn broken_models_and_machines_are_refused_with_the_place_named() {
         err.contains("machine.toml:") && err.contains("field 'chain'"),
         "{err}"
     );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Units written on the header are accepted when they are volver's (mm, degrees, seconds), in
+/// brackets or parentheses; nothing is converted.
+#[test]
+fn header_units_in_volvers_units_are_accepted() {
+    use volver::core::machine::Machine;
+    use volver::core::measure::MeasurementSet;
+    let m = Machine::default_xcfz();
+    let plain = "X,C,Z,reflector,meas_x,meas_y,meas_z,t_s\n100,90,50,R1,950,75,1450,1\n";
+    let marked = "X [mm],C (°),Z(mm),reflector,meas_x [mm],meas_y [MM],meas_z (mm),t_s [s]\n\
+                  100,90,50,R1,950,75,1450,1\n";
+    let a = MeasurementSet::from_csv_str(&m, plain, "plain.csv").unwrap();
+    let b = MeasurementSet::from_csv_str(&m, marked, "marked.csv").unwrap();
+    assert_eq!(a, b);
+    let err = MeasurementSet::from_csv_str(&m, &marked.replace("t_s [s]", "t_s [h]"), "h.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("h.csv:1:") && err.contains("t_s [h]"), "{err}");
+    let pts = volver::core::compensate::read_points("X [mm],C [deg],Z\n1,2,3\n", "p.csv", &m);
+    assert_eq!(pts.unwrap().len(), 1);
+    let err = volver::core::compensate::read_points("X [in],C,Z\n1,2,3\n", "p.csv", &m)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("p.csv:1:") && err.contains("X [in]") && err.contains("expected mm"));
+}
+
+/// Broken results files (the input of `volver tables`, `compensate`, `report --truth`) are
+/// refused with the file and the line or field named.
+#[test]
+fn broken_results_files_are_refused_with_the_place_named() {
+    let dir = fixture("json");
+    let good = std::fs::read_to_string(dir.join("truth.json")).unwrap();
+    let value: serde_json::Value = serde_json::from_str(&good).unwrap();
+    let edit = |f: &dyn Fn(&mut serde_json::Value)| {
+        let mut v = value.clone();
+        f(&mut v);
+        serde_json::to_string_pretty(&v).unwrap()
+    };
+    let out = dir.join("tables");
+    let out = out.to_str().unwrap();
+    let ok = volver(&[
+        "tables",
+        "--results",
+        dir.join("truth.json").to_str().unwrap(),
+        "--out",
+        out,
+    ]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let cut = good.lines().take(12).collect::<Vec<_>>().join("\n");
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        (
+            "empty.json",
+            String::new(),
+            vec!["empty.json:1:", "not a volver results file"],
+        ),
+        ("cut.json", cut, vec!["cut.json:12:", "EOF"]),
+        (
+            "not-results.json",
+            edit(&|v| v["format"] = "volver-model".into()),
+            vec!["not-results.json", "'format'", "volver-results"],
+        ),
+        (
+            "version.json",
+            edit(&|v| v["version"] = 7.into()),
+            vec!["version.json", "'version'", "version 7"],
+        ),
+        (
+            "renamed.json",
+            edit(&|v| v["parameters"][2]["name"] = "EXX.c9".into()),
+            vec!["renamed.json", "parameters[2]", "EXX.c9"],
+        ),
+        (
+            "missing-parameter.json",
+            edit(&|v| {
+                v["parameters"].as_array_mut().unwrap().pop();
+            }),
+            vec!["missing-parameter.json", "'parameters'", "parameters, but"],
+        ),
+        (
+            "string-value.json",
+            edit(&|v| v["parameters"][0]["value"] = "0.1".into()),
+            vec!["string-value.json:", "expected f64"],
+        ),
+        (
+            "huge-value.json",
+            good.replacen("\"value\": ", "\"value\": 1e999, \"x\": ", 1),
+            vec!["huge-value.json:", "out of range"],
+        ),
+        (
+            "unknown-field.json",
+            edit(&|v| v["colour"] = "red".into()),
+            vec!["unknown-field.json:", "colour"],
+        ),
+    ];
+    for (name, text, needles) in cases {
+        let path = dir.join(name);
+        std::fs::write(&path, text).unwrap();
+        let r = volver(&["tables", "--results", path.to_str().unwrap(), "--out", out]);
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(!r.status.success(), "{name} accepted");
+        assert!(!err.contains("panicked"), "{name}: {err}");
+        for n in &needles {
+            assert!(err.contains(n), "{name}: '{n}' not in {err}");
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -350,8 +350,10 @@ pub struct ListedPoint {
 }
 
 /// Reads a point list: CSV with one column per machine axis, named by its letter (file units:
-/// mm, degrees), and an optional `id` column. Any other column, a missing or repeated axis, a
-/// value that is not a finite number or an empty list is refused with the file, line and column.
+/// mm, degrees), and an optional `id` column. A header may carry its unit (`C [deg]`), which
+/// must be the one volver reads ([`crate::measure::check_unit`]). Any other column, a missing or
+/// repeated axis, another unit, a value that is not a finite number or an empty list is refused
+/// with the file, line and column.
 ///
 /// ```
 /// use volver_core::compensate::read_points;
@@ -379,7 +381,9 @@ pub fn read_points(
             "empty file: expected a header with one column per axis (and an optional id)",
         ));
     };
-    let names: Vec<&str> = header.split(',').map(str::trim).collect();
+    let raw: Vec<&str> = header.split(',').map(str::trim).collect();
+    let (names, units): (Vec<&str>, Vec<Option<&str>>) =
+        raw.iter().map(|h| crate::measure::split_unit(h)).unzip();
     let place = |line: usize, field: &str| Place::file(file).at_line(line).at_field(field);
     let mut id_col = None;
     let mut axis_col = vec![None; machine.axes().len()];
@@ -418,6 +422,12 @@ pub fn read_points(
         *slot = Some(c);
     }
     for (k, a) in machine.axes().iter().enumerate() {
+        if let Some(c) = axis_col[k]
+            && let Some(u) = units[c]
+        {
+            crate::measure::check_unit(u, a.file_unit())
+                .map_err(|m| Error::input(place(h_i + 1, raw[c]), m))?;
+        }
         if axis_col[k].is_none() {
             let l = a.axis.letter().to_string();
             return Err(Error::input(

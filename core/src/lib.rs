@@ -21,7 +21,8 @@
 //! - [`compensate`]: the inverse model: the command that puts the tool where it belongs;
 //! - [`gcode`]: G-code programs, read and written back compensated;
 //! - [`tables`]: controller tables of the identified errors (ISG CSV, Etalon style, plain CSV);
-//! - [`fsio`]: atomic file output.
+//! - [`fsio`]: atomic file output;
+//! - [`fuzz`]: harnesses for fuzzing the readers.
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -44,6 +45,7 @@ pub mod compensate;
 pub mod diagnose;
 pub mod error;
 pub mod fsio;
+pub mod fuzz;
 pub mod gcode;
 pub mod iso;
 pub mod kinematics;

@@ -4,8 +4,10 @@
 //! axes in degrees), `reflector` (an id from the machine file), `meas_x`, `meas_y`, `meas_z` (mm,
 //! tracker frame); optional `t_s` (seconds since the test started) and `station` (tracker station
 //! id). Column order is free and extra columns are ignored, except a single-letter axis column for
-//! an axis the machine does not have, which is an error. Every error names the file, the line and
-//! the column.
+//! an axis the machine does not have, which is an error. A header may carry its unit in brackets
+//! or parentheses (`C [deg]`, `meas_x (mm)`); a unit other than the one volver reads is refused
+//! ([`check_unit`]), not converted. Measured coordinates beyond 1 km ([`MAX_COORDINATE_MM`]) are
+//! refused as not being in mm. Every error names the file, the line and the column.
 //!
 //! ```
 //! use volver_core::machine::Machine;
@@ -22,6 +24,54 @@ use crate::iso::Axis;
 use crate::machine::{Commands, Machine};
 use std::fmt::Write as _;
 use std::path::Path;
+
+/// Splits a column header into its name and an optional unit annotation in brackets or
+/// parentheses: `C [deg]` and `C(deg)` are column `C` in `deg`.
+///
+/// ```
+/// use volver_core::measure::split_unit;
+/// assert_eq!(split_unit("meas_x [mm]"), ("meas_x", Some("mm")));
+/// assert_eq!(split_unit("C(deg)"), ("C", Some("deg")));
+/// assert_eq!(split_unit("X"), ("X", None));
+/// ```
+pub fn split_unit(header: &str) -> (&str, Option<&str>) {
+    let h = header.trim();
+    for (open, close) in [('[', ']'), ('(', ')')] {
+        if let Some(body) = h.strip_suffix(close)
+            && let Some(i) = body.rfind(open)
+        {
+            return (body[..i].trim_end(), Some(body[i + 1..].trim()));
+        }
+    }
+    (h, None)
+}
+
+/// Checks a column's unit annotation against the unit volver reads that column in (`mm`, `deg`
+/// or `s`); `Err` says what was found and expected. volver converts nothing: a column in other
+/// units must be converted before it is read, so that a file in metres or radians is never
+/// taken for one in mm or degrees.
+///
+/// ```
+/// use volver_core::measure::check_unit;
+/// assert!(check_unit("°", "deg").is_ok() && check_unit("MM", "mm").is_ok());
+/// assert!(check_unit("rad", "deg").unwrap_err().contains("expected deg"));
+/// ```
+pub fn check_unit(found: &str, expected: &str) -> std::result::Result<(), String> {
+    let f = found.to_ascii_lowercase();
+    let same = match expected {
+        "deg" => matches!(f.as_str(), "deg" | "°" | "degree" | "degrees"),
+        "s" => matches!(f.as_str(), "s" | "sec" | "seconds"),
+        _ => f == expected,
+    };
+    if same {
+        Ok(())
+    } else {
+        Err(format!(
+            "unit '{found}', expected {expected}: volver reads linear positions and coordinates \
+             in mm, rotary positions in degrees and times in seconds, and converts nothing"
+        ))
+    }
+}
 
 /// One measured point.
 #[derive(Clone, Debug, PartialEq)]
@@ -46,6 +96,11 @@ pub struct MeasurementSet {
     /// The points in file order.
     pub points: Vec<Measurement>,
 }
+
+/// The largest measured coordinate accepted (mm): 1 km, beyond the reach of any laser
+/// tracker. A larger value is not in mm (or is garbage) and would overflow the squares of
+/// the objective.
+pub const MAX_COORDINATE_MM: f64 = 1e6;
 
 const REQUIRED: [&str; 4] = ["reflector", "meas_x", "meas_y", "meas_z"];
 
@@ -74,12 +129,21 @@ impl MeasurementSet {
             }
             Error::input(place, format!("not valid CSV: {e}"))
         };
-        let headers: Vec<String> = rdr
+        let raw_headers: Vec<String> = rdr
             .headers()
             .map_err(csv_err)?
             .iter()
             .map(str::to_string)
             .collect();
+        // Names without their unit annotations (`X [mm]`, `C (deg)`); the units are checked
+        // once the columns are known.
+        let (headers, units): (Vec<String>, Vec<Option<String>>) = raw_headers
+            .iter()
+            .map(|h| {
+                let (name, unit) = split_unit(h);
+                (name.to_string(), unit.map(str::to_string))
+            })
+            .unzip();
         let header_place = |field: &str| Place::file(file).at_line(1).at_field(field);
         if headers.iter().all(|h| h.is_empty()) {
             return Err(Error::input(
@@ -146,6 +210,18 @@ impl MeasurementSet {
         }
         let t_col = find("t_s")?;
         let st_col = find("station")?;
+        let mut expected: Vec<(usize, &str)> = axis_cols
+            .iter()
+            .zip(machine.axes())
+            .map(|(&c, ax)| (c, ax.file_unit()))
+            .collect();
+        expected.extend(req[1..].iter().map(|&c| (c, "mm")));
+        expected.extend(t_col.map(|c| (c, "s")));
+        for (c, unit) in expected {
+            if let Some(u) = &units[c] {
+                check_unit(u, unit).map_err(|m| Error::input(header_place(&raw_headers[c]), m))?;
+            }
+        }
 
         let mut points = Vec::new();
         for rec in rdr.records() {
@@ -203,10 +279,23 @@ impl MeasurementSet {
                     ),
                 )
             })?;
+            let coordinate = |col: usize| -> Result<f64> {
+                let v = number(col, "mm")?;
+                if v.abs() > MAX_COORDINATE_MM {
+                    return Err(Error::input(
+                        at(col),
+                        format!(
+                            "{v} mm is beyond any laser tracker's reach ({MAX_COORDINATE_MM} mm): \
+                             coordinates are read in mm"
+                        ),
+                    ));
+                }
+                Ok(v)
+            };
             let measured = [
-                number(req[1], "mm")?,
-                number(req[2], "mm")?,
-                number(req[3], "mm")?,
+                coordinate(req[1])?,
+                coordinate(req[2])?,
+                coordinate(req[3])?,
             ];
             let t_s = match t_col {
                 Some(c) if !rec[c].is_empty() => Some(number(c, "seconds")?),

@@ -88,6 +88,96 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// Checks that the measured points have the size the machine gives them, which catches a
+    /// measurement file in the wrong units (metres or inches instead of mm, radians instead of
+    /// degrees) or a machine file whose reflector offsets or chain do not describe the machine
+    /// measured. It compares the RMS distance of the measured points from their centroid with
+    /// that of the points the model predicts at its start: a rigid motion (the tracker's pose)
+    /// changes neither, and geometric errors change the ratio by parts per thousand at most.
+    /// A ratio outside [0.98, 1.02] is an error naming `file`. Curve fits, fewer than three
+    /// points, and meshes whose nominal points spread less than 10 mm pass unchecked.
+    ///
+    /// ```
+    /// use volver_core::measure::MeasurementSet;
+    /// use volver_core::model::Model;
+    /// use volver_core::problem::Problem;
+    /// let model = Model::default_xcfz();
+    /// let mm = "reflector,X,C,Z,meas_x,meas_y,meas_z
+    /// R1,0,0,0,950,75,1450
+    /// R1,1000,0,0,-50,75,1450
+    /// R1,0,0,300,950,75,1750
+    /// ";
+    /// let data = MeasurementSet::from_csv_str(model.machine(), mm, "mm.csv").unwrap();
+    /// assert!(Problem::new(&model, &data).unwrap().check_scale("mm.csv").is_ok());
+    /// // The same points in metres.
+    /// let m = "reflector,X,C,Z,meas_x,meas_y,meas_z
+    /// R1,0,0,0,0.950,0.075,1.450
+    /// R1,1000,0,0,-0.050,0.075,1.450
+    /// R1,0,0,300,0.950,0.075,1.750
+    /// ";
+    /// let data = MeasurementSet::from_csv_str(model.machine(), m, "m.csv").unwrap();
+    /// let err = Problem::new(&model, &data).unwrap().check_scale("m.csv").unwrap_err();
+    /// assert!(err.to_string().starts_with("m.csv: ") && err.to_string().contains("metres"));
+    /// ```
+    pub fn check_scale(&self, file: &str) -> Result<()> {
+        let Source::Machine { model, data } = self.source else {
+            return Ok(());
+        };
+        let n = data.points.len();
+        if n < 3 {
+            return Ok(());
+        }
+        let params = model.initial_params();
+        let predicted: Vec<[f64; 3]> = (0..n)
+            .map(|i| {
+                let r = self.residual(i, &params);
+                let m = data.points[i].measured;
+                [r[0] + m[0], r[1] + m[1], r[2] + m[2]]
+            })
+            .collect();
+        let measured: Vec<[f64; 3]> = data.points.iter().map(|p| p.measured).collect();
+        let spread = |pts: &[[f64; 3]]| {
+            let mut c = [0.0; 3];
+            for p in pts {
+                for k in 0..3 {
+                    c[k] += p[k] / pts.len() as f64;
+                }
+            }
+            let ss: f64 = pts
+                .iter()
+                .map(|p| (0..3).map(|k| (p[k] - c[k]).powi(2)).sum::<f64>())
+                .sum();
+            (ss / pts.len() as f64).sqrt()
+        };
+        let (nominal, seen) = (spread(&predicted), spread(&measured));
+        if nominal.is_nan() || nominal < 10.0 {
+            return Ok(());
+        }
+        let ratio = seen / nominal;
+        if (0.98..=1.02).contains(&ratio) {
+            return Ok(());
+        }
+        let hint = if (ratio * 1000.0 - 1.0).abs() < 0.02 {
+            " (×0.001: the coordinates look like metres)".to_string()
+        } else if (ratio * 25.4 - 1.0).abs() < 0.02 {
+            " (×1/25.4: the coordinates look like inches)".to_string()
+        } else if (ratio / 1000.0 - 1.0).abs() < 0.02 {
+            " (×1000: the coordinates look like µm)".to_string()
+        } else {
+            String::new()
+        };
+        Err(Error::input(
+            crate::error::Place::file(file),
+            format!(
+                "the measured points spread {ratio:.4} times as far as the machine puts its \
+                 reflectors{hint}: RMS distance from their centroid {seen:.3} mm measured, \
+                 {nominal:.3} mm nominal. volver reads coordinates in mm and rotary positions in \
+                 degrees; if the units are right, check the machine file's chain and reflector \
+                 offsets"
+            ),
+        ))
+    }
+
     /// The model and measurements of a machine problem; `None` for a curve fit.
     pub fn machine(&self) -> Option<(&'a Model, &'a MeasurementSet)> {
         match self.source {

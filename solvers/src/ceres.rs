@@ -45,7 +45,7 @@ use crate::free::{Begun, begin, held_values};
 use crate::options::{Objective, Options};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use volver_ceres_sys as cs;
 use volver_core::problem::{Problem, norm};
 
@@ -77,8 +77,10 @@ struct Cost<'t, 'a> {
     d: &'t [f64],
     /// Residual passes (block 0 is evaluated once per pass).
     passes: AtomicUsize,
-    /// A residual or Jacobian was not finite.
-    nonfinite: AtomicBool,
+    /// Residual blocks whose residual or Jacobian was not finite.
+    nonfinite: AtomicUsize,
+    /// The last pass with such a block (0: none).
+    nonfinite_pass: AtomicUsize,
 }
 
 impl cs::CostFunction for Cost<'_, '_> {
@@ -112,7 +114,9 @@ impl cs::CostFunction for Cost<'_, '_> {
         residuals.copy_from_slice(&r);
         let ok = jac_ok && r.iter().all(|v| v.is_finite());
         if !ok {
-            self.nonfinite.store(true, Ordering::Relaxed);
+            self.nonfinite.fetch_add(1, Ordering::Relaxed);
+            self.nonfinite_pass
+                .fetch_max(self.passes.load(Ordering::Relaxed), Ordering::Relaxed);
         }
         ok
     }
@@ -193,7 +197,8 @@ impl Solver for Ceres {
             problem,
             d,
             passes: AtomicUsize::new(0),
-            nonfinite: AtomicBool::new(false),
+            nonfinite: AtomicUsize::new(0),
+            nonfinite_pass: AtomicUsize::new(0),
         };
         let mut cp = match cs::Problem::new(&s0, np, 3, &cost, loss)
             .and_then(|mut cp| cp.set_space(&space).map(|_| cp))
@@ -203,6 +208,7 @@ impl Solver for Ceres {
         };
         let wants = observer.wants_metrics();
         let base_evaluations = run.summary.evaluations;
+        let mut improved_pass = 0;
         let termination = loop {
             let final_stage = options.objective == Objective::Ve || eps <= eps_final(phi0) * 1.0001;
             let ceres_options = cs::Options {
@@ -230,7 +236,12 @@ impl Solver for Ceres {
             let mut evaluation_limit = false;
             let done_before = run.summary.iterations;
             let mut on_iteration = |it: &cs::Iteration, params: &[f64]| {
-                let evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
+                let passes = cost.passes.load(Ordering::Relaxed);
+                let evaluations = base_evaluations + passes;
+                // A stage's start counts as an improvement, as in the other engines.
+                if it.iteration == 0 || it.successful {
+                    improved_pass = passes;
+                }
                 if it.iteration > 0 {
                     let (objective_now, emm) = match options.objective {
                         Objective::Ve => (2.0 * it.cost / np as f64, f64::NAN),
@@ -278,7 +289,14 @@ impl Solver for Ceres {
             }
         };
         run.summary.evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
-        let termination = if cost.nonfinite.load(Ordering::Relaxed) && !termination.converged() {
+        let nonfinite_pass = cost.nonfinite_pass.load(Ordering::Relaxed);
+        let nonfinite = cost.nonfinite.load(Ordering::Relaxed);
+        if nonfinite > 0 {
+            run.edge.nonfinite_at(base_evaluations + nonfinite_pass);
+            run.edge.count = nonfinite;
+        }
+        run.edge.improved = base_evaluations + improved_pass;
+        let termination = if nonfinite > 0 && !termination.converged() {
             match termination {
                 Termination::NumericalFailure(s) => Termination::NumericalFailure(format!(
                     "{s} (a residual or Jacobian entry was not finite)"

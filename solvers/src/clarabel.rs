@@ -349,8 +349,14 @@ impl Solver for ProxLinear {
                     .as_ref()
                     .map(|v| objective_value(objective, v))
                     .unwrap_or(f64::INFINITY);
+                if new.is_none() {
+                    run.nonfinite_trial();
+                }
                 let rho = (cost - cost_new) / pred;
                 let accepted = rho > 1e-4;
+                if accepted {
+                    run.improved();
+                }
                 let emm_new = new
                     .as_ref()
                     .map(|v| v.iter().sum::<f64>() / np as f64 * 1e3)

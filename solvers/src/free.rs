@@ -150,14 +150,96 @@ pub(crate) fn cost_and_gradient(
     Some((cost_of(objective, &norms, eps), g))
 }
 
+/// Where a solve met trial points whose residuals or Jacobian are not finite (evaluation
+/// numbers as counted in the summary).
+///
+/// Such a trial is refused like any step that does not lower the cost, so an engine can end up
+/// pressed against the edge of the region where the model is finite, shrinking its steps until
+/// a step-size or cost-change test "converges", or creeping along that edge. [`Run::finish`]
+/// reports either as [`Termination::Stalled`], naming the evaluation: a convergence claimed with
+/// no improvement since the last non-finite trial, or with at least [`EDGE_RECENT`] non-finite
+/// trials among the last [`EDGE_WINDOW`] evaluations, is the edge's, not a minimum's.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Edge {
+    /// Non-finite trial evaluations.
+    pub(crate) count: usize,
+    /// The last [`EDGE_WINDOW`] of them, oldest first.
+    recent: Vec<usize>,
+    /// The last evaluation that lowered the cost (or began a stage).
+    pub(crate) improved: usize,
+}
+
+/// See [`Edge`].
+const EDGE_WINDOW: usize = 20;
+/// See [`Edge`].
+const EDGE_RECENT: usize = 5;
+
+impl Edge {
+    /// Records a non-finite trial at evaluation `k`.
+    pub(crate) fn nonfinite_at(&mut self, k: usize) {
+        self.count += 1;
+        if self.recent.len() == EDGE_WINDOW {
+            self.recent.remove(0);
+        }
+        self.recent.push(k);
+    }
+
+    /// The same record with every evaluation number moved by `base` (an engine that counts
+    /// its own calls from zero).
+    #[cfg(feature = "nlopt")]
+    pub(crate) fn shifted(&self, base: usize) -> Edge {
+        Edge {
+            count: self.count,
+            recent: self.recent.iter().map(|k| k + base).collect(),
+            improved: self.improved + base,
+        }
+    }
+
+    /// `termination`, or `Stalled` when it claims convergence at the edge (see the type)
+    /// after `evaluations` evaluations.
+    pub(crate) fn verdict(&self, termination: Termination, evaluations: usize) -> Termination {
+        let Some(&last) = self.recent.last() else {
+            return termination;
+        };
+        let window = self
+            .recent
+            .iter()
+            .filter(|&&k| k + EDGE_WINDOW > evaluations)
+            .count();
+        let at_edge = last >= self.improved || window >= EDGE_RECENT;
+        if at_edge && termination.converged() && termination != Termination::NoFreeParameters {
+            Termination::Stalled(format!(
+                "stopped at the edge of the region where the model is finite, not at a \
+                 minimum: trial evaluation {last} was not finite ({} such, {window} of the \
+                 last {EDGE_WINDOW})",
+                self.count
+            ))
+        } else {
+            termination
+        }
+    }
+}
+
 /// The bookkeeping of one solve: validation, the initial evaluation, the summary, the end.
 pub(crate) struct Run<'t, 'a> {
     pub(crate) problem: &'t Problem<'a>,
     pub(crate) summary: Summary,
+    /// Non-finite trial points met on the way.
+    pub(crate) edge: Edge,
     t0: Instant,
 }
 
 impl<'t, 'a> Run<'t, 'a> {
+    /// Records that the trial evaluation counted last was not finite.
+    pub(crate) fn nonfinite_trial(&mut self) {
+        self.edge.nonfinite_at(self.summary.evaluations);
+    }
+
+    /// Records that the evaluation counted last lowered the cost.
+    pub(crate) fn improved(&mut self) {
+        self.edge.improved = self.summary.evaluations;
+    }
+
     /// Validates the options and the start and evaluates it; `Err` is the finished solution of
     /// a run that cannot start.
     pub(crate) fn start(
@@ -185,6 +267,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 time_s: 0.0,
                 termination: Termination::NoFreeParameters,
             },
+            edge: Edge::default(),
             t0: Instant::now(),
         };
         if let Err(e) = options.validate() {
@@ -243,11 +326,12 @@ impl<'t, 'a> Run<'t, 'a> {
             self.summary.final_.phi_mm = f64::NAN;
             self.summary.final_.ve_mm2 = f64::NAN;
         }
-        // Never report success with a non-finite result.
+        // Never report success with a non-finite result, nor a stop at the edge of the finite
+        // region as convergence.
         let termination = if !self.summary.final_.phi_mm.is_finite() && !termination.failed() {
             Termination::NumericalFailure("the objective is not finite at the end".into())
         } else {
-            termination
+            self.edge.verdict(termination, self.summary.evaluations)
         };
         self.summary.termination = termination;
         self.summary.time_s = self.t0.elapsed().as_secs_f64();

@@ -751,12 +751,18 @@ impl Solver for LevenbergMarquardt {
                     (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
                 run.summary.evaluations += 1;
                 let cost_new = cost_of(objective, &norms_new, eps);
+                if !cost_new.is_finite() {
+                    run.nonfinite_trial();
+                }
                 let rho = if cost_new.is_finite() && pred > 0.0 {
                     (cost - cost_new) / pred
                 } else {
                     -1.0
                 };
                 let accepted = rho > 1e-4;
+                if accepted {
+                    run.improved();
+                }
                 observer.iteration(&Iteration {
                     iteration: run.summary.iterations,
                     evaluations: run.summary.evaluations,

@@ -85,6 +85,8 @@ struct State<'o> {
     gradients: usize,
     best: f64,
     nonfinite: Option<String>,
+    /// Non-finite objective calls, by call number, for [`crate::free::Edge`].
+    edge: crate::free::Edge,
     observer: &'o mut dyn Observer,
 }
 
@@ -166,6 +168,7 @@ impl Solver for Nlopt {
             gradients: 0,
             best: f64::INFINITY,
             nonfinite: None,
+            edge: Default::default(),
             observer,
         });
         let f = |x: &[f64], grad: Option<&mut [f64]>, _: &mut ()| -> f64 {
@@ -200,15 +203,20 @@ impl Solver for Nlopt {
                         None => f64::NAN,
                     },
                 };
-                if !value.is_finite() && st.nonfinite.is_none() {
-                    st.nonfinite = Some(format!(
-                        "a residual or Jacobian entry is not finite at objective call {}",
-                        st.calls
-                    ));
+                if !value.is_finite() {
+                    if st.nonfinite.is_none() {
+                        st.nonfinite = Some(format!(
+                            "a residual or Jacobian entry is not finite at objective call {}",
+                            st.calls
+                        ));
+                    }
+                    let call = st.calls;
+                    st.edge.nonfinite_at(call);
                 }
                 let accepted = value < st.best;
                 if accepted {
                     st.best = value;
+                    st.edge.improved = st.calls;
                 }
                 let (calls, best) = (st.calls, st.best);
                 let emm_um = if st.observer.wants_metrics() {
@@ -348,6 +356,7 @@ impl Solver for Nlopt {
         run.summary.iterations = st.calls;
         run.summary.evaluations = base_evaluations + st.calls;
         run.summary.jacobian_evaluations += st.gradients;
+        run.edge = st.edge.shifted(base_evaluations);
         let p = params_of(&x);
         run.finish(p, termination)
     }

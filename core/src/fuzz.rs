@@ -1,0 +1,156 @@
+//! Harnesses for fuzzing volver's readers: one function per reader, taking arbitrary bytes.
+//!
+//! Each either refuses its input with an error or accepts it and carries it one step further
+//! (builds the model, evaluates it, writes the result back and reads it again); it panics only
+//! when volver is wrong: a panic inside a reader, or volver's own output refused by its own
+//! reader. The `cargo fuzz` targets in `fuzz/` call these, and `tests/fuzz_seeds.rs` runs them
+//! on the committed seeds and on every input a fuzzer once found, in every test run.
+//!
+//! ```
+//! use volver_core::fuzz;
+//! fuzz::machine_toml(volver_core::machine::DEFAULT_MACHINE_TOML.as_bytes());
+//! fuzz::gcode(b"G18\nG0 X100 Z50 C0\nG2 X200 Z150 I0 K100\n");
+//! fuzz::measurement_csv(b"reflector,X\nR1,1e999\n"); // refused, no panic
+//! ```
+
+use crate::compensate::{Compensator, read_points};
+use crate::gcode::{Linearise, Program};
+use crate::machine::Machine;
+use crate::measure::MeasurementSet;
+use crate::model::{ErrorModelSpec, Model};
+use crate::results::ResultsFile;
+use crate::tables::ErrorTables;
+
+/// A harness: arbitrary bytes in, a panic only when volver is wrong.
+pub type Harness = fn(&[u8]);
+
+/// The readers with a harness, by the name of their fuzz target.
+pub const TARGETS: [(&str, Harness); 7] = [
+    ("machine_toml", machine_toml),
+    ("model_toml", model_toml),
+    ("measurement_csv", measurement_csv),
+    ("results_json", results_json),
+    ("gcode", gcode),
+    ("points_csv", points_csv),
+    ("tables", tables),
+];
+
+/// Evaluates `model` with `params` once per reflector, every axis at zero.
+fn evaluate(model: &Model, params: &[f64]) {
+    let zeros = vec![0.0; model.machine().axes().len()];
+    let commands = model.machine().commands_from_file_units(&zeros);
+    for r in 0..model.machine().reflectors().len() {
+        let _ = model.predict(&commands, r, params);
+    }
+}
+
+/// Machine files (TOML): parsed, then the complete error model is built and evaluated.
+pub fn machine_toml(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(machine) = Machine::from_toml_str(text, "fuzz.toml") else {
+        return;
+    };
+    let spec = ErrorModelSpec::complete(&machine);
+    if let Ok(model) = Model::new(machine, spec) {
+        evaluate(&model, &model.initial_params());
+    }
+}
+
+/// Error-model files (TOML) for the embedded XCFZ machine: parsed, built and evaluated.
+pub fn model_toml(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    if let Ok(model) = Model::from_toml_str(Machine::default_xcfz(), text, "fuzz.toml") {
+        evaluate(&model, &model.initial_params());
+    }
+}
+
+/// Measurement files (CSV) for the embedded XCFZ machine: what the reader accepts, the writer
+/// writes and the reader accepts again with the same number of points.
+pub fn measurement_csv(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let machine = Machine::default_xcfz();
+    let Ok(set) = MeasurementSet::from_csv_str(&machine, text, "fuzz.csv") else {
+        return;
+    };
+    let written = set.to_csv_string(&machine);
+    match MeasurementSet::from_csv_str(&machine, &written, "rewritten.csv") {
+        Ok(again) => assert_eq!(again.points.len(), set.points.len(), "{written}"),
+        Err(e) => panic!("volver's own measurement file is refused: {e}\n{written}"),
+    }
+}
+
+/// Results files (JSON): parsed, then the machine, the model and the parameters are rebuilt and
+/// evaluated.
+pub fn results_json(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let Ok(results) = ResultsFile::from_json_str(text, "fuzz.json") else {
+        return;
+    };
+    if let Ok((model, params)) = results.to_model("fuzz.json") {
+        evaluate(&model, &params);
+    }
+}
+
+/// G-code for the embedded XCFZ machine: parsed (arcs linearised to 0.01 mm, moves split at
+/// 50 mm), compensated with the paper model at its start, and the compensated program parses
+/// again.
+pub fn gcode(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let machine = Machine::default_xcfz();
+    let lin = Linearise {
+        chord_tolerance_mm: 0.01,
+        max_segment_mm: Some(50.0),
+    };
+    let Ok(program) = Program::parse(text, "fuzz.nc", &machine, &lin) else {
+        return;
+    };
+    let model = Model::default_xcfz();
+    let params = model.initial_params();
+    let comp = Compensator::new(&model, &params, [0.0; 3]).expect("the paper model compensates");
+    if let Ok((out, _)) = program.compensate(&comp, &machine, 6, "fuzz")
+        && let Err(e) = Program::parse(&out, "compensated.nc", &machine, &lin)
+    {
+        panic!("volver's own G-code is refused: {e}\n{out}");
+    }
+}
+
+/// Point lists (CSV) for the embedded XCFZ machine.
+pub fn points_csv(data: &[u8]) {
+    if let Ok(text) = std::str::from_utf8(data) {
+        let _ = read_points(text, "fuzz.csv", &Machine::default_xcfz());
+    }
+}
+
+/// Controller tables; the first byte picks the format (ISG CSV, Etalon style, plain CSV). What a
+/// reader accepts, its writer writes and the reader accepts again.
+pub fn tables(data: &[u8]) {
+    type Reader = fn(&str, &str) -> crate::error::Result<ErrorTables>;
+    let Some((&which, rest)) = data.split_first() else {
+        return;
+    };
+    let Ok(text) = std::str::from_utf8(rest) else {
+        return;
+    };
+    let (read, write): (Reader, fn(&ErrorTables) -> String) = match which % 3 {
+        0 => (ErrorTables::from_isg_csv, ErrorTables::to_isg_csv),
+        1 => (ErrorTables::from_etalon, ErrorTables::to_etalon),
+        _ => (ErrorTables::from_plain_csv, ErrorTables::to_plain_csv),
+    };
+    let Ok(t) = read(text, "fuzz.txt") else {
+        return;
+    };
+    let written = write(&t);
+    if let Err(e) = read(&written, "rewritten.txt") {
+        panic!("volver's own table is refused: {e}\n{written}");
+    }
+}

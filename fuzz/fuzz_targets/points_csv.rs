@@ -1,0 +1,5 @@
+//! Point lists (CSV) for the embedded XCFZ machine: see `volver_core::fuzz::points_csv`.
+#![no_main]
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| volver_core::fuzz::points_csv(data));

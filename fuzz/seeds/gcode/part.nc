@@ -1,0 +1,11 @@
+%
+(a test part on the XCFZ grinder)
+N10 G21 G90 G18
+N20 G0 X100 C0 Z50
+N30 G1 X600 Z250 F800 ; feed move
+N40 G2 X700 Z350 I0 K100 (quarter circle, centre at X600 Z350)
+N50 G91 G1 C45
+N60 G90 G3 X600 Z450 R100
+N70 G1 X650 Z450 C90.0
+N80 M30
+%
