@@ -7,10 +7,12 @@
 //! - axis words for the machine's axes (mm, degrees), comments `( … )` and `; …`, block numbers
 //!   `N`, `%` lines, and any other word (`F`, `S`, `M`, `T` …), which is kept as it is.
 //!
-//! What is refused, with the file, line and word: `G20` (inches: convert the program to mm
-//! first), axis words of axes the machine lacks, `G28`/`G30`/`G53`/`G92` with axis words (moves
-//! in another frame), arcs whose plane axes the machine lacks or whose end is off the circle,
-//! malformed numbers. The program's coordinates are taken as the machine's axis positions (no
+//! What is refused, with the file, line and word: `G20` and `G70` (inches: convert the program
+//! to mm first; `G70` is also a Fanuc lathe cycle), axis words of axes the machine lacks,
+//! `G28`/`G30`/`G53`/`G92` with axis words (moves in another frame), scaling, mirroring and
+//! rotation of the coordinates (`G51`, `G51.1`, `G68`), canned cycles (`G72`–`G76`,
+//! `G81`–`G89`: moves the program does not state), arcs whose plane axes the machine lacks or
+//! whose end is off the circle, malformed numbers. The program's coordinates are taken as the machine's axis positions (no
 //! work offset); axes not yet programmed start at their reference position.
 //!
 //! Arcs are linearised into chords whose sagitta is at most the chord tolerance (compensation
@@ -230,6 +232,30 @@ impl Program {
                                 return Err(Error::input(
                                     place.at_field("G20"),
                                     "inch programs (G20) are not read: convert the program to mm (G21)",
+                                ));
+                            }
+                            700 => {
+                                return Err(Error::input(
+                                    place.at_field(&w.text),
+                                    "G70 is read as inches on Siemens controls and as a \
+                                     finishing cycle on Fanuc lathes; neither can be compensated \
+                                     point by point: convert the program to mm and expand cycles",
+                                ));
+                            }
+                            510 | 511 | 680 => {
+                                return Err(Error::input(
+                                    place.at_field(&w.text),
+                                    "scaling, mirroring or rotating the coordinate system \
+                                     (G51, G51.1, G68) changes where the programmed points go: \
+                                     expand it into the program's coordinates first",
+                                ));
+                            }
+                            720..=760 | 810..=890 if g % 10 == 0 => {
+                                return Err(Error::input(
+                                    place.at_field(&w.text),
+                                    "a canned cycle (G72–G76, G81–G89) makes moves the program \
+                                     does not state, which cannot be compensated point by point: \
+                                     expand it into G0/G1 moves first",
                                 ));
                             }
                             280 | 300 | 530 | 920 => other_frame = Some(w.text.clone()),
