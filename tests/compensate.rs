@@ -279,6 +279,15 @@ fn bad_gcode_names_the_place() {
         ("X100", 1, None, "before any motion"),
         ("G0 X1\nG92 X0", 2, Some("G92"), "another frame"),
         ("G21\nG70 G0 X1", 2, Some("G70"), "inches"),
+        // Found by the fuzzer: G30 with an arc word became a motion line carrying G30.
+        ("G0 X1\nG19 G0 R20 G30", 2, Some("G30"), "another frame"),
+        // Found by the fuzzer: an arc of 1e30 mm asked for more points than memory holds.
+        (
+            "G0 X0 Z0\nG1 X1000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000",
+            2,
+            Some("X"),
+            "beyond",
+        ),
         ("G0 X1\nG68 X0 Z0 R30", 2, Some("G68"), "rotating"),
         ("G0 X1\nG51.1 X0", 2, Some("G51.1"), "mirroring"),
         (
@@ -292,15 +301,43 @@ fn bad_gcode_names_the_place() {
         ("G0 X1\nG1 X#3", 2, Some("X"), "needs a number"),
         ("G0 X1\nG1 X3 $", 2, Some("$"), "expected a word"),
     ] {
-        let err = Program::parse(text, "bad.nc", &m, &lin)
-            .unwrap_err()
-            .to_string();
+        let err = match Program::parse(text, "bad.nc", &m, &lin) {
+            Ok(p) => panic!("{text:?} accepted ({} blocks)", p.blocks.len()),
+            Err(e) => e.to_string(),
+        };
         assert!(err.starts_with(&format!("bad.nc:{line}")), "{err}");
         if let Some(f) = field {
             assert!(err.contains(&format!("field '{f}'")), "{err}");
         }
         assert!(err.contains(what), "{err}");
     }
+}
+
+/// A move cut into more points than [`MAX_MOVE_POINTS`] is refused, not allocated.
+#[test]
+fn a_move_needing_too_many_points_is_refused() {
+    use volver::core::gcode::MAX_MOVE_POINTS;
+    let m = Machine::default_xcfz();
+    let fine = Linearise {
+        chord_tolerance_mm: 1e-9,
+        max_segment_mm: None,
+    };
+    // A full circle of radius 500 mm at 1e-9 mm: about 2.2 million chords.
+    let text = "G18\nG0 X0 Z0\nG2 X0 Z0 I500 K0";
+    let err = match Program::parse(text, "fine.nc", &m, &fine) {
+        Ok(p) => panic!("accepted ({} blocks)", p.blocks.len()),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.starts_with("fine.nc:3") && err.contains(&MAX_MOVE_POINTS.to_string()),
+        "{err}"
+    );
+    // The same circle at 1 µm is read.
+    let ok = Linearise {
+        chord_tolerance_mm: 1e-3,
+        max_segment_mm: None,
+    };
+    assert!(Program::parse(text, "ok.nc", &m, &ok).is_ok());
 }
 
 /// Every export parses back to the same tables, and the tables hold the model's error values.

@@ -197,6 +197,7 @@ impl Program {
         }
         let (mut mode, mut absolute, mut plane) = (None::<Mode>, true, 0usize);
         let mut blocks = Vec::new();
+        let mut total_points = 0;
         for (i, raw) in text.lines().enumerate() {
             let place = Place::file(file).at_line(i + 1);
             let trimmed = raw.trim();
@@ -279,6 +280,16 @@ impl Program {
                         } else {
                             target[k] + w.value
                         };
+                        if !(target[k].abs() <= MAX_AXIS_VALUE) {
+                            return Err(Error::input(
+                                place.at_field(w.letter.to_string()),
+                                format!(
+                                    "{} puts axis {} at {:e}, beyond any machine's travel \
+                                     (|value| ≤ {MAX_AXIS_VALUE:e} mm or degrees)",
+                                    w.text, w.letter, target[k]
+                                ),
+                            ));
+                        }
                         moved = true;
                     }
                     'U' | 'V' | 'W' => {
@@ -294,8 +305,9 @@ impl Program {
                     _ => kept.push(w.text.clone()),
                 }
             }
+            let has_arc_words = centre.iter().any(Option::is_some) || radius.is_some();
             if let Some(g) = other_frame {
-                if moved {
+                if moved || has_arc_words {
                     return Err(Error::input(
                         place.at_field(g.clone()),
                         format!(
@@ -308,7 +320,6 @@ impl Program {
             if block_mode.is_some() {
                 mode = block_mode;
             }
-            let has_arc_words = centre.iter().any(Option::is_some) || radius.is_some();
             let motion = if moved || (has_arc_words && block_mode.is_some()) {
                 let Some(m) = mode else {
                     return Err(Error::input(
@@ -317,7 +328,9 @@ impl Program {
                     ));
                 };
                 let points = match m {
-                    Mode::Rapid | Mode::Linear => linear_points(machine, &pos, &target, lin),
+                    Mode::Rapid | Mode::Linear => {
+                        linear_points(machine, &pos, &target, lin, &place)?
+                    }
                     Mode::Clockwise | Mode::Counter => arc_points(
                         machine,
                         &pos,
@@ -330,6 +343,16 @@ impl Program {
                         &place,
                     )?,
                 };
+                total_points += points.len();
+                if total_points > MAX_PROGRAM_POINTS {
+                    return Err(Error::input(
+                        place,
+                        format!(
+                            "the program needs more than {MAX_PROGRAM_POINTS} points at this \
+                             chord tolerance and segment length: raise them, or split the program"
+                        ),
+                    ));
+                }
                 pos = target;
                 Some(Motion {
                     rapid: m == Mode::Rapid,
@@ -444,19 +467,45 @@ fn lerp(a: &[f64; MAX_AXES], b: &[f64; MAX_AXES], t: f64) -> [f64; MAX_AXES] {
     p
 }
 
+/// The largest axis position read (mm or degrees): 1 km, beyond any machine's travel.
+pub const MAX_AXIS_VALUE: f64 = 1e6;
+
+/// The most points one move may be cut into.
+pub const MAX_MOVE_POINTS: usize = 100_000;
+
+/// The most points a program may be cut into (48 bytes each per axis set).
+pub const MAX_PROGRAM_POINTS: usize = 5_000_000;
+
+/// `n` points for one move, refused (with the place) beyond [`MAX_MOVE_POINTS`] or when `n` is
+/// not a number: the move is absurdly long for its tolerance, or its coordinates are.
+fn move_points(n: f64, place: &Place) -> Result<usize> {
+    if n <= MAX_MOVE_POINTS as f64 {
+        Ok((n as usize).max(1))
+    } else {
+        Err(Error::input(
+            place.clone(),
+            format!(
+                "this move needs {n:.3e} points at the chord tolerance and segment length \
+                 (at most {MAX_MOVE_POINTS}): check its coordinates, or raise the tolerances"
+            ),
+        ))
+    }
+}
+
 fn linear_points(
     machine: &Machine,
     from: &[f64; MAX_AXES],
     to: &[f64; MAX_AXES],
     lin: &Linearise,
-) -> Vec<[f64; MAX_AXES]> {
+    place: &Place,
+) -> Result<Vec<[f64; MAX_AXES]>> {
     let n = match lin.max_segment_mm {
-        Some(s) if s > 0.0 => ((linear_length(machine, from, to) / s).ceil() as usize).max(1),
+        Some(s) if s > 0.0 => move_points((linear_length(machine, from, to) / s).ceil(), place)?,
         _ => 1,
     };
-    (1..=n)
+    Ok((1..=n)
         .map(|i| lerp(from, to, i as f64 / n as f64))
-        .collect()
+        .collect())
 }
 
 /// The points of an arc in plane 0 (XY), 1 (ZX) or 2 (YZ): chords with sagitta ≤ `tol`.
@@ -539,7 +588,7 @@ fn arc_points(
         sweep = tau; // a full circle
     }
     let step = 2.0 * (1.0 - (tol / r0).min(1.0)).acos();
-    let n = ((sweep / step.max(1e-9)).ceil() as usize).max(1);
+    let n = move_points((sweep / step.max(1e-9)).ceil(), place)?;
     let dir = if clockwise { -1.0 } else { 1.0 };
     Ok((1..=n)
         .map(|i| {

@@ -291,6 +291,8 @@ impl Solver for Ceres {
         run.summary.evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
         let nonfinite_pass = cost.nonfinite_pass.load(Ordering::Relaxed);
         let nonfinite = cost.nonfinite.load(Ordering::Relaxed);
+        // Ceres evaluates blocks, not trial points: the edge sees the last pass with a
+        // non-finite block, and counts blocks.
         if nonfinite > 0 {
             run.edge.nonfinite_at(base_evaluations + nonfinite_pass);
             run.edge.count = nonfinite;
