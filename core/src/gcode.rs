@@ -280,7 +280,7 @@ impl Program {
                         } else {
                             target[k] + w.value
                         };
-                        if !(target[k].abs() <= MAX_AXIS_VALUE) {
+                        if !target[k].is_finite() || target[k].abs() > MAX_AXIS_VALUE {
                             return Err(Error::input(
                                 place.at_field(w.letter.to_string()),
                                 format!(
