@@ -308,14 +308,7 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
     }
     let r = problem.residuals(&id.params);
     let rm = diagnose::to_machine_frame(&problem, &id.params, &r);
-    let mut breakdowns: Vec<diagnose::Breakdown> = (0..m.axes().len())
-        .map(|k| diagnose::by_axis(&problem, &r, k, 24))
-        .collect();
-    breakdowns.push(diagnose::by_reflector(&problem, &r));
-    if let Some(t) = diagnose::by_time(&problem, &r, 8) {
-        breakdowns.push(t);
-    }
-    breakdowns.push(diagnose::by_distance(&problem, &r, 8));
+    let breakdowns = diagnose::breakdowns(&problem, &r);
     let periodograms: Vec<(String, Vec<diagnose::Line>)> = m
         .axes()
         .iter()

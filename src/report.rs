@@ -426,14 +426,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     }
     // Diagnosis.
     let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");
-    let mut breakdowns: Vec<diagnose::Breakdown> = (0..m.axes().len())
-        .map(|k| diagnose::by_axis(&problem, &after, k, 24))
-        .collect();
-    breakdowns.push(diagnose::by_reflector(&problem, &after));
-    if let Some(t) = diagnose::by_time(&problem, &after, 8) {
-        breakdowns.push(t);
-    }
-    breakdowns.push(diagnose::by_distance(&problem, &after, 8));
+    let breakdowns = diagnose::breakdowns(&problem, &after);
     let noise_ref = diagnose::repeat_noise(&problem).map(|(n, _)| n.emm_um);
     for b in &breakdowns {
         let data: Vec<(String, f64)> = b

@@ -57,6 +57,18 @@ fn broken_measurement_files_are_refused_with_the_place_named() {
         c[k] = value;
         c.join(",")
     };
+    // The file with the measured coordinates divided by `divisor` (another length unit).
+    let scaled = |divisor: f64| -> Vec<String> {
+        std::iter::once(header.clone())
+            .chain(lines.iter().map(|r| {
+                let mut c: Vec<String> = r.split(',').map(String::from).collect();
+                for v in &mut c[4..7] {
+                    *v = format!("{}", v.parse::<f64>().unwrap() / divisor);
+                }
+                c.join(",")
+            }))
+            .collect()
+    };
     // (file, its lines, what the message must contain)
     let cases: Vec<(&str, Vec<String>, Vec<&str>)> = vec![
         (
@@ -155,28 +167,12 @@ fn broken_measurement_files_are_refused_with_the_place_named() {
         ),
         (
             "metres.csv",
-            std::iter::once(header.clone())
-                .chain(lines.iter().map(|r| {
-                    let mut c: Vec<String> = r.split(',').map(String::from).collect();
-                    for v in &mut c[4..7] {
-                        *v = format!("{}", v.parse::<f64>().unwrap() / 1000.0);
-                    }
-                    c.join(",")
-                }))
-                .collect(),
+            scaled(1000.0),
             vec!["metres.csv", "look like metres"],
         ),
         (
             "inches.csv",
-            std::iter::once(header.clone())
-                .chain(lines.iter().map(|r| {
-                    let mut c: Vec<String> = r.split(',').map(String::from).collect();
-                    for v in &mut c[4..7] {
-                        *v = format!("{}", v.parse::<f64>().unwrap() / 25.4);
-                    }
-                    c.join(",")
-                }))
-                .collect(),
+            scaled(25.4),
             vec!["inches.csv", "look like inches"],
         ),
         ("empty.csv", vec![], vec!["empty.csv", "empty file"]),

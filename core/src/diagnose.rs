@@ -203,6 +203,19 @@ pub fn by_distance(problem: &Problem, residuals: &[[f64; 3]], max_bins: usize) -
     by_values("distance", "mm", &d, residuals, max_bins)
 }
 
+/// Every breakdown `volver diagnose` and the report show: by each axis (up to 24 bins), by
+/// reflector, by time when every point has one, and by distance (8 bins).
+pub fn breakdowns(problem: &Problem, residuals: &[[f64; 3]]) -> Vec<Breakdown> {
+    let n_axes = problem.model().machine().axes().len();
+    let mut all: Vec<Breakdown> = (0..n_axes)
+        .map(|k| by_axis(problem, residuals, k, 24))
+        .collect();
+    all.push(by_reflector(problem, residuals));
+    all.extend(by_time(problem, residuals, 8));
+    all.push(by_distance(problem, residuals, 8));
+    all
+}
+
 /// One line of a periodogram.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Line {
