@@ -867,8 +867,9 @@ struct SimulateArgs {
     /// Size of the random true errors of one kind, e.g. straightness=20 (see below).
     #[arg(long = "magnitude", value_name = "KIND=VALUE")]
     magnitude: Vec<String>,
-    /// Tracker noise: paper (30 µrad, 30 µrad, 4 µm + 0.8 µm/m), none, or
-    /// AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M.
+    /// Tracker noise: paper (uniform on ±30 µrad, ±30 µrad, ±(4 µm + 0.8 µm/m): the paper's
+    /// "±" values read as bounds, which reproduces its tables 9–10), none, or a distribution and
+    /// four values: normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ) or uniform:… (bounds).
     #[arg(long, default_value = "paper")]
     noise: String,
     /// An effect outside the standard model, hidden in the data (see below); repeatable.
@@ -984,8 +985,16 @@ fn simulate(a: SimulateArgs) -> Result<()> {
     }
     let n = &r.noise;
     println!(
-        "  noise: azimuth {} µrad, elevation {} µrad, range {} µm + {} µm/m (σ)",
-        n.azimuth_urad, n.elevation_urad, n.range_um, n.range_um_per_m
+        "  noise: {:?} in azimuth {} µrad, elevation {} µrad, range {} µm + {} µm/m ({}; --noise {n})",
+        n.distribution,
+        n.azimuth_urad,
+        n.elevation_urad,
+        n.range_um,
+        n.range_um_per_m,
+        match n.distribution {
+            volver::core::noise::Distribution::Normal => "σ",
+            volver::core::noise::Distribution::Uniform => "bounds ±a, σ = a/√3",
+        }
     );
     if r.effects.is_empty() {
         println!("  hidden effects: none");

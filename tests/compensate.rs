@@ -582,3 +582,344 @@ fn the_report_is_one_self_contained_html_file() {
     assert!(!html.contains("NaN") && !html.contains("inf µm"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A model whose errors are set by hand: EXX rises linearly by 0.2 µm per mm of X (2 µm at
+/// X = 10 mm, 10 µm at 50 mm), ECC is a constant 5 µrad, and the squareness B0Z is 20 µrad.
+fn hand_set() -> (Model, Vec<f64>) {
+    let model = Model::from_toml_str(
+        Machine::default_xcfz(),
+        r#"
+name = "hand-set"
+[[error]]
+name = "EXX"
+basis = "monomial"
+degree = 1
+[[error]]
+name = "ECC"
+basis = "fourier"
+order = 1
+[[error]]
+name = "B0Z"
+"#,
+        "hand.toml",
+    )
+    .unwrap();
+    let mut p = model.initial_params();
+    // X travels 0–1400 mm, so ξ = 2x/1400 − 1 and EXX = c0 + c1·ξ; zero at x = 0 means c0 = c1,
+    // and EXX(10 mm) = c1·20/1400 = 0.002 mm gives c1 = 0.14 mm.
+    p[model.param_index("EXX.c0").unwrap()] = 0.14;
+    p[model.param_index("EXX.c1").unwrap()] = 0.14;
+    p[model.param_index("ECC.d").unwrap()] = 5e-6;
+    p[model.param_index("B0Z").unwrap()] = 20e-6;
+    (model, p)
+}
+
+/// Every table format states the hand-set errors as exactly those numbers in its stated unit:
+/// the plain CSV in µm and µrad (EXX = 2 µm at 10 mm, not 2 098 µm or 2 000 µm), the ISG and
+/// Etalon files in mm and rad. Checked on the text, through the library and through the CLI.
+#[test]
+fn tables_state_hand_set_errors_in_their_units() {
+    let (model, p) = hand_set();
+    let tables = ErrorTables::from_model(&model, &p, 10.0, 30.0).unwrap();
+    let check = |plain: &str, isg: &str, etalon: &str| {
+        for line in [
+            "EXX,X,10.000000,mm,2.000000000,um",
+            "EXX,X,50.000000,mm,10.000000000,um",
+            "EXX,X,0.000000,mm,0.000000000,um",
+            "ECC,C,30.000000,deg,5.000000,urad",
+            "B0Z,Z,,,20.000000,urad",
+        ] {
+            assert!(
+                plain.lines().any(|l| l == line),
+                "plain CSV lacks {line}:\n{plain}"
+            );
+        }
+        // ISG: the X block's row at 10 mm holds 0.002 mm; the constants block B0Z 2e-5 rad.
+        assert!(
+            isg.lines().any(|l| l == "10.000000 0.002000000000"),
+            "{isg}"
+        );
+        assert!(
+            isg.lines().any(|l| l == "30.000000 0.000005000000"),
+            "{isg}"
+        );
+        let b0z = isg.lines().position(|l| l == "B0Z").expect("B0Z header");
+        assert_eq!(isg.lines().nth(b0z + 1), Some("0.000020000000"));
+        // Etalon: the same in its Gridpoints and VALUE lines.
+        assert!(
+            etalon.contains(
+                "[EXX]\nGridpoints = {\n  0.000000 0.000000000000\n  10.000000 0.002000000000\n"
+            ),
+            "{etalon}"
+        );
+        assert!(
+            etalon.contains("[B0Z]\nVALUE = 0.000020000000\n"),
+            "{etalon}"
+        );
+        assert!(etalon.contains("  30.000000 0.000005000000\n"), "{etalon}");
+    };
+    check(
+        &tables.to_plain_csv(),
+        &tables.to_isg_csv(),
+        &tables.to_etalon(),
+    );
+    // Read back, each format gives the same tables (not a check of the format on its own).
+    let back = ErrorTables::from_plain_csv(&tables.to_plain_csv(), "p.csv").unwrap();
+    assert!(tables.max_difference(&back).unwrap() < 1e-12);
+
+    // Through the CLI, from a results file.
+    let dir = std::env::temp_dir().join(format!("volver-hand-tables-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let results = dir.join("hand.json");
+    volver::core::results::ResultsFile::from_model(&model, &p)
+        .unwrap()
+        .save(&results)
+        .unwrap();
+    let out = common::volver(&[
+        "tables",
+        "--results",
+        results.to_str().unwrap(),
+        "--out",
+        dir.join("t").to_str().unwrap(),
+        "--rotary-step",
+        "30",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = |n: &str| std::fs::read_to_string(dir.join("t").join(n)).unwrap();
+    check(
+        &read("errors.csv"),
+        &read("errors-isg.csv"),
+        &read("errors-etalon.txt"),
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The moves a program makes (file units, chain order), read by volver's reader.
+fn moves_of(text: &str, m: &Machine) -> Vec<Vec<f64>> {
+    Program::parse(text, "p.nc", m, &Linearise::default())
+        .unwrap()
+        .points()
+        .iter()
+        .map(|(p, _, _)| p[..m.axes().len()].to_vec())
+        .collect()
+}
+
+/// `text` compensated on a perfect machine (the identity): the output, which must re-read as
+/// the same moves.
+fn rewritten(text: &str, m: &Machine, model: &Model) -> String {
+    let p = model.initial_params();
+    let comp = Compensator::new(model, &p, [0.0; 3]).unwrap();
+    let prog = Program::parse(text, "p.nc", m, &Linearise::default()).unwrap();
+    let (out, _) = prog.compensate(&comp, m, 4, "test").unwrap();
+    let (a, b) = (moves_of(text, m), moves_of(&out, m));
+    assert_eq!(a.len(), b.len(), "{out}");
+    for (x, y) in a.iter().zip(&b) {
+        for (u, v) in x.iter().zip(y) {
+            assert!((u - v).abs() < 1e-4, "{x:?} became {y:?}:\n{out}");
+        }
+    }
+    out
+}
+
+/// Mode words in every spelling a control accepts are read, and none reaches the output, whose
+/// moves are absolute under one stated modal state: `G091` or `G 91` copied verbatim would make
+/// a control run the absolute moves as increments (reliability II).
+#[test]
+fn gcode_mode_words_in_any_spelling_leave_no_trace() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    for g91 in ["G91", "G091", "G 91", "g91", "G91.0"] {
+        let text = format!("G90 G1 X100 C0 Z100\n{g91}\nG1 X10\nG1 Z5\n");
+        assert_eq!(moves_of(&text, &m)[2], vec![110.0, 0.0, 105.0], "{g91}");
+        let out = rewritten(&text, &m, &model);
+        let code: Vec<String> = out
+            .lines()
+            .map(|l| l.split('(').next().unwrap().to_uppercase().replace(' ', ""))
+            .collect();
+        assert!(
+            code.iter()
+                .all(|l| !l.contains("G91") && !l.contains("G091")),
+            "{g91}:\n{out}"
+        );
+        assert!(out.contains("G90 G21 G17\n"), "{out}");
+        assert!(out.contains("G1 X110.0000 Z105.0000 C0.0000"), "{out}");
+    }
+}
+
+/// Modal words apply to the whole block, as RS-274/NGC says, wherever they stand in it.
+#[test]
+fn gcode_modal_words_apply_to_the_whole_block() {
+    let m = Machine::default_xcfz();
+    let at = |text: &str| moves_of(text, &m).last().unwrap()[0];
+    assert_eq!(at("G1 X100 C0 Z0\nG1 X10 G91\n"), 110.0);
+    assert_eq!(at("G91\nG1 X100\nG1 X500 G90\n"), 500.0);
+    // Two words of one modal group, or of one axis, in a block are refused with their place.
+    let err = |text: &str| {
+        Program::parse(text, "p.nc", &m, &Linearise::default())
+            .unwrap_err()
+            .to_string()
+    };
+    let e = err("G1 X1\nG90 X10 G91\n");
+    assert!(
+        e.starts_with("p.nc:2") && e.contains("distance mode"),
+        "{e}"
+    );
+    let e = err("G0 G1 X10\n");
+    assert!(e.contains("motion"), "{e}");
+    let e = err("G1 X10 X20\n");
+    assert!(e.contains("two words for axis X"), "{e}");
+}
+
+/// Numbers in every form a control accepts, and a clear refusal of exponents (`X1e2` is X1 and
+/// a word E2 to a control).
+#[test]
+fn gcode_numbers_are_read_as_a_control_reads_them() {
+    let m = Machine::default_xcfz();
+    let last = |text: &str| moves_of(text, &m).last().unwrap().clone();
+    assert_eq!(last("G1 X-.5 C+10. Z007\n"), vec![-0.5, 10.0, 7.0]);
+    assert_eq!(last("g1x12.5z3\n"), vec![12.5, 0.0, 3.0]);
+    for bad in ["G1 X1e2\n", "G1 X1E+2\n", "G1 X1.5e-3 Z0\n"] {
+        let e = Program::parse(bad, "p.nc", &m, &Linearise::default())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("p.nc:1") && e.contains("no exponent"),
+            "{bad}: {e}"
+        );
+    }
+    for bad in ["G1 X1.2.3\n", "G1 X--1\n", "G1 X.\n", "G1 X+\n"] {
+        assert!(
+            Program::parse(bad, "p.nc", &m, &Linearise::default()).is_err(),
+            "{bad}"
+        );
+    }
+    // A real E word after a space is kept as a word.
+    let out = rewritten("G1 X1 E2\n", &m, &Model::default_xcfz());
+    assert!(out.contains("G1 X1.0000 Z0.0000 C0.0000 E2"), "{out}");
+}
+
+/// LF, CR LF and CR alone end lines: a CR-only file is not one block.
+#[test]
+fn gcode_every_line_ending_is_read() {
+    let m = Machine::default_xcfz();
+    let lf = "G1 X10 C0 Z0\nG1 X20\nG1 Z30\n";
+    let want = moves_of(lf, &m);
+    assert_eq!(want.len(), 3);
+    for text in [
+        lf.replace('\n', "\r\n"),
+        lf.replace('\n', "\r"),
+        lf.trim_end().replace('\n', "\r"),
+    ] {
+        assert_eq!(moves_of(&text, &m), want, "{text:?}");
+    }
+    // Errors name the line whatever the ending.
+    let e = Program::parse("G1 X1\rG1 Q\r", "p.nc", &m, &Linearise::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with("p.nc:2"), "{e}");
+}
+
+/// Block delete, block numbers and program numbers stay in their place: `/` first on every line
+/// of an optional block, `N` first in its block (LinuxCNC refuses a line number mid-block), the
+/// header after `%` and `O1000`, and the axis words in the order X Y Z A B C.
+#[test]
+fn gcode_block_delete_and_numbers_keep_their_place() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let text =
+        "%\nO1000 (part)\nN10 G90 G1 X100 C0 Z10 F500\n/N20 G1 X200\nN30 M5 ; spindle off\n%\n";
+    let out = rewritten(text, &m, &model);
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(lines[0], "%");
+    assert_eq!(lines[1], "O1000 (part)");
+    assert!(lines[2].starts_with("(test"), "{out}");
+    assert!(
+        out.contains("\nN10 G1 X100.0000 Z10.0000 C0.0000 F500 (line 3)\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains("\n/N20 G1 X200.0000 Z10.0000 C0.0000 (line 4)\n"),
+        "{out}"
+    );
+    assert!(out.contains("\nN30 M5 ; spindle off\n"), "{out}");
+    assert!(out.ends_with("\n%\n"), "{out}");
+    let prog = Program::parse(&out, "o.nc", &m, &Linearise::default()).unwrap();
+    let flags: Vec<bool> = prog.points().iter().map(|p| p.2).collect();
+    assert_eq!(flags, vec![false, true]);
+    // A long optional move split into segments keeps the `/` on every segment.
+    let lin = Linearise {
+        chord_tolerance_mm: 0.001,
+        max_segment_mm: Some(30.0),
+    };
+    let p = model.initial_params();
+    let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    let prog = Program::parse("G1 X0 C0 Z0\n/G1 X100\n", "p.nc", &m, &lin).unwrap();
+    let (out, _) = prog.compensate(&comp, &m, 3, "").unwrap();
+    let optional: Vec<&str> = out
+        .lines()
+        .filter(|l| l.contains("X") && l.starts_with('/'))
+        .collect();
+    assert_eq!(optional.len(), 4, "{out}");
+}
+
+/// A five-axis program is written with its axis words in the conventional order X Y Z A B C,
+/// not in the machine's chain order.
+#[test]
+fn gcode_axis_words_are_written_in_the_conventional_order() {
+    let m = Machine::from_toml_str(
+        r#"
+        name = "five-axis"
+        chain = "YACFXZ"
+        [axes.Y]
+        range = [-400.0, 400.0]
+        offset = [0.0, 0.0, 0.0]
+        [axes.A]
+        range = [-110.0, 110.0]
+        offset = [0.0, 0.0, 100.0]
+        [axes.C]
+        range = [-360.0, 360.0]
+        offset = [0.0, 0.0, 50.0]
+        [axes.X]
+        range = [-500.0, 500.0]
+        offset = [0.0, 0.0, 0.0]
+        [axes.Z]
+        range = [0.0, 600.0]
+        offset = [0.0, 0.0, 800.0]
+        [[reflector]]
+        id = "R1"
+        offset = [0.0, 0.0, -100.0]
+        [tracker]
+        mount = "frame"
+        position = [2000.0, 0.0, 0.0]
+        orientation_deg = [0.0, 0.0, 180.0]
+        "#,
+        "5ax.toml",
+    )
+    .unwrap();
+    let model = Model::from_toml_str(m.clone(), "name = \"none\"\n", "none.toml").unwrap();
+    let out = rewritten("G1 X1 Y2 Z3 A4 C5\n", &m, &model);
+    assert!(
+        out.contains("G1 X1.0000 Y2.0000 Z3.0000 A4.0000 C5.0000"),
+        "{out}"
+    );
+}
+
+/// Decimals beyond what any machine resolves are refused, not a panic.
+#[test]
+fn gcode_decimals_are_bounded() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let p = model.initial_params();
+    let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    let prog = Program::parse("G1 X1\n", "p.nc", &m, &Linearise::default()).unwrap();
+    let e = prog
+        .compensate(&comp, &m, 70_000, "")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("at most 12"), "{e}");
+}

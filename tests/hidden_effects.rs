@@ -42,6 +42,7 @@ fn simulate_harmonic_files(name: &str, seed: &str) -> std::path::PathBuf {
 }
 
 const LOW_NOISE: TrackerNoise = TrackerNoise {
+    distribution: volver::core::noise::Distribution::Normal,
     azimuth_urad: 3.0,
     elevation_urad: 3.0,
     range_um: 0.5,

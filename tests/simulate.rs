@@ -537,9 +537,8 @@ fn the_noise_error_reflects_the_tracker_noise() {
     for (pt, clean) in out.measurements.points.iter().zip(&out.noise_free) {
         let rho = clean[0].hypot(clean[1]);
         let r = rho.hypot(clean[2]);
-        want += (rho * noise.azimuth_urad * 1e-6).powi(2)
-            + (r * noise.elevation_urad * 1e-6).powi(2)
-            + noise.range_sigma_mm(r).powi(2);
+        let (s_az, s_el) = noise.angle_sigmas_rad();
+        want += (rho * s_az).powi(2) + (r * s_el).powi(2) + noise.range_sigma_mm(r).powi(2);
         got += dist(pt.measured, *clean).powi(2);
     }
     let ratio = (got / want).sqrt();

@@ -1,25 +1,34 @@
 //! G-code programs (ISO 6983 / RS-274 subset): the moves of an NC program, for compensation.
 //!
-//! What is read:
+//! What is read, with RS-274/NGC's semantics (as LinuxCNC documents them):
 //! - linear moves `G0`/`G1` and arcs `G2`/`G3` (centre by `I J K`, incremental from the start,
 //!   or radius `R`; helical arcs move the third axis linearly), with the modal motion code;
 //! - `G90`/`G91` (absolute/incremental), `G17`/`G18`/`G19` (arc plane XY, ZX, YZ), `G21` (mm);
-//! - axis words for the machine's axes (mm, degrees), comments `( … )` and `; …`, block numbers
-//!   `N`, `%` lines, and any other word (`F`, `S`, `M`, `T` …), which is kept as it is.
+//!   modal words apply to the whole block wherever they stand in it (`G1 X10 G91` is an
+//!   incremental move), and two words of one modal group in a block are refused;
+//! - numbers with an optional sign, digits and one optional decimal point (`X-.5`, `X5.`,
+//!   `G091`, `G 91`); exponents are not G-code (`X1e2` is refused: a control reads X1 and E2);
+//! - axis words for the machine's axes (mm, degrees), comments `( … )` and `; …`, block delete
+//!   `/`, block numbers `N`, program numbers `O`, `%` lines, and any other word (`F`, `S`,
+//!   `M`, `T` …), which is kept as it is;
+//! - lines ended by LF, CR LF or CR alone.
 //!
 //! What is refused, with the file, line and word: `G20` and `G70` (inches: convert the program
-//! to mm first; `G70` is also a Fanuc lathe cycle), axis words of axes the machine lacks,
-//! `G28`/`G30`/`G53`/`G92` with axis words (moves in another frame), scaling, mirroring and
-//! rotation of the coordinates (`G51`, `G51.1`, `G68`), canned cycles (`G72`–`G76`,
-//! `G81`–`G89`: moves the program does not state), arcs whose plane axes the machine lacks or
-//! whose end is off the circle, malformed numbers. The program's coordinates are taken as the machine's axis positions (no
-//! work offset); axes not yet programmed start at their reference position.
+//! to mm first; `G70` is also a Fanuc lathe cycle), axis words of axes the machine lacks, two
+//! words for one axis in a block, `G28`/`G30`/`G53`/`G92` with axis words (moves in another
+//! frame), scaling, mirroring and rotation of the coordinates (`G51`, `G51.1`, `G68`), canned
+//! cycles (`G72`–`G76`, `G81`–`G89`: moves the program does not state), arcs whose plane axes
+//! the machine lacks or whose end is off the circle, malformed numbers. The program's
+//! coordinates are taken as the machine's axis positions (no work offset); axes not yet
+//! programmed start at their reference position.
 //!
 //! Arcs are linearised into chords whose sagitta is at most the chord tolerance (compensation
 //! bends a path, so an arc stays an arc only on the nominal machine); long linear moves can be
 //! split too (`max_segment_mm`) so that the compensated path follows the bent one between
 //! points. [`Program::compensate`] writes the program back as absolute `G1`/`G0` moves through
-//! compensated commands and verifies every written command through the forward model.
+//! compensated commands, under one explicit modal state and without the input's mode words
+//! that would change their meaning, and verifies every written command through the forward
+//! model.
 
 use crate::chain::MAX_AXES;
 use crate::compensate::Compensator;
@@ -55,8 +64,6 @@ pub struct Motion {
     /// The points to pass through, the last being the block's end (file units: mm, degrees;
     /// chain order).
     pub points: Vec<[f64; MAX_AXES]>,
-    /// The block's words other than motion codes, axis words and arc words (`F500 S1000` …).
-    pub kept: String,
 }
 
 /// One line of a program.
@@ -66,6 +73,15 @@ pub struct Block {
     pub line: usize,
     /// The line as written.
     pub source: String,
+    /// Block delete: the block starts with `/` (a control skips it when its switch is on).
+    pub optional: bool,
+    /// Its block number as written (`N20`).
+    pub number: Option<String>,
+    /// Its words other than the block number, mode words, motion codes, axis words and arc
+    /// words, as written (`F500`, `S1000`, `M3`, `O1000` …).
+    pub kept: Vec<String>,
+    /// Its comments as written, with their delimiters (`(roughing)`, `; end`).
+    pub comments: Vec<String>,
     /// Its move, if it has one.
     pub motion: Option<Motion>,
 }
@@ -112,6 +128,9 @@ struct Word {
     text: String,
 }
 
+/// The words of a block's code (comments removed). Numbers follow RS-274/NGC: an optional sign,
+/// digits and at most one decimal point, no exponent; spaces may stand between a letter and its
+/// number (`G 91`) and inside neither.
 fn words(code: &str, place: &Place) -> Result<Vec<Word>> {
     let mut out = Vec::new();
     let chars: Vec<char> = code.chars().collect();
@@ -134,21 +153,40 @@ fn words(code: &str, place: &Place) -> Result<Vec<Word>> {
             i += 1;
         }
         let num_start = i;
-        while i < chars.len() && (chars[i].is_ascii_digit() || matches!(chars[i], '.' | '+' | '-'))
-        {
+        if i < chars.len() && matches!(chars[i], '+' | '-') {
+            i += 1;
+        }
+        while i < chars.len() && (chars[i].is_ascii_digit() || chars[i] == '.') {
             i += 1;
         }
         let num: String = chars[num_start..i].iter().collect();
-        let value: f64 = num.parse().map_err(|_| {
-            Error::input(
-                place.clone().at_field(letter.to_string()),
-                format!("word '{letter}' needs a number, found \"{num}\""),
-            )
-        })?;
-        if !value.is_finite() {
+        let digits = num.chars().filter(char::is_ascii_digit).count();
+        let points = num.matches('.').count();
+        let value: f64 = match num.parse() {
+            Ok(v) if digits > 0 && points <= 1 => v,
+            _ => {
+                return Err(Error::input(
+                    place.clone().at_field(letter.to_string()),
+                    format!("word '{letter}' needs a number, found \"{num}\""),
+                ));
+            }
+        };
+        // `X1e2` is X1 followed by a word E2 to a control: G-code numbers have no exponent.
+        if i + 1 < chars.len()
+            && matches!(chars[i], 'e' | 'E')
+            && (chars[i + 1].is_ascii_digit() || matches!(chars[i + 1], '+' | '-' | '.'))
+        {
+            let tail: String = chars[i..]
+                .iter()
+                .take_while(|c| !c.is_whitespace())
+                .collect();
             return Err(Error::input(
                 place.clone().at_field(letter.to_string()),
-                "the number is not finite",
+                format!(
+                    "{letter}{num}{tail} is not a G-code number (G-code has no exponent; a \
+                     control reads {letter}{num} and then a word {tail}): write the number out in \
+                     full, or put a space before a real E word"
+                ),
             ));
         }
         out.push(Word {
@@ -160,17 +198,32 @@ fn words(code: &str, place: &Place) -> Result<Vec<Word>> {
     Ok(out)
 }
 
-/// The code of a line without its comments, or an error for an unclosed comment.
-fn strip_comments(line: &str, place: &Place) -> Result<String> {
-    let mut out = String::new();
+/// A line split into its code and its comments (as written, each with its delimiters), or an
+/// error for an unclosed comment.
+fn split_comments(line: &str, place: &Place) -> Result<(String, Vec<String>)> {
+    let mut code = String::new();
+    let mut comments = Vec::new();
     let mut depth = 0;
-    for c in line.chars() {
+    let mut current = String::new();
+    for (i, c) in line.char_indices() {
         match c {
-            '(' => depth += 1,
-            ')' if depth > 0 => depth -= 1,
-            ';' if depth == 0 => break,
-            _ if depth == 0 => out.push(c),
-            _ => {}
+            '(' => {
+                depth += 1;
+                current.push(c);
+            }
+            ')' if depth > 0 => {
+                depth -= 1;
+                current.push(c);
+                if depth == 0 {
+                    comments.push(std::mem::take(&mut current));
+                }
+            }
+            ';' if depth == 0 => {
+                comments.push(line[i..].to_string());
+                break;
+            }
+            _ if depth == 0 => code.push(c),
+            _ => current.push(c),
         }
     }
     if depth > 0 {
@@ -179,11 +232,45 @@ fn strip_comments(line: &str, place: &Place) -> Result<String> {
             "a comment '(' is not closed on its line",
         ));
     }
-    Ok(out)
+    Ok((code, comments))
 }
+
+/// The lines of a program, whatever their endings (LF, CR LF or CR alone).
+fn program_lines(text: &str) -> Vec<&str> {
+    let mut lines = Vec::new();
+    let mut rest = text;
+    while let Some(i) = rest.find(['\n', '\r']) {
+        lines.push(&rest[..i]);
+        let skip = if rest[i..].starts_with("\r\n") { 2 } else { 1 };
+        rest = &rest[i + skip..];
+    }
+    if !rest.is_empty() {
+        lines.push(rest);
+    }
+    lines
+}
+
+/// The modal groups of RS-274/NGC that volver reads (two words of one group in one block are an
+/// error): motion, plane, distance mode, units.
+fn modal_group(g: i64) -> Option<&'static str> {
+    match g {
+        0 | 10 | 20 | 30 => Some("motion (G0, G1, G2, G3)"),
+        170 | 180 | 190 => Some("plane (G17, G18, G19)"),
+        900 | 910 => Some("distance mode (G90, G91)"),
+        200 | 210 => Some("units (G20, G21)"),
+        _ => None,
+    }
+}
+
+/// The modal state the reader starts in and the writer states at the top of its output.
+const START_STATE: &str = "G90 G21 G17";
 
 impl Program {
     /// Reads a program for `machine`; `file` names it in messages.
+    ///
+    /// Modal words apply to the whole block, whatever their place in it (RS-274/NGC): `G1 X10
+    /// G91` moves X by 10. Two words of one modal group, or two words for one axis, in one block
+    /// are refused.
     pub fn parse(text: &str, file: &str, machine: &Machine, lin: &Linearise) -> Result<Program> {
         if !(lin.chord_tolerance_mm > 0.0 && lin.chord_tolerance_mm.is_finite()) {
             return Err(Error::Model(
@@ -198,71 +285,116 @@ impl Program {
         let (mut mode, mut absolute, mut plane) = (None::<Mode>, true, 0usize);
         let mut blocks = Vec::new();
         let mut total_points = 0;
-        for (i, raw) in text.lines().enumerate() {
+        for (i, raw) in program_lines(text).into_iter().enumerate() {
             let place = Place::file(file).at_line(i + 1);
             let trimmed = raw.trim();
-            let code = if trimmed.starts_with('%') {
-                String::new()
-            } else {
-                strip_comments(trimmed.trim_start_matches('/'), &place)?
-            };
+            if trimmed.starts_with('%') {
+                blocks.push(Block {
+                    line: i + 1,
+                    source: raw.to_string(),
+                    optional: false,
+                    number: None,
+                    kept: Vec::new(),
+                    comments: Vec::new(),
+                    motion: None,
+                });
+                continue;
+            }
+            let optional = trimmed.starts_with('/');
+            let (code, comments) = split_comments(trimmed.trim_start_matches('/'), &place)?;
             let ws = words(&code, &place)?;
-            let mut target = pos;
-            let mut moved = false;
-            let mut centre = [None::<f64>; 3];
-            let mut radius = None;
+            // Modal words first: they apply to the whole block.
+            let mut groups: Vec<(&str, &str)> = Vec::new();
             let mut block_mode = None;
             let mut other_frame = None;
             let mut kept = Vec::new();
+            let mut number = None;
+            for w in &ws {
+                if w.letter == 'N' {
+                    if number.is_some() {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            "two block numbers (N) in one block",
+                        ));
+                    }
+                    number = Some(w.text.clone());
+                    continue;
+                }
+                if w.letter != 'G' {
+                    continue;
+                }
+                let g = (w.value * 10.0).round() as i64;
+                if let Some(group) = modal_group(g) {
+                    if let Some((_, first)) = groups.iter().find(|(gr, _)| *gr == group) {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            format!(
+                                "{first} and {} are both in the {group} modal group: a block may \
+                                 hold one of them",
+                                w.text
+                            ),
+                        ));
+                    }
+                    groups.push((group, &w.text));
+                }
+                match g {
+                    0 => block_mode = Some(Mode::Rapid),
+                    10 => block_mode = Some(Mode::Linear),
+                    20 => block_mode = Some(Mode::Clockwise),
+                    30 => block_mode = Some(Mode::Counter),
+                    // Plane words are kept: they mean nothing to volver's G1 moves but matter
+                    // to the control's cutter compensation.
+                    170 | 180 | 190 => {
+                        plane = ((g - 170) / 10) as usize;
+                        kept.push(w.text.clone());
+                    }
+                    900 => absolute = true,
+                    910 => absolute = false,
+                    // Arc-centre distance modes (G90.1, G91.1): volver writes no arcs.
+                    901 | 911 | 210 => {}
+                    200 => {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            "inch programs (G20) are not read: convert the program to mm (G21)",
+                        ));
+                    }
+                    700 => {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            "G70 is read as inches on Siemens controls and as a \
+                             finishing cycle on Fanuc lathes; neither can be compensated \
+                             point by point: convert the program to mm and expand cycles",
+                        ));
+                    }
+                    510 | 511 | 680 => {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            "scaling, mirroring or rotating the coordinate system \
+                             (G51, G51.1, G68) changes where the programmed points go: \
+                             expand it into the program's coordinates first",
+                        ));
+                    }
+                    720..=760 | 810..=890 if g % 10 == 0 => {
+                        return Err(Error::input(
+                            place.at_field(&w.text),
+                            "a canned cycle (G72–G76, G81–G89) makes moves the program \
+                             does not state, which cannot be compensated point by point: \
+                             expand it into G0/G1 moves first",
+                        ));
+                    }
+                    280 | 300 | 530 | 920 => other_frame = Some(w.text.clone()),
+                    _ => kept.push(w.text.clone()),
+                }
+            }
+            // Then the axis and arc words, in the block's modes.
+            let mut target = pos;
+            let mut seen = [false; MAX_AXES];
+            let mut moved = false;
+            let mut centre = [None::<f64>; 3];
+            let mut radius = None;
             for w in &ws {
                 match w.letter {
-                    'G' => {
-                        let g = (w.value * 10.0).round() as i64;
-                        match g {
-                            0 => block_mode = Some(Mode::Rapid),
-                            10 => block_mode = Some(Mode::Linear),
-                            20 => block_mode = Some(Mode::Clockwise),
-                            30 => block_mode = Some(Mode::Counter),
-                            170 => plane = 0,
-                            180 => plane = 1,
-                            190 => plane = 2,
-                            900 => absolute = true,
-                            910 => absolute = false,
-                            210 => {}
-                            200 => {
-                                return Err(Error::input(
-                                    place.at_field("G20"),
-                                    "inch programs (G20) are not read: convert the program to mm (G21)",
-                                ));
-                            }
-                            700 => {
-                                return Err(Error::input(
-                                    place.at_field(&w.text),
-                                    "G70 is read as inches on Siemens controls and as a \
-                                     finishing cycle on Fanuc lathes; neither can be compensated \
-                                     point by point: convert the program to mm and expand cycles",
-                                ));
-                            }
-                            510 | 511 | 680 => {
-                                return Err(Error::input(
-                                    place.at_field(&w.text),
-                                    "scaling, mirroring or rotating the coordinate system \
-                                     (G51, G51.1, G68) changes where the programmed points go: \
-                                     expand it into the program's coordinates first",
-                                ));
-                            }
-                            720..=760 | 810..=890 if g % 10 == 0 => {
-                                return Err(Error::input(
-                                    place.at_field(&w.text),
-                                    "a canned cycle (G72–G76, G81–G89) makes moves the program \
-                                     does not state, which cannot be compensated point by point: \
-                                     expand it into G0/G1 moves first",
-                                ));
-                            }
-                            280 | 300 | 530 | 920 => other_frame = Some(w.text.clone()),
-                            _ => kept.push(w.text.clone()),
-                        }
-                    }
+                    'G' | 'N' => {}
                     'X' | 'Y' | 'Z' | 'A' | 'B' | 'C' => {
                         let axis = Axis::from_letter(w.letter).expect("axis letter");
                         let Some((k, _)) = machine.axis(axis) else {
@@ -275,6 +407,12 @@ impl Program {
                                 ),
                             ));
                         };
+                        if std::mem::replace(&mut seen[k], true) {
+                            return Err(Error::input(
+                                place.at_field(&w.text),
+                                format!("two words for axis {} in one block", w.letter),
+                            ));
+                        }
                         target[k] = if absolute {
                             w.value
                         } else {
@@ -358,14 +496,23 @@ impl Program {
                     rapid: m == Mode::Rapid,
                     arc: matches!(m, Mode::Clockwise | Mode::Counter),
                     points,
-                    kept: kept.join(" "),
                 })
             } else {
+                if has_arc_words {
+                    return Err(Error::input(
+                        place,
+                        "arc words (I, J, K, R) without axis words or a motion code",
+                    ));
+                }
                 None
             };
             blocks.push(Block {
                 line: i + 1,
                 source: raw.to_string(),
+                optional,
+                number,
+                kept,
+                comments,
                 motion,
             });
         }
@@ -375,10 +522,14 @@ impl Program {
         })
     }
 
-    /// The program with every point replaced by its compensated command: motion blocks become
-    /// absolute `G1` (or `G0`) moves with every axis, written with `decimals` decimals; other
-    /// lines are copied (with `G91` turned into `G90`, since every move is now absolute).
-    /// Each written command is verified through the forward model.
+    /// The program with every point replaced by its compensated command, written for a
+    /// control: the header comment and one explicit modal state ([`START_STATE`]: absolute, mm,
+    /// XY plane) after any leading `%` and program number (`O…`); motion blocks become absolute
+    /// `G1` (or `G0`) moves with every axis in the conventional order X Y Z A B C, written with
+    /// `decimals` decimals; every other block keeps its words but the mode words whose meaning
+    /// volver's absolute moves replace (`G90`, `G91`, `G90.1`, `G91.1`, `G21`, and motion codes
+    /// without axis words). Block delete (`/`), block numbers (`N`, first in the block) and
+    /// comments stay in place. Each written command is verified through the forward model.
     pub fn compensate(
         &self,
         comp: &Compensator,
@@ -386,27 +537,46 @@ impl Program {
         decimals: usize,
         header: &str,
     ) -> Result<(String, Report)> {
+        if decimals > MAX_DECIMALS {
+            return Err(Error::Model(format!(
+                "{decimals} decimals: at most {MAX_DECIMALS} (1e-{MAX_DECIMALS} mm is far below \
+                 any machine's resolution)"
+            )));
+        }
         let axes = machine.axes();
+        let mut order: Vec<usize> = (0..axes.len()).collect();
+        order.sort_by_key(|&k| Axis::ALL.iter().position(|&a| a == axes[k].axis));
         let mut out = String::new();
-        // A leading tape mark (%) stays the first line.
-        let skip = usize::from(
-            self.blocks
-                .first()
-                .is_some_and(|b| b.source.trim_start().starts_with('%')),
-        );
-        if skip == 1 {
-            out.push_str(&self.blocks[0].source);
+        // Leading tape marks (%) and program numbers (O…) stay first.
+        let lead = self
+            .blocks
+            .iter()
+            .take_while(|b| {
+                b.source.trim_start().starts_with('%')
+                    || (b.motion.is_none()
+                        && b.number.is_none()
+                        && !b.optional
+                        && b.kept.len() == 1
+                        && b.kept[0].starts_with('O'))
+            })
+            .count();
+        for b in &self.blocks[..lead] {
+            out.push_str(&b.rewritten(""));
             out.push('\n');
         }
         for l in header.lines() {
             out.push_str(&format!("({})\n", l.replace(['(', ')'], "")));
         }
-        out.push_str("G90 G21\n");
+        out.push_str(START_STATE);
+        out.push('\n');
         let mut rep = Report::default();
-        for b in &self.blocks[skip..] {
+        for b in &self.blocks[lead..] {
             let Some(m) = &b.motion else {
-                out.push_str(&b.source.replace("G91", "G90").replace("g91", "G90"));
-                out.push('\n');
+                let line = b.rewritten("");
+                if !line.is_empty() || b.source.trim().is_empty() {
+                    out.push_str(&line);
+                    out.push('\n');
+                }
                 continue;
             };
             rep.moves += 1;
@@ -420,18 +590,20 @@ impl Program {
                     Error::input(Place::file(&self.file).at_line(b.line), e.to_string())
                 })?;
                 let (texts, written) = crate::compensate::written(machine, &c.commands, decimals);
-                let mut line = String::from(if m.rapid { "G0" } else { "G1" });
-                for (a, text) in axes.iter().zip(&texts) {
-                    line.push_str(&format!(" {}{text}", a.axis.letter()));
+                let mut moves = String::from(if m.rapid { "G0" } else { "G1" });
+                for &k in &order {
+                    moves.push_str(&format!(" {}{}", axes[k].axis.letter(), texts[k]));
                 }
-                if j == 0 && !m.kept.is_empty() {
-                    line.push(' ');
-                    line.push_str(&m.kept);
-                }
-                if j + 1 == m.points.len() {
-                    line.push_str(&format!(" (line {})", b.line));
-                }
+                let line = if j == 0 {
+                    b.rewritten(&moves)
+                } else {
+                    let prefix = if b.optional { "/" } else { "" };
+                    format!("{prefix}{moves}")
+                };
                 out.push_str(&line);
+                if j + 1 == m.points.len() {
+                    out.push_str(&format!(" (line {})", b.line));
+                }
                 out.push('\n');
                 let written_dev = comp.deviation_mm(&written, c.target);
                 rep.points += 1;
@@ -445,7 +617,45 @@ impl Program {
         }
         Ok((out, rep))
     }
+
+    /// Every point the program moves through, in order (file units, chain order), with whether
+    /// it is a rapid move and whether its block is optional (block delete).
+    pub fn points(&self) -> Vec<([f64; MAX_AXES], bool, bool)> {
+        self.blocks
+            .iter()
+            .filter_map(|b| b.motion.as_ref().map(|m| (b, m)))
+            .flat_map(|(b, m)| m.points.iter().map(move |p| (*p, m.rapid, b.optional)))
+            .collect()
+    }
 }
+
+impl Block {
+    /// The block as volver writes it: block delete, block number, `moves` (when not empty), the
+    /// kept words and the comments. A tape-mark line (`%`) is copied.
+    fn rewritten(&self, moves: &str) -> String {
+        if self.source.trim_start().starts_with('%') {
+            return self.source.trim().to_string();
+        }
+        let mut parts: Vec<&str> = Vec::new();
+        if let Some(n) = &self.number {
+            parts.push(n);
+        }
+        if !moves.is_empty() {
+            parts.push(moves);
+        }
+        parts.extend(self.kept.iter().map(String::as_str));
+        parts.extend(self.comments.iter().map(String::as_str));
+        let body = parts.join(" ");
+        if self.optional && !body.is_empty() {
+            format!("/{body}")
+        } else {
+            body
+        }
+    }
+}
+
+/// The most decimals [`Program::compensate`] writes.
+pub const MAX_DECIMALS: usize = 12;
 
 /// Length of a move over the linear axes (mm).
 fn linear_length(machine: &Machine, a: &[f64; MAX_AXES], b: &[f64; MAX_AXES]) -> f64 {

@@ -1041,7 +1041,7 @@ impl Simulation {
         if sigmas.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
             return Err(Error::input(
                 place("noise"),
-                "every noise σ must be a finite number ≥ 0",
+                "every noise value (σ or bound) must be a finite number ≥ 0",
             ));
         }
         for e in &self.effects {

@@ -23,7 +23,8 @@
 //!   exchange format: `[C0B]` / `VALUE = …` for constants, and `[EXY]` / `Gridpoints = { … }`
 //!   with one `position value` row per line for functions.
 //! - **Plain CSV** ([`ErrorTables::to_plain_csv`]): one row per value,
-//!   `error,axis,position,position_unit,value,value_unit` (an empty position for constants).
+//!   `error,axis,position,position_unit,value,value_unit` (an empty position for constants);
+//!   lengths in µm (`um`, the mm value × 1 000), angles in µrad (`urad`, the rad value × 10⁶).
 //!
 //! ```
 //! use volver_core::model::Model;
@@ -410,20 +411,20 @@ impl ErrorTables {
     /// The plain CSV text (see the module documentation): µm and µrad.
     pub fn to_plain_csv(&self) -> String {
         let mut s = String::from("error,axis,position,position_unit,value,value_unit\n");
-        let unit = |n: &str| if is_angle(n) { "urad" } else { "um" };
         for (n, v) in &self.constants {
             let id: ErrorId = n.parse().expect("ISO name");
-            s.push_str(&format!("{n},{},,,{:.6},{}\n", id.axis(), v * 1e6, unit(n)));
+            let (scale, unit, dec) = plain_unit(n);
+            s.push_str(&format!("{n},{},,,{:.dec$},{unit}\n", id.axis(), v * scale));
         }
         for t in &self.axes {
             let pu = if t.axis.is_rotary() { "deg" } else { "mm" };
             for (n, vals) in &t.errors {
+                let (scale, unit, dec) = plain_unit(n);
                 for (p, v) in t.positions.iter().zip(vals) {
                     s.push_str(&format!(
-                        "{n},{},{p:.6},{pu},{:.6},{}\n",
+                        "{n},{},{p:.6},{pu},{:.dec$},{unit}\n",
                         t.axis,
-                        v * 1e6,
-                        unit(n)
+                        v * scale
                     ));
                 }
             }
@@ -466,7 +467,9 @@ impl ErrorTables {
                 )
             })?;
             let scale = match c[5] {
-                "um" | "urad" => 1e-6,
+                // µm → mm, µrad → rad.
+                "um" => 1e-3,
+                "urad" => 1e-6,
                 other => {
                     return Err(Error::input(
                         place.at_field("value_unit"),
@@ -521,6 +524,17 @@ impl ErrorTables {
             t.errors[n - 1].1.push(v);
         }
         Ok(out)
+    }
+}
+
+/// The plain CSV's factor from volver's units (mm, rad), its unit and its decimals for error
+/// `name`: lengths in µm (× 1e3, 9 decimals), angles in µrad (× 1e6, 6 decimals), both to
+/// 1e-12 of mm or rad as the other formats.
+fn plain_unit(name: &str) -> (f64, &'static str, usize) {
+    if is_angle(name) {
+        (1e6, "urad", 6)
+    } else {
+        (1e3, "um", 9)
     }
 }
 
