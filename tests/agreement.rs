@@ -206,7 +206,7 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
             let viol_model = model.constraints().max_violation(&s.params);
             let viol_gauge = gauge.constraints.max_violation(&s.params);
             println!(
-                "  {name:<12} {value:.12e}  rel {:+.2e}  max Δr {:.2e} mm  viol {:.1e}/{:.1e}  {} it {} ev {:.2} s  {}",
+                "  {name:<12} {value:.12e}  rel {:+.2e}  max Δr {:.2e} mm  viol {:.1e}/{:.1e}  {} it {} ev {:.2} s  held {}  {}",
                 value / best_value - 1.0,
                 dr,
                 viol_model,
@@ -214,6 +214,7 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
                 s.summary.iterations,
                 s.summary.evaluations,
                 s.summary.time_s,
+                s.summary.unidentifiable,
                 s.summary.termination
             );
             let tag = format!("{label} {objective} {name}");

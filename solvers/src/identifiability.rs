@@ -176,6 +176,21 @@ pub fn analyse(
 /// directions reach the same optimum. `None` when the Jacobian is not finite or a
 /// decomposition fails.
 pub fn hold_weak<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option<Task<'a>> {
+    // The native LM's own measure of identifiability (curvatures of the Jacobi-scaled reduced
+    // normal matrix) depends on the free coordinates, which the new constraints change: hold
+    // until the problem left has no direction below the tolerance (a few rounds at most).
+    let mut held = task.clone();
+    for _ in 0..4 {
+        let before = held.constraints.rows.len();
+        held = hold_weak_once(&held, params, tolerance)?;
+        if held.constraints.rows.len() == before {
+            break;
+        }
+    }
+    Some(held)
+}
+
+fn hold_weak_once<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option<Task<'a>> {
     let n = params.len();
     let Reduced { d, ns, hz, .. } = reduced_normal(task, params)?;
     let nf = ns.n_free();
@@ -184,13 +199,26 @@ pub fn hold_weak<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option<
         return Some(held);
     }
     let basis = ns.basis();
-    let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
-    let (mu, v) = (evd.S().column_vector(), evd.U());
+    let dmax = (0..nf).map(|i| hz[(i, i)]).fold(0.0_f64, f64::max);
+    let s0: Vec<f64> = (0..nf)
+        .map(|i| 1.0 / hz[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+        .collect();
+    // The LM's design: curvatures μ and directions w = S₀ u in z. It steps only in the span of
+    // the kept w; holding w_i means holding its coordinate c_i = (S₀⁻¹ u_i)ᵀ z.
+    let (mu, w) = crate::lm::design_from_reduced(&hz)?;
     let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
-    for i in (0..nf).filter(|&i| mu[i] <= tolerance * mu_max) {
+    let counted = task
+        .constraints
+        .rows
+        .iter()
+        .filter(|r| r.kind == ConstraintKind::Gauge)
+        .count();
+    for (round, i) in (0..nf).filter(|&i| mu[i] <= tolerance * mu_max).enumerate() {
         let coeffs: Vec<(usize, f64)> = (0..n)
             .map(|j| {
-                let dir: f64 = (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum();
+                let dir: f64 = (0..nf)
+                    .map(|k| basis[(j, k)] * w[(k, i)] / (s0[k] * s0[k]))
+                    .sum();
                 (j, dir / d[j])
             })
             .filter(|(_, c)| *c != 0.0)
@@ -203,7 +231,7 @@ pub fn hold_weak<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option<
             kind: ConstraintKind::Gauge,
             label: format!(
                 "unidentifiable direction {} held (relative curvature {:.1e})",
-                i + 1,
+                counted + round + 1,
                 mu[i].max(0.0) / mu_max
             ),
             coeffs,

@@ -324,7 +324,7 @@ fn design_of(free: &crate::free::Free, h: &Mat<f64>) -> Option<(Vec<f64>, Mat<f6
 }
 
 /// [`design_of`] from the reduced normal matrix `H_z`.
-fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
+pub(crate) fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
     let nf = h0.nrows();
     let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
     let s0: Vec<f64> = (0..nf)
