@@ -378,9 +378,12 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
                 "free": a.free, "rank": a.rank, "condition": a.condition,
                 "weak": a.weak.iter().map(|w| w.parameters.iter().map(|(j, x)| serde_json::json!({"name": name(*j), "share": x})).collect::<Vec<_>>()).collect::<Vec<_>>(),
             })),
+            "verdict": volver::solvers::candidates::verdict(&ranked, id.final_.stats.emm_um),
             "candidates": ranked.iter().take(top).map(|s| serde_json::json!({
-                "id": s.id, "description": s.description, "delta_bic": s.delta_bic,
-                "emm_um": s.emm_um, "size": s.size, "size_unit": s.size_unit,
+                "id": s.id, "description": s.description, "seen": s.seen(),
+                "delta_bic": s.seen().then_some(s.delta_bic),
+                "emm_um": s.seen().then_some(s.emm_um),
+                "size": s.seen().then_some(s.size), "size_unit": s.size_unit,
                 "added": s.added, "equivalent": s.equivalent,
             })).collect::<Vec<_>>(),
         });
@@ -445,20 +448,36 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
             println!("  cannot separate: {}", parts.join(", "));
         }
     }
+    println!(
+        "\nVerdict: {}",
+        volver::solvers::candidates::verdict(&ranked, id.final_.stats.emm_um)
+    );
     println!("\nWhat is most likely missing (ranked by ΔBIC; below −10 is strong evidence):");
     println!(
         "  {:<3} {:<18} {:>10} {:>12} {:>12}  meaning",
         "#", "candidate", "ΔBIC", "EMM µm", "size"
     );
     for (i, s) in ranked.iter().take(top).enumerate() {
+        let (bic, emm, size) = if s.seen() {
+            (
+                format!("{:.1}", s.delta_bic),
+                um(s.emm_um),
+                format!("{:>8.2} {:<4}", s.size, s.size_unit),
+            )
+        } else {
+            ("—".into(), "—".into(), format!("{:>8} {:<4}", "—", ""))
+        };
         println!(
-            "  {:<3} {:<18} {:>10.1} {:>12} {:>8.2} {:<4}  {}{}",
+            "  {:<3} {:<18} {:>10} {:>12} {size}  {}{}{}",
             i + 1,
             s.id,
-            s.delta_bic,
-            um(s.emm_um),
-            s.size,
-            s.size_unit,
+            bic,
+            emm,
+            if s.seen() {
+                ""
+            } else {
+                "not seen in these data: "
+            },
             s.description,
             if s.equivalent.is_empty() {
                 String::new()

@@ -451,18 +451,38 @@ pub fn html(input: &ReportInput) -> Result<String> {
             s,
             "<h3>Effects the first model most likely missed (ranked by ΔBIC; below −10 is strong evidence)</h3>"
         );
+        if let Some(first) = input.fits.first() {
+            let _ = writeln!(
+                s,
+                "<p><b>Verdict:</b> {}</p>",
+                crate::plot::escape(&volver::solvers::candidates::verdict(
+                    &input.candidates,
+                    first.id.final_.stats.emm_um
+                ))
+            );
+        }
         let rows: Vec<Vec<String>> = input
             .candidates
             .iter()
             .take(8)
             .map(|c| {
-                vec![
-                    c.id.clone(),
-                    format!("{:.1}", c.delta_bic),
-                    format!("{:.3}", c.emm_um),
-                    format!("{:.2} {}", c.size, c.size_unit),
-                    c.description.clone(),
-                ]
+                if c.seen() {
+                    vec![
+                        c.id.clone(),
+                        format!("{:.1}", c.delta_bic),
+                        format!("{:.3}", c.emm_um),
+                        format!("{:.2} {}", c.size, c.size_unit),
+                        c.description.clone(),
+                    ]
+                } else {
+                    vec![
+                        c.id.clone(),
+                        "—".into(),
+                        "—".into(),
+                        "—".into(),
+                        format!("not seen in these data: {}", c.description),
+                    ]
+                }
             })
             .collect();
         s.push_str(&table(

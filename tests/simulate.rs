@@ -526,12 +526,12 @@ fn effects_do_not_change_the_noise_draws_or_the_errors() {
 #[test]
 fn the_noise_error_reflects_the_tracker_noise() {
     let out = run("test4", random_truth(2), TrackerNoise::PAPER, vec![]);
-    // 30 µrad at 1.6 … 2.2 m on two angles (plus a few µm of range): ‖noise‖ averages
-    // √(π/2)·σ for two equal normal components, about 60 … 85 µm.
+    // Uniform on ±30 µrad (σ = 17.3 µrad) at 1.6 … 2.2 m on two angles (plus a few µm of
+    // range): ‖noise‖ averages about 1.2 σ·r for two equal components, about 33 … 48 µm.
     let emm = out.record.noise_error.emm_um;
-    assert!((55.0..95.0).contains(&emm), "noise EMM {emm} µm");
-    // Per point, the noise has independent normal components ρ·σ_az (ρ the horizontal
-    // distance), r·σ_el and σ_r: its mean square is their sum of squares.
+    assert!((30.0..55.0).contains(&emm), "noise EMM {emm} µm");
+    // Per point, the noise has independent components ρ·σ_az (ρ the horizontal distance),
+    // r·σ_el and σ_r: its mean square is their sum of squares.
     let noise = TrackerNoise::PAPER;
     let (mut got, mut want) = (0.0, 0.0);
     for (pt, clean) in out.measurements.points.iter().zip(&out.noise_free) {
@@ -754,4 +754,47 @@ fn volver_simulate_takes_grids_truth_files_effects_and_reports_bad_options() {
     }
     let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&dir2);
+}
+
+/// The `paper` preset reproduces the paper's tables 9–10 noise error within 10 %, mean and
+/// maximum, averaged over 20 fixed seeds on the table-4 and table-7 meshes; the literal normal
+/// reading does not (its maximum is about three times the paper's on table 4). This is what
+/// fixed the preset as the bounded reading (see `volver::core::noise`).
+#[test]
+fn the_paper_noise_preset_reproduces_tables_9_and_10() {
+    use volver::core::noise::Distribution;
+    let mean = |plan: &str, noise: TrackerNoise| {
+        let (mut emm, mut emax) = (0.0, 0.0);
+        for seed in 0..20 {
+            let p = Plan::preset(&xcfz(), plan).unwrap();
+            let mut sim = Simulation::new(p, zero_truth(), 100 + seed);
+            sim.noise = noise;
+            let e = sim.run().unwrap().record.noise_error;
+            emm += e.emm_um / 20.0;
+            emax += e.emax_um / 20.0;
+        }
+        (emm, emax)
+    };
+    for (plan, paper) in [("table4", (31.3, 57.8)), ("table7", (46.8, 104.8))] {
+        let (emm, emax) = mean(plan, TrackerNoise::PAPER);
+        assert!(
+            (emm / paper.0 - 1.0).abs() < 0.1,
+            "{plan}: EMM {emm} µm vs {}",
+            paper.0
+        );
+        assert!(
+            (emax / paper.1 - 1.0).abs() < 0.1,
+            "{plan}: EMax {emax} µm vs {}",
+            paper.1
+        );
+        let normal = TrackerNoise {
+            distribution: Distribution::Normal,
+            ..TrackerNoise::PAPER
+        };
+        let (emm, emax) = mean(plan, normal);
+        assert!(
+            emm > 1.4 * paper.0 && emax > 2.0 * paper.1,
+            "{plan}: {emm} {emax}"
+        );
+    }
 }

@@ -35,7 +35,8 @@ fn kernels_and_the_native_lm_report_finite_figures() {
     assert!(lm["error"].is_null(), "{lm}");
     let phi = lm["phi_mm"].as_f64().unwrap();
     // The demo's fit: Φ near the paper's noise level, converged.
-    assert!((0.05..0.12).contains(&phi), "Φ {phi}");
+    // (the paper's bounded noise gives a noise error of 35–50 µm on test 4).
+    assert!((0.03..0.12).contains(&phi), "Φ {phi}");
     assert!(
         lm["termination"].as_str().unwrap().starts_with("converged"),
         "{lm}"

@@ -57,7 +57,10 @@ pub struct Score {
     pub emm_um: f64,
     /// ΔBIC against the current model (negative: the data support it).
     pub delta_bic: f64,
-    /// Size of the implied effect: its largest value over the travel, µm or µrad.
+    /// Size of the implied effect, by kind: the norm of a new effect's parameters (a drift in
+    /// µm/h, a periodic error's amplitude in µm, a reflector offset in µm, a range scale in
+    /// ppm), the tilt `tracker-tilt` frees (µrad), or the largest change over the travel of an
+    /// added or raised error function (µm or µrad).
     pub size: f64,
     /// Unit of `size` (`µm`, `µrad`, `µm/h` or `ppm`).
     pub size_unit: &'static str,
@@ -353,36 +356,19 @@ fn linear_prediction(problem: &Problem, params: &[f64], q: &[f64]) -> (f64, f64)
     (rss, sum / problem.n_points() as f64 * 1e3)
 }
 
-/// Largest |value| over the travel of what the candidate adds to the model (µm or µrad).
-fn implied_size(model: &Model, params: &[f64], extended: &Model, q: &[f64]) -> (f64, &'static str) {
-    let mut best: (f64, &'static str) = (0.0, "µm");
-    for t in extended.terms() {
-        let ax = &extended.machine().axes()[t.axis];
-        let scale = if t.id.unit() == Unit::Mm {
-            (1e3, "µm")
-        } else {
-            (1e6, "µrad")
-        };
-        let peak = (0..=64)
-            .map(|i| {
-                let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
-                let new = extended.error_value(t.id, u, q).unwrap_or(0.0);
-                let old = model.error_value(t.id, u, params).unwrap_or(0.0);
-                (new - old).abs() * scale.0
-            })
-            .fold(0.0, f64::max);
-        if peak > best.0
-            && (model.term(t.id).is_none() || t.basis != model.term(t.id).expect("exists").basis)
-        {
-            best = (peak, scale.1);
-        }
-    }
-    let (ts, te) = (model.tracker_start(), extended.tracker_start());
-    let tilt =
-        ((q[te + 3] - params[ts + 3]).powi(2) + (q[te + 4] - params[ts + 4]).powi(2)).sqrt() * 1e6;
-    if tilt > 1e-9 && best.0 <= 1e-9 {
-        best = (tilt, "µrad");
-    }
+/// The size of what the candidate adds, by its kind: for a new effect (drift, periodic
+/// positioning error, reflector offset, range scale) the norm of its new parameters (µm/h, the
+/// amplitude in µm, µm, ppm); for `tracker-tilt` the tilt it frees (µrad); for an added or raised
+/// error function the largest change of that function over the travel (µm or µrad). Changes the
+/// Gauss–Newton step makes to parameters the model already had (say the tracker's tilt, when the
+/// model identifies it) are not the candidate's size.
+fn implied_size(
+    id: &str,
+    model: &Model,
+    params: &[f64],
+    extended: &Model,
+    q: &[f64],
+) -> (f64, &'static str) {
     // New effect parameters: the norm of each group (drift.x/y/z, screw.X.a/b …).
     let mut groups: Vec<(String, f64, &'static str)> = Vec::new();
     for (j, info) in extended.params().iter().enumerate() {
@@ -406,10 +392,38 @@ fn implied_size(model: &Model, params: &[f64], extended: &Model, q: &[f64]) -> (
             None => groups.push((key, v.abs(), unit)),
         }
     }
-    if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1))
-        && best.0 <= 1e-9
-    {
-        best = (g.1, g.2);
+    if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
+        return (g.1, g.2);
+    }
+    if id == "tracker-tilt" {
+        let (ts, te) = (model.tracker_start(), extended.tracker_start());
+        let tilt = ((q[te + 3] - params[ts + 3]).powi(2) + (q[te + 4] - params[ts + 4]).powi(2))
+            .sqrt()
+            * 1e6;
+        return (tilt, "µrad");
+    }
+    let mut best: (f64, &'static str) = (0.0, "µm");
+    for t in extended.terms() {
+        if model.term(t.id).is_some_and(|old| old.basis == t.basis) {
+            continue;
+        }
+        let ax = &extended.machine().axes()[t.axis];
+        let scale = if t.id.unit() == Unit::Mm {
+            (1e3, "µm")
+        } else {
+            (1e6, "µrad")
+        };
+        let peak = (0..=64)
+            .map(|i| {
+                let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
+                let new = extended.error_value(t.id, u, q).unwrap_or(0.0);
+                let old = model.error_value(t.id, u, params).unwrap_or(0.0);
+                (new - old).abs() * scale.0
+            })
+            .fold(0.0, f64::max);
+        if peak > best.0 {
+            best = (peak, scale.1);
+        }
     }
     best
 }
@@ -433,7 +447,7 @@ pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
             let start = carry_over(model, params, &extended);
             let (q, rank1) = gauss_newton_step(&Task::new(ext_problem), &start, tolerance)?;
             let (rss1, emm_um) = linear_prediction(&ext_problem, &start, &q);
-            let (size, size_unit) = implied_size(model, params, &extended, &q);
+            let (size, size_unit) = implied_size(&c.id, model, params, &extended, &q);
             let added = rank1.saturating_sub(rank0);
             Some(Score {
                 id: c.id,
@@ -447,7 +461,13 @@ pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
             })
         })
         .collect();
-    scores.sort_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+    // Candidates that add no direction the data identify cannot be seen (a period equal to the
+    // mesh step, a squareness the model already carries): they go last, whatever their ΔBIC.
+    scores.sort_by(|a, b| {
+        (a.added == 0)
+            .cmp(&(b.added == 0))
+            .then(a.delta_bic.total_cmp(&b.delta_bic))
+    });
     // Merge candidates the data cannot tell apart: as many directions, ΔBIC within 2.
     let mut merged: Vec<Score> = Vec::new();
     for s in scores {
@@ -461,6 +481,40 @@ pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
         }
     }
     merged
+}
+
+impl Score {
+    /// `true` when the candidate adds a direction the data identify; one that adds none cannot
+    /// be seen in these data (its ΔBIC and size mean nothing).
+    pub fn seen(&self) -> bool {
+        self.added > 0
+    }
+
+    /// Strong evidence on Kass and Raftery's scale: ΔBIC below −10, for a candidate the data see.
+    pub fn strong(&self) -> bool {
+        self.seen() && self.delta_bic < -10.0
+    }
+}
+
+/// A one-line verdict on a ranked list (as [`rank`] returns it) for a fit of EMM `emm_um`:
+/// the candidate to add, or that none is supported.
+pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
+    match ranked.first() {
+        Some(s) if s.strong() => format!(
+            "add {} (ΔBIC {:.0}, strong evidence): {}; it would bring the EMM from {:.2} to about \
+             {:.2} µm — `volver identify … --add {}`",
+            s.id, s.delta_bic, s.description, emm_um, s.emm_um, s.id
+        ),
+        Some(s) if s.seen() && s.delta_bic < 0.0 => format!(
+            "no candidate has strong evidence; the best, {} (ΔBIC {:.1}), would bring the EMM \
+             from {emm_um:.2} to about {:.2} µm",
+            s.id, s.delta_bic, s.emm_um
+        ),
+        _ => format!(
+            "no candidate of the library lowers the error (EMM {emm_um:.2} µm): what is left is \
+             noise or an effect no candidate describes"
+        ),
+    }
 }
 
 /// The axis of a candidate id, when it names one (`add:EAC` → C, `raise-axis:X` → X).
