@@ -42,9 +42,9 @@ pub struct CompensateArgs {
     /// Split linear moves longer than this (mm) so the corrected path follows the bent one.
     #[arg(long)]
     max_segment: Option<f64>,
-    /// Decimals of the written commands (mm, degrees).
-    #[arg(long, default_value_t = 4)]
-    decimals: usize,
+    /// Decimals of the written commands (mm, degrees), 0–12.
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u8).range(0..=volver::core::gcode::MAX_DECIMALS as i64))]
+    decimals: u8,
     /// Largest accepted deviation of a corrected command from its target, as solved (mm).
     #[arg(long, default_value_t = 1e-9)]
     tolerance: f64,
@@ -178,7 +178,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             let c = comp
                 .compensate(&p.commands)
                 .with_context(|| format!("{label}:{}", p.line))?;
-            let (cells, written) = written(m, &c.commands, a.decimals);
+            let (cells, written) = written(m, &c.commands, usize::from(a.decimals));
             let prog: Vec<String> = axes
                 .iter()
                 .enumerate()
@@ -228,7 +228,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             tool,
             model.spec().name
         );
-        let (out, rep) = prog.compensate(&comp, m, a.decimals, &header)?;
+        let (out, rep) = prog.compensate(&comp, m, usize::from(a.decimals), &header)?;
         write_atomic(&a.out, out).with_context(|| format!("writing {}", a.out.display()))?;
         println!(
             "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",

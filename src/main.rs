@@ -234,6 +234,7 @@ Example:
   volver simulate --plan test4 --seed 7 --out sim --effect thermal-drift=0,0,15";
 
 fn main() -> Result<()> {
+    quiet_on_broken_pipe();
     let cli = Cli::parse();
     match cli.command {
         Command::Demo { out } => demo::run(&out)?,
@@ -296,6 +297,25 @@ fn main() -> Result<()> {
         Command::Tables(args) => compensation::tables_command(args)?,
     }
     Ok(())
+}
+
+/// A reader that closes the pipe early (`volver layout | head -1`) is not an error of volver:
+/// Rust's `println!` panics on the broken pipe, so the panic is turned into the quiet exit a
+/// process killed by SIGPIPE would make (status 141). Every other panic is reported as before.
+fn quiet_on_broken_pipe() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or("");
+        if message.contains("failed printing to stdout") && message.contains("Broken pipe") {
+            std::process::exit(141);
+        }
+        default(info);
+    }));
 }
 
 fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {

@@ -347,3 +347,36 @@ fn broken_results_files_are_refused_with_the_place_named() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A reader that closes the pipe early is not a crash: `volver layout | head -1` exits like a
+/// process stopped by SIGPIPE (status 141), with no panic message; `--decimals` beyond 12 is
+/// refused by the argument parser instead of panicking.
+#[test]
+fn a_closed_pipe_and_absurd_decimals_are_not_crashes() {
+    use std::process::{Command, Stdio};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_volver"))
+        .arg("layout")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take()); // the reader goes away before volver writes
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_ne!(out.status.code(), Some(101), "{err}");
+    let out = common::volver(&[
+        "compensate",
+        "--results",
+        "x.json",
+        "--points",
+        "p.csv",
+        "--out",
+        "o.csv",
+        "--decimals",
+        "70000",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && !err.contains("panicked"), "{err}");
+    assert!(err.contains("--decimals"), "{err}");
+}
