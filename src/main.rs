@@ -55,6 +55,10 @@ enum Command {
         /// Error-model file (TOML); the paper's model when absent (needs the default machine).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// A test plan (preset name or grid such as X=0:1400:200,C=0:330:30,Z=0:600:150): also
+        /// states in words what this layout can and cannot measure, and what would fix it.
+        #[arg(long)]
+        plan: Option<String>,
     },
     /// Fits the model, then shows where it fails and ranks the effects it most likely misses.
     ///
@@ -239,7 +243,11 @@ fn main() -> Result<()> {
     match cli.command {
         Command::Demo { out } => demo::run(&out)?,
         Command::Report(args) => report_command(args)?,
-        Command::Layout { machine, model } => {
+        Command::Layout {
+            machine,
+            model,
+            plan,
+        } => {
             let m = match &machine {
                 Some(p) => Machine::load(p).with_context(|| "reading the machine file")?,
                 None => Machine::default_xcfz(),
@@ -252,6 +260,24 @@ fn main() -> Result<()> {
                 ),
             };
             print_layout(&model)?;
+            if let Some(text) = plan {
+                let plan = if text.contains('=') {
+                    Plan::parse_grid(model.machine(), &text)?
+                } else {
+                    Plan::preset(model.machine(), &text)?
+                };
+                let data = volver::solvers::observability::nominal_data(&model, &plan);
+                println!(
+                    "\nWhat plan {} ({} points) can measure with this layout:",
+                    plan.name,
+                    data.points.len()
+                );
+                print_observability(&volver::solvers::observability::observe(
+                    &model,
+                    &data,
+                    &model.initial_params(),
+                ));
+            }
         }
         Command::Identify(args) => identify_command(args)?,
         Command::Compare(args) => compare::compare_command(args)?,
@@ -715,6 +741,14 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             phasing.name()
         );
     }
+    // What these positions can measure with this layout, before anything is fitted.
+    let observability =
+        volver::solvers::observability::observe(&model, &data, &model.initial_params());
+    if !a.json && !observability.is_empty() {
+        println!("\nWhat these positions can and cannot measure with this layout:");
+        print_observability(&observability);
+        println!();
+    }
     let id = identify(
         solver.as_ref(),
         problem,
@@ -746,7 +780,10 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         )?;
     }
     let results = ResultsFile::from_model(&model, &id.params)?;
-    if let Some(out) = &a.out {
+    // A failed run writes no results (a later `compensate` must not use them).
+    if let Some(out) = &a.out
+        && !id.termination.failed()
+    {
         results.save(out).context("writing the results file")?;
     }
     let params = serde_json::to_value(&results.parameters)?;
@@ -804,6 +841,10 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             "unidentifiable": weak.iter().map(|(c, names)| serde_json::json!({
                 "relative_curvature": c,
                 "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
+            })).collect::<Vec<_>>(),
+            "observability": observability.iter().map(|f| serde_json::json!({
+                "kind": format!("{:?}", f.kind).to_lowercase(),
+                "what": f.what, "fix": f.fix,
             })).collect::<Vec<_>>(),
         });
         println!("{}", serde_json::to_string_pretty(&obj)?);
@@ -1067,6 +1108,16 @@ fn simulate(a: SimulateArgs) -> Result<()> {
         println!("  {}  ({what})", path.display());
     }
     Ok(())
+}
+
+/// Prints the findings of [`volver::solvers::observability::observe`], or that there are none.
+fn print_observability(findings: &[volver::solvers::observability::Finding]) {
+    if findings.is_empty() {
+        println!("  everything the model describes can be identified from these positions");
+    }
+    for f in findings {
+        println!("  - {}\n      fix: {}", f.what, f.fix);
+    }
 }
 
 fn print_layout(model: &Model) -> Result<()> {

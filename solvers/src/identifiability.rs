@@ -116,12 +116,16 @@ pub fn analyse(
         .collect();
     let cov = |i: usize, j: usize| sigma2 * w.iter().map(|c| c[i] * c[j]).sum::<f64>();
     let uncertainty: Vec<f64> = (0..n).map(|j| cov(j, j).max(0.0).sqrt()).collect();
+    // Correlations do not depend on σ²: from the design alone, so that noise-free (planned)
+    // data have them too.
+    let design_cov = |i: usize, j: usize| w.iter().map(|c| c[i] * c[j]).sum::<f64>();
+    let design_sd: Vec<f64> = (0..n).map(|j| design_cov(j, j).max(0.0).sqrt()).collect();
     let mut correlations = Vec::new();
     for i in 0..n {
         for j in i + 1..n {
-            let (si, sj) = (uncertainty[i], uncertainty[j]);
+            let (si, sj) = (design_sd[i], design_sd[j]);
             if si > 0.0 && sj > 0.0 {
-                let c = cov(i, j) / (si * sj);
+                let c = design_cov(i, j) / (si * sj);
                 if c.abs() > correlation {
                     correlations.push((i, j, c));
                 }

@@ -28,6 +28,7 @@ pub mod lm;
 #[cfg(feature = "nlopt")]
 pub mod nlopt;
 pub mod nullspace;
+pub mod observability;
 pub mod options;
 pub mod strategy;
 pub mod strd;

@@ -1,0 +1,360 @@
+//! What a layout (machine, tracker mount, reflectors, error model and plan) can and cannot
+//! measure, in words a metrologist acts on: axes whose motion the tracker cannot see, errors
+//! that need more positions than the plan has, pairs of parameters that are the same motion on
+//! this layout, and combinations the data cannot identify — each with what would fix it.
+//!
+//! It needs no measurement: [`nominal_data`] turns a plan into the points a perfect machine
+//! would give, and the design (the Jacobian at the model's start) decides the rest. `volver
+//! layout --plan` prints it, and `volver identify` prints it for the data it fits.
+//!
+//! ```
+//! use volver_core::model::Model;
+//! use volver_core::plan::Plan;
+//! use volver_solvers::observability::{nominal_data, observe};
+//! let model = Model::default_xcfz();
+//! let plan = Plan::parse_grid(model.machine(), "X=0:1400:700,C=0:330:30,Z=0:600:300").unwrap();
+//! let data = nominal_data(&model, &plan);
+//! let findings = observe(&model, &data, &model.initial_params());
+//! // Three positions of X and of Z cannot fix a cubic.
+//! assert!(findings.iter().any(|f| f.what.contains("at least 4 positions of X")));
+//! ```
+
+use crate::Task;
+use crate::identifiability::analyse;
+use volver_core::basis::BasisKind;
+use volver_core::chain::Side;
+use volver_core::iso::Axis;
+use volver_core::machine::TrackerMount;
+use volver_core::measure::{Measurement, MeasurementSet};
+use volver_core::model::Model;
+use volver_core::plan::Plan;
+use volver_core::problem::Problem;
+
+/// Correlation above which two parameters are called interchangeable.
+pub const INTERCHANGEABLE: f64 = 0.99;
+
+/// The kind of a finding.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Kind {
+    /// An axis whose errors move no measured point.
+    Unseen,
+    /// Errors that need more positions of their axis than the plan has.
+    TooFewPositions,
+    /// Two parameters that are nearly the same motion on this layout.
+    Interchangeable,
+    /// A combination of parameters the data cannot identify.
+    Unidentified,
+}
+
+/// One statement about the layout.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Finding {
+    /// Its kind.
+    pub kind: Kind,
+    /// What cannot be measured, in words.
+    pub what: String,
+    /// What would fix it.
+    pub fix: String,
+}
+
+/// The points a perfect machine (the model at its start: errors zero, the tracker at its
+/// nominal pose) gives for every position and reflector of `plan`.
+pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
+    let p = model.initial_params();
+    let mut points = Vec::new();
+    for c in &plan.positions {
+        for &r in &plan.reflectors {
+            points.push(Measurement {
+                commands: *c,
+                reflector: r,
+                measured: model.predict(c, r, &p),
+                t_s: None,
+                station: None,
+                line: points.len() + 2,
+            });
+        }
+    }
+    MeasurementSet { points }
+}
+
+fn join(names: &[String]) -> String {
+    match names.len() {
+        0 => String::new(),
+        1 => names[0].clone(),
+        n => format!("{} and {}", names[..n - 1].join(", "), names[n - 1]),
+    }
+}
+
+/// Positions an error function needs to be determined: a polynomial of degree d needs d + 1,
+/// Chebyshev with m nodes m, a periodic series of order K 2K + 1 angles, a constant 1.
+fn positions_needed(kind: BasisKind, degree: usize) -> usize {
+    match kind {
+        BasisKind::Constant => 1,
+        BasisKind::Fourier | BasisKind::Sine => 2 * degree + 1,
+        _ => degree + 1,
+    }
+}
+
+fn basis_words(kind: BasisKind, degree: usize) -> String {
+    match (kind, degree) {
+        (BasisKind::Fourier | BasisKind::Sine, k) => format!("{k} harmonic(s)"),
+        (_, 1) => "linear".into(),
+        (_, 2) => "quadratic".into(),
+        (_, 3) => "cubic".into(),
+        (_, d) => format!("degree {d}"),
+    }
+}
+
+/// The findings for `model` on `data` at `params` (the start of a fit, or the model's start
+/// for a plan): unseen axes, too few positions, interchangeable pairs, unidentified
+/// combinations, in that order.
+pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Finding> {
+    let mut out = Vec::new();
+    let machine = model.machine();
+    let Ok(problem) = Problem::new(model, data) else {
+        return out;
+    };
+    let n = model.n_params();
+    // Column norms of the Jacobian.
+    let mut col = vec![0.0; n];
+    let mut jac = vec![0.0; 3 * n];
+    for i in 0..problem.n_points() {
+        problem.residual_and_jacobian(i, params, &mut jac);
+        for (j, c) in col.iter_mut().enumerate() {
+            *c += jac[j].powi(2) + jac[n + j].powi(2) + jac[2 * n + j].powi(2);
+        }
+    }
+    let cmax = col.iter().cloned().fold(0.0, f64::max);
+    let mut unseen_axes = Vec::new();
+    for (k, ax) in machine.axes().iter().enumerate() {
+        let terms: Vec<_> = model.terms().iter().filter(|t| t.axis == k).collect();
+        if terms.is_empty() {
+            continue;
+        }
+        let seen = terms
+            .iter()
+            .any(|t| t.params.clone().any(|j| col[j] > 1e-18 * cmax));
+        if seen {
+            continue;
+        }
+        unseen_axes.push(k);
+        let names: Vec<String> = terms.iter().map(|t| t.id.to_string()).collect();
+        let frame = machine.tracker().mount == TrackerMount::Frame;
+        let (what, fix) = if frame && ax.side == Side::Workpiece {
+            (
+                format!(
+                    "the tracker stands on the machine frame and the reflectors ride on the tool, \
+                     so the motion of workpiece-side axis {} moves nothing it measures: its errors \
+                     ({}) cannot be measured",
+                    ax.axis,
+                    join(&names)
+                ),
+                format!(
+                    "put the tracker on the workpiece side (on the table that {} carries), or \
+                     leave {}'s errors out of the model",
+                    ax.axis, ax.axis
+                ),
+            )
+        } else {
+            (
+                format!(
+                    "the errors of axis {} ({}) move no measured point of this plan",
+                    ax.axis,
+                    join(&names)
+                ),
+                format!(
+                    "move {} in the plan, or leave its errors out of the model",
+                    ax.axis
+                ),
+            )
+        };
+        out.push(Finding {
+            kind: Kind::Unseen,
+            what,
+            fix,
+        });
+    }
+    // Positions per axis.
+    for (k, ax) in machine.axes().iter().enumerate() {
+        if unseen_axes.contains(&k) {
+            continue;
+        }
+        let mut pos: Vec<f64> = data.points.iter().map(|p| p.commands.0[k]).collect();
+        if ax.axis.is_rotary() {
+            // C = 0° and 360° are one pose.
+            for v in &mut pos {
+                *v = v.rem_euclid(std::f64::consts::TAU);
+                if (*v - std::f64::consts::TAU).abs() < 1e-9 {
+                    *v = 0.0;
+                }
+            }
+        }
+        pos.sort_by(f64::total_cmp);
+        pos.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
+        let have = pos.len();
+        let mut groups: Vec<(BasisKind, usize, usize, Vec<String>)> = Vec::new();
+        for t in model.terms().iter().filter(|t| t.axis == k) {
+            let (kind, degree) = (t.basis.kind(), t.basis.degree());
+            let need = positions_needed(kind, degree);
+            if need <= have {
+                continue;
+            }
+            match groups.iter_mut().find(|g| g.0 == kind && g.1 == degree) {
+                Some(g) => g.3.push(t.id.to_string()),
+                None => groups.push((kind, degree, need, vec![t.id.to_string()])),
+            }
+        }
+        for (kind, degree, need, names) in groups {
+            let lower = match kind {
+                BasisKind::Fourier | BasisKind::Sine => (have.saturating_sub(1) / 2).max(1),
+                _ => have.saturating_sub(1).max(1),
+            };
+            out.push(Finding {
+                kind: Kind::TooFewPositions,
+                what: format!(
+                    "{} ({}) need at least {need} positions of {}; the plan has {have}",
+                    join(&names),
+                    basis_words(kind, degree),
+                    ax.axis
+                ),
+                fix: format!(
+                    "measure {} at {need} or more positions, or lower their {} to {lower}",
+                    ax.axis,
+                    if kind.is_periodic() {
+                        "order"
+                    } else {
+                        "degree"
+                    }
+                ),
+            });
+        }
+    }
+    // The design: interchangeable pairs and unidentified combinations.
+    let task = Task::new(problem);
+    let Some(a) = analyse(&task, params, 1e-10, INTERCHANGEABLE) else {
+        return out;
+    };
+    let name = |j: usize| model.params()[j].name.clone();
+    let unseen_param = |j: usize| {
+        model
+            .terms()
+            .iter()
+            .any(|t| t.params.contains(&j) && unseen_axes.contains(&t.axis))
+    };
+    // How much of each parameter the data leave undetermined: the norm of its row in the
+    // unidentified directions (scaled coordinates, 0 … 1).
+    let mut undetermined = vec![0.0_f64; n];
+    for w in &a.weak {
+        for &(j, share) in &w.parameters {
+            undetermined[j] = undetermined[j].hypot(share);
+        }
+    }
+    for &(i, j, c) in a.correlations.iter().take(8) {
+        if unseen_param(i) || unseen_param(j) || (undetermined[i] > 0.3 && undetermined[j] > 0.3) {
+            continue;
+        }
+        out.push(Finding {
+            kind: Kind::Interchangeable,
+            what: format!(
+                "{} and {} are nearly the same motion on this layout (correlation {c:+.3})",
+                name(i),
+                name(j)
+            ),
+            fix: "hold one of them (a [fixed] entry, or the squareness rule), or add a \
+                  measurement that moves them differently (another reflector, another tracker \
+                  position, more positions of their axes)"
+                .into(),
+        });
+    }
+    // The unidentified combinations, by cause: the tool's turn about the line through two
+    // reflectors (tool-side errors), and the tracker's pose against the rest.
+    let side_of = |j: usize| {
+        model
+            .terms()
+            .iter()
+            .find(|t| t.params.contains(&j))
+            .map(|t| machine.axes()[t.axis].side)
+    };
+    let listed = |keep: &dyn Fn(usize) -> bool| -> Vec<String> {
+        let mut js: Vec<usize> = (0..n)
+            .filter(|&j| undetermined[j] > 0.3 && !unseen_param(j) && keep(j))
+            .collect();
+        js.sort_by(|&a, &b| undetermined[b].total_cmp(&undetermined[a]));
+        js.iter()
+            .take(10)
+            .map(|&j| format!("{} ({:.0} %)", name(j), 100.0 * undetermined[j].min(1.0)))
+            .collect()
+    };
+    let reflectors = machine.reflectors().len();
+    if !a.weak.is_empty() {
+        let tool = listed(&|j| side_of(j) == Some(Side::Tool));
+        let rest = listed(&|j| side_of(j) != Some(Side::Tool));
+        let count = a.weak.len();
+        if !tool.is_empty() {
+            out.push(Finding {
+                kind: Kind::Unidentified,
+                what: format!(
+                    "the tool-side errors are not all determined (the share of each that the \
+                     data leave open): {}",
+                    join(&tool)
+                ),
+                fix: match reflectors {
+                    1 => "a second reflector at another offset on the tool".into(),
+                    2 => "a third reflector off the line through the two reflectors (or one at \
+                          the tool's length): two reflectors cannot see the tool turn about \
+                          that line"
+                        .into(),
+                    _ => "reflectors further apart on the tool, or more positions of the \
+                          tool-side axes"
+                        .into(),
+                },
+            });
+        }
+        if !rest.is_empty() {
+            let tracker = (0..n)
+                .any(|j| undetermined[j] > 0.3 && model.params()[j].name.starts_with("tracker"));
+            out.push(Finding {
+                kind: Kind::Unidentified,
+                what: format!(
+                    "{}: {}",
+                    if tracker {
+                        "the tracker's pose trades with machine errors"
+                    } else {
+                        "these errors trade with each other"
+                    },
+                    join(&rest)
+                ),
+                fix: if tracker {
+                    "a second tracker position (or station), or hold that part of the pose in \
+                     the model; what compensation needs is the tool relative to the workpiece, \
+                     which does not depend on it"
+                        .into()
+                } else {
+                    "more positions of their axes, or hold the combination".into()
+                },
+            });
+        }
+        if let Some(first) = out.iter_mut().find(|f| f.kind == Kind::Unidentified) {
+            first.what = format!(
+                "{count} combination(s) of parameters cannot be identified from these \
+                 positions{}; {}",
+                if unseen_axes.is_empty() {
+                    ""
+                } else {
+                    " (the unseen axes' errors among them)"
+                },
+                first.what
+            );
+        }
+    }
+    out
+}
+
+/// The axis letters a finding names, for tests and filters.
+pub fn axes_named(f: &Finding) -> Vec<Axis> {
+    Axis::ALL
+        .into_iter()
+        .filter(|a| f.what.contains(&format!("axis {a}")) || f.what.contains(&format!("of {a}")))
+        .collect()
+}
