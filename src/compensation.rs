@@ -82,6 +82,19 @@ fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
     }
 }
 
+/// A point in mm as people write it: `(-30, 75, 0)`, each coordinate rounded to 0.1 µm
+/// (`26.6667`, not `26.666666666666668`).
+pub fn point_mm(p: [f64; 3]) -> String {
+    let c: Vec<String> = p
+        .iter()
+        .map(|v| {
+            let r = (v * 1e4).round() / 1e4;
+            format!("{}", if r == 0.0 { 0.0 } else { r })
+        })
+        .collect();
+    format!("({})", c.join(", "))
+}
+
 /// The centroid of the reflector offsets (mm).
 pub fn reflector_centroid(model: &Model) -> [f64; 3] {
     let r = model.machine().reflectors();
@@ -120,6 +133,15 @@ pub fn distance_from_reflector_line(model: &Model, tool: [f64; 3]) -> Option<f64
 
 /// Runs `volver compensate`.
 pub fn compensate_command(a: CompensateArgs) -> Result<()> {
+    let inputs: Vec<&Path> = [
+        Some(a.results.as_path()),
+        a.points.as_deref(),
+        a.gcode.as_deref(),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    volver::core::fsio::check_not_an_input(&a.out, &inputs)?;
     let (model, params) = load_results(&a.results)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
@@ -150,15 +172,19 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         .map(|&k| m.axes()[k].axis.letter())
         .collect();
     println!(
-        "volver compensate — {} with the errors of {} (model \"{}\"), tool point ({}, {}, {}) mm, solving for {free}",
+        "volver compensate — {} with the errors of {} (model \"{}\"), tool point {} mm, solving for {free}",
         m.chain(),
         a.results.display(),
         model.spec().name,
-        tool[0],
-        tool[1],
-        tool[2]
+        point_mm(tool)
     );
-    let (worst_solved, worst_written, outside) = if let Some(path) = &a.points {
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
+        bail!(
+            "--tolerance {}: the verification tolerance must be a positive length (mm)",
+            a.tolerance
+        );
+    }
+    let (text, worst_solved, worst_written, outside) = if let Some(path) = &a.points {
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
         let pts = read_points(&text, &label, m)?;
@@ -204,13 +230,12 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
                 wd * 1e3
             ));
         }
-        write_atomic(&a.out, out).with_context(|| format!("writing {}", a.out.display()))?;
         println!(
             "  {} points from {label}: uncompensated error up to {:.4} µm",
             pts.len(),
             largest * 1e3
         );
-        (ws, ww, outside)
+        (out, ws, ww, outside)
     } else {
         let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
         let label = path.display().to_string();
@@ -221,15 +246,14 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         };
         let prog = Program::parse(&text, &label, m, &lin)?;
         let header = format!(
-            "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {:?} mm; errors of model {}",
+            "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm; errors of model {}",
             env!("CARGO_PKG_VERSION"),
             a.results.display(),
             a.chord_tolerance,
-            tool,
+            point_mm(tool),
             model.spec().name
         );
         let (out, rep) = prog.compensate(&comp, m, usize::from(a.decimals), &header)?;
-        write_atomic(&a.out, out).with_context(|| format!("writing {}", a.out.display()))?;
         println!(
             "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
             rep.moves,
@@ -239,6 +263,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             rep.max_error_mm * 1e3
         );
         (
+            out,
             rep.max_deviation_mm,
             rep.max_written_deviation_mm,
             rep.outside_travel.len(),
@@ -251,13 +276,16 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     if outside > 0 {
         println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
     }
-    println!("  written to {}", a.out.display());
+    // A failed verification writes nothing: a program that misses its targets must not reach a
+    // control.
     if worst_solved.is_nan() || worst_solved > a.tolerance {
         bail!(
-            "a corrected command misses its target by {worst_solved:.3e} mm, above the tolerance {:.1e} mm",
+            "a corrected command misses its target by {worst_solved:.3e} mm, above the tolerance {:.1e} mm; nothing written",
             a.tolerance
         );
     }
+    write_atomic(&a.out, text).with_context(|| format!("writing {}", a.out.display()))?;
+    println!("  written to {}", a.out.display());
     Ok(())
 }
 
@@ -319,4 +347,15 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         println!("  written {}", p.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod point_tests {
+    #[test]
+    fn points_are_printed_rounded() {
+        assert_eq!(
+            super::point_mm([-30.0, 80.0 / 3.0, -1e-9]),
+            "(-30, 26.6667, 0)"
+        );
+    }
 }

@@ -138,6 +138,19 @@ struct Inputs {
 }
 
 impl Inputs {
+    /// The input files given, with `more`.
+    fn paths<'a>(&'a self, more: &[Option<&'a std::path::Path>]) -> Vec<&'a std::path::Path> {
+        [
+            self.machine.as_deref(),
+            self.model.as_deref(),
+            Some(self.data.as_path()),
+        ]
+        .into_iter()
+        .chain(more.iter().copied())
+        .flatten()
+        .collect()
+    }
+
     /// Reads the three files.
     fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
         let m = match &self.machine {
@@ -553,6 +566,10 @@ struct ReportArgs {
     /// The HTML file to write.
     #[arg(long, default_value = "volver-report.html")]
     out: PathBuf,
+    /// The results file of the final fit (JSON) that `volver compensate` and `volver tables`
+    /// read; default: beside the report, with the extension `.json`.
+    #[arg(long)]
+    results: Option<PathBuf>,
 }
 
 /// `model` with the candidates `ids` (from `volver diagnose`) added in turn.
@@ -620,8 +637,13 @@ fn report_command(a: ReportArgs) -> Result<()> {
             &options,
             &mut volver::solvers::Silent,
         );
+        let model_label = if a.add.is_empty() {
+            format!("model \"{}\"", model.spec().name)
+        } else {
+            format!("model \"{}\" + {}", model.spec().name, a.add.join(" + "))
+        };
         cross.push((
-            a.inputs.data.display().to_string(),
+            format!("{} ({model_label})", a.inputs.data.display()),
             cv.initial.stats.emm_um,
             cv.final_.stats.emm_um,
             cv.residual_percent(),
@@ -639,6 +661,7 @@ fn report_command(a: ReportArgs) -> Result<()> {
             id,
         });
     }
+    let (last_model, last_params) = (last_model.clone(), last_params.clone());
     let input = report::ReportInput {
         title: format!("volver report — {}", a.inputs.data.display()),
         data_label: a.inputs.data.display().to_string(),
@@ -652,9 +675,26 @@ fn report_command(a: ReportArgs) -> Result<()> {
         notes: Vec::new(),
     };
     let html = report::html(&input)?;
+    let results_path = a
+        .results
+        .clone()
+        .unwrap_or_else(|| a.out.with_extension("json"));
+    let inputs = a
+        .inputs
+        .paths(&[a.reference.as_deref(), a.truth.as_deref()]);
+    for out in [&a.out, &results_path] {
+        volver::core::fsio::check_not_an_input(out, &inputs)?;
+    }
     volver::core::fsio::write_atomic(&a.out, html)
         .with_context(|| format!("writing {}", a.out.display()))?;
-    println!("volver report — written to {}", a.out.display());
+    ResultsFile::from_model(&last_model, &last_params)?
+        .save(&results_path)
+        .context("writing the results file")?;
+    println!(
+        "volver report — written to {}; the final fit's errors to {} (for compensate and tables)",
+        a.out.display(),
+        results_path.display()
+    );
     Ok(())
 }
 
@@ -675,6 +715,10 @@ impl Observer for Progress {
 }
 
 fn identify_command(a: IdentifyArgs) -> Result<()> {
+    let inputs = a.inputs.paths(&[a.truth.as_deref()]);
+    for out in [&a.out, &a.write_model, &a.history].into_iter().flatten() {
+        volver::core::fsio::check_not_an_input(out, &inputs)?;
+    }
     let (machine, model, data) = a.inputs.load()?;
     let model = with_candidates(&machine, model, &a.add)?;
     if let Some(path) = &a.write_model {

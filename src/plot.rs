@@ -461,12 +461,13 @@ pub fn bars(
     for t in ticks(0.0, vmax) {
         let _ = writeln!(
             s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text><line x1=\"{:.1}\" y1=\"{2:.1}\" x2=\"{:.1}\" y2=\"{2:.1}\" stroke=\"#ddd\"/>",
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text><line x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>",
             f.x0 - 6.0,
             f.y(t) + 4.0,
             fmt_tick(t),
             f.x0,
-            f.x0 + f.w
+            f.x0 + f.w,
+            y = f.y(t)
         );
     }
     let _ = writeln!(
@@ -532,6 +533,22 @@ mod tests {
         assert!(
             t.len() >= 3 && t.iter().all(|v| (-0.013..=0.021).contains(v)),
             "{t:?}"
+        );
+    }
+
+    /// Each grid line of a bar chart is drawn at its tick's height: 190 px of plot for 0 … 1.12
+    /// × the largest bar, from y = 230 at zero (values 10 and 20: the tick 10 at 230 − 10 / 22.4
+    /// × 190 = 145.2).
+    #[test]
+    fn bar_chart_grid_lines_sit_at_their_ticks() {
+        let svg = bars("t", "µm", &[("a".into(), 10.0), ("b".into(), 20.0)], None);
+        let line = svg
+            .lines()
+            .find(|l| l.contains(">10</text><line"))
+            .expect("a tick at 10");
+        assert!(
+            line.contains("y1=\"145.2\"") && line.contains("y2=\"145.2\""),
+            "{line}"
         );
     }
 

@@ -380,3 +380,87 @@ fn a_closed_pipe_and_absurd_decimals_are_not_crashes() {
     assert!(!out.status.success() && !err.contains("panicked"), "{err}");
     assert!(err.contains("--decimals"), "{err}");
 }
+
+/// An output path that names an input is refused before anything is written, and the input is
+/// intact: `identify --out DATA`, `report --out DATA`, `compensate --out RESULTS`; a NaN
+/// verification tolerance is refused instead of disabling the verification.
+#[test]
+fn outputs_never_overwrite_inputs() {
+    let dir = std::env::temp_dir().join(format!("volver-overwrite-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = |n: &str| dir.join(n).display().to_string();
+    let out = common::volver(&[
+        "simulate",
+        "--plan",
+        "test3",
+        "--seed",
+        "3",
+        "--out",
+        &d("sim"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = d("sim/measurements.csv");
+    let before = std::fs::read(&data).unwrap();
+    for args in [
+        vec!["identify", "--data", &data, "--out", &data, "--no-history"],
+        vec!["report", "--data", &data, "--out", &data],
+        vec![
+            "report",
+            "--data",
+            &data,
+            "--out",
+            &d("r.html"),
+            "--results",
+            &data,
+        ],
+    ] {
+        let out = common::volver(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?}");
+        assert!(
+            err.contains("is an input of this command"),
+            "{args:?}: {err}"
+        );
+        assert_eq!(
+            std::fs::read(&data).unwrap(),
+            before,
+            "{args:?} touched the data"
+        );
+    }
+    let truth = d("sim/truth.json");
+    std::fs::write(d("p.csv"), "X,C,Z\n100,0,50\n").unwrap();
+    let truth_before = std::fs::read(&truth).unwrap();
+    let out = common::volver(&[
+        "compensate",
+        "--results",
+        &truth,
+        "--points",
+        &d("p.csv"),
+        "--out",
+        &truth,
+    ]);
+    assert!(!out.status.success());
+    assert_eq!(std::fs::read(&truth).unwrap(), truth_before);
+    let out = common::volver(&[
+        "compensate",
+        "--results",
+        &truth,
+        "--points",
+        &d("p.csv"),
+        "--out",
+        &d("o.csv"),
+        "--tolerance",
+        "nan",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("--tolerance"),
+        "{err}"
+    );
+    assert!(!dir.join("o.csv").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,7 +1,10 @@
 //! Atomic file output: the content goes to a temporary file beside the target, is flushed to
 //! disk, then renamed over the target, so a failure (a full disk, a killed process) never
 //! leaves a half-written results, measurement or model file: the reader sees the old file or
-//! the new one.
+//! the new one. A symbolic link is written through (the file it points to is replaced, the link
+//! stays), an existing file keeps its permissions, and a target that is not a regular file (a
+//! device, a pipe) is written directly. [`check_not_an_input`] refuses an output path that names
+//! one of the command's inputs.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -20,18 +23,69 @@ use std::path::{Path, PathBuf};
 /// std::fs::remove_dir_all(&dir).unwrap();
 /// ```
 pub fn write_atomic(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<()> {
-    let tmp = temporary_beside(path);
+    // Through a symbolic link to the file it names (every link of a chain resolved).
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path)?,
+        _ => path.to_path_buf(),
+    };
+    let existing = std::fs::metadata(&target).ok();
+    if let Some(m) = &existing
+        && !m.is_file()
+    {
+        if m.is_dir() {
+            return Err(std::io::Error::other(format!(
+                "{} is a directory",
+                target.display()
+            )));
+        }
+        // A device or a pipe: no rename over it, write to it.
+        let mut f = std::fs::OpenOptions::new().write(true).open(&target)?;
+        return f.write_all(contents.as_ref());
+    }
+    let tmp = temporary_beside(&target);
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(contents.as_ref())?;
         f.sync_all()?;
         drop(f);
-        std::fs::rename(&tmp, path)
+        if let Some(m) = &existing {
+            std::fs::set_permissions(&tmp, m.permissions())?;
+        }
+        std::fs::rename(&tmp, &target)
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
     result
+}
+
+/// `true` when `a` and `b` name the same file (links resolved), or the same path when either
+/// does not exist yet.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// Refuses an output path that names one of `inputs` (writing it would destroy the input
+/// before, or while, it is read): an error naming both.
+///
+/// ```
+/// use std::path::Path;
+/// let e = volver_core::fsio::check_not_an_input(Path::new("m.csv"), &[Path::new("m.csv")]);
+/// assert!(e.unwrap_err().to_string().contains("m.csv is an input"));
+/// assert!(volver_core::fsio::check_not_an_input(Path::new("o.csv"), &[Path::new("m.csv")]).is_ok());
+/// ```
+pub fn check_not_an_input(out: &Path, inputs: &[&Path]) -> std::io::Result<()> {
+    match inputs.iter().find(|i| same_file(out, i)) {
+        Some(i) => Err(std::io::Error::other(format!(
+            "{} is an input of this command: writing the output there would destroy it; \
+             choose another output path",
+            i.display()
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// `.<name>.<pid>.tmp` in the target's directory (a rename within one file system is atomic).
@@ -41,4 +95,54 @@ fn temporary_beside(path: &Path) -> PathBuf {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "output".into());
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("volver-fsio-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    /// A link is written through and stays a link; the file keeps its mode.
+    #[cfg(unix)]
+    #[test]
+    fn links_are_written_through_and_modes_kept() {
+        use std::os::unix::fs::{PermissionsExt, symlink};
+        let d = dir("link");
+        let real = d.join("real.json");
+        std::fs::write(&real, "old").unwrap();
+        std::fs::set_permissions(&real, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let link = d.join("link.json");
+        symlink(&real, &link).unwrap();
+        write_atomic(&link, "new").unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read_to_string(&real).unwrap(), "new");
+        let mode = std::fs::metadata(&real).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o640);
+        // A device is written to, not replaced.
+        write_atomic(Path::new("/dev/null"), "x").unwrap();
+        assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    #[test]
+    fn an_input_is_not_an_output() {
+        let d = dir("input");
+        let f = d.join("m.csv");
+        std::fs::write(&f, "x").unwrap();
+        let other = d.join(".").join("m.csv");
+        assert!(check_not_an_input(&other, &[&f]).is_err());
+        assert!(check_not_an_input(&d.join("o.csv"), &[&f]).is_ok());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
 }
