@@ -464,3 +464,61 @@ fn outputs_never_overwrite_inputs() {
     assert!(!dir.join("o.csv").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Every size read from input is bounded before anything is allocated, and refused with the
+/// limit named: an error model's order of 2⁶³ − 1 or 2⁶³ (which wrapped the coefficient count),
+/// a degree of 2⁶⁴ − 1, a Chebyshev with 2⁶⁴ nodes (which wrapped to "0 nodes"), a plan step of
+/// 1e-9 mm, a table step of 1e-6 mm.
+#[test]
+fn sizes_from_input_are_bounded() {
+    use volver::core::machine::Machine;
+    use volver::core::model::Model;
+    use volver::core::plan::Plan;
+    use volver::core::tables::ErrorTables;
+    let m = Machine::default_xcfz();
+    for (text, what) in [
+        (
+            "[[error]]\nname = \"ECC\"\nbasis = \"fourier\"\norder = 9223372036854775807\n",
+            "order 2^63-1",
+        ),
+        (
+            "[[error]]\nname = \"EXX\"\nbasis = \"legendre\"\ndegree = 9223372036854775807\n",
+            "degree 2^63-1",
+        ),
+        (
+            "[[error]]\nname = \"EXX\"\nbasis = \"chebyshev\"\nnodes = 9223372036854775807\n",
+            "nodes 2^63-1",
+        ),
+    ] {
+        let e = Model::from_toml_str(m.clone(), text, "big.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("at most 32 coefficients"), "{what}: {e}");
+    }
+    // Through JSON (a results file's model), where u64 reaches 2⁶³ and 2⁶⁴ − 1.
+    let spec = |entry: &str| format!("{{\"name\":\"big\",\"error\":[{entry}]}}");
+    for entry in [
+        "{\"name\":\"ECC\",\"basis\":\"fourier\",\"order\":9223372036854775808}",
+        "{\"name\":\"EXX\",\"basis\":\"legendre\",\"degree\":18446744073709551615}",
+        "{\"name\":\"EXX\",\"basis\":\"chebyshev\",\"degree\":18446744073709551615}",
+    ] {
+        let s: volver::core::model::ErrorModelSpec = serde_json::from_str(&spec(entry)).unwrap();
+        let e = Model::new(m.clone(), s).unwrap_err().to_string();
+        assert!(e.contains("at most 32 coefficients"), "{entry}: {e}");
+    }
+    let e = Plan::parse_grid(&m, "X=0:1400:1e-9,C=0,Z=0")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("at most 1000000 positions"), "{e}");
+    let e = Plan::parse_grid(&m, "X=0:1400:0.01,C=0:360:0.001,Z=0:600:1")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("at most 1000000"), "{e}");
+    let model = Model::default_xcfz();
+    let p = model.initial_params();
+    let e = ErrorTables::from_model(&model, &p, 1e-6, 5.0)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("at most 100000"), "{e}");
+    assert!(ErrorTables::from_model(&model, &p, f64::INFINITY, 5.0).is_err());
+}

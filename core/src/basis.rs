@@ -90,6 +90,13 @@ impl Basis {
         } else {
             degree
         };
+        // Checked before any count is computed: a degree near usize::MAX would wrap
+        // `degree + 1` (or `1 + 2 · order`) to a small number.
+        if degree >= MAX_COEFFS {
+            return Err(format!(
+                "{kind} of degree/order {degree}: at most {MAX_COEFFS} coefficients are supported"
+            ));
+        }
         let b = Basis {
             kind,
             degree,

@@ -36,6 +36,10 @@ pub const PRESETS: [&str; 7] = [
     "table4", "table7", "test1", "test2", "test3", "test4", "test5",
 ];
 
+/// The most positions a plan may have (each measured at every reflector): far beyond any
+/// laser-tracker test, which measures hundreds to a few thousand.
+pub const MAX_PLAN_POSITIONS: usize = 1_000_000;
+
 /// Values of one axis in a grid, file units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AxisRange {
@@ -238,12 +242,38 @@ impl Plan {
                     ),
                 ));
             }
+            // Counted before anything is allocated: a step of 1e-9 mm would ask for 10¹² values.
+            let count = if r.start == r.end {
+                1.0
+            } else {
+                ((r.end - r.start) / r.step).floor() + 2.0
+            };
+            if count > MAX_PLAN_POSITIONS as f64 {
+                return Err(Error::input(
+                    place(),
+                    format!(
+                        "axis {}: {}:{}:{} has {count:.3e} values; a plan has at most \
+                         {MAX_PLAN_POSITIONS} positions: use a larger step",
+                        ax.axis, r.start, r.end, r.step
+                    ),
+                ));
+            }
             per_axis.push(
                 r.values()
                     .into_iter()
                     .map(|v| ax.from_file_units(v))
                     .collect(),
             );
+        }
+        let total = per_axis.iter().map(|v| v.len() as f64).product::<f64>();
+        if total > MAX_PLAN_POSITIONS as f64 {
+            return Err(Error::input(
+                place(),
+                format!(
+                    "the grid has {total:.3e} positions; a plan has at most {MAX_PLAN_POSITIONS}: \
+                     use larger steps"
+                ),
+            ));
         }
         if let Some(extra) = ranges.iter().find(|r| machine.axis(r.axis).is_none()) {
             return Err(Error::input(

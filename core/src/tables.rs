@@ -42,6 +42,9 @@ use crate::iso::{Axis, ErrorId};
 use crate::machine::Commands;
 use crate::model::Model;
 
+/// The most rows of one axis' table (compensation tables have tens to thousands).
+pub const MAX_TABLE_ROWS: usize = 100_000;
+
 /// The errors of one axis over its positions.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AxisTable {
@@ -85,8 +88,11 @@ impl ErrorTables {
                 params.len()
             )));
         }
-        if !(linear_step > 0.0 && rotary_step > 0.0) {
-            return Err(Error::Model("table steps must be positive".into()));
+        let usable = |s: f64| s > 0.0 && s.is_finite();
+        if !(usable(linear_step) && usable(rotary_step)) {
+            return Err(Error::Model(
+                "table steps must be positive and finite".into(),
+            ));
         }
         let m = model.machine();
         let mut reference = Commands::default();
@@ -115,6 +121,16 @@ impl ErrorTables {
                 linear_step
             };
             let (lo, hi) = (a.to_file_units(a.min), a.to_file_units(a.max));
+            let rows = ((hi - lo) / step).ceil() + 1.0;
+            // `rows` is finite here (a positive finite step over a finite travel).
+            if rows > MAX_TABLE_ROWS as f64 {
+                return Err(Error::Model(format!(
+                    "a step of {step} {} over axis {}'s travel gives {rows:.3e} rows; a table \
+                     has at most {MAX_TABLE_ROWS}: use a larger step",
+                    a.file_unit(),
+                    a.axis
+                )));
+            }
             let mut positions = Vec::new();
             let mut x = lo;
             while x < hi - 1e-9 * step {
