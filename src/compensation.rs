@@ -48,12 +48,38 @@ pub struct CompensateArgs {
     /// Largest accepted deviation of a corrected command from its target, as solved (mm).
     #[arg(long, default_value_t = 1e-9)]
     tolerance: f64,
+    /// Use a results file whose errors are implausible (see `volver identify --accept`).
+    #[arg(long)]
+    accept: bool,
 }
 
-fn load_results(path: &Path) -> Result<(Model, Vec<f64>)> {
+/// Reads a results file; its errors must be plausible ([`volver::core::plausibility`]) unless
+/// `accept`: implausible sizes come from a wrong input and must not reach a control.
+fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>)> {
     let label = path.display().to_string();
     let file = ResultsFile::load(path).context("reading the results file")?;
-    Ok(file.to_model(&label)?)
+    let (model, params) = file.to_model(&label)?;
+    let implausible = volver::core::plausibility::check(
+        &model,
+        &params,
+        &volver::core::plausibility::Context {
+            relaxed: true,
+            ..Default::default()
+        },
+    );
+    if !accept && !implausible.is_empty() {
+        let list: Vec<String> = implausible
+            .iter()
+            .take(4)
+            .map(ToString::to_string)
+            .collect();
+        bail!(
+            "{label}: implausible sizes: {}; {} (--accept uses them anyway)",
+            list.join("; "),
+            volver::core::plausibility::WHERE_TO_LOOK
+        );
+    }
+    Ok((model, params))
 }
 
 fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
@@ -142,7 +168,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     .flatten()
     .collect();
     volver::core::fsio::check_not_an_input(&a.out, &inputs)?;
-    let (model, params) = load_results(&a.results)?;
+    let (model, params) = load_results(&a.results, a.accept)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
     let comp = match &a.hold {
@@ -304,6 +330,9 @@ pub struct TablesArgs {
     /// Step over rotary axes (degrees).
     #[arg(long, default_value_t = 5.0)]
     rotary_step: f64,
+    /// Use a results file whose errors are implausible (see `volver identify --accept`).
+    #[arg(long)]
+    accept: bool,
 }
 
 /// Writes the three table formats into `dir`; returns their paths.
@@ -325,7 +354,7 @@ pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
 
 /// Runs `volver tables`.
 pub fn tables_command(a: TablesArgs) -> Result<()> {
-    let (model, params) = load_results(&a.results)?;
+    let (model, params) = load_results(&a.results, a.accept)?;
     let tables = ErrorTables::from_model(&model, &params, a.step, a.rotary_step)?;
     let paths = write_tables(&tables, &a.out)?;
     println!(

@@ -220,6 +220,10 @@ struct IdentifyArgs {
     /// Do not append this fit to any history file.
     #[arg(long, conflicts_with = "history")]
     no_history: bool,
+    /// Keep (and write with --out) a fit that stopped on a limit or whose sizes are
+    /// implausible; without it such a run exits non-zero and writes no results.
+    #[arg(long)]
+    accept: bool,
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
@@ -824,9 +828,58 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         )?;
     }
     let results = ResultsFile::from_model(&model, &id.params)?;
-    // A failed run writes no results (a later `compensate` must not use them).
+    // Honest exits: a failed run, a run stopped by a limit and a run with implausible sizes exit
+    // non-zero and write no results (a later `compensate` or `tables` must not use them),
+    // unless --accept keeps the last two.
+    // Plausibility of what the data determine: the fit moved to the minimum-norm point along
+    // the directions the data cannot identify (whose values are arbitrary), each value allowed
+    // its expanded uncertainty.
+    let tracker_start = volver::solvers::init::init_tracker(&problem, &model.initial_params()).ok();
+    let determined = volver::solvers::identifiability::analyse(
+        &volver::solvers::Task::new(problem),
+        &id.params,
+        options.rank_tolerance,
+        1.0,
+    );
+    let representative = match (&determined, &tracker_start) {
+        (Some(a), Some(start)) => a.minimum_norm(&id.params, start),
+        _ => id.params.clone(),
+    };
+    let implausible = volver::core::plausibility::check(
+        &model,
+        &representative,
+        &volver::core::plausibility::Context {
+            tracker_start: tracker_start.as_deref(),
+            covariance_factor: determined.as_ref().map(|a| a.covariance_factor.as_slice()),
+            emm_um: Some(id.final_.stats.emm_um),
+            relaxed: false,
+        },
+    );
+    let refusal = if id.termination.failed() {
+        Some(format!("identification failed: {}", id.termination))
+    } else if !a.accept && !implausible.is_empty() {
+        let list: Vec<String> = implausible
+            .iter()
+            .take(4)
+            .map(ToString::to_string)
+            .collect();
+        Some(format!(
+            "implausible sizes ({}): {}; {} (--accept keeps the fit anyway)",
+            id.termination,
+            list.join("; "),
+            volver::core::plausibility::WHERE_TO_LOOK
+        ))
+    } else if !a.accept && !id.termination.converged() {
+        Some(format!(
+            "{}, not converged: raise --max-iterations or --max-evaluations, or pass --accept \
+             to keep this fit",
+            id.termination
+        ))
+    } else {
+        None
+    };
     if let Some(out) = &a.out
-        && !id.termination.failed()
+        && refusal.is_none()
     {
         results.save(out).context("writing the results file")?;
     }
@@ -886,6 +939,8 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                 "relative_curvature": c,
                 "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
             })).collect::<Vec<_>>(),
+            "implausible": implausible.iter().map(ToString::to_string).collect::<Vec<_>>(),
+            "refused": refusal,
             "observability": observability.iter().map(|f| serde_json::json!({
                 "kind": format!("{:?}", f.kind).to_lowercase(),
                 "what": f.what, "fix": f.fix,
@@ -948,12 +1003,17 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                 println!("    {}   (relative curvature {c:.1e})", list.join(", "));
             }
         }
-        if let Some(out) = &a.out {
+        for i in &implausible {
+            println!("  implausible: {i}");
+        }
+        if let Some(out) = &a.out
+            && refusal.is_none()
+        {
             println!("  parameters written to {}", out.display());
         }
     }
-    if id.termination.failed() {
-        anyhow::bail!("identification failed: {}", id.termination);
+    if let Some(r) = refusal {
+        anyhow::bail!("{r}; no results written");
     }
     Ok(())
 }

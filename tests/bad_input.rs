@@ -522,3 +522,103 @@ fn sizes_from_input_are_bounded() {
     assert!(e.contains("at most 100000"), "{e}");
     assert!(ErrorTables::from_model(&model, &p, f64::INFINITY, 5.0).is_err());
 }
+
+/// Honest exits: a fit whose determined sizes no machine has (a 2 mm typo in the Z offset, the
+/// meas_x and meas_y columns swapped, i.e. a mirrored tracker frame) or that stopped on a limit
+/// exits non-zero and writes no results, unless --accept; correct data pass (the values along
+/// the directions test 4 cannot identify are not held against it). `tables` refuses a results
+/// file with a gross size.
+#[test]
+fn implausible_or_unfinished_fits_exit_non_zero_and_write_nothing() {
+    let dir = std::env::temp_dir().join(format!("volver-plausible-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let d = |n: &str| dir.join(n).display().to_string();
+    let out = common::volver(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--seed",
+        "3",
+        "--out",
+        &d("sim"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let data = d("sim/measurements.csv");
+    let machine = std::fs::read_to_string(d("sim/machine.toml")).unwrap();
+    let typo = machine.replace("[1000.0, 25.0, 1500.0]", "[1000.0, 27.0, 1500.0]");
+    assert_ne!(typo, machine);
+    std::fs::write(d("typo.toml"), typo).unwrap();
+    let csv = std::fs::read_to_string(&data).unwrap();
+    std::fs::write(
+        d("swapped.csv"),
+        csv.replacen("meas_x,meas_y", "meas_y,meas_x", 1),
+    )
+    .unwrap();
+    let model = "core/data/xcfz-paper-model.toml";
+    let fit = |extra: &[&str], out_name: &str| {
+        let out_path = d(out_name);
+        let mut args = vec!["identify", "--no-history", "--out", &out_path];
+        args.extend_from_slice(extra);
+        let out = common::volver(&args);
+        (
+            out.status.success(),
+            String::from_utf8_lossy(&out.stderr).to_string(),
+            dir.join(out_name).exists(),
+        )
+    };
+    let (ok, err, written) = fit(&["--data", &data], "good.json");
+    assert!(ok && written, "correct data refused: {err}");
+    let typo_args = [
+        "--machine",
+        &d("typo.toml"),
+        "--model",
+        model,
+        "--data",
+        &data,
+    ];
+    let (ok, err, written) = fit(&typo_args, "typo.json");
+    assert!(!ok && !written, "{err}");
+    assert!(
+        err.contains("implausible sizes") && err.contains("EYC"),
+        "{err}"
+    );
+    assert!(err.contains("check the machine file"), "{err}");
+    let mut accepted = typo_args.to_vec();
+    accepted.push("--accept");
+    let (ok, err, written) = fit(&accepted, "typo-accepted.json");
+    assert!(ok && written, "{err}");
+    let (ok, err, written) = fit(&["--data", &d("swapped.csv")], "swapped.json");
+    assert!(!ok && !written, "{err}");
+    assert!(err.contains("implausible sizes"), "{err}");
+    let (ok, err, written) = fit(&["--data", &data, "--max-iterations", "2"], "short.json");
+    assert!(!ok && !written, "{err}");
+    assert!(
+        err.contains("not converged") && err.contains("--accept"),
+        "{err}"
+    );
+    let (ok, err, written) = fit(
+        &["--data", &data, "--max-iterations", "2", "--accept"],
+        "short-accepted.json",
+    );
+    assert!(ok && written, "{err}");
+    // A results file with 20 mm of radial error: `tables` refuses it.
+    let m = volver::core::model::Model::default_xcfz();
+    let mut p = m.initial_params();
+    p[m.param_index("EYC.d").unwrap()] = 20.0;
+    volver::core::results::ResultsFile::from_model(&m, &p)
+        .unwrap()
+        .save(&dir.join("gross.json"))
+        .unwrap();
+    let out = common::volver(&["tables", "--results", &d("gross.json"), "--out", &d("t")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("implausible"),
+        "{err}"
+    );
+    assert!(!dir.join("t").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

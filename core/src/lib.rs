@@ -13,6 +13,7 @@
 //! - [`measure`]: measurement files (CSV);
 //! - [`results`]: results files (JSON);
 //! - [`plan`]: test plans (the paper's meshes and plain grids);
+//! - [`plausibility`]: identified sizes checked against stated physical limits;
 //! - [`noise`], [`random`]: the tracker's noise model and a seeded random source;
 //! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
 //! - [`metrics`]: EMM and EMax;
@@ -56,6 +57,7 @@ pub mod model;
 pub mod nist;
 pub mod noise;
 pub mod plan;
+pub mod plausibility;
 pub mod problem;
 pub mod random;
 pub mod results;

@@ -317,6 +317,30 @@ impl MeasurementSet {
                 "the file has a header but no measurement rows",
             ));
         }
+        // A row that repeats another exactly (commands, reflector, every measured coordinate to
+        // the last digit) is a copy, not a second reading: two tracker readings never agree to
+        // the file's resolution, and a copy would fake a small repeat noise.
+        let mut order: Vec<usize> = (0..points.len()).collect();
+        let key = |p: &Measurement| {
+            let mut k: Vec<u64> = p.commands.0.iter().map(|v| v.to_bits()).collect();
+            k.extend(p.measured.iter().map(|v| v.to_bits()));
+            k.push(p.reflector as u64);
+            k
+        };
+        order.sort_by_key(|&i| (key(&points[i]), i));
+        for w in order.windows(2) {
+            let (a, b) = (&points[w[0]], &points[w[1]]);
+            if key(a) == key(b) {
+                return Err(Error::input(
+                    Place::file(file).at_line(b.line),
+                    format!(
+                        "this row repeats line {} exactly (same position, reflector and \
+                         measured point to the last digit): a copied row, not a second reading",
+                        a.line
+                    ),
+                ));
+            }
+        }
         Ok(MeasurementSet { points })
     }
 

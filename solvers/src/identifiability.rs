@@ -22,6 +22,8 @@ pub struct WeakDirection {
     /// The parameters it moves most (index, share of the scaled direction, sign included),
     /// largest first, shares above 0.1.
     pub parameters: Vec<(usize, f64)>,
+    /// The whole direction in the scaled parameters `p_j / D_j` (unit length).
+    pub scaled: Vec<f64>,
 }
 
 /// The identifiability of a model on a data set at a parameter vector.
@@ -44,6 +46,9 @@ pub struct Identifiability {
     pub correlations: Vec<(usize, usize, f64)>,
     /// The directions that are not identified, weakest first.
     pub weak: Vec<WeakDirection>,
+    /// The parameters' scales `D` (the inverse column norms of the Jacobian): the scaled
+    /// parameters are `p_j / D_j`.
+    pub scale: Vec<f64>,
     /// A factor `F` of the parameters' covariance, `Cov(p) = F Fᵀ`: one column (length
     /// n_params, in the parameters' units) per identified direction. The standard uncertainty
     /// of any linear function `gᵀp` is `‖Fᵀg‖` — of an error function at a position, say.
@@ -51,6 +56,22 @@ pub struct Identifiability {
 }
 
 impl Identifiability {
+    /// `params` moved along the unidentified directions to the point nearest `reference` in
+    /// the scaled parameters: the minimum-norm representative of the solutions the data cannot
+    /// tell apart (every identified combination, every constraint and the fit are unchanged).
+    pub fn minimum_norm(&self, params: &[f64], reference: &[f64]) -> Vec<f64> {
+        let mut p = params.to_vec();
+        for w in &self.weak {
+            let c: f64 = (0..p.len())
+                .map(|j| w.scaled[j] * (p[j] - reference[j]) / self.scale[j])
+                .sum();
+            for (j, v) in p.iter_mut().enumerate() {
+                *v -= c * w.scaled[j] * self.scale[j];
+            }
+        }
+        p
+    }
+
     /// Standard uncertainty of the linear function `gᵀp` of the parameters (identified
     /// directions only).
     pub fn uncertainty_of(&self, g: &[f64]) -> f64 {
@@ -92,6 +113,7 @@ pub fn analyse(
             uncertainty: vec![0.0; n],
             correlations: vec![],
             weak: vec![],
+            scale: d.clone(),
             covariance_factor: vec![],
         });
     }
@@ -149,6 +171,7 @@ pub fn analyse(
             WeakDirection {
                 relative_curvature: mu[i].max(0.0) / mu_max,
                 parameters,
+                scaled: dir,
             }
         })
         .collect();
@@ -166,6 +189,7 @@ pub fn analyse(
         uncertainty,
         correlations,
         weak,
+        scale: d.clone(),
         covariance_factor: w
             .iter()
             .map(|c| c.iter().map(|x| x * sigma2.sqrt()).collect())

@@ -129,8 +129,10 @@ pub struct Identification {
 
 impl Identification {
     /// Final EMM as a percentage of the initial EMM.
+    /// 0 when the initial EMM is already 0 (nothing to reduce), never NaN.
     pub fn residual_percent(&self) -> f64 {
-        100.0 * self.final_.stats.emm_um / self.initial.stats.emm_um
+        let (a, b) = (self.final_.stats.emm_um, self.initial.stats.emm_um);
+        if b > 0.0 { 100.0 * a / b } else { 0.0 }
     }
 
     /// Steps tried over every phase.
@@ -224,17 +226,22 @@ pub fn identify_errors(
         .filter(|info| eligible(model, info, errors))
         .count();
     let free = eligible_count.saturating_sub(model.constraints().rows.len());
-    let equations = 3 * problem.n_points();
-    if equations < free {
+    // Distinct poses only: a point measured twice adds no equation about the machine.
+    let distinct = distinct_poses(&problem);
+    let equations = 3 * distinct;
+    if equations < MIN_EQUATIONS_PER_PARAMETER * free {
         return done(
             p,
             vec![],
             initial,
             Termination::InvalidInput(format!(
-                "{} points give {equations} equations for at least {free} free parameters: the \
-                 mesh is too small for this model (at least {} points, many more in practice)",
+                "{} distinct poses ({} points) give {equations} equations for at least {free} \
+                 free parameters: the mesh is too small for this model (at least \
+                 {MIN_EQUATIONS_PER_PARAMETER} equations per free parameter, {} distinct poses; \
+                 many more in practice)",
+                distinct,
                 problem.n_points(),
-                free.div_ceil(3)
+                (MIN_EQUATIONS_PER_PARAMETER * free).div_ceil(3)
             )),
         );
     }
@@ -271,6 +278,43 @@ pub fn identify_errors(
         emm = now;
     }
     done(p, phases, initial, termination)
+}
+
+/// Fewest equations (3 per distinct pose and reflector) per free parameter a mesh must give.
+pub const MIN_EQUATIONS_PER_PARAMETER: usize = 3;
+
+/// Distinct (commands, reflector) pairs of a problem's data (rotary positions a turn apart are
+/// one pose).
+fn distinct_poses(problem: &Problem) -> usize {
+    let Some((model, data)) = problem.machine() else {
+        return problem.n_points();
+    };
+    let axes = model.machine().axes();
+    let mut keys: Vec<Vec<i64>> = data
+        .points
+        .iter()
+        .map(|p| {
+            let mut k: Vec<i64> = axes
+                .iter()
+                .enumerate()
+                .map(|(j, ax)| {
+                    let mut u = p.commands.0[j];
+                    if ax.axis.is_rotary() {
+                        u = u.rem_euclid(std::f64::consts::TAU);
+                        if (u - std::f64::consts::TAU).abs() < 1e-9 {
+                            u = 0.0;
+                        }
+                    }
+                    (u * 1e6).round() as i64
+                })
+                .collect();
+            k.push(p.reflector as i64);
+            k
+        })
+        .collect();
+    keys.sort();
+    keys.dedup();
+    keys.len()
 }
 
 /// [`identify_errors`] with every error free: the joint method.

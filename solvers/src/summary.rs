@@ -126,8 +126,10 @@ impl Summary {
     }
 
     /// Final EMM as a percentage of the initial EMM (the paper's residual error).
+    /// 0 when the initial EMM is already 0 (nothing to reduce), never NaN.
     pub fn residual_percent(&self) -> f64 {
-        100.0 * self.final_.stats.emm_um / self.initial.stats.emm_um
+        let (a, b) = (self.final_.stats.emm_um, self.initial.stats.emm_um);
+        if b > 0.0 { 100.0 * a / b } else { 0.0 }
     }
 
     /// One line.

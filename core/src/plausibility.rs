@@ -1,0 +1,223 @@
+//! Plausibility of identified errors: sizes no machine tool has point at a wrong input (a
+//! mirrored tracker frame, swapped measurement columns, a typo in an axis offset, another unit),
+//! not at the machine. Each kind has a stated limit, far above any machine that is worth
+//! verifying and far below what such input faults produce (metres):
+//!
+//! | what | limit |
+//! |---|---|
+//! | a translation error over its axis' travel (EXX, EYC …), a location error (X0C …), a reflector offset, a periodic positioning error's amplitude | [`MAX_TRANSLATION_MM`] = 1 mm |
+//! | a rotation error over its axis' travel (EAX, ECC …), a squareness or location tilt (B0Z, A0C …) | [`MAX_ANGLE_RAD`] = 1 mrad (1 mm per metre) |
+//! | a thermal drift | 1 mm/h |
+//! | a range scale | 1 000 ppm |
+//! | the tracker's pose against its rigid fit to the measurements (errors zero) | [`MAX_TRACKER_SHIFT_MM`] = 25 mm, 5 mrad |
+//! | the EMM the fit leaves | [`MAX_TRANSLATION_MM`] = 1 mm |
+//!
+//! Parameters read from a results file are checked against ten times these limits
+//! ([`Context::relaxed`]). A value is implausible only when it exceeds its limit by more than its expanded uncertainty
+//! (k = 2) when the covariance is given: a value the data barely determine is not evidence of
+//! a wrong input. Values along directions the data do not determine at all mean nothing and
+//! must be removed first (the minimum-norm representative of the fit,
+//! `volver_solvers::identifiability::Identifiability::minimum_norm`).
+//!
+//! ```
+//! use volver_core::model::Model;
+//! use volver_core::plausibility::{Context, check};
+//! let model = Model::default_xcfz();
+//! let mut p = model.initial_params();
+//! assert!(check(&model, &p, &Context::default()).is_empty());
+//! p[model.param_index("EYC.d").unwrap()] = 1.8; // 1.8 mm of radial error: an offset typo
+//! let found = check(&model, &p, &Context::default());
+//! assert_eq!(found[0].name, "EYC");
+//! assert!(found[0].to_string().contains("1800 µm"));
+//! ```
+
+use crate::iso::{Group, Unit};
+use crate::model::Model;
+use std::fmt;
+
+/// Largest plausible translation error (mm).
+pub const MAX_TRANSLATION_MM: f64 = 1.0;
+/// Largest plausible rotation error (rad).
+pub const MAX_ANGLE_RAD: f64 = 1e-3;
+/// Largest plausible shift of the tracker from its rigid fit (mm); its angles: 5 mrad.
+pub const MAX_TRACKER_SHIFT_MM: f64 = 25.0;
+const MAX_TRACKER_TURN_RAD: f64 = 5e-3;
+
+/// An identified size beyond its limit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Implausible {
+    /// The error (`EYC`), effect parameter group (`screw.X.200`) or `tracker`.
+    pub name: String,
+    /// Its largest magnitude, in `unit`.
+    pub value: f64,
+    /// The limit, in `unit`.
+    pub limit: f64,
+    /// `µm`, `µrad`, `µm/h` or `ppm`.
+    pub unit: &'static str,
+}
+
+impl fmt::Display for Implausible {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{} reaches {:.0} {} (plausible: up to {:.0} {})",
+            self.name, self.value, self.unit, self.limit, self.unit
+        )
+    }
+}
+
+/// What to check when identified sizes are implausible, for messages.
+pub const WHERE_TO_LOOK: &str = "sizes like these come from the input, not the machine: check \
+     the machine file (the chain's order, axis offsets, reflector offsets, the tracker's mount \
+     and orientation) and the measurement file (the meas_x, meas_y, meas_z columns' order and \
+     signs, a mirrored tracker frame, the units)";
+
+/// `true` when `v` exceeds `limit` or is not a number.
+fn beyond(v: f64, limit: f64) -> bool {
+    v.is_nan() || v > limit
+}
+
+/// What [`check`] may use besides the parameters.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Context<'a> {
+    /// The tracker pose of the rigid fit the identification started from.
+    pub tracker_start: Option<&'a [f64]>,
+    /// A factor `F` of the parameters' covariance (`Cov = F Fᵀ`, one column per identified
+    /// direction, in the parameters' units).
+    pub covariance_factor: Option<&'a [Vec<f64>]>,
+    /// The EMM the fit leaves (µm).
+    pub emm_um: Option<f64>,
+    /// Ten times every limit: for parameters read from a results file, which carries no
+    /// covariance and whose values along unidentified directions are wherever the fit left
+    /// them (only gross input faults are caught then).
+    pub relaxed: bool,
+}
+
+/// The implausible sizes of `params` (most implausible first).
+pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausible> {
+    let mut out = Vec::new();
+    let k = if context.relaxed { 10.0 } else { 1.0 };
+    let tracker_start = context.tracker_start;
+    // Expanded uncertainty (k = 2) of a linear function with gradient g.
+    let expanded = |g: &[(usize, f64)]| -> f64 {
+        context.covariance_factor.map_or(0.0, |f| {
+            2.0 * f
+                .iter()
+                .map(|c| g.iter().map(|&(j, gj)| c[j] * gj).sum::<f64>().powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+    };
+    if let Some(emm) = context.emm_um
+        && beyond(emm, MAX_TRANSLATION_MM * 1e3)
+    {
+        out.push(Implausible {
+            name: "the fit's EMM".into(),
+            value: emm,
+            limit: MAX_TRANSLATION_MM * 1e3,
+            unit: "µm",
+        });
+    }
+    for t in model.terms() {
+        let ax = &model.machine().axes()[t.axis];
+        let value = |u: f64, p: &[f64]| model.error_value(t.id, u, p).unwrap_or(0.0);
+        let (peak, at) = (0..=64)
+            .map(|i| {
+                let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
+                (value(u, params).abs(), u)
+            })
+            .fold(
+                (0.0, ax.min),
+                |m, x| if x.0 > m.0 || x.0.is_nan() { x } else { m },
+            );
+        let (scale, limit, unit) = if t.id.unit() == Unit::Mm {
+            (1e3, k * MAX_TRANSLATION_MM * 1e3, "µm")
+        } else {
+            (1e6, k * MAX_ANGLE_RAD * 1e6, "µrad")
+        };
+        // The gradient of the value at its peak (exact for the linear bases).
+        let mut q = params.to_vec();
+        let base = value(at, params);
+        let g: Vec<(usize, f64)> = t
+            .params
+            .clone()
+            .map(|j| {
+                q[j] += 1.0;
+                let d = value(at, &q) - base;
+                q[j] -= 1.0;
+                (j, d)
+            })
+            .collect();
+        let margin = expanded(&g);
+        if beyond((peak - margin) * scale, limit) {
+            out.push(Implausible {
+                name: t.id.to_string(),
+                value: peak * scale,
+                limit,
+                unit,
+            });
+        }
+    }
+    // Effect parameters, by group (screw.X.200.a/b, drift.x/y/z, reflector.R1.x/y/z, …).
+    let mut groups: Vec<(String, f64, f64, &'static str)> = Vec::new();
+    for (j, info) in model.params().iter().enumerate() {
+        if info.group != Group::Other {
+            continue;
+        }
+        let (scale, limit, unit) = match info.unit {
+            Unit::Mm => (1e3, k * MAX_TRANSLATION_MM * 1e3, "µm"),
+            Unit::MmPerHour => (1e3, k * 1e3, "µm/h"),
+            Unit::Ppm => (1.0, k * 1e3, "ppm"),
+            Unit::Rad => (1e6, k * MAX_ANGLE_RAD * 1e6, "µrad"),
+        };
+        let key = info
+            .name
+            .rsplit_once('.')
+            .map_or(info.name.as_str(), |(k, _)| k)
+            .to_string();
+        let v = params[j] * scale;
+        match groups.iter_mut().find(|g| g.0 == key) {
+            Some(g) => g.1 = g.1.hypot(v),
+            None => groups.push((key, v.abs(), limit, unit)),
+        }
+    }
+    for (name, value, limit, unit) in groups {
+        if beyond(value, limit) {
+            out.push(Implausible {
+                name,
+                value,
+                limit,
+                unit,
+            });
+        }
+    }
+    if let Some(start) = tracker_start {
+        let t = model.tracker_start();
+        let shift = (0..3)
+            .map(|k| (params[t + k] - start[t + k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let turn = (3..6)
+            .map(|k| (params[t + k] - start[t + k]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        if beyond(shift, MAX_TRACKER_SHIFT_MM) {
+            out.push(Implausible {
+                name: "tracker position (from its rigid fit)".into(),
+                value: shift * 1e3,
+                limit: MAX_TRACKER_SHIFT_MM * 1e3,
+                unit: "µm",
+            });
+        }
+        if beyond(turn, MAX_TRACKER_TURN_RAD) {
+            out.push(Implausible {
+                name: "tracker orientation (from its rigid fit)".into(),
+                value: turn * 1e6,
+                limit: MAX_TRACKER_TURN_RAD * 1e6,
+                unit: "µrad",
+            });
+        }
+    }
+    out.sort_by(|a, b| (b.value / b.limit).total_cmp(&(a.value / a.limit)));
+    out
+}
