@@ -256,6 +256,11 @@ Example:
 
 fn main() -> Result<()> {
     quiet_on_broken_pipe();
+    // An interrupted write leaves no hidden temporary file (a simulation's can be 100 MB).
+    let _ = ctrlc::set_handler(|| {
+        volver::core::fsio::remove_temporaries();
+        std::process::exit(130);
+    });
     let cli = Cli::parse();
     match cli.command {
         Command::Demo { out } => demo::run(&out)?,
@@ -760,12 +765,17 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                 anyhow::bail!("the machine of {label} is not the machine of the measurements");
             }
             // Effects outside the results format (drift, reflector offsets …) are not in the
-            // truth file; the generator's own record beside it has the exact noise error.
-            let record = path
-                .parent()
-                .map(|d| d.join("simulation.json"))
-                .and_then(|p| std::fs::read_to_string(p).ok())
-                .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok());
+            // truth file; the generator's own record beside it has the exact noise error — when
+            // it belongs to these data: the measurements the generator wrote beside it, with
+            // its number of points.
+            let dir = path.parent().unwrap_or(std::path::Path::new("."));
+            let belongs =
+                volver::core::fsio::same_file(&dir.join("measurements.csv"), &a.inputs.data);
+            let record = belongs
+                .then(|| std::fs::read_to_string(dir.join("simulation.json")).ok())
+                .flatten()
+                .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok())
+                .filter(|r| r.points == data.points.len());
             match record {
                 Some(r) => Some(r.noise_error),
                 None => Some(Problem::new(&truth.model, &data)?.stats(&truth.params)),
@@ -856,7 +866,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         },
     );
     let refusal = if id.termination.failed() {
-        Some(format!("identification failed: {}", id.termination))
+        Some(format!("identification {}", id.termination))
     } else if !a.accept && !implausible.is_empty() {
         let list: Vec<String> = implausible
             .iter()

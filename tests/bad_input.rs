@@ -186,7 +186,7 @@ fn broken_measurement_files_are_refused_with_the_place_named() {
             std::iter::once(header.clone())
                 .chain(lines[..5].iter().cloned())
                 .collect(),
-            vec!["5 points give 15 equations", "too small"],
+            vec!["5 distinct poses (5 points) give 15 equations", "too small"],
         ),
     ];
     for (name, content, needles) in cases {

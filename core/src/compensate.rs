@@ -74,7 +74,8 @@ pub struct Compensated {
     pub error_mm: f64,
     /// Newton steps taken.
     pub steps: usize,
-    /// Axes (chain positions) whose compensated command leaves the travel range.
+    /// Axes (chain positions, rotary ones included) whose compensated command leaves the
+    /// travel range.
     pub outside_travel: Vec<usize>,
 }
 
@@ -212,9 +213,11 @@ impl<'a> Compensator<'a> {
         let q = best.1;
         let deviation_mm = self.deviation_mm(&q, target);
         let axes = self.model.machine().axes();
+        // Rotary axes too: a turntable commanded to 100 000° is outside any travel.
         let outside_travel = (0..axes.len())
             .filter(|&k| {
-                !axes[k].axis.is_rotary() && (q.0[k] < axes[k].min || q.0[k] > axes[k].max)
+                let tol = 1e-9 * (axes[k].max - axes[k].min).abs().max(1.0);
+                q.0[k] < axes[k].min - tol || q.0[k] > axes[k].max + tol
             })
             .collect();
         Ok(Compensated {
@@ -449,13 +452,15 @@ pub fn read_points(
         for (k, a) in machine.axes().iter().enumerate() {
             let c = axis_col[k].expect("checked");
             let v: f64 = match cells[c].parse::<f64>() {
-                Ok(v) if v.is_finite() => v,
+                Ok(v) if v.is_finite() && v.abs() <= crate::gcode::MAX_AXIS_VALUE => v,
                 _ => {
                     return Err(Error::input(
                         place(i + 1, names[c]),
                         format!(
-                            "expected a finite number in {}, found \"{}\"",
+                            "expected a finite number in {} of at most {:e} in magnitude \
+                             (beyond any machine's travel), found \"{}\"",
                             a.file_unit(),
+                            crate::gcode::MAX_AXIS_VALUE,
                             cells[c]
                         ),
                     ));

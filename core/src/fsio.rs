@@ -8,6 +8,62 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// Temporary files being written now (removed by [`remove_temporaries`] on an interrupt).
+static TEMPORARIES: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+fn register(tmp: &Path, on: bool) {
+    let mut list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    if on {
+        list.push(tmp.to_path_buf());
+    } else {
+        list.retain(|p| p != tmp);
+    }
+}
+
+/// Removes the temporary files of writes under way: for a program's interrupt handler (the
+/// `volver` CLI calls it on Ctrl-C and SIGTERM), so that an interrupted write leaves neither a
+/// half-written target nor a hidden temporary file.
+pub fn remove_temporaries() {
+    let list = TEMPORARIES.lock().unwrap_or_else(|e| e.into_inner());
+    for p in list.iter() {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
+/// Removes temporary files beside `target` left by processes that no longer run (killed
+/// before they could clean up). Only where `/proc` tells which processes run (Linux).
+fn remove_stale(target: &Path) {
+    let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else {
+        return;
+    };
+    if !Path::new("/proc/self").exists() {
+        return;
+    }
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file
+            .strip_prefix(&prefix)
+            .and_then(|r| r.strip_suffix(".tmp"))
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
+}
 
 /// Writes `contents` to `path` atomically (temporary file in the same directory, `fsync`,
 /// rename). On error the temporary file is removed and `path` is untouched.
@@ -42,7 +98,9 @@ pub fn write_atomic(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<
         let mut f = std::fs::OpenOptions::new().write(true).open(&target)?;
         return f.write_all(contents.as_ref());
     }
+    remove_stale(&target);
     let tmp = temporary_beside(&target);
+    register(&tmp, true);
     let result = (|| {
         let mut f = std::fs::File::create(&tmp)?;
         f.write_all(contents.as_ref())?;
@@ -56,6 +114,7 @@ pub fn write_atomic(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
+    register(&tmp, false);
     result
 }
 
@@ -132,6 +191,24 @@ mod tests {
         // A device is written to, not replaced.
         write_atomic(Path::new("/dev/null"), "x").unwrap();
         assert!(!std::fs::metadata("/dev/null").unwrap().is_file());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A temporary file of a process that no longer runs is removed by the next write; one of
+    /// a running process is left alone.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn stale_temporaries_are_removed() {
+        let d = dir("stale");
+        let target = d.join("m.csv");
+        // PIDs above the kernel's limit (4 194 304) never run.
+        let stale = d.join(".m.csv.4999999.tmp");
+        std::fs::write(&stale, "half").unwrap();
+        std::fs::write(d.join(".m.csv.1.tmp"), "init's").unwrap();
+        write_atomic(&target, "whole").unwrap();
+        assert!(!stale.exists());
+        assert!(d.join(".m.csv.1.tmp").exists(), "pid 1 runs");
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "whole");
         std::fs::remove_dir_all(&d).unwrap();
     }
 

@@ -326,6 +326,21 @@ impl Machine {
                     "reflector id is empty",
                 ));
             }
+            // The id is a cell of the measurement and point files (CSV) and a word of messages.
+            if r.id.trim() != r.id
+                || r.id
+                    .chars()
+                    .any(|c| matches!(c, ',' | '"' | ';') || c.is_control())
+            {
+                return Err(Error::input(
+                    at(),
+                    format!(
+                        "reflector id {:?}: an id is written in CSV files, so it may hold no \
+                         comma, semicolon, quote, control character or surrounding space",
+                        r.id
+                    ),
+                ));
+            }
             if reflectors.iter().any(|q| q.id == r.id) {
                 return Err(Error::input(
                     at(),
