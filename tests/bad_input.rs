@@ -622,3 +622,135 @@ fn implausible_or_unfinished_fits_exit_non_zero_and_write_nothing() {
     assert!(!dir.join("t").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A reflector id that cannot sit in a CSV cell, and machine dimensions of 1e300 (written back
+/// as 300-digit numbers), are refused with their place; a rotary command far outside its travel
+/// is reported, as a linear one is.
+#[test]
+fn ids_dimensions_and_rotary_travel_are_checked() {
+    use volver::core::compensate::Compensator;
+    use volver::core::machine::{DEFAULT_MACHINE_TOML, Machine};
+    use volver::core::model::Model;
+    for (from, to, needle) in [
+        ("id = \"R1\"", "id = \"R1,a\"", "comma"),
+        ("id = \"R1\"", "id = \" R1\"", "surrounding space"),
+        (
+            "range = [0.0, 1400.0]",
+            "range = [0.0, 1e300]",
+            "at most 1e6",
+        ),
+        (
+            "offset = [-50.0, 50.0, -50.0]",
+            "offset = [-50.0, 1e300, -50.0]",
+            "at most 1e6",
+        ),
+    ] {
+        let text = DEFAULT_MACHINE_TOML.replacen(from, to, 1);
+        assert_ne!(text, DEFAULT_MACHINE_TOML, "{from}");
+        let e = Machine::from_toml_str(&text, "m.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("m.toml") && e.contains(needle), "{to}: {e}");
+    }
+    let model = Model::default_xcfz();
+    let p = model.initial_params();
+    let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    let far = model
+        .machine()
+        .commands_from_file_units(&[100.0, 100_000.0, 50.0]);
+    let c = comp.compensate(&far).unwrap();
+    assert_eq!(c.outside_travel, vec![1], "C at 100 000° is outside 0–360°");
+}
+
+/// A row copied exactly is refused (it would fake a small repeat noise); data whose points all
+/// sit at one pose are refused by the mesh check, which counts distinct poses; `--truth` takes
+/// the noise error from the simulation record only for the measurements written beside it.
+#[test]
+fn copied_rows_one_pose_and_foreign_records_are_caught() {
+    use volver::core::machine::Machine;
+    use volver::core::measure::MeasurementSet;
+    let m = Machine::default_xcfz();
+    let rows = "X,C,Z,reflector,meas_x,meas_y,meas_z\n\
+                100,90,50,R1,950.1,75.2,1450.3\n\
+                200,90,50,R1,850.1,75.2,1450.3\n\
+                100,90,50,R1,950.1,75.2,1450.3\n";
+    let e = MeasurementSet::from_csv_str(&m, rows, "d.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("d.csv:4") && e.contains("repeats line 2"),
+        "{e}"
+    );
+    // A true repeat (another reading of the same pose) is kept.
+    let again = format!("{}1450.3004\n", rows.strip_suffix("1450.3\n").unwrap());
+    assert_ne!(again, rows);
+    assert_eq!(
+        MeasurementSet::from_csv_str(&m, &again, "d.csv")
+            .unwrap()
+            .points
+            .len(),
+        3
+    );
+
+    let dir = std::env::temp_dir().join(format!("volver-onepose-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |n: &str| dir.join(n).display().to_string();
+    let mut one = String::from("X,C,Z,reflector,meas_x,meas_y,meas_z\n");
+    for i in 0..200 {
+        one.push_str(&format!(
+            "100,90,50,R1,950.1,75.2,{:.4}\n",
+            1450.0 + i as f64 * 1e-4
+        ));
+    }
+    std::fs::write(d("one.csv"), one).unwrap();
+    let out = common::volver(&["identify", "--data", &d("one.csv"), "--no-history"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("1 distinct poses (200 points)"),
+        "{err}"
+    );
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("NaN"));
+
+    // Two simulations; the truth of A with the data of B.
+    for (name, seed) in [("a", "1"), ("b", "2")] {
+        let out = common::volver(&[
+            "simulate",
+            "--plan",
+            "test3",
+            "--seed",
+            seed,
+            "--out",
+            &d(name),
+        ]);
+        assert!(out.status.success());
+    }
+    let noise_of = |data: &str, truth: &str| {
+        let out = common::volver(&[
+            "identify",
+            "--data",
+            data,
+            "--truth",
+            truth,
+            "--json",
+            "--no-history",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        v["noise_error_um"].as_f64().unwrap()
+    };
+    let record = |name: &str| -> f64 {
+        let t = std::fs::read_to_string(dir.join(name).join("simulation.json")).unwrap();
+        let v: serde_json::Value = serde_json::from_str(&t).unwrap();
+        v["noise_error"]["emm_um"].as_f64().unwrap()
+    };
+    let own = noise_of(&d("a/measurements.csv"), &d("a/truth.json"));
+    assert_eq!(own, record("a"));
+    let foreign = noise_of(&d("b/measurements.csv"), &d("a/truth.json"));
+    assert_ne!(foreign, record("a"), "A's record used for B's data");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -36,6 +36,11 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+/// The largest magnitude of a range, offset or position in a machine file (mm or degrees): 1 km,
+/// beyond any machine; larger numbers are a wrong unit or garbage (and would be written back as
+/// hundreds of digits).
+pub const MAX_DIMENSION: f64 = 1e6;
+
 /// The embedded default machine: the paper's XCFZ grinder (tables 2, 3 and 7; C 0–360°).
 pub const DEFAULT_MACHINE_TOML: &str = include_str!("../data/xcfz.toml");
 
@@ -272,12 +277,19 @@ impl Machine {
                 ));
             };
             let at = || place(&format!("[axes.{key}]"), &field);
-            let finite =
-                a.range.iter().chain(&a.offset).all(|v| v.is_finite()) && a.reference.is_finite();
+            let finite = a
+                .range
+                .iter()
+                .chain(&a.offset)
+                .chain(std::iter::once(&a.reference))
+                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION);
             if !finite {
                 return Err(Error::input(
                     at(),
-                    "range, offset and reference must be finite numbers",
+                    format!(
+                        "range, offset and reference must be finite numbers of at most \
+                         {MAX_DIMENSION:e} (mm or degrees) in magnitude"
+                    ),
                 ));
             }
             if a.range[0] >= a.range[1] {
@@ -347,10 +359,16 @@ impl Machine {
                     format!("reflector id '{}' is used twice", r.id),
                 ));
             }
-            if !r.offset.iter().all(|v| v.is_finite()) {
+            if !r
+                .offset
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
+            {
                 return Err(Error::input(
                     at(),
-                    "reflector offset must be finite numbers (mm)",
+                    format!(
+                        "reflector offset must be finite numbers of at most {MAX_DIMENSION:e} mm"
+                    ),
                 ));
             }
             reflectors.push(Reflector {
@@ -363,11 +381,14 @@ impl Machine {
             .position
             .iter()
             .chain(&t.orientation_deg)
-            .all(|v| v.is_finite())
+            .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
         {
             return Err(Error::input(
                 place("[tracker]", "tracker"),
-                "tracker position (mm) and orientation_deg must be finite numbers",
+                format!(
+                    "tracker position (mm) and orientation_deg must be finite numbers of at most \
+                     {MAX_DIMENSION:e} in magnitude"
+                ),
             ));
         }
         let [rx, ry, rz] = t.orientation_deg.map(f64::to_radians);
