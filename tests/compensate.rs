@@ -600,6 +600,10 @@ basis = "fourier"
 order = 1
 [[error]]
 name = "B0Z"
+# The tracker's angles held: it stands on the C axis, where its turn about z and a constant
+# ECC are one motion.
+[tracker]
+identify = ["x", "y", "z"]
 "#,
         "hand.toml",
     )
@@ -922,4 +926,82 @@ fn gcode_decimals_are_bounded() {
         .unwrap_err()
         .to_string();
     assert!(e.contains("at most 12"), "{e}");
+}
+
+/// The hand-set errors, measured without noise on test 4 with a model of their own structure,
+/// come back as those numbers (to the 1e-9 mm of the measurement file) in `identify --json` (mm,
+/// rad) and in the report's table of constants (µrad), and the report's results file holds them.
+#[test]
+fn hand_set_errors_appear_in_identify_json_and_the_report() {
+    use volver::core::simulate::{Simulation, Truth};
+    let (model, p) = hand_set();
+    let dir = std::env::temp_dir().join(format!("volver-hand-report-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let truth = Truth {
+        model: model.clone(),
+        params: p.clone(),
+    };
+    let plan = volver::core::plan::Plan::preset(model.machine(), "test4").unwrap();
+    let mut sim = Simulation::new(plan, truth, 1);
+    sim.noise = volver::core::noise::TrackerNoise::NONE;
+    sim.run().unwrap().write(&dir).unwrap();
+    let model_toml = dir.join("hand.toml");
+    std::fs::write(&model_toml, toml::to_string(model.spec()).unwrap()).unwrap();
+    let d = |n: &str| dir.join(n).display().to_string();
+    let inputs = [
+        "--machine",
+        &d("machine.toml"),
+        "--model",
+        &d("hand.toml"),
+        "--data",
+        &d("measurements.csv"),
+    ];
+    let mut args = vec!["identify", "--json", "--no-history"];
+    args.extend_from_slice(&inputs);
+    let out = common::volver(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let param = |name: &str| {
+        v["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|q| q["name"] == name)
+            .unwrap_or_else(|| panic!("{name}"))
+            .clone()
+    };
+    for (name, want, unit) in [
+        ("EXX.c1", 0.14, "mm"),
+        ("ECC.d", 5e-6, "rad"),
+        ("B0Z", 20e-6, "rad"),
+    ] {
+        let q = param(name);
+        let got = q["value"].as_f64().unwrap();
+        // The measurement file holds 1e-9 mm: the fit recovers each value to 1e-6 of itself.
+        assert!((got / want - 1.0).abs() < 1e-6, "{name}: {got} vs {want}");
+        assert_eq!(q["unit"], unit, "{name}");
+    }
+    let mut args = vec!["report", "--out"];
+    let html_path = d("r.html");
+    args.push(&html_path);
+    args.extend_from_slice(&inputs);
+    let out = common::volver(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(&html_path).unwrap();
+    assert!(html.contains("<td>B0Z</td><td>20.000 ± "), "B0Z row");
+    let (fit, q) = volver::core::results::ResultsFile::load(&dir.join("r.json"))
+        .unwrap()
+        .to_model("r.json")
+        .unwrap();
+    let e = fit.error_value("EXX".parse().unwrap(), 10.0, &q).unwrap();
+    assert!((e - 0.002).abs() < 1e-9, "EXX(10 mm) = {e} mm");
+    let _ = std::fs::remove_dir_all(&dir);
 }

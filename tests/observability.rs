@@ -121,3 +121,33 @@ fn layout_prints_what_the_plan_can_measure() {
         "{text}"
     );
 }
+
+/// A line of EXX (its two coefficients tied by the reference constraint), a constant ECC and
+/// B0Z on test 4: everything is identified while the tracker's angles are held; with them free,
+/// the tracker standing on the C axis turns about z exactly as a constant ECC does, and that one
+/// combination is named.
+#[test]
+fn a_tracker_on_the_c_axis_and_a_constant_ecc_are_one_motion() {
+    let text = |identify: &str| {
+        format!(
+            "name = \"hand\"\n[[error]]\nname = \"EXX\"\nbasis = \"monomial\"\ndegree = 1\n\
+             [[error]]\nname = \"ECC\"\nbasis = \"fourier\"\norder = 1\n[[error]]\nname = \"B0Z\"\n\
+             [tracker]\nidentify = [{identify}]\n"
+        )
+    };
+    let m = Machine::default_xcfz();
+    let plan = Plan::preset(&m, "test4").unwrap();
+    let held = Model::from_toml_str(m.clone(), &text("\"x\", \"y\", \"z\""), "h.toml").unwrap();
+    let f = observe(&held, &nominal_data(&held, &plan), &held.initial_params());
+    assert!(f.is_empty(), "{f:#?}");
+    let free = Model::from_toml_str(
+        m.clone(),
+        &text("\"x\", \"y\", \"z\", \"rx\", \"ry\", \"rz\""),
+        "f.toml",
+    )
+    .unwrap();
+    let f = observe(&free, &nominal_data(&free, &plan), &free.initial_params());
+    assert_eq!(f.len(), 1, "{f:#?}");
+    assert!(f[0].what.contains("1 combination") && f[0].what.contains("tracker.rz"));
+    assert!(f[0].what.contains("ECC.d"), "{}", f[0].what);
+}

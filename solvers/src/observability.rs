@@ -250,7 +250,15 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             undetermined[j] = undetermined[j].hypot(share);
         }
     }
-    for &(i, j, c) in a.correlations.iter().take(8) {
+    // Coefficients of one error function are tied by its constraints (zero at the reference:
+    // c0 = c1 for a line), which is no property of the layout.
+    let term_of = |j: usize| model.terms().iter().position(|t| t.params.contains(&j));
+    for &(i, j, c) in a
+        .correlations
+        .iter()
+        .filter(|&&(i, j, _)| term_of(i).is_none() || term_of(i) != term_of(j))
+        .take(8)
+    {
         if unseen_param(i) || unseen_param(j) || (undetermined[i] > 0.3 && undetermined[j] > 0.3) {
             continue;
         }
