@@ -411,10 +411,33 @@ pub fn html(input: &ReportInput) -> Result<String> {
             &consts,
         ));
     }
-    let sq: Vec<Vec<String>> = model
-        .squareness(params)
+    // Each implied squareness is linear in the parameters: its standard uncertainty from the
+    // gradient (one unit step per parameter) and the covariance.
+    let implied = model.squareness(params);
+    let sq: Vec<Vec<String>> = implied
         .iter()
-        .map(|(id, v)| vec![id.to_string(), format!("{:.3} µrad", v * 1e6)])
+        .map(|(id, v)| {
+            let u = ident.as_ref().map_or(0.0, |a| {
+                let mut q = params.to_vec();
+                let g: Vec<f64> = (0..q.len())
+                    .map(|j| {
+                        q[j] += 1.0;
+                        let w = model
+                            .squareness(&q)
+                            .iter()
+                            .find(|(i, _)| i == id)
+                            .map_or(*v, |(_, w)| *w);
+                        q[j] -= 1.0;
+                        w - v
+                    })
+                    .collect();
+                a.uncertainty_of(&g)
+            });
+            vec![
+                id.to_string(),
+                format!("{:.3} ± {:.3} µrad", v * 1e6, u * 1e6),
+            ]
+        })
         .collect();
     if !sq.is_empty() {
         let _ = writeln!(
@@ -422,7 +445,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
             "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}):</p>",
             model.spec().squareness
         );
-        s.push_str(&table(&["squareness", "value"], &sq));
+        s.push_str(&table(&["squareness", "value ± u"], &sq));
     }
     // Diagnosis.
     let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");

@@ -501,19 +501,37 @@ impl Score {
 pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
     match ranked.first() {
         Some(s) if s.strong() => format!(
-            "add {} (ΔBIC {:.0}, strong evidence): {}; it would bring the EMM from {:.2} to about \
-             {:.2} µm — `volver identify … --add {}`",
-            s.id, s.delta_bic, s.description, emm_um, s.emm_um, s.id
+            "add {} (ΔBIC {:.0}, strong evidence): {}; it would bring the EMM from {} to about \
+             {} µm — `volver identify … --add {}`",
+            s.id,
+            s.delta_bic,
+            s.description,
+            um(emm_um),
+            um(s.emm_um),
+            s.id
         ),
         Some(s) if s.seen() && s.delta_bic < 0.0 => format!(
             "no candidate has strong evidence; the best, {} (ΔBIC {:.1}), would bring the EMM \
-             from {emm_um:.2} to about {:.2} µm",
-            s.id, s.delta_bic, s.emm_um
+             from {} to about {} µm",
+            s.id,
+            s.delta_bic,
+            um(emm_um),
+            um(s.emm_um)
         ),
         _ => format!(
-            "no candidate of the library lowers the error (EMM {emm_um:.2} µm): what is left is \
-             noise or an effect no candidate describes"
+            "no candidate of the library lowers the error (EMM {} µm): what is left is noise or \
+             an effect no candidate describes",
+            um(emm_um)
         ),
+    }
+}
+
+/// A length in µm with three significant figures (`0.178`, `1.86e-4`, `49.3`).
+fn um(v: f64) -> String {
+    if v != 0.0 && v.abs() < 0.01 {
+        format!("{v:.2e}")
+    } else {
+        format!("{v:.3}")
     }
 }
 
