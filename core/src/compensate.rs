@@ -74,8 +74,9 @@ pub struct Compensated {
     pub error_mm: f64,
     /// Newton steps taken.
     pub steps: usize,
-    /// Axes (chain positions, rotary ones included) whose compensated command leaves the
-    /// travel range.
+    /// Axes (chain positions) whose compensated command leaves the travel range: a linear axis
+    /// or a rotary axis of limited range beyond its range, a full-turn rotary axis more than a
+    /// turn beyond it.
     pub outside_travel: Vec<usize>,
 }
 
@@ -213,11 +214,19 @@ impl<'a> Compensator<'a> {
         let q = best.1;
         let deviation_mm = self.deviation_mm(&q, target);
         let axes = self.model.machine().axes();
-        // Rotary axes too: a turntable commanded to 100 000° is outside any travel.
+        // Rotary axes too: a trunnion beyond its range, or a turntable commanded more than a
+        // turn beyond its (a full-turn axis at −0.001° is at 359.999°).
         let outside_travel = (0..axes.len())
             .filter(|&k| {
-                let tol = 1e-9 * (axes[k].max - axes[k].min).abs().max(1.0);
-                q.0[k] < axes[k].min - tol || q.0[k] > axes[k].max + tol
+                let a = &axes[k];
+                let full_turn =
+                    a.axis.is_rotary() && a.max - a.min >= std::f64::consts::TAU * (1.0 - 1e-9);
+                let slack = if full_turn {
+                    std::f64::consts::TAU
+                } else {
+                    1e-9 * (a.max - a.min).abs().max(1.0)
+                };
+                q.0[k] < a.min - slack || q.0[k] > a.max + slack
             })
             .collect();
         Ok(Compensated {
