@@ -256,13 +256,14 @@ pub fn run(out_dir: &Path) -> Result<()> {
         engines: Vec::new(),
         cross,
         notes: vec![format!(
-            "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm.",
+            "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm in the workpiece frame, and to {} µm after the best rigid transform (which a workpiece set-up takes up).",
             um(id1.final_.stats.emm_um),
             best.id,
             um(id2.final_.stats.emm_um),
             um(noise),
             um(sb.emm_um),
-            um(sa.emm_um)
+            um(sa.emm_um),
+            um(rigid.emm_um)
         )],
     };
     let html = report::html(&input)?;
