@@ -27,7 +27,13 @@ pub struct CompensateArgs {
     out: PathBuf,
     /// The tool point, mm in the frame of the last tool-side axis (like a reflector offset);
     /// default: the centroid of the reflectors, where the measurement sees best.
-    #[arg(long, value_name = "X,Y,Z", conflicts_with = "tool_reflector")]
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        conflicts_with = "tool_reflector",
+        visible_alias = "tool-offset",
+        allow_hyphen_values = true
+    )]
     tool: Option<String>,
     /// Use a reflector's offset as the tool point.
     #[arg(long, value_name = "ID")]
@@ -83,7 +89,17 @@ fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>)> {
 }
 
 fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
-    if let Some(id) = &a.tool_reflector {
+    tool_point_of(a.tool.as_deref(), a.tool_reflector.as_deref(), model)
+}
+
+/// The tool point from `--tool X,Y,Z` (mm, in the frame of the last tool-side axis) or
+/// `--tool-reflector ID`; the reflectors' centroid when neither is given.
+pub fn tool_point_of(
+    text: Option<&str>,
+    reflector: Option<&str>,
+    model: &Model,
+) -> Result<[f64; 3]> {
+    if let Some(id) = reflector {
         let m = model.machine();
         let Some(r) = m.reflector_index(id) else {
             let ids: Vec<&str> = m.reflectors().iter().map(|r| r.id.as_str()).collect();
@@ -94,7 +110,7 @@ fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
         };
         return Ok(m.reflectors()[r].offset);
     }
-    let Some(text) = &a.tool else {
+    let Some(text) = text else {
         return Ok(reflector_centroid(model));
     };
     let v: Vec<f64> = text
@@ -103,9 +119,83 @@ fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
         .collect::<Result<_, _>>()
         .map_err(|_| anyhow::anyhow!("--tool {text}: expected X,Y,Z in mm"))?;
     match v[..] {
-        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([x, y, z]),
+        [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) => Ok([x, y, z]),
         _ => bail!("--tool {text}: expected three finite numbers X,Y,Z in mm"),
     }
+}
+
+/// Options of `volver predict`.
+#[derive(clap::Args)]
+pub struct PredictArgs {
+    /// Results file (of `volver identify`, `report`, or a simulation's truth.json).
+    #[arg(long)]
+    results: PathBuf,
+    /// The commands: a plan preset or a grid such as X=0:1400:200,C=0:330:30,Z=0:600:150 (mm,
+    /// degrees).
+    #[arg(long)]
+    grid: String,
+    /// The tool point, mm in the frame of the last tool-side axis; default: the reflectors'
+    /// centroid.
+    #[arg(
+        long,
+        value_name = "X,Y,Z",
+        visible_alias = "tool",
+        allow_hyphen_values = true
+    )]
+    tool_offset: Option<String>,
+    /// Print one JSON object instead of a CSV table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `volver predict`: the tool point of a results file at each command of a grid, in the
+/// workpiece frame (the tracker pose and the measurement's effects left out), so that an
+/// identified model and another (the truth of a simulation, a second fit) can be put side by
+/// side.
+pub fn predict_command(a: PredictArgs) -> Result<()> {
+    let label = a.results.display().to_string();
+    let file = ResultsFile::load(&a.results).context("reading the results file")?;
+    let (model, params) = file.to_model(&label)?;
+    let m = model.machine();
+    let plan = if a.grid.contains('=') {
+        volver::core::plan::Plan::parse_grid(m, &a.grid)?
+    } else {
+        volver::core::plan::Plan::preset(m, &a.grid)?
+    };
+    let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
+    let rows: Vec<(Vec<f64>, [f64; 3])> = plan
+        .positions
+        .iter()
+        .map(|c| {
+            let files: Vec<f64> = m
+                .axes()
+                .iter()
+                .enumerate()
+                .map(|(k, ax)| ax.to_file_units(c.0[k]))
+                .collect();
+            (files, model.tool_point(&c.0, &tool, &params))
+        })
+        .collect();
+    if a.json {
+        let obj = serde_json::json!({
+            "results": label,
+            "model": model.spec().name,
+            "tool_offset_mm": tool,
+            "axes": m.axes().iter().map(|ax| ax.axis.to_string()).collect::<Vec<_>>(),
+            "points": rows.iter().map(|(c, t)| serde_json::json!({
+                "commands": c, "tool_point_mm": t,
+            })).collect::<Vec<_>>(),
+        });
+        println!("{}", serde_json::to_string_pretty(&obj)?);
+        return Ok(());
+    }
+    let names: Vec<String> = m.axes().iter().map(|ax| ax.axis.to_string()).collect();
+    println!("{},tool_x_mm,tool_y_mm,tool_z_mm", names.join(","));
+    for (c, t) in &rows {
+        let cells: Vec<String> = c.iter().map(|v| format!("{v}")).collect();
+        println!("{},{:.9},{:.9},{:.9}", cells.join(","), t[0], t[1], t[2]);
+    }
+    Ok(())
 }
 
 /// A point in mm as people write it: `(-30, 75, 0)`, each coordinate rounded to 0.1 µm

@@ -121,6 +121,10 @@ enum Command {
     /// Exports identified errors as controller tables over each axis' positions: ISG CSV,
     /// Etalon exchange style and plain CSV (errors, not corrections).
     Tables(compensation::TablesArgs),
+    /// The tool point of a results file at each command of a grid, in the workpiece frame (CSV,
+    /// or --json): to put an identified model beside another (a simulation's truth, a second
+    /// fit).
+    Predict(compensation::PredictArgs),
 }
 
 /// The machine, error model and measurements that `identify` and `diagnose` read.
@@ -343,6 +347,7 @@ fn main() -> Result<()> {
         Command::Simulate(args) => simulate(args)?,
         Command::Compensate(args) => compensation::compensate_command(args)?,
         Command::Tables(args) => compensation::tables_command(args)?,
+        Command::Predict(args) => compensation::predict_command(args)?,
     }
     Ok(())
 }

@@ -1005,3 +1005,62 @@ fn hand_set_errors_appear_in_identify_json_and_the_report() {
     assert!((e - 0.002).abs() < 1e-9, "EXX(10 mm) = {e} mm");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `volver predict` puts two results files side by side: the hand-set model and the same
+/// machine without errors differ at X = 10 mm, C = 0, Z = 0 (B0Z acts only away from Z's
+/// reference) for a tool point that the X offset puts 10 mm from the C axis by the hand-set EXX
+/// (2 µm) along x and by ECC's 5 µrad turn over that lever (0.05 µm) along y.
+#[test]
+fn predict_shows_a_hand_set_error_at_its_point() {
+    let (model, p) = hand_set();
+    let dir = std::env::temp_dir().join(format!("volver-predict-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let save = |name: &str, params: &[f64]| {
+        let path = dir.join(name);
+        volver::core::results::ResultsFile::from_model(&model, params)
+            .unwrap()
+            .save(&path)
+            .unwrap();
+        path.display().to_string()
+    };
+    let hand = save("hand.json", &p);
+    let zero = save("zero.json", &model.initial_params());
+    let run = |results: &str| -> serde_json::Value {
+        let out = common::volver(&[
+            "predict",
+            "--results",
+            results,
+            "--grid",
+            "X=10,C=0,Z=0",
+            "--tool-offset",
+            "-1000,-25,0",
+            "--json",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice(&out.stdout).unwrap()
+    };
+    let (a, b) = (run(&hand), run(&zero));
+    let pt = |v: &serde_json::Value| -> Vec<f64> {
+        v["points"][0]["tool_point_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect()
+    };
+    let (pa, pb) = (pt(&a), pt(&b));
+    let d: Vec<f64> = pa.iter().zip(&pb).map(|(x, y)| x - y).collect();
+    assert!((d[0].abs() - 0.002).abs() < 1e-9, "{d:?}");
+    // The lever is the 10 mm less the 2 µm EXX takes off it.
+    assert!(
+        (d[1].abs() - 5e-6 * 9.998).abs() < 1e-11 && d[2].abs() < 1e-12,
+        "{d:?}"
+    );
+    assert_eq!(a["points"][0]["commands"][0], 10.0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
