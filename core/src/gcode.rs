@@ -262,8 +262,9 @@ fn modal_group(g: i64) -> Option<&'static str> {
     }
 }
 
-/// The modal state the reader starts in and the writer states at the top of its output.
-const START_STATE: &str = "G90 G21 G17";
+/// The modal state the reader starts in and the writer states at the top of its output:
+/// absolute, mm, XY plane.
+pub const START_STATE: &str = "G90 G21 G17";
 
 impl Program {
     /// Reads a program for `machine`; `file` names it in messages.
