@@ -33,7 +33,8 @@ pub fn remove_temporaries() {
 }
 
 /// Removes temporary files beside `target` left by processes that no longer run (killed
-/// before they could clean up). Only where `/proc` tells which processes run (Linux).
+/// before they could clean up) and at least an hour old. Only where `/proc` tells which
+/// processes run (Linux).
 fn remove_stale(target: &Path) {
     let (Some(dir), Some(name)) = (target.parent(), target.file_name()) else {
         return;
@@ -59,7 +60,15 @@ fn remove_stale(target: &Path) {
         else {
             continue;
         };
-        if pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists() {
+        // Also an hour old: a process in another PID namespace (a container writing to the same
+        // folder) is not in our /proc, and its write under way must not lose its file.
+        let old = e
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age.as_secs() >= 3600);
+        if pid != std::process::id() && old && !Path::new(&format!("/proc/{pid}")).exists() {
             let _ = std::fs::remove_file(e.path());
         }
     }
@@ -194,8 +203,8 @@ mod tests {
         std::fs::remove_dir_all(&d).unwrap();
     }
 
-    /// A temporary file of a process that no longer runs is removed by the next write; one of
-    /// a running process is left alone.
+    /// A temporary file of a process that no longer runs, an hour old, is removed by the next
+    /// write; one of a running process, or a recent one, is left alone.
     #[cfg(target_os = "linux")]
     #[test]
     fn stale_temporaries_are_removed() {
@@ -205,9 +214,21 @@ mod tests {
         let stale = d.join(".m.csv.4999999.tmp");
         std::fs::write(&stale, "half").unwrap();
         std::fs::write(d.join(".m.csv.1.tmp"), "init's").unwrap();
+        let young = d.join(".m.csv.4999998.tmp");
+        std::fs::write(&young, "another namespace's, under way").unwrap();
+        let two_hours_ago = std::time::SystemTime::now() - std::time::Duration::from_secs(7200);
+        for f in [&stale, &d.join(".m.csv.1.tmp")] {
+            std::fs::File::options()
+                .write(true)
+                .open(f)
+                .unwrap()
+                .set_modified(two_hours_ago)
+                .unwrap();
+        }
         write_atomic(&target, "whole").unwrap();
         assert!(!stale.exists());
         assert!(d.join(".m.csv.1.tmp").exists(), "pid 1 runs");
+        assert!(young.exists(), "less than an hour old");
         assert_eq!(std::fs::read_to_string(&target).unwrap(), "whole");
         std::fs::remove_dir_all(&d).unwrap();
     }
