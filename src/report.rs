@@ -6,7 +6,7 @@ use anyhow::Result;
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use volver::core::diagnose;
-use volver::core::iso::{ErrorId, Unit};
+use volver::core::iso::ErrorId;
 use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::problem::{Problem, norm};
@@ -177,11 +177,7 @@ fn function_panels(
 
 /// Scale from internal units (mm, rad) to µm or µrad, and the unit's name.
 fn micro(id: ErrorId) -> (f64, &'static str) {
-    if id.unit() == Unit::Rad {
-        (1e6, "µrad")
-    } else {
-        (1e3, "µm")
-    }
+    id.unit().micro()
 }
 
 fn table(head: &[&str], rows: &[Vec<String>]) -> String {

@@ -389,20 +389,7 @@ fn outputs_never_overwrite_inputs() {
     let dir = std::env::temp_dir().join(format!("volver-overwrite-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let d = |n: &str| dir.join(n).display().to_string();
-    let out = common::volver(&[
-        "simulate",
-        "--plan",
-        "test3",
-        "--seed",
-        "3",
-        "--out",
-        &d("sim"),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::simulate(&d("sim"), &["--plan", "test3", "--seed", "3"]);
     let data = d("sim/measurements.csv");
     let before = std::fs::read(&data).unwrap();
     for args in [
@@ -533,20 +520,7 @@ fn implausible_or_unfinished_fits_exit_non_zero_and_write_nothing() {
     let dir = std::env::temp_dir().join(format!("volver-plausible-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let d = |n: &str| dir.join(n).display().to_string();
-    let out = common::volver(&[
-        "simulate",
-        "--plan",
-        "test4",
-        "--seed",
-        "3",
-        "--out",
-        &d("sim"),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    common::simulate(&d("sim"), &["--plan", "test4", "--seed", "3"]);
     let data = d("sim/measurements.csv");
     let machine = std::fs::read_to_string(d("sim/machine.toml")).unwrap();
     let typo = machine.replace("[1000.0, 25.0, 1500.0]", "[1000.0, 27.0, 1500.0]");
@@ -714,16 +688,7 @@ fn copied_rows_one_pose_and_foreign_records_are_caught() {
 
     // Two simulations; the truth of A with the data of B.
     for (name, seed) in [("a", "1"), ("b", "2")] {
-        let out = common::volver(&[
-            "simulate",
-            "--plan",
-            "test3",
-            "--seed",
-            seed,
-            "--out",
-            &d(name),
-        ]);
-        assert!(out.status.success());
+        common::simulate(&d(name), &["--plan", "test3", "--seed", seed]);
     }
     let noise_of = |data: &str, truth: &str| {
         let out = common::volver(&[

@@ -150,25 +150,20 @@ fn diagnose_json_states_the_ball_screw_amplitude() {
     let dir = std::env::temp_dir().join(format!("volver-sizes-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let d = dir.to_str().unwrap();
-    let out = common::volver(&[
-        "simulate",
-        "--plan",
-        "test4",
-        "--seed",
-        "3",
-        "--noise",
-        "none",
-        "--truth-model",
-        "core/data/xcfz-paper-model.toml",
-        "--effect",
-        "ball-screw=X,175,3",
-        "--out",
+    common::simulate(
         d,
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        &[
+            "--plan",
+            "test4",
+            "--seed",
+            "3",
+            "--noise",
+            "none",
+            "--truth-model",
+            "core/data/xcfz-paper-model.toml",
+            "--effect",
+            "ball-screw=X,175,3",
+        ],
     );
     let data = dir.join("measurements.csv");
     let out = common::volver(&["diagnose", "--data", data.to_str().unwrap(), "--json"]);

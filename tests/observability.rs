@@ -7,7 +7,7 @@ mod common;
 use volver::core::machine::{Machine, TrackerMount};
 use volver::core::model::Model;
 use volver::core::plan::Plan;
-use volver::solvers::observability::{Finding, Kind, axes_named, nominal_data, observe};
+use volver::solvers::observability::{Finding, Kind, nominal_data, observe};
 
 fn mill(mount: TrackerMount) -> (Machine, Model) {
     let mut m = Machine::load(std::path::Path::new("tests/data/mill/yxfz-floor.toml")).unwrap();
@@ -36,7 +36,7 @@ fn a_floor_tracker_cannot_see_the_table_axes() {
     let f = findings(&model, grid);
     let unseen: Vec<_> = f.iter().filter(|f| f.kind == Kind::Unseen).collect();
     assert_eq!(unseen.len(), 2, "{f:#?}");
-    let axes: Vec<_> = unseen.iter().flat_map(|f| axes_named(f)).collect();
+    let axes: Vec<_> = unseen.iter().filter_map(|f| f.axis).collect();
     assert!(
         axes.contains(&volver::core::iso::Axis::X) && axes.contains(&volver::core::iso::Axis::Y)
     );

@@ -377,26 +377,7 @@ pub fn repeat_noise(problem: &Problem) -> Option<(ErrorStats, usize)> {
     let machine = problem.model().machine();
     let pts = &problem.data().points;
     // Rotary positions a full turn apart are the same pose.
-    let key = |i: usize| -> Vec<i64> {
-        let p = &pts[i];
-        let mut k: Vec<i64> = machine
-            .axes()
-            .iter()
-            .enumerate()
-            .map(|(j, ax)| {
-                let mut u = p.commands.0[j];
-                if ax.axis.is_rotary() {
-                    u = u.rem_euclid(2.0 * PI);
-                    if (u - 2.0 * PI).abs() < 1e-9 {
-                        u = 0.0;
-                    }
-                }
-                (u * 1e6).round() as i64
-            })
-            .collect();
-        k.push(p.reflector as i64);
-        k
-    };
+    let key = |i: usize| crate::measure::pose_key(machine, &pts[i]);
     let mut order: Vec<usize> = (0..pts.len()).collect();
     order.sort_by_key(|&i| (key(i), i));
     let mut diffs = Vec::new();

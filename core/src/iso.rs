@@ -137,6 +137,19 @@ pub enum Unit {
     Ppm,
 }
 
+impl Unit {
+    /// The factor to the unit volver prints values of this unit in, and that unit: µm for mm,
+    /// µrad for rad, µm/h for mm/h, ppm for ppm.
+    pub fn micro(self) -> (f64, &'static str) {
+        match self {
+            Unit::Mm => (1e3, "µm"),
+            Unit::Rad => (1e6, "µrad"),
+            Unit::MmPerHour => (1e3, "µm/h"),
+            Unit::Ppm => (1.0, "ppm"),
+        }
+    }
+}
+
 impl fmt::Display for Unit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(match self {

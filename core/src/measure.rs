@@ -90,6 +90,28 @@ pub struct Measurement {
     pub line: usize,
 }
 
+/// A key equal for two measurements of one pose: the commands rounded to 1e-6 (mm, rad) with
+/// rotary positions a full turn apart taken as one (C = 0° and 360°), and the reflector.
+pub fn pose_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
+    let mut k: Vec<i64> = machine
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(j, ax)| {
+            let mut u = p.commands.0[j];
+            if ax.axis.is_rotary() {
+                u = u.rem_euclid(std::f64::consts::TAU);
+                if (u - std::f64::consts::TAU).abs() < 1e-9 {
+                    u = 0.0;
+                }
+            }
+            (u * 1e6).round() as i64
+        })
+        .collect();
+    k.push(p.reflector as i64);
+    k
+}
+
 /// The measurements of one test.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MeasurementSet {

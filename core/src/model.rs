@@ -1216,6 +1216,36 @@ impl Model {
         out
     }
 
+    /// The size of each effect outside ISO 230 (the parameters of group "other", grouped by
+    /// their name without its last part: `drift.x/y/z`, `screw.X.200.a/b`,
+    /// `reflector.R1.x/y/z`, `range.scale`): the norm of its parameters, in the unit volver
+    /// prints ([`Unit::micro`]: µm, µm/h, ppm, µrad), with that unit and the parameters' own.
+    /// Only parameters for which `keep` is true count.
+    pub fn effect_sizes(
+        &self,
+        params: &[f64],
+        keep: impl Fn(usize) -> bool,
+    ) -> Vec<(String, f64, &'static str, Unit)> {
+        let mut groups: Vec<(String, f64, &'static str, Unit)> = Vec::new();
+        for (j, info) in self.params.iter().enumerate() {
+            if info.group != Group::Other || !keep(j) {
+                continue;
+            }
+            let (scale, shown) = info.unit.micro();
+            let key = info
+                .name
+                .rsplit_once('.')
+                .map_or(info.name.as_str(), |(k, _)| k)
+                .to_string();
+            let v = params[j] * scale;
+            match groups.iter_mut().find(|g| g.0 == key) {
+                Some(g) => g.1 = g.1.hypot(v),
+                None => groups.push((key, v.abs(), shown, info.unit)),
+            }
+        }
+        groups
+    }
+
     /// The squareness of every linear axis implied by the parameters, whatever the rule: the
     /// squareness parameter (if modelled) plus the slope of its straightness partner's best-fit
     /// line (if modelled), in rad. With the paper's rule the first is zero and this is the

@@ -31,7 +31,7 @@
 //! assert!(found[0].to_string().contains("1800 µm"));
 //! ```
 
-use crate::iso::{Group, Unit};
+use crate::iso::Unit;
 use crate::model::Model;
 use std::fmt;
 
@@ -159,29 +159,13 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
         }
     }
     // Effect parameters, by group (screw.X.200.a/b, drift.x/y/z, reflector.R1.x/y/z, …).
-    let mut groups: Vec<(String, f64, f64, &'static str)> = Vec::new();
-    for (j, info) in model.params().iter().enumerate() {
-        if info.group != Group::Other {
-            continue;
-        }
-        let (scale, limit, unit) = match info.unit {
-            Unit::Mm => (1e3, k * MAX_TRANSLATION_MM * 1e3, "µm"),
-            Unit::MmPerHour => (1e3, k * 1e3, "µm/h"),
-            Unit::Ppm => (1.0, k * 1e3, "ppm"),
-            Unit::Rad => (1e6, k * MAX_ANGLE_RAD * 1e6, "µrad"),
+    for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
+        let limit = k * match own {
+            Unit::Mm => MAX_TRANSLATION_MM * 1e3,
+            Unit::MmPerHour => 1e3,
+            Unit::Ppm => 1e3,
+            Unit::Rad => MAX_ANGLE_RAD * 1e6,
         };
-        let key = info
-            .name
-            .rsplit_once('.')
-            .map_or(info.name.as_str(), |(k, _)| k)
-            .to_string();
-        let v = params[j] * scale;
-        match groups.iter_mut().find(|g| g.0 == key) {
-            Some(g) => g.1 = g.1.hypot(v),
-            None => groups.push((key, v.abs(), limit, unit)),
-        }
-    }
-    for (name, value, limit, unit) in groups {
         if beyond(value, limit) {
             out.push(Implausible {
                 name,

@@ -26,7 +26,7 @@ use crate::Task;
 use crate::lm::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
-use volver_core::iso::{Axis, ErrorId, Group, Unit};
+use volver_core::iso::{Axis, ErrorId};
 use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
 
 /// Periodic positioning errors are tried with periods travel/2 … travel/SCREW_PERIODS.
@@ -370,28 +370,9 @@ fn implied_size(
     q: &[f64],
 ) -> (f64, &'static str) {
     // New effect parameters: the norm of each group (drift.x/y/z, screw.X.a/b …).
-    let mut groups: Vec<(String, f64, &'static str)> = Vec::new();
-    for (j, info) in extended.params().iter().enumerate() {
-        if info.group != Group::Other || model.param_index(&info.name).is_some() {
-            continue;
-        }
-        let (scale, unit) = match info.unit {
-            Unit::Mm => (1e3, "µm"),
-            Unit::MmPerHour => (1e3, "µm/h"),
-            Unit::Ppm => (1.0, "ppm"),
-            Unit::Rad => (1e6, "µrad"),
-        };
-        let key = info
-            .name
-            .rsplit_once('.')
-            .map_or(info.name.as_str(), |(k, _)| k)
-            .to_string();
-        let v = q[j] * scale;
-        match groups.iter_mut().find(|g| g.0 == key) {
-            Some(g) => g.1 = g.1.hypot(v),
-            None => groups.push((key, v.abs(), unit)),
-        }
-    }
+    let groups = extended.effect_sizes(q, |j| {
+        model.param_index(&extended.params()[j].name).is_none()
+    });
     if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
         return (g.1, g.2);
     }
@@ -408,11 +389,7 @@ fn implied_size(
             continue;
         }
         let ax = &extended.machine().axes()[t.axis];
-        let scale = if t.id.unit() == Unit::Mm {
-            (1e3, "µm")
-        } else {
-            (1e6, "µrad")
-        };
+        let scale = t.id.unit().micro();
         let peak = (0..=64)
             .map(|i| {
                 let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;

@@ -52,6 +52,8 @@ pub enum Kind {
 pub struct Finding {
     /// Its kind.
     pub kind: Kind,
+    /// The axis it is about (unseen axes, too few positions), if one.
+    pub axis: Option<Axis>,
     /// What cannot be measured, in words.
     pub what: String,
     /// What would fix it.
@@ -170,6 +172,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             )
         };
         out.push(Finding {
+            axis: Some(ax.axis),
             kind: Kind::Unseen,
             what,
             fix,
@@ -211,6 +214,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
                 _ => have.saturating_sub(1).max(1),
             };
             out.push(Finding {
+                axis: Some(ax.axis),
                 kind: Kind::TooFewPositions,
                 what: format!(
                     "{} ({}) need at least {need} positions of {}; the plan has {have}",
@@ -263,6 +267,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             continue;
         }
         out.push(Finding {
+            axis: None,
             kind: Kind::Interchangeable,
             what: format!(
                 "{} and {} are nearly the same motion on this layout (correlation {c:+.3})",
@@ -301,6 +306,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
         let count = a.weak.len();
         if !tool.is_empty() {
             out.push(Finding {
+                axis: None,
                 kind: Kind::Unidentified,
                 what: format!(
                     "the tool-side errors are not all determined (the share of each that the \
@@ -323,6 +329,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             let tracker = (0..n)
                 .any(|j| undetermined[j] > 0.3 && model.params()[j].name.starts_with("tracker"));
             out.push(Finding {
+                axis: None,
                 kind: Kind::Unidentified,
                 what: format!(
                     "{}: {}",
@@ -357,12 +364,4 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
         }
     }
     out
-}
-
-/// The axis letters a finding names, for tests and filters.
-pub fn axes_named(f: &Finding) -> Vec<Axis> {
-    Axis::ALL
-        .into_iter()
-        .filter(|a| f.what.contains(&format!("axis {a}")) || f.what.contains(&format!("of {a}")))
-        .collect()
 }

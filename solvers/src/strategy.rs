@@ -289,28 +289,10 @@ fn distinct_poses(problem: &Problem) -> usize {
     let Some((model, data)) = problem.machine() else {
         return problem.n_points();
     };
-    let axes = model.machine().axes();
     let mut keys: Vec<Vec<i64>> = data
         .points
         .iter()
-        .map(|p| {
-            let mut k: Vec<i64> = axes
-                .iter()
-                .enumerate()
-                .map(|(j, ax)| {
-                    let mut u = p.commands.0[j];
-                    if ax.axis.is_rotary() {
-                        u = u.rem_euclid(std::f64::consts::TAU);
-                        if (u - std::f64::consts::TAU).abs() < 1e-9 {
-                            u = 0.0;
-                        }
-                    }
-                    (u * 1e6).round() as i64
-                })
-                .collect();
-            k.push(p.reflector as i64);
-            k
-        })
+        .map(|p| volver_core::measure::pose_key(model.machine(), p))
         .collect();
     keys.sort();
     keys.dedup();
