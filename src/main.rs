@@ -791,7 +791,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     let strategy = Strategy {
         phasing,
         subloops: a.subloops,
-        init_tracker: true,
+        ..Strategy::default()
     };
     if !a.json {
         println!(
@@ -856,8 +856,11 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         options.rank_tolerance,
         1.0,
     );
-    let representative = match (&determined, &tracker_start) {
-        (Some(a), Some(start)) => a.minimum_norm(&id.params, start),
+    // The fit is on the gauge (values along the unidentified combinations at the reference),
+    // unless the gauge could not be computed: then the minimum-norm point of the analysis.
+    let representative = match (&id.gauge, &determined, &tracker_start) {
+        (Some(_), _, _) => id.params.clone(),
+        (None, Some(a), Some(start)) => a.minimum_norm(&id.params, start),
         _ => id.params.clone(),
     };
     let implausible = volver::core::plausibility::check(
@@ -899,34 +902,28 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         results.save(out).context("writing the results file")?;
     }
     let params = serde_json::to_value(&results.parameters)?;
-    // The combinations the data cannot identify, by the parameters they move (the engine held
-    // them; a metrologist needs to know which errors are therefore not determined).
-    let held: usize = id.phases.last().map_or(0, |s| s.unidentifiable);
-    let weak: Vec<(f64, Vec<(String, f64)>)> = if held > 0 {
-        volver::solvers::identifiability::analyse(
-            &volver::solvers::Task::new(problem),
-            &id.params,
-            options.rank_tolerance,
-            0.99,
-        )
-        .map(|a| {
-            a.weak
+    // The combinations the data cannot identify, by the parameters they move: the gauge held
+    // them at the reference (a metrologist needs to know which errors are therefore not
+    // determined, and by which rule their values were chosen).
+    let weak: Vec<(f64, Vec<(String, f64)>)> = id
+        .gauge
+        .as_ref()
+        .map(|g| {
+            g.held
                 .iter()
-                .map(|w| {
-                    let names = w
+                .map(|h| {
+                    let names = h
                         .parameters
                         .iter()
                         .take(4)
                         .map(|&(j, share)| (model.params()[j].name.clone(), share))
                         .collect();
-                    (w.relative_curvature, names)
+                    (h.relative_curvature, names)
                 })
                 .collect()
         })
-        .unwrap_or_default()
-    } else {
-        Vec::new()
-    };
+        .unwrap_or_default();
+    let held = weak.len();
     if a.json {
         let obj = serde_json::json!({
             "solver": solver.name(),
@@ -950,6 +947,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             "converged": id.termination.converged(),
             "phases": id.phases,
             "parameters": params,
+            "gauge": id.gauge.as_ref().map(|_| volver::solvers::gauge::RULE),
             "unidentifiable": weak.iter().map(|(c, names)| serde_json::json!({
                 "relative_curvature": c,
                 "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
@@ -1004,19 +1002,25 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             id.time_s,
             id.termination,
             if held > 0 {
-                format!("; {held} direction(s) not identifiable from these data were held")
+                format!(
+                    "; {held} combination(s) not identifiable from these data held by the gauge"
+                )
             } else {
                 String::new()
             }
         );
         if !weak.is_empty() {
             println!(
-                "  not identifiable from these data (held; the parameters each combination moves):"
+                "  not identifiable from these data (held at the reference; the parameters each \
+                 combination moves):"
             );
             for (c, names) in &weak {
                 let list: Vec<String> = names.iter().map(|(n, s)| format!("{n} {s:+.2}")).collect();
                 println!("    {}   (relative curvature {c:.1e})", list.join(", "));
             }
+        }
+        if held > 0 {
+            println!("  gauge: {}", volver::solvers::gauge::RULE);
         }
         for i in &implausible {
             println!("  implausible: {i}");

@@ -174,8 +174,12 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
     let lm = LevenbergMarquardt;
     let run = |model: &Model, set: &MeasurementSet, errors, phasing| -> Result<Identification> {
         let problem = Problem::new(model, set)?;
+        // The paper's method has no gauge: on its noise-free meshes the data determine even
+        // the nearly flat combinations (curvature 1e-12 of the largest) that the gauge holds
+        // for real data, and the tables compare final errors of zero.
         let strategy = Strategy {
             phasing,
+            gauge: false,
             ..Strategy::default()
         };
         Ok(identify_errors(
@@ -220,6 +224,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         Errors::All,
         &Strategy {
             init_tracker: false,
+            gauge: false,
             ..Strategy::default()
         },
         &options,
@@ -435,7 +440,10 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         .map(|p| measure(&truth4, p, noise, seed))
         .collect::<Result<_>>()?;
     let p0 = full.initial_params();
-    let st = Strategy::default();
+    let st = Strategy {
+        gauge: false,
+        ..Strategy::default()
+    };
     let pr: Vec<Problem> = sets
         .iter()
         .map(|s| Problem::new(&full, s))

@@ -115,6 +115,40 @@ fn check(machine: Machine, seed: u64) -> usize {
                     checked += 1;
                 }
             }
+            // The tool point's exact Jacobian, at a tool offset off the reflectors, against
+            // central differences of the f64 tool point.
+            let tool = [12.0, -30.0, -87.0];
+            let t = model.tool_point_with_jacobian(&c, &tool, &p, &mut jac);
+            assert_eq!(
+                t,
+                model.tool_point(&c.0, &tool, &p),
+                "value of the dual pass"
+            );
+            for j in 0..n {
+                let info = &model.params()[j];
+                let h = if info.name.contains(".phi") {
+                    1e-5
+                } else if info.unit == volver::core::iso::Unit::Rad {
+                    1e-6
+                } else {
+                    1e-4
+                };
+                let (mut pp, mut pm) = (p.clone(), p.clone());
+                pp[j] += h;
+                pm[j] -= h;
+                let a: [f64; 3] = model.tool_point(&c.0, &tool, &pp);
+                let b: [f64; 3] = model.tool_point(&c.0, &tool, &pm);
+                for i in 0..3 {
+                    let fd = (a[i] - b[i]) / (2.0 * h);
+                    let ad = jac[i * n + j];
+                    assert!(
+                        (fd - ad).abs() <= 1e-6 * fd.abs().max(ad.abs()).max(1.0),
+                        "tool point: {} coordinate {i}: dual {ad} vs finite difference {fd}",
+                        info.name
+                    );
+                    checked += 1;
+                }
+            }
             // The second derivative along a random direction against central differences of
             // the exact first derivative J·v.
             let v = random_params(&model, &mut rng);

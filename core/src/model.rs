@@ -872,6 +872,30 @@ impl Model {
         )
     }
 
+    /// [`Model::error_value`] and its exact gradient with respect to the error's own
+    /// coefficients (written to `grad`, one value per coefficient of the term, in the order of
+    /// [`Term::params`]). The sine series' phases get their derivative at `params`.
+    ///
+    /// # Panics
+    /// When `grad` is shorter than the term's coefficients.
+    pub fn error_value_gradient(
+        &self,
+        id: ErrorId,
+        position: f64,
+        params: &[f64],
+        grad: &mut [f64],
+    ) -> Option<f64> {
+        let t = self.term(id)?;
+        let mut cmd = Commands::default();
+        cmd.0[t.axis] = position;
+        let k = t.params.len();
+        Some(t.basis.eval(
+            self.argument(t, &cmd),
+            &params[t.params.clone()],
+            &mut grad[..k],
+        ))
+    }
+
     fn check_len(&self, params: &[f64]) {
         assert_eq!(
             params.len(),
@@ -1072,6 +1096,83 @@ impl Model {
         e.reflector_delta = [S::zero(); 3];
         e.range_scale = S::zero();
         crate::kinematics::tool_in_workpiece(&self.machine, commands, tool, &e)
+    }
+
+    /// [`Model::tool_point`] and its exact Jacobian with respect to every parameter, written to
+    /// `jac` (row-major 3 × n_params): forward-mode duals over the error values at the commands,
+    /// then the bases' derivatives, as [`Model::predict_with_jacobian`]. The measurement's
+    /// parameters (tracker pose, reflector offsets, range scale, drift) get zero columns.
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()` or `jac.len() != 3 * n_params()`.
+    pub fn tool_point_with_jacobian(
+        &self,
+        commands: &Commands,
+        tool: &[f64; 3],
+        params: &[f64],
+        jac: &mut [f64],
+    ) -> [f64; 3] {
+        self.check_len(params);
+        let n = self.params.len();
+        assert_eq!(
+            jac.len(),
+            3 * n,
+            "Jacobian buffer must hold 3 × n_params values"
+        );
+        let mut vals = [0.0; MAX_SLOTS];
+        for (i, t) in self.terms.iter().enumerate() {
+            let r = t.params.clone();
+            vals[i] = t
+                .basis
+                .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
+        }
+        let m = self.terms.len() + TRACKER_DOF;
+        jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(0.0);
+        let m = m + self.effects.len();
+        self.effect_values(&commands.0, usize::MAX, 0.0, params, &mut vals, Some(jac));
+        let mut g = [[0.0; MAX_SLOTS]; 3];
+        let point = match m {
+            0..=16 => self.tool_value_jacobian::<16>(commands, tool, &vals[..m], &mut g),
+            17..=32 => self.tool_value_jacobian::<32>(commands, tool, &vals[..m], &mut g),
+            33..=48 => self.tool_value_jacobian::<48>(commands, tool, &vals[..m], &mut g),
+            49..=64 => self.tool_value_jacobian::<64>(commands, tool, &vals[..m], &mut g),
+            _ => self.tool_value_jacobian::<MAX_SLOTS>(commands, tool, &vals[..m], &mut g),
+        };
+        let (r0, rest) = jac.split_at_mut(n);
+        let (r1, r2) = rest.split_at_mut(n);
+        for j in 0..n {
+            let s = self.slot_of[j];
+            let d = r0[j];
+            r0[j] = g[0][s] * d;
+            r1[j] = g[1][s] * d;
+            r2[j] = g[2][s] * d;
+        }
+        point
+    }
+
+    fn tool_value_jacobian<const N: usize>(
+        &self,
+        commands: &Commands,
+        tool: &[f64; 3],
+        vals: &[f64],
+        g: &mut [[f64; MAX_SLOTS]; 3],
+    ) -> [f64; 3] {
+        let mut e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
+        let zero = DualSVec64::<N>::from_re(0.0);
+        e.tool_shift = [zero; 3];
+        e.reflector_delta = [zero; 3];
+        e.range_scale = zero;
+        let cmd: [DualSVec64<N>; MAX_AXES] =
+            std::array::from_fn(|k| DualSVec64::<N>::from_re(commands.0[k]));
+        let x = crate::kinematics::tool_in_workpiece(&self.machine, &cmd, tool, &e);
+        let mut out = [0.0; 3];
+        for c in 0..3 {
+            out[c] = x[c].re;
+            if let Some(eps) = &x[c].eps.0 {
+                g[c][..vals.len()].copy_from_slice(&eps.as_slice()[..vals.len()]);
+            }
+        }
+        out
     }
 
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`

@@ -22,6 +22,7 @@ pub mod ceres;
 #[cfg(feature = "clarabel")]
 pub mod clarabel;
 mod free;
+pub mod gauge;
 pub mod identifiability;
 pub mod init;
 pub mod lm;

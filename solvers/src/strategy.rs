@@ -22,10 +22,11 @@
 //! while the rotary-axis errors are identified on another); [`cross_validate`] (the
 //! compensated error of a reference set, with only its tracker pose fitted, table 12).
 
+use crate::gauge::Gauge;
 use crate::init::init_tracker;
 use crate::options::Options;
 use crate::summary::{Evaluation, Summary, Termination};
-use crate::{Observer, Solver, Task, evaluate};
+use crate::{Observer, Solution, Solver, Task, evaluate};
 use serde::Serialize;
 use std::time::Instant;
 use volver_core::iso::Group;
@@ -98,6 +99,10 @@ pub struct Strategy {
     pub subloops: usize,
     /// Start the tracker pose from a rigid best fit ([`init_tracker`]).
     pub init_tracker: bool,
+    /// Hold the combinations the design cannot identify by the stated rule of
+    /// [`crate::gauge`] (machine problems only). Without it, their values are wherever the
+    /// engine stopped.
+    pub gauge: bool,
 }
 
 impl Default for Strategy {
@@ -106,6 +111,7 @@ impl Default for Strategy {
             phasing: Phasing::One,
             subloops: 1,
             init_tracker: true,
+            gauge: true,
         }
     }
 }
@@ -125,6 +131,9 @@ pub struct Identification {
     pub termination: Termination,
     /// Wall time (s).
     pub time_s: f64,
+    /// The gauge the fit honoured ([`Strategy::gauge`]; `None` without it or when the design
+    /// could not be analysed).
+    pub gauge: Option<Gauge>,
 }
 
 impl Identification {
@@ -191,13 +200,15 @@ pub fn identify_errors(
     let t0 = Instant::now();
     let model = problem.model();
     let mut p = start.to_vec();
-    let done = |p: Vec<f64>, phases: Vec<Summary>, initial, termination| Identification {
+    let mut gauge: Option<Gauge> = None;
+    let done = |p: Vec<f64>, phases: Vec<Summary>, initial, termination, gauge| Identification {
         final_: evaluate(&problem, &p),
         params: p,
         phases,
         initial,
         termination,
         time_s: t0.elapsed().as_secs_f64(),
+        gauge,
     };
     if strategy.subloops == 0 {
         let initial = evaluate(&problem, &p);
@@ -206,6 +217,7 @@ pub fn identify_errors(
             vec![],
             initial,
             Termination::InvalidInput("the strategy needs at least one sub-loop".into()),
+            None,
         );
     }
     if strategy.init_tracker {
@@ -213,7 +225,7 @@ pub fn identify_errors(
             Ok(q) => p = q,
             Err(e) => {
                 let initial = evaluate(&problem, &p);
-                return done(p, vec![], initial, Termination::InvalidInput(e));
+                return done(p, vec![], initial, Termination::InvalidInput(e), None);
             }
         }
     }
@@ -243,6 +255,7 @@ pub fn identify_errors(
                 problem.n_points(),
                 (MIN_EQUATIONS_PER_PARAMETER * free).div_ceil(3)
             )),
+            None,
         );
     }
     let mut phases = Vec::new();
@@ -262,7 +275,19 @@ pub fn identify_errors(
                 names.join("+")
             };
             let task = Task::holding(problem, |_, info| !free(info), &p, &label);
-            let sol = solver.solve(&task, &p, options, observer);
+            let mut sol = solver.solve(&task, &p, options, observer);
+            if strategy.gauge && problem.machine().is_some() && !sol.summary.termination.failed() {
+                // The phase's own gauge: its free errors' reference is zero (the held ones stay
+                // where the phase holds them), the tracker's the rigid fit to that; the
+                // directions are those flat at the solution.
+                let reference = gauge_reference(&problem, &p, free);
+                if let Some(g) =
+                    crate::gauge::gauge(&task, &reference, &sol.params, crate::gauge::TOLERANCE)
+                {
+                    sol = onto_gauge(solver, &task, &g, sol, options, observer);
+                    gauge = Some(g);
+                }
+            }
             termination = sol.summary.termination.clone();
             let failed = termination.failed();
             phases.push(sol.summary);
@@ -277,7 +302,90 @@ pub fn identify_errors(
         }
         emm = now;
     }
-    done(p, phases, initial, termination)
+    // Several phases: each held its own flat combinations, and a later phase moves the tracker
+    // along an earlier one's. The result goes onto the gauge of every parameter the call
+    // identifies (moving along flat combinations: the fit stays, to first order).
+    if phases.len() > 1 && !termination.failed() && gauge.is_some() {
+        let base = Task::holding(
+            problem,
+            |_, info| !eligible(model, info, errors),
+            &p,
+            "gauge",
+        );
+        let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors));
+        gauge = crate::gauge::gauge(&base, &reference, &p, crate::gauge::TOLERANCE);
+        if let Some(g) = &gauge {
+            p = g.project(&p);
+        }
+    }
+    done(p, phases, initial, termination, gauge)
+}
+
+/// The gauge's reference for a solve that identifies the parameters `free` accepts: those errors
+/// at their initial value (zero), the others as in `p`, and the tracker's rigid fit to that.
+fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bool) -> Vec<f64> {
+    let model = problem.model();
+    let initial_params = model.initial_params();
+    let mut reference = p.to_vec();
+    for (j, info) in model.params().iter().enumerate() {
+        if free(info) && info.group != Group::Tracker {
+            reference[j] = initial_params[j];
+        }
+    }
+    init_tracker(problem, &reference).unwrap_or(reference)
+}
+
+/// Relative rise of the objective above which a solution moved onto the gauge is polished by a
+/// second solve under the gauge's constraints (the held directions are flat to first order at
+/// the solution; the model's curvature makes a long move along them cost a little).
+const POLISH_ABOVE: f64 = 1e-6;
+
+/// `sol` (of `task`, found without the gauge) moved along the held combinations onto the gauge
+/// `g`; when that raises the objective by more than [`POLISH_ABOVE`], polished by a solve under
+/// the gauge's constraints from there (its steps and evaluations added to the summary). The
+/// held combinations are on the gauge either way.
+fn onto_gauge(
+    solver: &dyn Solver,
+    task: &Task,
+    g: &Gauge,
+    mut sol: Solution,
+    options: &Options,
+    observer: &mut dyn Observer,
+) -> Solution {
+    let problem = &task.problem;
+    let cost = |p: &[f64]| match options.objective {
+        crate::Objective::Phi => problem.phi(p),
+        crate::Objective::Ve => problem.ve(p),
+    };
+    let before = cost(&sol.params);
+    let projected = g.project(&sol.params);
+    let after = cost(&projected);
+    if !after.is_finite() {
+        return sol;
+    }
+    sol.params = projected;
+    if after <= before * (1.0 + POLISH_ABOVE) {
+        sol.summary.final_ = evaluate(problem, &sol.params);
+        return sol;
+    }
+    // From a point this near the optimum, the IRLS smoothing of Φ need not start wide.
+    let near = Options {
+        irls_initial_epsilon: options
+            .irls_final_epsilon
+            .max(1e-6 * options.irls_initial_epsilon),
+        ..options.clone()
+    };
+    let polish = solver.solve(&g.apply(task), &sol.params, &near, observer);
+    sol.summary.iterations += polish.summary.iterations;
+    sol.summary.evaluations += polish.summary.evaluations;
+    sol.summary.jacobian_evaluations += polish.summary.jacobian_evaluations;
+    sol.summary.time_s += polish.summary.time_s;
+    if !polish.summary.termination.failed() && cost(&polish.params) <= after {
+        sol.params = g.project(&polish.params);
+        sol.summary.termination = polish.summary.termination;
+    }
+    sol.summary.final_ = evaluate(problem, &sol.params);
+    sol
 }
 
 /// Fewest equations (3 per distinct pose and reflector) per free parameter a mesh must give.

@@ -1,0 +1,295 @@
+//! The gauge: a stated rule for the values the data do not determine.
+//!
+//! Along a direction the data cannot identify (the tracker's pose against the table's errors,
+//! the turn of the tool about the line through two reflectors …) every value fits the data
+//! equally well, so an engine would leave it wherever its iteration stopped. volver fixes those
+//! values by a rule the user can read ([`crate::strategy::Strategy::gauge`], on by default):
+//!
+//! > the combinations of parameters the design cannot identify are held at their reference
+//! > values: the solution has no component along them, in the function metric, away from the
+//! > reference (zero errors and the tracker's rigid fit).
+//!
+//! That is the minimum-norm solution in the function metric [`function_metric`]: the mean
+//! square over its travel of every error function (lengths in mm, angles in rad times
+//! [`LEVER_MM`], so that 1 µrad weighs as 1 µm), plus the tracker's pose and the other effects'
+//! parameters in the same units. The unidentified directions are the generalised eigenvectors
+//! of `(JᵀJ, M)` on the constraint set whose curvature is below [`TOLERANCE`] × the largest,
+//! at the solution an engine reached. After the engine stops, the solution moves along them
+//! onto the gauge (which changes no residual to first order; when the model's curvature makes
+//! the move cost more than 1e-6 of the objective, a second solve under the gauge's linear
+//! constraints polishes it). Both the metric and the generalised eigenproblem transform with
+//! the parameters, so the rule names the same *functions* whatever the basis they are written
+//! in, and the held combinations are at the reference whatever the engine and the start.
+//!
+//! ```
+//! use volver_core::model::Model;
+//! use volver_solvers::gauge::function_metric;
+//! let model = Model::default_xcfz();
+//! let n = model.n_params();
+//! let m = function_metric(&model, &model.initial_params());
+//! // EXX.c1 (the linear Legendre term, ξ over [−1, 1]): mean of ξ² over 65 positions ≈ 1/3.
+//! let j = model.param_index("EXX.c1").unwrap();
+//! assert!((m[(j, j)] - 0.34).abs() < 0.01);
+//! ```
+
+use crate::Task;
+use faer::{Mat, Side};
+use volver_core::iso::Unit;
+use volver_core::model::{Constraint, ConstraintKind, Model};
+use volver_core::problem::Problem;
+
+/// The lever that turns an angle into a length in the metric (mm): 1 µrad weighs as 1 µm.
+pub const LEVER_MM: f64 = 1000.0;
+
+/// Relative curvature (generalised eigenvalue of `(JᵀJ, M)` over the largest) below which a
+/// direction is not identified and the gauge holds it.
+pub const TOLERANCE: f64 = 1e-9;
+
+/// Positions sampled over each error function's travel by the metric.
+const SAMPLES: usize = 65;
+
+/// The rule, as printed in every output that depends on it.
+pub const RULE: &str = "minimum norm in the function metric: the combinations the design cannot \
+    identify (relative curvature below 1e-9 in the function metric) are held at their reference \
+    values, zero errors and the tracker's rigid fit (mean square of each error function over its \
+    travel, angles × 1000 mm)";
+
+/// The function metric `M` (n × n) at `params`: `pᵀ M p` is the sum over the error functions of
+/// the mean square of their values at 65 evenly spaced positions of their travel (mm², angles
+/// times [`LEVER_MM`]), plus the squares of the tracker's pose and of the other effects'
+/// parameters in the same units (µm/h and ppm weigh as µm). The error functions are linear in
+/// their coefficients except the sine series' phases, whose derivative is taken at `params`.
+pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
+    let n = model.n_params();
+    let mut m = Mat::<f64>::zeros(n, n);
+    let mut covered = vec![false; n];
+    let mut grad = vec![0.0; n];
+    for t in model.terms() {
+        let ax = &model.machine().axes()[t.axis];
+        let scale = if t.id.unit() == Unit::Mm {
+            1.0
+        } else {
+            LEVER_MM
+        };
+        let range: Vec<usize> = t.params.clone().collect();
+        for &j in &range {
+            covered[j] = true;
+        }
+        for s in 0..SAMPLES {
+            let u = ax.min + (ax.max - ax.min) * s as f64 / (SAMPLES - 1) as f64;
+            if model
+                .error_value_gradient(t.id, u, params, &mut grad)
+                .is_none()
+            {
+                continue;
+            }
+            for (a, &ja) in range.iter().enumerate() {
+                for (b, &jb) in range.iter().enumerate() {
+                    m[(ja, jb)] += grad[a] * grad[b] * scale * scale / SAMPLES as f64;
+                }
+            }
+        }
+    }
+    for (j, info) in model.params().iter().enumerate() {
+        if covered[j] {
+            continue;
+        }
+        let w = match info.unit {
+            Unit::Rad => LEVER_MM,
+            Unit::Ppm => 1e-3,
+            Unit::Mm | Unit::MmPerHour => 1.0,
+        };
+        m[(j, j)] = w * w;
+    }
+    m
+}
+
+/// One combination of parameters the design does not identify, held by the gauge.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Held {
+    /// Its curvature relative to the best-determined direction, in the function metric.
+    pub relative_curvature: f64,
+    /// The direction in the parameters (their units), unit length in the function metric:
+    /// moving the parameters by `t ·` this changes the error functions by `t` mm RMS.
+    pub direction: Vec<f64>,
+    /// The parameters it moves most: (index, share of the direction in the metric, sign
+    /// included), largest first, shares above 0.1.
+    pub parameters: Vec<(usize, f64)>,
+    /// The constraint that holds it: `Σ c_j p_j = Σ c_j reference_j` with `c = M d` scaled to
+    /// a largest coefficient of 1.
+    pub constraint: Constraint,
+}
+
+/// The gauge of a problem: the rule, its reference, and the combinations it holds.
+#[derive(Clone, Debug)]
+pub struct Gauge {
+    /// The reference the held combinations keep (zero errors and the tracker's rigid fit).
+    pub reference: Vec<f64>,
+    /// The combinations held, weakest first.
+    pub held: Vec<Held>,
+    /// The function metric at the reference.
+    pub metric: Mat<f64>,
+}
+
+impl Gauge {
+    /// `task` with the gauge's constraints added (phases that hold parameters too: a row that
+    /// their holds already imply is redundant, and the null space accepts it).
+    pub fn apply<'a>(&self, task: &Task<'a>) -> Task<'a> {
+        let mut t = task.clone();
+        t.constraints
+            .rows
+            .extend(self.held.iter().map(|h| h.constraint.clone()));
+        t
+    }
+
+    /// `params` moved along the held directions onto the gauge (the point of the gauge nearest
+    /// `params` in the function metric): for a solution found without the gauge. Every residual
+    /// is unchanged to the extent the held directions are flat.
+    pub fn project(&self, params: &[f64]) -> Vec<f64> {
+        let n = params.len();
+        let k = self.held.len();
+        if k == 0 {
+            return params.to_vec();
+        }
+        // Directions are M-orthonormal: the coefficient along d_i is d_iᵀ M (p − r).
+        let diff: Vec<f64> = (0..n).map(|j| params[j] - self.reference[j]).collect();
+        let mut p = params.to_vec();
+        for h in &self.held {
+            let c: f64 = (0..n)
+                .map(|i| {
+                    h.direction[i] * (0..n).map(|j| self.metric[(i, j)] * diff[j]).sum::<f64>()
+                })
+                .sum();
+            for (pj, dj) in p.iter_mut().zip(&h.direction) {
+                *pj -= c * dj;
+            }
+        }
+        p
+    }
+
+    /// The value of each held combination at `params`: `d_iᵀ M (p − reference)` (mm RMS of the
+    /// error functions). Zero on the gauge.
+    pub fn offsets(&self, params: &[f64]) -> Vec<f64> {
+        let n = params.len();
+        self.held
+            .iter()
+            .map(|h| {
+                (0..n)
+                    .map(|i| {
+                        h.direction[i]
+                            * (0..n)
+                                .map(|j| self.metric[(i, j)] * (params[j] - self.reference[j]))
+                                .sum::<f64>()
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+}
+
+/// The gauge of `task` with reference `reference` (which must satisfy its constraints),
+/// linearised at `at` (the solution an engine reached: the model is mildly non-linear, and a
+/// direction flat at zero errors is not quite flat at the machine's errors): the directions of the constraint
+/// set whose curvature `dᵀJᵀJd / dᵀMd` at `at` is below `tolerance` × the largest
+/// ([`TOLERANCE`] by default). Directions the metric does not see there (a sine series' phases
+/// while its amplitude is zero) are left free. `None` when the Jacobian is not finite or a
+/// decomposition fails.
+pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
+    let problem: &Problem = &task.problem;
+    let n = reference.len();
+    let (h, _) = crate::lm::normal_equations(problem, at)?;
+    let metric = if problem.machine().is_some() {
+        function_metric(problem.model(), at)
+    } else {
+        Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 })
+    };
+    let ns = crate::nullspace::NullSpace::from_constraints(&task.constraints, reference).ok()?;
+    let nf = ns.n_free();
+    let none = |metric| {
+        Some(Gauge {
+            reference: reference.to_vec(),
+            held: vec![],
+            metric,
+        })
+    };
+    if nf == 0 {
+        return none(metric);
+    }
+    let basis = ns.basis();
+    let mz = basis.transpose() * (&metric * basis);
+    let hz = basis.transpose() * (&h * basis);
+    // The part of the free space the metric sees: M_z = Q diag(m) Qᵀ, kept where m > 1e-12 max.
+    let evm = mz.self_adjoint_eigen(Side::Lower).ok()?;
+    let (mv, q) = (evm.S().column_vector(), evm.U());
+    let mmax = (0..nf).map(|i| mv[i]).fold(0.0_f64, f64::max);
+    if mmax <= 0.0 {
+        return none(metric);
+    }
+    let seen: Vec<usize> = (0..nf).filter(|&i| mv[i] > 1e-12 * mmax).collect();
+    let k = seen.len();
+    // Whitened: W = Q_s diag(1/√m), C = Wᵀ H_z W; eigenvectors y give M-orthonormal d = W y.
+    let w = Mat::from_fn(nf, k, |r, c| q[(r, seen[c])] / mv[seen[c]].sqrt());
+    let c = w.transpose() * (&hz * &w);
+    let evc = c.self_adjoint_eigen(Side::Lower).ok()?;
+    let (mu, y) = (evc.S().column_vector(), evc.U());
+    let mu_max = mu[k - 1].max(f64::MIN_POSITIVE);
+    // Parameters a constraint fixes on its own: exactly still (the null space leaves rounding
+    // there).
+    let mut fixed = vec![false; n];
+    for row in &task.constraints.rows {
+        if let [(j, _)] = row.coeffs.as_slice() {
+            fixed[*j] = true;
+        }
+    }
+    let mut held = Vec::new();
+    for i in (0..k).filter(|&i| mu[i] <= tolerance * mu_max) {
+        let dz = &w * y.col(i);
+        let d: Vec<f64> = (0..n)
+            .map(|j| {
+                if fixed[j] {
+                    0.0
+                } else {
+                    (0..nf).map(|r| basis[(j, r)] * dz[r]).sum()
+                }
+            })
+            .collect();
+        let md: Vec<f64> = (0..n)
+            .map(|a| (0..n).map(|b| metric[(a, b)] * d[b]).sum())
+            .collect();
+        // Shares of the direction in the metric: d_j (M d)_j sums to 1.
+        let mut parameters: Vec<(usize, f64)> = (0..n)
+            .map(|j| (j, d[j] * md[j]))
+            .filter(|(_, s)| s.abs() > 0.1)
+            .collect();
+        parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+        let cmax = md.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let coeffs: Vec<(usize, f64)> = md
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| v.abs() > 1e-14 * cmax)
+            .map(|(j, v)| (j, v / cmax))
+            .collect();
+        let rhs = coeffs.iter().map(|&(j, c)| c * reference[j]).sum();
+        let curvature = mu[i].max(0.0) / mu_max;
+        held.push(Held {
+            relative_curvature: curvature,
+            direction: d,
+            parameters,
+            constraint: Constraint {
+                kind: ConstraintKind::Gauge,
+                label: format!(
+                    "gauge: unidentified combination {} held at the reference (relative \
+                     curvature {curvature:.1e})",
+                    held.len() + 1
+                ),
+                coeffs,
+                rhs,
+            },
+        });
+    }
+    Some(Gauge {
+        reference: reference.to_vec(),
+        held,
+        metric,
+    })
+}
