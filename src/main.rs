@@ -7,6 +7,7 @@ mod history;
 mod plot;
 mod report;
 mod study;
+mod uncertainty;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
@@ -125,6 +126,10 @@ enum Command {
     /// or --json): to put an identified model beside another (a simulation's truth, a second
     /// fit).
     Predict(compensation::PredictArgs),
+    /// The fit with its gauge stated and the expanded uncertainty (k = 2) of every parameter
+    /// and of the tool point over the volume, raw and after the set-up's rigid transform:
+    /// linearised (GUM) and, with --monte-carlo N, by Monte Carlo (GUM Supplement 1).
+    Uncertainty(uncertainty::UncertaintyArgs),
 }
 
 /// The machine, error model and measurements that `identify` and `diagnose` read.
@@ -348,6 +353,7 @@ fn main() -> Result<()> {
         Command::Compensate(args) => compensation::compensate_command(args)?,
         Command::Tables(args) => compensation::tables_command(args)?,
         Command::Predict(args) => compensation::predict_command(args)?,
+        Command::Uncertainty(args) => uncertainty::uncertainty_command(args)?,
     }
     Ok(())
 }

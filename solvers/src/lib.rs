@@ -34,6 +34,7 @@ pub mod options;
 pub mod strategy;
 pub mod strd;
 pub mod summary;
+pub mod uncertainty;
 
 pub use options::{Objective, Options};
 pub use summary::{Evaluation, Summary, Termination};

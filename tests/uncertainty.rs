@@ -1,0 +1,338 @@
+//! Uncertainty: the linearised (GUM) and Monte Carlo (GUM-S1) uncertainties agree with each
+//! other, and their 95 % intervals of the tool point (after the set-up's rigid transform) cover
+//! the truth as often as they claim, on replicas of test 4 with known truths of varied size; the
+//! CLI states the gauge and the U of every point.
+//!
+//! The coverage test runs in release builds only (`cargo test --release --test uncertainty`,
+//! which `scripts/test` runs): 100 identifications and 2 000 Monte Carlo solves.
+
+mod common;
+
+use common::volver;
+use volver::core::machine::{Commands, Machine};
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::Plan;
+use volver::core::problem::Problem;
+use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
+use volver::solvers::candidates::rank;
+use volver::solvers::lm::LevenbergMarquardt;
+use volver::solvers::strategy::{Identification, Strategy, fit, identify};
+use volver::solvers::uncertainty::{K, NoiseModel, ToolGrid, linear, monte_carlo, std_dev};
+use volver::solvers::{Options, Silent};
+
+/// The tool at the reflectors' centroid over 8 × 12 × 5 commands of the volume.
+fn grid(m: &Machine) -> ToolGrid {
+    let mut commands: Vec<Commands> = Vec::new();
+    for x in (0..=1400).step_by(200) {
+        for c in (0..=330).step_by(30) {
+            for z in (0..=600).step_by(150) {
+                commands.push(m.commands_from_file_units(&[x as f64, c as f64, z as f64]));
+            }
+        }
+    }
+    let r = m.reflectors();
+    let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
+    ToolGrid { commands, tool }
+}
+
+/// Test-4 data of a random truth inside the paper's model, its magnitudes scaled by `scale`.
+fn replica(seed: u64, scale: f64, noise: TrackerNoise) -> (Truth, MeasurementSet) {
+    let m = Machine::default_xcfz();
+    let d = Magnitudes::default();
+    let mags = Magnitudes {
+        positioning_um: d.positioning_um * scale,
+        straightness_um: d.straightness_um * scale,
+        angular_urad: d.angular_urad * scale,
+        squareness_urad: d.squareness_urad * scale,
+        radial_um: d.radial_um * scale,
+        axial_um: d.axial_um * scale,
+        tilt_urad: d.tilt_urad * scale,
+        angular_positioning_urad: d.angular_positioning_urad * scale,
+        location_um: d.location_um * scale,
+        location_tilt_urad: d.location_tilt_urad * scale,
+        tracker_mm: d.tracker_mm,
+    };
+    let truth = Truth::random(&m, Model::default_xcfz().spec(), &mags, seed).unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, "test4").unwrap(), truth.clone(), seed);
+    sim.noise = noise;
+    (truth, sim.run().unwrap().measurements)
+}
+
+/// Counts of (inside, total) for the truth's aligned deviations from the fit against `u`.
+fn count(dev: &[f64], u: &[f64]) -> (usize, usize) {
+    let inside = dev.iter().zip(u).filter(|(d, u)| d.abs() <= **u).count();
+    (inside, dev.len())
+}
+
+#[test]
+#[cfg_attr(
+    debug_assertions,
+    ignore = "release only: cargo test --release --test uncertainty"
+)]
+fn intervals_of_the_tool_point_cover_the_truth_on_100_replicas_of_test_4() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let g = grid(&m);
+    let noise = NoiseModel::Tracker(TrackerNoise::PAPER);
+    let options = Options {
+        max_iterations: 1000,
+        max_evaluations: 10_000,
+        ..Options::default()
+    };
+    let (mut lin, mut mc) = ((0, 0), (0, 0));
+    for r in 0..100u64 {
+        // Truths from a fifth to twice the default magnitudes.
+        let scale = 0.2 + 1.8 * (r % 10) as f64 / 9.0;
+        let (truth, data) = replica(5000 + r, scale, TrackerNoise::PAPER);
+        let problem = Problem::new(&model, &data).unwrap();
+        // The native LM needs more than its default 200 steps on a few of these (issue 18).
+        let id: Identification = identify(
+            &LevenbergMarquardt,
+            problem,
+            &model.initial_params(),
+            &Strategy::default(),
+            &options,
+            &mut Silent,
+        );
+        assert!(
+            id.termination.converged(),
+            "replica {r}: {}",
+            id.termination
+        );
+        let cov = linear(
+            &problem,
+            id.gauge.as_ref(),
+            &id.params,
+            Default::default(),
+            noise,
+        )
+        .unwrap();
+        let base = g.points(&model, &id.params);
+        let dev = g.deviations(&truth.model, &truth.params, &base, true);
+        let u: Vec<f64> = g
+            .uncertainty(&model, &id.params, &cov, true)
+            .iter()
+            .flat_map(|p| p.u95_mm())
+            .collect();
+        let (a, b) = count(&dev, &u);
+        lin = (lin.0 + a, lin.1 + b);
+        // Monte Carlo with 20 replicas per fit (a wider interval estimate than the linear
+        // one, so its coverage scatters more).
+        let runs = monte_carlo(
+            "lm",
+            &model,
+            &data,
+            &id.params,
+            noise,
+            cov.sigma_mm,
+            id.gauge.as_ref(),
+            &options,
+            20,
+            r,
+            &|_| {},
+        )
+        .unwrap();
+        assert_eq!(runs.failed, 0);
+        let devs: Vec<Vec<f64>> = runs
+            .samples
+            .iter()
+            .map(|p| g.deviations(&model, p, &base, true))
+            .collect();
+        let umc: Vec<f64> = (0..dev.len())
+            .map(|k| K * std_dev(&devs.iter().map(|d| d[k]).collect::<Vec<_>>()))
+            .collect();
+        let (a, b) = count(&dev, &umc);
+        mc = (mc.0 + a, mc.1 + b);
+    }
+    let (cl, cm) = (lin.0 as f64 / lin.1 as f64, mc.0 as f64 / mc.1 as f64);
+    println!("coverage of k = 2 intervals: linearised {cl:.3}, Monte Carlo {cm:.3}");
+    assert!((0.90..=0.99).contains(&cl), "linearised coverage {cl}");
+    assert!((0.90..=0.99).contains(&cm), "Monte Carlo coverage {cm}");
+}
+
+/// Linearised and Monte Carlo uncertainties of the tool point agree on test 4 (the Monte Carlo
+/// one from 40 replicas, so within the scatter of a standard deviation from 40 draws: ±25 %
+/// point by point, ±10 % on average).
+#[test]
+fn linearised_and_monte_carlo_uncertainties_agree_on_test_4() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let g = grid(&m);
+    let (_, data) = replica(77, 1.0, TrackerNoise::PAPER);
+    let problem = Problem::new(&model, &data).unwrap();
+    let id = fit(problem);
+    // Without a tracker model: the residuals' isotropic σ, for both methods.
+    let noise = NoiseModel::Residual;
+    let cov = linear(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        Default::default(),
+        noise,
+    )
+    .unwrap();
+    let base = g.points(&model, &id.params);
+    let ul: Vec<f64> = g
+        .uncertainty(&model, &id.params, &cov, true)
+        .iter()
+        .flat_map(|p| p.u95_data_mm)
+        .collect();
+    let runs = monte_carlo(
+        "lm",
+        &model,
+        &data,
+        &id.params,
+        noise,
+        cov.sigma_mm,
+        id.gauge.as_ref(),
+        &Options::default(),
+        40,
+        3,
+        &|_| {},
+    )
+    .unwrap();
+    let devs: Vec<Vec<f64>> = runs
+        .samples
+        .iter()
+        .map(|p| g.deviations(&model, p, &base, true))
+        .collect();
+    let ratios: Vec<f64> = (0..ul.len())
+        .map(|k| K * std_dev(&devs.iter().map(|d| d[k]).collect::<Vec<_>>()) / ul[k])
+        .collect();
+    let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+    let sorted = {
+        let mut r = ratios.clone();
+        r.sort_by(f64::total_cmp);
+        r
+    };
+    println!(
+        "Monte Carlo / linearised: mean {mean:.3}, 5 % {:.3}, 95 % {:.3}",
+        sorted[sorted.len() / 20],
+        sorted[sorted.len() * 19 / 20]
+    );
+    assert!((0.9..1.1).contains(&mean), "mean ratio {mean}");
+    assert!(
+        sorted[sorted.len() / 20] > 0.75 && sorted[sorted.len() * 19 / 20] < 1.25,
+        "{sorted:?}"
+    );
+}
+
+/// Noise-free data from a machine with an effect the model lacks (harmonics 2 and 3 of every
+/// error of the C axis, 10 µm and 20 µrad): the intervals are not honest, whether σ comes from
+/// the residuals or from a claimed tracker noise: they miss the truth most of the time. The
+/// diagnosis flags the missing effect first (its top candidate is strongly supported; which one
+/// is the diagnosis suite's business).
+#[test]
+fn intervals_from_a_misspecified_model_are_not_honest_and_the_diagnosis_flags_it() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let g = grid(&m);
+    let (mut inside, mut total) = ([0; 2], [0; 2]);
+    for seed in 0..3u64 {
+        let truth = Truth::random(&m, model.spec(), &Magnitudes::default(), 300 + seed).unwrap();
+        let mut sim = Simulation::new(Plan::preset(&m, "test4").unwrap(), truth.clone(), seed);
+        sim.noise = TrackerNoise::NONE;
+        sim.effects = vec![Effect::parse("rotary-harmonics=3,10,20").unwrap()];
+        let out = sim.run().unwrap();
+        let (truth, data) = (out.truth, out.measurements);
+        let problem = Problem::new(&model, &data).unwrap();
+        let id = fit(problem);
+        let top = &rank(&problem, &id.params, Options::default().rank_tolerance)[0];
+        assert!(
+            top.strong(),
+            "seed {seed}: top candidate {} (ΔBIC {})",
+            top.id,
+            top.delta_bic
+        );
+        let base = g.points(&model, &id.params);
+        let dev = g.deviations(&truth.model, &truth.params, &base, true);
+        for (k, noise) in [
+            NoiseModel::Residual,
+            NoiseModel::Tracker(TrackerNoise::from_text("normal:2,2,1,0.2").unwrap()),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let cov = linear(
+                &problem,
+                id.gauge.as_ref(),
+                &id.params,
+                Default::default(),
+                noise,
+            )
+            .unwrap();
+            let u: Vec<f64> = g
+                .uncertainty(&model, &id.params, &cov, true)
+                .iter()
+                .flat_map(|p| p.u95_mm())
+                .collect();
+            let (a, b) = count(&dev, &u);
+            inside[k] += a;
+            total[k] += b;
+        }
+    }
+    let c: Vec<f64> = (0..2).map(|k| inside[k] as f64 / total[k] as f64).collect();
+    println!(
+        "coverage with missing harmonics of the C axis, noise-free: σ from the residuals {:.3}, \
+         a low tracker noise claimed {:.3}",
+        c[0], c[1]
+    );
+    // Measured: 0.146 and 0.015. The misfit is systematic: it moves the tool point the same
+    // way in every replica, and no σ describes it.
+    assert!(c[0] < 0.5, "residual-based coverage {}", c[0]);
+    assert!(c[1] < 0.5, "tracker-based coverage {}", c[1]);
+}
+
+#[test]
+fn volver_uncertainty_states_the_gauge_and_the_u_of_every_point() {
+    let dir = std::env::temp_dir().join(format!("volver-uncertainty-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    common::simulate(d, &["--plan", "test4", "--seed", "5"]);
+    let data = dir.join("measurements.csv");
+    let out = volver(&[
+        "uncertainty",
+        "--data",
+        data.to_str().unwrap(),
+        "--noise",
+        "paper",
+        "--grid",
+        "X=0:1400:700,C=0:270:90,Z=0:600:300",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["gauge"].as_str().unwrap().contains("minimum norm"));
+    assert!(!v["combinations"].as_array().unwrap().is_empty());
+    let points = v["points"].as_array().unwrap();
+    assert_eq!(points.len(), 3 * 4 * 3);
+    for p in points {
+        let u: Vec<f64> = p["u95_um"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .collect();
+        // At the reflectors' centroid the data determine the tool point to tens of µm.
+        assert!(u.iter().all(|x| *x > 0.1 && *x < 50.0), "{u:?}");
+        assert_eq!(p["commands"].as_array().unwrap().len(), 3);
+    }
+    let params = v["parameters"].as_array().unwrap();
+    assert!(params.iter().all(|p| p["u"].as_f64().unwrap() >= 0.0));
+    // A noise-free tracker cannot give an uncertainty.
+    let out = volver(&[
+        "uncertainty",
+        "--data",
+        data.to_str().unwrap(),
+        "--noise",
+        "none",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--noise none"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
