@@ -8,7 +8,9 @@ use volver::core::gcode::{Linearise, Program};
 use volver::core::iso::Axis;
 use volver::core::model::Model;
 use volver::core::results::ResultsFile;
+use volver::core::results::UncertaintyRecord;
 use volver::core::tables::ErrorTables;
+use volver::solvers::uncertainty::{Covariance, K, ToolGrid};
 
 /// Options of `volver compensate`.
 #[derive(clap::Args)]
@@ -57,11 +59,26 @@ pub struct CompensateArgs {
     /// Use a results file whose errors are implausible (see `volver identify --accept`).
     #[arg(long)]
     accept: bool,
+    /// Refuse when the expanded uncertainty (k = 2) of the compensated tool point over the
+    /// travel, after the set-up's rigid transform, exceeds this (µm).
+    #[arg(long, default_value_t = 25.0)]
+    max_u_um: f64,
+    /// Compensate even when the uncertainty exceeds --max-u-um.
+    #[arg(long)]
+    force: bool,
+}
+
+/// `--max-u-um` must be a positive length.
+fn check_max_u(v: f64) -> Result<()> {
+    if !(v.is_finite() && v > 0.0) {
+        bail!("--max-u-um {v}: the limit must be a positive length (µm)");
+    }
+    Ok(())
 }
 
 /// Reads a results file; its errors must be plausible ([`volver::core::plausibility`]) unless
 /// `accept`: implausible sizes come from a wrong input and must not reach a control.
-fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>)> {
+fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>, Option<UncertaintyRecord>)> {
     let label = path.display().to_string();
     let file = ResultsFile::load(path).context("reading the results file")?;
     let (model, params) = file.to_model(&label)?;
@@ -85,7 +102,148 @@ fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>)> {
             volver::core::plausibility::WHERE_TO_LOOK
         );
     }
-    Ok((model, params))
+    Ok((model, params, file.uncertainty))
+}
+
+/// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
+/// machine's travel (5 positions per axis), printed after the set-up's rigid transform and raw;
+/// refused when the former exceeds `max_u_um` unless `force`, with the held combination that
+/// makes it and the measurement that would identify it. Returns (after the transform, raw) in
+/// mm, `None` when the results carry no uncertainty (a simulation's truth, an older file).
+pub fn vouch(
+    model: &Model,
+    params: &[f64],
+    record: Option<&UncertaintyRecord>,
+    tool: [f64; 3],
+    max_u_um: f64,
+    force: bool,
+) -> Result<Option<(f64, f64)>> {
+    let Some(record) = record else {
+        println!(
+            "  U unknown: the results file records no uncertainty (`volver identify --out` writes \
+             it); nothing vouches for this compensation"
+        );
+        return Ok(None);
+    };
+    let cov = Covariance::from_record(record, model.n_params());
+    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
+    let grid = ToolGrid {
+        commands: plan.positions,
+        tool,
+    };
+    let aligned = grid.uncertainty(model, params, &cov, true);
+    let raw = grid.uncertainty(model, params, &cov, false);
+    let worst = |us: &[volver::solvers::uncertainty::PointUncertainty]| {
+        us.iter()
+            .enumerate()
+            .map(|(i, u)| (u.u95_max_mm(), i))
+            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let (ua, ia) = worst(&aligned);
+    let (ur, _) = worst(&raw);
+    println!(
+        "  U (k = 2) of the compensated tool point {} mm over the travel: up to {:.2} µm after \
+         the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {})",
+        point_mm(tool),
+        ua * 1e3,
+        ur * 1e3,
+        if record.gauge == "none" {
+            "none"
+        } else {
+            "held combinations at the reference, a prior of 100 µm RMS each"
+        }
+    );
+    if ua * 1e3 > max_u_um {
+        let held = aligned[ia]
+            .worst_held
+            .and_then(|c| record.held.get(c))
+            .filter(|_| {
+                let h = aligned[ia].u95_held_mm.iter().copied().fold(0.0, f64::max);
+                h > 0.5 * ua
+            });
+        let off_line = distance_from_reflector_line(model, tool).filter(|d| *d > 1.0);
+        let why = match (held, off_line) {
+            (Some(h), Some(d)) => format!(
+                "it comes from a combination the data cannot identify ({h}); the tool point is \
+                 {d:.0} mm off the line through the reflectors, whose turn about that line the \
+                 tracker does not see: measure a reflector at the tool's position, or a third \
+                 reflector off the line"
+            ),
+            (Some(h), None) => format!(
+                "it comes from a combination the data cannot identify ({h}): measure a plan \
+                 that moves it (more positions of the axes it involves, a reflector elsewhere)"
+            ),
+            (None, Some(d)) => format!(
+                "the tool point is {d:.0} mm off the line through the reflectors: measure a \
+                 reflector at the tool's position, or a third reflector off the line"
+            ),
+            (None, None) => "the data determine it poorly: measure more positions, or with \
+                 less noise"
+                .to_string(),
+        };
+        let msg = format!(
+            "U of the compensated tool point reaches {:.1} µm (limit --max-u-um {max_u_um}): \
+             {why}",
+            ua * 1e3
+        );
+        if !force {
+            bail!("{msg}; --force uses the errors anyway");
+        }
+        println!("  warning: {msg} (used anyway: --force)");
+    }
+    Ok(Some((ua, ur)))
+}
+
+/// The tables' expanded uncertainty (k = 2), in the tables' own layout: every value is the
+/// U of the error there. The tables are linear in the parameters (the sine series' phases
+/// excepted, linearised over one standard deviation), so each factor column's change of the
+/// tables is its exact contribution.
+pub fn table_uncertainty(
+    model: &Model,
+    params: &[f64],
+    record: &UncertaintyRecord,
+    tables: &ErrorTables,
+    step: f64,
+    rotary_step: f64,
+) -> Result<ErrorTables> {
+    let mut sq = tables.clone();
+    for (_, v) in &mut sq.constants {
+        *v = 0.0;
+    }
+    for t in &mut sq.axes {
+        for (_, vals) in &mut t.errors {
+            vals.iter_mut().for_each(|v| *v = 0.0);
+        }
+    }
+    for col in record.data_factor.iter().chain(&record.held_factor) {
+        let p: Vec<f64> = params.iter().zip(col).map(|(a, b)| a + b).collect();
+        let moved = ErrorTables::from_model(model, &p, step, rotary_step)?;
+        for ((_, s), ((_, m), (_, o))) in sq
+            .constants
+            .iter_mut()
+            .zip(moved.constants.iter().zip(&tables.constants))
+        {
+            *s += (m - o) * (m - o);
+        }
+        for (ts, (tm, t0)) in sq.axes.iter_mut().zip(moved.axes.iter().zip(&tables.axes)) {
+            for ((_, vs), ((_, vm), (_, v0))) in
+                ts.errors.iter_mut().zip(tm.errors.iter().zip(&t0.errors))
+            {
+                for ((s, m), o) in vs.iter_mut().zip(vm).zip(v0) {
+                    *s += (m - o) * (m - o);
+                }
+            }
+        }
+    }
+    for (_, v) in &mut sq.constants {
+        *v = K * v.sqrt();
+    }
+    for t in &mut sq.axes {
+        for (_, vals) in &mut t.errors {
+            vals.iter_mut().for_each(|v| *v = K * v.sqrt());
+        }
+    }
+    Ok(sq)
 }
 
 fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
@@ -258,7 +416,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     .flatten()
     .collect();
     volver::core::fsio::check_not_an_input(&a.out, &inputs)?;
-    let (model, params) = load_results(&a.results, a.accept)?;
+    let (model, params, record) = load_results(&a.results, a.accept)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
     let comp = match &a.hold {
@@ -294,6 +452,8 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         model.spec().name,
         point_mm(tool)
     );
+    check_max_u(a.max_u_um)?;
+    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         bail!(
             "--tolerance {}: the verification tolerance must be a positive length (mm)",
@@ -423,6 +583,17 @@ pub struct TablesArgs {
     /// Use a results file whose errors are implausible (see `volver identify --accept`).
     #[arg(long)]
     accept: bool,
+    /// The tool point the tables serve, mm in the frame of the last tool-side axis; default:
+    /// the reflectors' centroid.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    tool_offset: Option<String>,
+    /// Refuse when the expanded uncertainty (k = 2) of the compensated tool point over the
+    /// travel, after the set-up's rigid transform, exceeds this (µm).
+    #[arg(long, default_value_t = 25.0)]
+    max_u_um: f64,
+    /// Write the tables even when the uncertainty exceeds --max-u-um.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Writes the three table formats into `dir`; returns their paths.
@@ -444,13 +615,24 @@ pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
 
 /// Runs `volver tables`.
 pub fn tables_command(a: TablesArgs) -> Result<()> {
-    let (model, params) = load_results(&a.results, a.accept)?;
+    let (model, params, record) = load_results(&a.results, a.accept)?;
+    check_max_u(a.max_u_um)?;
+    let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let tables = ErrorTables::from_model(&model, &params, a.step, a.rotary_step)?;
-    let paths = write_tables(&tables, &a.out)?;
     println!(
         "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
         a.results.display()
     );
+    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
+    let mut paths = write_tables(&tables, &a.out)?;
+    if let Some(r) = &record {
+        // The formats have no place for U: a companion in errors.csv's layout whose values are
+        // the expanded uncertainty (k = 2) of each error.
+        let u = table_uncertainty(&model, &params, r, &tables, a.step, a.rotary_step)?;
+        let p = a.out.join("errors-u95.csv");
+        write_atomic(&p, u.to_plain_csv()).with_context(|| format!("writing {}", p.display()))?;
+        paths.push(p);
+    }
     for t in &tables.axes {
         let names: Vec<&str> = t.errors.iter().map(|e| e.0.as_str()).collect();
         println!(

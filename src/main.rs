@@ -192,6 +192,11 @@ struct IdentifyArgs {
     /// Objective: phi (mean error module, eq. 12) or ve (mean squared error, eq. 1).
     #[arg(long, default_value = "phi")]
     objective: String,
+    /// The tracker's noise for the uncertainty the results file records (`paper`,
+    /// `normal:AZ,EL,R,R_PER_M`, … as `simulate --noise`); default: isotropic normal with the
+    /// residuals' variance.
+    #[arg(long)]
+    noise: Option<String>,
     /// Phases: one, two, tr, rt, three-tr, three-rt (table 1 of the paper).
     #[arg(long, default_value = "one")]
     strategy: String,
@@ -848,7 +853,35 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             },
         )?;
     }
-    let results = ResultsFile::from_model(&model, &id.params)?;
+    let mut results = ResultsFile::from_model(&model, &id.params)?;
+    // The uncertainty the results carry, so that compensate, tables and report state the U of
+    // what they derive.
+    let noise_model = uncertainty::noise_of(a.noise.as_deref())?;
+    if !id.termination.failed()
+        && let Some(cov) = volver::solvers::uncertainty::linear(
+            &problem,
+            id.gauge.as_ref(),
+            &id.params,
+            objective,
+            noise_model,
+        )
+    {
+        let held = id
+            .gauge
+            .as_ref()
+            .map(|g| {
+                (0..g.held.len())
+                    .map(|c| uncertainty::combination_text(&model, g, c))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let rule = if id.gauge.is_some() {
+            volver::solvers::gauge::RULE
+        } else {
+            "none"
+        };
+        results.uncertainty = Some(cov.to_record(rule, held));
+    }
     // Honest exits: a failed run, a run stopped by a limit and a run with implausible sizes exit
     // non-zero and write no results (a later `compensate` or `tables` must not use them),
     // unless --accept keeps the last two.

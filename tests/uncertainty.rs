@@ -336,3 +336,104 @@ fn volver_uncertainty_states_the_gauge_and_the_u_of_every_point() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--noise none"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `identify --out` records the covariance; `tables` writes the U of every error beside the
+/// tables, which must equal the U computed on an independent path (the error function's exact
+/// gradient through the recorded covariance), and refuses a tool offset whose compensated tool
+/// point the data do not determine, unless --force.
+#[test]
+fn tables_state_the_u_of_every_error_and_refuse_an_undetermined_tool() {
+    let dir = std::env::temp_dir().join(format!("volver-u-tables-{}", std::process::id()));
+    let d = dir.to_str().unwrap();
+    common::simulate(d, &["--plan", "test4", "--seed", "6"]);
+    let fit = dir.join("fit.json");
+    let out = volver(&[
+        "identify",
+        "--data",
+        dir.join("measurements.csv").to_str().unwrap(),
+        "--noise",
+        "paper",
+        "--out",
+        fit.to_str().unwrap(),
+        "--no-history",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let tables = dir.join("tables");
+    let out = volver(&[
+        "tables",
+        "--results",
+        fit.to_str().unwrap(),
+        "--out",
+        tables.to_str().unwrap(),
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("U (k = 2) of the compensated tool point"),
+        "{text}"
+    );
+    let u_text = std::fs::read_to_string(tables.join("errors-u95.csv")).unwrap();
+    let u_tables = volver::core::tables::ErrorTables::from_plain_csv(&u_text, "u").unwrap();
+    let file = volver::core::results::ResultsFile::load(&fit).unwrap();
+    let (model, params) = file.to_model("fit").unwrap();
+    let cov = volver::solvers::uncertainty::Covariance::from_record(
+        file.uncertainty.as_ref().expect("identify --out records U"),
+        model.n_params(),
+    );
+    let mut checked = 0;
+    for t in &u_tables.axes {
+        for (name, us) in &t.errors {
+            let id: volver::core::iso::ErrorId = name.parse().unwrap();
+            let term = model.term(id).unwrap();
+            for (pos, u) in t.positions.iter().zip(us).step_by(7) {
+                let ax = &model.machine().axes()[term.axis];
+                let x = ax.from_file_units(*pos);
+                let mut grad = vec![0.0; term.params.len()];
+                model
+                    .error_value_gradient(id, x, &params, &mut grad)
+                    .unwrap();
+                let mut g = vec![0.0; model.n_params()];
+                for (j, v) in term.params.clone().zip(&grad) {
+                    g[j] = *v;
+                }
+                let want = K * cov.u(&g);
+                assert!(
+                    (u - want).abs() <= 1e-6 * want.max(1e-9),
+                    "{name} at {pos}: table {u}, gradient {want}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 100, "{checked}");
+    // A tool 100 mm below the reflectors: its turn about their line is not measured.
+    let below_dir = dir.join("below");
+    let below = [
+        "tables",
+        "--results",
+        fit.to_str().unwrap(),
+        "--out",
+        below_dir.to_str().unwrap(),
+        "--tool-offset=-30,75,-100",
+    ];
+    let out = volver(&below);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("--max-u-um") && err.contains("reflector"),
+        "{err}"
+    );
+    let mut forced = below.to_vec();
+    forced.push("--force");
+    assert!(volver(&forced).status.success());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -54,6 +54,31 @@ pub struct ResultsFile {
     pub error_model: ErrorModelSpec,
     /// Every parameter of the layout, in layout order.
     pub parameters: Vec<ParamRecord>,
+    /// The uncertainty of the parameters, when the fit stated it (`volver identify --out`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<UncertaintyRecord>,
+}
+
+/// The covariance of a fit's parameters, as factors: `Cov(p) = D Dᵀ + H Hᵀ` (the data's part and
+/// the gauge's held combinations' prior), so that later commands state the U of what they
+/// derive (`volver_solvers::uncertainty::Covariance`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UncertaintyRecord {
+    /// The gauge's rule.
+    pub gauge: String,
+    /// The noise model.
+    pub noise: String,
+    /// Residual standard deviation per coordinate (mm).
+    pub sigma_mm: f64,
+    /// The prior of each held combination (mm RMS of the error functions).
+    pub held_prior_mm: f64,
+    /// The held combinations: the parameters each moves most, as text (`tracker.z +0.50, …`).
+    pub held: Vec<String>,
+    /// Columns of `D`, each one value per parameter in layout order (parameters' units).
+    pub data_factor: Vec<Vec<f64>>,
+    /// Columns of `H`, one per held combination.
+    pub held_factor: Vec<Vec<f64>>,
 }
 
 impl ResultsFile {
@@ -93,6 +118,7 @@ impl ResultsFile {
                     group: i.group,
                 })
                 .collect(),
+            uncertainty: None,
         })
     }
 
@@ -178,6 +204,35 @@ impl ResultsFile {
                 ));
             }
             values.push(rec.value);
+        }
+        if let Some(u) = &self.uncertainty {
+            let n = model.n_params();
+            let columns = u
+                .data_factor
+                .iter()
+                .map(|c| ("data_factor", c))
+                .chain(u.held_factor.iter().map(|c| ("held_factor", c)));
+            for (k, (field, col)) in columns.enumerate() {
+                if col.len() != n || col.iter().any(|v| !v.is_finite()) {
+                    return Err(Error::input(
+                        Place::file(file).at_field(format!("uncertainty.{field}")),
+                        format!(
+                            "column {k} must hold {n} finite values (one per parameter), it has {}",
+                            col.len()
+                        ),
+                    ));
+                }
+            }
+            if u.held.len() != u.held_factor.len() {
+                return Err(Error::input(
+                    Place::file(file).at_field("uncertainty.held"),
+                    format!(
+                        "{} names for {} held combinations",
+                        u.held.len(),
+                        u.held_factor.len()
+                    ),
+                ));
+            }
         }
         Ok((model, values))
     }

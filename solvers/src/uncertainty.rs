@@ -33,6 +33,7 @@ use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::problem::Problem;
 use volver_core::random::Rng;
+use volver_core::results::UncertaintyRecord;
 
 /// Draws of the noise per point for the sandwich's expectations.
 pub const NOISE_DRAWS: usize = 256;
@@ -131,6 +132,38 @@ impl Covariance {
                 self.u(&g)
             })
             .collect()
+    }
+}
+
+impl Covariance {
+    /// The record a results file keeps; `held` names each held combination.
+    pub fn to_record(&self, gauge: &str, held: Vec<String>) -> UncertaintyRecord {
+        let cols = |f: &Mat<f64>| -> Vec<Vec<f64>> {
+            (0..f.ncols())
+                .map(|c| (0..f.nrows()).map(|j| f[(j, c)]).collect())
+                .collect()
+        };
+        UncertaintyRecord {
+            gauge: gauge.to_string(),
+            noise: self.noise.to_string(),
+            sigma_mm: self.sigma_mm,
+            held_prior_mm: HELD_PRIOR_MM,
+            held,
+            data_factor: cols(&self.data),
+            held_factor: cols(&self.held),
+        }
+    }
+
+    /// The covariance a results file recorded (checked by `ResultsFile::to_model`); its noise
+    /// model reads as the residuals' (the record keeps it as text).
+    pub fn from_record(r: &UncertaintyRecord, n: usize) -> Covariance {
+        let mat = |cols: &[Vec<f64>]| Mat::from_fn(n, cols.len(), |j, c| cols[c][j]);
+        Covariance {
+            data: mat(&r.data_factor),
+            held: mat(&r.held_factor),
+            sigma_mm: r.sigma_mm,
+            noise: NoiseModel::Residual,
+        }
     }
 }
 
