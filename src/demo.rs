@@ -176,6 +176,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
     let tool = reflector_centroid(&model2);
     let comp = Compensator::new(&model2, &id2.params, tool)?;
     let (mut before, mut after) = (Vec::new(), Vec::new());
+    let mut programmed_grid = Vec::new();
     let (mut worst, mut outside) = (0.0_f64, 0usize);
     for i in 0..=10 {
         for j in 0..12 {
@@ -185,6 +186,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
                     30.0 * j as f64,
                     100.0 * k as f64,
                 ]);
+                programmed_grid.push(programmed);
                 let c = comp.compensate(&programmed)?;
                 worst = worst.max(c.deviation_mm);
                 outside += usize::from(!c.outside_travel.is_empty());
@@ -223,17 +225,71 @@ pub fn run(out_dir: &Path) -> Result<()> {
             String::new()
         }
     );
+    // What the data vouch for: the U of the identified tool point over the same grid (the
+    // tracker's noise as simulated), after the set-up's transform and raw.
+    let cov = volver::solvers::uncertainty::linear(
+        &p2,
+        id2.gauge.as_ref(),
+        &id2.params,
+        options.objective,
+        volver::solvers::uncertainty::NoiseModel::Tracker(volver::core::noise::TrackerNoise::PAPER),
+    )
+    .ok_or_else(|| anyhow::anyhow!("the uncertainty of the fit could not be computed"))?;
+    let grid = volver::solvers::uncertainty::ToolGrid {
+        commands: programmed_grid,
+        tool,
+    };
+    let largest = |aligned: bool| {
+        grid.uncertainty(&model2, &id2.params, &cov, aligned)
+            .iter()
+            .map(|u| u.u95_max_mm())
+            .fold(0.0_f64, f64::max)
+            * 1e3
+    };
+    let (u_rigid, u_raw) = (largest(true), largest(false));
+    // The held combination that dominates the raw U, by name.
+    let raw_worst = grid
+        .uncertainty(&model2, &id2.params, &cov, false)
+        .iter()
+        .max_by(|a, b| a.u95_max_mm().total_cmp(&b.u95_max_mm()))
+        .and_then(|u| u.worst_held)
+        .zip(id2.gauge.as_ref())
+        .map(|(c, g)| crate::uncertainty::combination_text(&model2, g, c))
+        .unwrap_or_else(|| "none".into());
     println!(
-        "   after the best rigid transform (what the workpiece set-up takes up): EMM {} µm, EMax {} µm — the rest of the raw figure is a constant shift and turn of the tool",
+        "   after the best rigid transform (what the workpiece set-up takes up): EMM {} µm, EMax {} µm; U of the identified tool point there (k = 2) up to {} µm",
         um(rigid.emm_um),
-        um(rigid.emax_um)
+        um(rigid.emax_um),
+        um(u_rigid),
+    );
+    println!(
+        "   raw, U reaches {} µm, mostly from a combination the data cannot identify ({raw_worst}): a constant shift of the tool that the set-up takes up",
+        um(u_raw)
     );
     // 7. Files.
-    let results = ResultsFile::from_model(&model2, &id2.params)?;
+    let mut results = ResultsFile::from_model(&model2, &id2.params)?;
+    let held = id2
+        .gauge
+        .as_ref()
+        .map(|g| {
+            (0..g.held.len())
+                .map(|c| crate::uncertainty::combination_text(&model2, g, c))
+                .collect()
+        })
+        .unwrap_or_default();
+    results.uncertainty = Some(cov.to_record(volver::solvers::gauge::RULE, held));
     let fit_path = out_dir.join("fit.json");
     results.save(&fit_path)?;
     let tables = ErrorTables::from_model(&model2, &id2.params, 10.0, 5.0)?;
-    let table_paths = write_tables(&tables, &out_dir.join("tables"))?;
+    let mut table_paths = write_tables(&tables, &out_dir.join("tables"))?;
+    if let Some(r) = &results.uncertainty {
+        let u =
+            crate::compensation::table_uncertainty(&model2, &id2.params, r, &tables, 10.0, 5.0)?;
+        let p = out_dir.join("tables").join("errors-u95.csv");
+        volver::core::fsio::write_atomic(&p, u.to_plain_csv())
+            .with_context(|| format!("writing {}", p.display()))?;
+        table_paths.push(p);
+    }
     let input = ReportInput {
         title: "volver demo — XCFZ grinder, synthetic test 4".into(),
         data_label: out_dir.join("test4/measurements.csv").display().to_string(),

@@ -342,7 +342,7 @@ pub struct FunctionPanel {
 }
 
 /// Small multiples of error functions against their axis position (fig. 15 of the paper):
-/// the identified function, a ±2σ band, and the truth (dashed) when known.
+/// the identified function, its U band (k = 2), and the truth (dashed) when known.
 pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
     let cols = 3usize;
     let rows = panels.len().div_ceil(cols).max(1);
@@ -351,7 +351,7 @@ pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
     let mut s = header(w, h, title);
     let _ = writeln!(
         s,
-        "<text x=\"10\" y=\"36\"><tspan fill=\"#1f4e79\">— identified</tspan>  <tspan fill=\"#9dc3e6\">■ ±2σ (identified directions)</tspan>  <tspan fill=\"#c0392b\">- - truth</tspan></text>"
+        "<text x=\"10\" y=\"36\"><tspan fill=\"#1f4e79\">— identified</tspan>  <tspan fill=\"#9dc3e6\">■ ±U (k = 2)</tspan>  <tspan fill=\"#c0392b\">- - truth</tspan></text>"
     );
     for (i, p) in panels.iter().enumerate() {
         let (r, c) = (i / cols, i % cols);

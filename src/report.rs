@@ -12,9 +12,10 @@ use volver::core::model::Model;
 use volver::core::problem::{Problem, norm};
 use volver::solvers::Options;
 use volver::solvers::candidates::Score;
-use volver::solvers::identifiability::{Identifiability, analyse};
+use volver::solvers::identifiability::analyse;
 use volver::solvers::init::init_tracker;
 use volver::solvers::strategy::Identification;
+use volver::solvers::uncertainty::{Covariance, K};
 
 /// One fitted model revision shown in the report.
 pub struct Fit<'a> {
@@ -121,11 +122,14 @@ fn plotted_axes(problem: &Problem) -> Option<(usize, usize)> {
     }
 }
 
-/// The error functions of a fit against their axis positions, with ±2σ bands.
+/// The error functions of a fit against their axis positions, with bands of their expanded
+/// uncertainty (k = 2: the data's and the held combinations' prior); a function the prior
+/// dominates is titled as not determined.
 fn function_panels(
     model: &Model,
     params: &[f64],
-    ident: Option<&Identifiability>,
+    cov: Option<&Covariance>,
+    gauge: Option<&volver::solvers::gauge::Gauge>,
     truth: Option<(&Model, &[f64])>,
 ) -> Vec<FunctionPanel> {
     let m = model.machine();
@@ -140,6 +144,8 @@ fn function_panels(
         let (mut x, mut value, mut sigma, mut tv) = (vec![], vec![], vec![], vec![]);
         let mut g = vec![0.0; model.n_params()];
         let mut gb = vec![0.0; t.params.len()];
+        // Where the held combinations' prior outweighs the data, the function is not measured.
+        let (mut data_sq, mut held_sq, mut worst) = (0.0, 0.0, None);
         for i in 0..n {
             let u = ax.min + (ax.max - ax.min) * i as f64 / (n - 1) as f64;
             let arg = if t.basis.kind().is_periodic() {
@@ -152,7 +158,16 @@ fn function_panels(
             g[t.params.clone()].copy_from_slice(&gb);
             x.push(ax.to_file_units(u));
             value.push(v * scale);
-            sigma.push(ident.map_or(0.0, |a| a.uncertainty_of(&g)) * scale);
+            if let Some(c) = cov {
+                let (uh, w) = c.u_held(&g);
+                let ud = c.u_data(&g);
+                data_sq += ud * ud;
+                held_sq += uh * uh;
+                worst = worst.or(w);
+                sigma.push(ud.hypot(uh) * scale);
+            } else {
+                sigma.push(0.0);
+            }
             if let Some((tm, tp)) = truth {
                 tv.push(tm.error_value(t.id, u, tp).map(|v| v * scale));
             }
@@ -162,8 +177,16 @@ fn function_panels(
         } else {
             None
         };
+        let name = match (gauge, worst) {
+            (Some(g), Some(c)) if held_sq > data_sq => format!(
+                "{} — not determined by the data (held combination {})",
+                t.id,
+                crate::uncertainty::combination_text(model, g, c)
+            ),
+            _ => t.id.to_string(),
+        };
         out.push(FunctionPanel {
-            name: t.id.to_string(),
+            name,
             xlabel: format!("{} ({})", ax.axis, ax.file_unit()),
             unit: unit.into(),
             x,
@@ -214,6 +237,15 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let options = Options::default();
     let task = volver::solvers::Task::new(problem);
     let ident = analyse(&task, params, options.rank_tolerance, 0.95);
+    // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held
+    // combinations' prior.
+    let cov = volver::solvers::uncertainty::linear(
+        &problem,
+        last.id.gauge.as_ref(),
+        params,
+        options.objective,
+        volver::solvers::uncertainty::NoiseModel::Residual,
+    );
     let mut s = String::new();
     let _ = write!(
         s,
@@ -374,7 +406,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     // Error functions.
     let _ = writeln!(
         s,
-        "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is ±2 standard uncertainties from the Jacobian and the residual variance (identified directions only){}. Single functions can differ from the truth where the model's parameters are nearly redundant while the points agree.</p>",
+        "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is its expanded uncertainty U (k = 2): the data's (linearised, σ from the residuals) and a prior of 100 µm or 100 µrad RMS on each combination the data cannot identify (held by the gauge at the reference){}. A panel titled \"not determined\" shows a function the data do not fix: its value is the gauge's choice, not a measurement.</p>",
         if input.truth.is_some() {
             "; the dashed line is the truth"
         } else {
@@ -383,7 +415,13 @@ pub fn html(input: &ReportInput) -> Result<String> {
     );
     s.push_str(&plot::error_functions(
         "Component errors",
-        &function_panels(model, params, ident.as_ref(), input.truth),
+        &function_panels(
+            model,
+            params,
+            cov.as_ref(),
+            last.id.gauge.as_ref(),
+            input.truth,
+        ),
     ));
     let consts: Vec<Vec<String>> = model
         .terms()
@@ -391,19 +429,19 @@ pub fn html(input: &ReportInput) -> Result<String> {
         .filter(|t| matches!(t.id, ErrorId::Location { .. }))
         .map(|t| {
             let v = params[t.params.start];
-            let sd = ident
-                .as_ref()
-                .map_or(0.0, |a| a.uncertainty[t.params.start]);
+            let mut g = vec![0.0; params.len()];
+            g[t.params.start] = 1.0;
+            let u = cov.as_ref().map_or(0.0, |c| K * c.u(&g));
             let (scale, unit) = micro(t.id);
             vec![
                 t.id.to_string(),
-                format!("{:.3} ± {:.3} {unit}", v * scale, sd * scale),
+                format!("{:.3} ± {:.3} {unit}", v * scale, u * scale),
             ]
         })
         .collect();
     if !consts.is_empty() {
         s.push_str(&table(
-            &["location / squareness error", "value ± u"],
+            &["location / squareness error", "value ± U (k = 2)"],
             &consts,
         ));
     }
@@ -413,7 +451,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let sq: Vec<Vec<String>> = implied
         .iter()
         .map(|(id, v)| {
-            let u = ident.as_ref().map_or(0.0, |a| {
+            let u = cov.as_ref().map_or(0.0, |c| {
                 let mut q = params.to_vec();
                 let g: Vec<f64> = (0..q.len())
                     .map(|j| {
@@ -427,7 +465,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
                         w - v
                     })
                     .collect();
-                a.uncertainty_of(&g)
+                K * c.u(&g)
             });
             vec![
                 id.to_string(),
@@ -441,7 +479,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
             "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}):</p>",
             model.spec().squareness
         );
-        s.push_str(&table(&["squareness", "value ± u"], &sq));
+        s.push_str(&table(&["squareness", "value ± U (k = 2)"], &sq));
     }
     // Diagnosis.
     let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");
