@@ -435,5 +435,38 @@ fn tables_state_the_u_of_every_error_and_refuse_an_undetermined_tool() {
     let mut forced = below.to_vec();
     forced.push("--force");
     assert!(volver(&forced).status.success());
+    // compensate vouches the same way for its tool point.
+    let points = dir.join("points.csv");
+    std::fs::write(&points, "X,C,Z\n700,90,300\n").unwrap();
+    let compensate = |tool: &str, force: bool| {
+        let mut args = vec![
+            "compensate".to_string(),
+            "--results".into(),
+            fit.to_str().unwrap().into(),
+            "--points".into(),
+            points.to_str().unwrap().into(),
+            "--out".into(),
+            dir.join("points-comp.csv").to_str().unwrap().into(),
+            format!("--tool-offset={tool}"),
+        ];
+        if force {
+            args.push("--force".into());
+        }
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        volver(&refs)
+    };
+    let out = compensate("-30,75,0", false);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("U (k = 2) of the compensated tool point")
+    );
+    let out = compensate("-30,75,-100", false);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--max-u-um"));
+    assert!(compensate("-30,75,-100", true).status.success());
     let _ = std::fs::remove_dir_all(&dir);
 }
