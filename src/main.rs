@@ -752,6 +752,8 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
+    // The noise model of the uncertainty the results file records (checked before the fit).
+    let noise_model = uncertainty::noise_of(a.noise.as_deref())?;
     let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
     if a.subloops == 0 {
         anyhow::bail!("--subloops must be at least 1");
@@ -856,7 +858,6 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     let mut results = ResultsFile::from_model(&model, &id.params)?;
     // The uncertainty the results carry, so that compensate, tables and report state the U of
     // what they derive.
-    let noise_model = uncertainty::noise_of(a.noise.as_deref())?;
     if !id.termination.failed()
         && let Some(cov) = volver::solvers::uncertainty::linear(
             &problem,

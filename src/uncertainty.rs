@@ -361,7 +361,9 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
                 combination_text(&model, g, c)
             );
         }
-        if let (Some(m), Some(mc)) = (mcu, &mc) {
+        if let (Some(m), Some(mc)) = (mcu, &mc)
+            && us.iter().any(|u| u.u95_data_mm.iter().any(|v| *v > 0.0))
+        {
             let ratio: Vec<f64> = us
                 .iter()
                 .enumerate()
