@@ -51,6 +51,15 @@ pub const DEFAULT_MODEL_LABEL: &str = "<embedded paper error model>";
 /// Most error values (modelled errors plus the tracker pose) one point may depend on.
 pub const MAX_SLOTS: usize = 72;
 
+/// What one dual pass of [`Model`]'s exact Jacobian differentiates.
+#[derive(Clone, Copy)]
+enum DualTarget<'a> {
+    /// The point a reflector at this offset (frame of the last tool-side axis) is measured at.
+    Reflector(&'a [f64; 3]),
+    /// The tool point at this offset, in the workpiece frame.
+    Tool(&'a [f64; 3]),
+}
+
 /// How squareness and straightness share the slope they both describe (paper, section 6.1).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -1112,67 +1121,14 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
-        self.check_len(params);
-        let n = self.params.len();
-        assert_eq!(
-            jac.len(),
-            3 * n,
-            "Jacobian buffer must hold 3 × n_params values"
-        );
-        let mut vals = [0.0; MAX_SLOTS];
-        for (i, t) in self.terms.iter().enumerate() {
-            let r = t.params.clone();
-            vals[i] = t
-                .basis
-                .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
-        }
-        let m = self.terms.len() + TRACKER_DOF;
-        jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(0.0);
-        let m = m + self.effects.len();
-        self.effect_values(&commands.0, usize::MAX, 0.0, params, &mut vals, Some(jac));
-        let mut g = [[0.0; MAX_SLOTS]; 3];
-        let point = match m {
-            0..=16 => self.tool_value_jacobian::<16>(commands, tool, &vals[..m], &mut g),
-            17..=32 => self.tool_value_jacobian::<32>(commands, tool, &vals[..m], &mut g),
-            33..=48 => self.tool_value_jacobian::<48>(commands, tool, &vals[..m], &mut g),
-            49..=64 => self.tool_value_jacobian::<64>(commands, tool, &vals[..m], &mut g),
-            _ => self.tool_value_jacobian::<MAX_SLOTS>(commands, tool, &vals[..m], &mut g),
-        };
-        let (r0, rest) = jac.split_at_mut(n);
-        let (r1, r2) = rest.split_at_mut(n);
-        for j in 0..n {
-            let s = self.slot_of[j];
-            let d = r0[j];
-            r0[j] = g[0][s] * d;
-            r1[j] = g[1][s] * d;
-            r2[j] = g[2][s] * d;
-        }
-        point
-    }
-
-    fn tool_value_jacobian<const N: usize>(
-        &self,
-        commands: &Commands,
-        tool: &[f64; 3],
-        vals: &[f64],
-        g: &mut [[f64; MAX_SLOTS]; 3],
-    ) -> [f64; 3] {
-        let mut e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
-        let zero = DualSVec64::<N>::from_re(0.0);
-        e.tool_shift = [zero; 3];
-        e.reflector_delta = [zero; 3];
-        e.range_scale = zero;
-        let cmd: [DualSVec64<N>; MAX_AXES] =
-            std::array::from_fn(|k| DualSVec64::<N>::from_re(commands.0[k]));
-        let x = crate::kinematics::tool_in_workpiece(&self.machine, &cmd, tool, &e);
-        let mut out = [0.0; 3];
-        for c in 0..3 {
-            out[c] = x[c].re;
-            if let Some(eps) = &x[c].eps.0 {
-                g[c][..vals.len()].copy_from_slice(&eps.as_slice()[..vals.len()]);
-            }
-        }
-        out
+        self.point_with_jacobian(
+            commands,
+            DualTarget::Tool(tool),
+            usize::MAX,
+            0.0,
+            params,
+            jac,
+        )
     }
 
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`
@@ -1207,6 +1163,29 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
+        let refl = &self.machine.reflectors()[reflector].offset;
+        self.point_with_jacobian(
+            commands,
+            DualTarget::Reflector(refl),
+            reflector,
+            t_s,
+            params,
+            jac,
+        )
+    }
+
+    /// The exact Jacobian shared by [`Model::predict_with_jacobian_at`] and
+    /// [`Model::tool_point_with_jacobian`]: the error values and their bases' derivatives, one
+    /// dual pass over the values for `target`, then the chain rule.
+    fn point_with_jacobian(
+        &self,
+        commands: &Commands,
+        target: DualTarget,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        jac: &mut [f64],
+    ) -> [f64; 3] {
         self.check_len(params);
         let n = self.params.len();
         assert_eq!(
@@ -1228,17 +1207,17 @@ impl Model {
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
         self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
-        let refl = &self.machine.reflectors()[reflector].offset;
         let mut g = [[0.0; MAX_SLOTS]; 3];
+        let v = &vals[..m];
         let point = match m {
-            0..=8 => self.value_jacobian::<8>(commands, refl, &vals[..m], &mut g),
-            9..=16 => self.value_jacobian::<16>(commands, refl, &vals[..m], &mut g),
-            17..=24 => self.value_jacobian::<24>(commands, refl, &vals[..m], &mut g),
-            25..=32 => self.value_jacobian::<32>(commands, refl, &vals[..m], &mut g),
-            33..=40 => self.value_jacobian::<40>(commands, refl, &vals[..m], &mut g),
-            41..=48 => self.value_jacobian::<48>(commands, refl, &vals[..m], &mut g),
-            49..=64 => self.value_jacobian::<64>(commands, refl, &vals[..m], &mut g),
-            _ => self.value_jacobian::<MAX_SLOTS>(commands, refl, &vals[..m], &mut g),
+            0..=8 => self.value_jacobian::<8>(commands, target, v, &mut g),
+            9..=16 => self.value_jacobian::<16>(commands, target, v, &mut g),
+            17..=24 => self.value_jacobian::<24>(commands, target, v, &mut g),
+            25..=32 => self.value_jacobian::<32>(commands, target, v, &mut g),
+            33..=40 => self.value_jacobian::<40>(commands, target, v, &mut g),
+            41..=48 => self.value_jacobian::<48>(commands, target, v, &mut g),
+            49..=64 => self.value_jacobian::<64>(commands, target, v, &mut g),
+            _ => self.value_jacobian::<MAX_SLOTS>(commands, target, v, &mut g),
         };
         let (r0, rest) = jac.split_at_mut(n);
         let (r1, r2) = rest.split_at_mut(n);
@@ -1296,17 +1275,30 @@ impl Model {
         [x[0].v2, x[1].v2, x[2].v2]
     }
 
-    /// Point and ∂point/∂(error value) for every slot, by one dual pass with N derivatives.
+    /// Point and ∂point/∂(error value) for every slot, by one dual pass with N derivatives:
+    /// the reflector seen by the tracker, or the tool point in the workpiece frame (the
+    /// measurement's effects zeroed, as [`Model::tool_point`]).
     #[inline(never)]
     fn value_jacobian<const N: usize>(
         &self,
         commands: &Commands,
-        reflector: &[f64; 3],
+        target: DualTarget,
         vals: &[f64],
         g: &mut [[f64; MAX_SLOTS]; 3],
     ) -> [f64; 3] {
-        let e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
-        let x = predict(&self.machine, commands, reflector, &e);
+        let mut e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
+        let x = match target {
+            DualTarget::Reflector(refl) => predict(&self.machine, commands, refl, &e),
+            DualTarget::Tool(tool) => {
+                let zero = DualSVec64::<N>::from_re(0.0);
+                e.tool_shift = [zero; 3];
+                e.reflector_delta = [zero; 3];
+                e.range_scale = zero;
+                let cmd: [DualSVec64<N>; MAX_AXES] =
+                    std::array::from_fn(|k| DualSVec64::<N>::from_re(commands.0[k]));
+                crate::kinematics::tool_in_workpiece(&self.machine, &cmd, tool, &e)
+            }
+        };
         let mut out = [0.0; 3];
         for c in 0..3 {
             out[c] = x[c].re;
