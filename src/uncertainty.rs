@@ -14,8 +14,7 @@ use volver::core::problem::Problem;
 use volver::solvers::gauge::{Gauge, RULE};
 use volver::solvers::strategy::{Strategy, identify};
 use volver::solvers::uncertainty::{
-    HELD_PRIOR_MM, K, MonteCarlo, NoiseModel, PointUncertainty, ToolGrid, linear, monte_carlo,
-    std_dev,
+    HELD_PRIOR_MM, K, NoiseModel, PointUncertainty, ToolGrid, linear, monte_carlo,
 };
 use volver::solvers::{Options, Silent};
 
@@ -123,28 +122,6 @@ fn largest(us: &[PointUncertainty]) -> (f64, f64, f64, usize) {
     out
 }
 
-/// The Monte Carlo expanded uncertainty (k = 2 standard deviations) of each tool-point
-/// coordinate over the grid (mm, 3K values), after the set-up's transform when `aligned`.
-pub fn monte_carlo_points(
-    grid: &ToolGrid,
-    model: &Model,
-    mc: &MonteCarlo,
-    base: &[[f64; 3]],
-    aligned: bool,
-) -> Vec<f64> {
-    let devs: Vec<Vec<f64>> = mc
-        .samples
-        .iter()
-        .map(|p| grid.deviations(model, p, base, aligned))
-        .collect();
-    (0..3 * base.len())
-        .map(|k| {
-            let v: Vec<f64> = devs.iter().map(|d| d[k]).collect();
-            K * std_dev(&v)
-        })
-        .collect()
-}
-
 /// Runs `volver uncertainty`.
 pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     let (machine, model, data) = a.inputs.load()?;
@@ -216,18 +193,11 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     };
     let mc_aligned = mc
         .as_ref()
-        .map(|mc| monte_carlo_points(&grid, &model, mc, &base, true));
+        .map(|mc| grid.monte_carlo_u95(&model, mc, &base, true));
     let mc_raw = mc
         .as_ref()
-        .map(|mc| monte_carlo_points(&grid, &model, mc, &base, false));
-    let u_params = cov.parameters();
-    let u_data: Vec<f64> = (0..model.n_params())
-        .map(|j| {
-            let mut g = vec![0.0; model.n_params()];
-            g[j] = 1.0;
-            cov.u_data(&g)
-        })
-        .collect();
+        .map(|mc| grid.monte_carlo_u95(&model, mc, &base, false));
+    let u_parts = cov.parameter_parts();
     let u_params_mc: Option<Vec<f64>> = mc
         .as_ref()
         .map(|mc| (0..model.n_params()).map(|j| mc.std_of(|p| p[j])).collect());
@@ -254,8 +224,8 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
                 "name": info.name,
                 "unit": info.unit.to_string(),
                 "value": id.params[j],
-                "u": u_params[j],
-                "u_data": u_data[j],
+                "u": u_parts[j].0.hypot(u_parts[j].1),
+                "u_data": u_parts[j].0,
                 "u_monte_carlo": u_params_mc.as_ref().map(|u| u[j]),
             })).collect::<Vec<_>>(),
             "combinations": id.gauge.as_ref().map(|g| g.held.iter().map(|h| serde_json::json!({
@@ -315,11 +285,8 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
             ""
         }
     );
-    let n = model.n_params();
     for (j, info) in model.params().iter().enumerate() {
-        let mut g = vec![0.0; n];
-        g[j] = 1.0;
-        let (ud, uh) = (cov.u_data(&g), cov.u_held(&g).0);
+        let (ud, uh) = u_parts[j];
         if ud == 0.0 && uh == 0.0 && id.params[j] == 0.0 {
             continue; // held by a constraint at zero (a reference coefficient)
         }

@@ -19,7 +19,7 @@ use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver::solvers::candidates::rank;
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::strategy::{Identification, Strategy, fit, identify};
-use volver::solvers::uncertainty::{K, NoiseModel, ToolGrid, linear, monte_carlo, std_dev};
+use volver::solvers::uncertainty::{K, NoiseModel, ToolGrid, linear, monte_carlo};
 use volver::solvers::{Options, Silent};
 
 /// The tool at the reflectors' centroid over 8 × 12 × 5 commands of the volume.
@@ -135,14 +135,7 @@ fn intervals_of_the_tool_point_cover_the_truth_on_100_replicas_of_test_4() {
         )
         .unwrap();
         assert_eq!(runs.failed, 0);
-        let devs: Vec<Vec<f64>> = runs
-            .samples
-            .iter()
-            .map(|p| g.deviations(&model, p, &base, true))
-            .collect();
-        let umc: Vec<f64> = (0..dev.len())
-            .map(|k| K * std_dev(&devs.iter().map(|d| d[k]).collect::<Vec<_>>()))
-            .collect();
+        let umc = g.monte_carlo_u95(&model, &runs, &base, true);
         let (a, b) = count(&dev, &umc);
         mc = (mc.0 + a, mc.1 + b);
     }
@@ -193,13 +186,11 @@ fn linearised_and_monte_carlo_uncertainties_agree_on_test_4() {
         &|_| {},
     )
     .unwrap();
-    let devs: Vec<Vec<f64>> = runs
-        .samples
+    let ratios: Vec<f64> = g
+        .monte_carlo_u95(&model, &runs, &base, true)
         .iter()
-        .map(|p| g.deviations(&model, p, &base, true))
-        .collect();
-    let ratios: Vec<f64> = (0..ul.len())
-        .map(|k| K * std_dev(&devs.iter().map(|d| d[k]).collect::<Vec<_>>()) / ul[k])
+        .zip(&ul)
+        .map(|(m, l)| m / l)
         .collect();
     let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
     let sorted = {

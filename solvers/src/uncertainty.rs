@@ -122,20 +122,28 @@ impl Covariance {
         self.u_data(g).hypot(self.u_held(g).0)
     }
 
-    /// Standard uncertainty of every parameter (data and held combinations).
-    pub fn parameters(&self) -> Vec<f64> {
-        let n = self.data.nrows();
-        (0..n)
-            .map(|j| {
-                let mut g = vec![0.0; n];
-                g[j] = 1.0;
-                self.u(&g)
-            })
+    /// Standard uncertainty of every parameter: (from the data, from the held combinations'
+    /// prior).
+    pub fn parameter_parts(&self) -> Vec<(f64, f64)> {
+        let row = |f: &Mat<f64>, j: usize| {
+            (0..f.ncols())
+                .map(|c| f[(j, c)] * f[(j, c)])
+                .sum::<f64>()
+                .sqrt()
+        };
+        (0..self.data.nrows())
+            .map(|j| (row(&self.data, j), row(&self.held, j)))
             .collect()
     }
-}
 
-impl Covariance {
+    /// Standard uncertainty of every parameter (data and held combinations).
+    pub fn parameters(&self) -> Vec<f64> {
+        self.parameter_parts()
+            .into_iter()
+            .map(|(d, h)| d.hypot(h))
+            .collect()
+    }
+
     /// The record a results file keeps; `held` names each held combination.
     pub fn to_record(&self, gauge: &str, held: Vec<String>) -> UncertaintyRecord {
         let cols = |f: &Mat<f64>| -> Vec<Vec<f64>> {
@@ -520,6 +528,26 @@ impl ToolGrid {
                     worst_held: worst.1,
                 }
             })
+            .collect()
+    }
+
+    /// The Monte Carlo expanded uncertainty (k = [`K`] standard deviations over the replicas)
+    /// of each tool-point coordinate (mm, 3K values, point-major), the deviations taken from
+    /// `base` and after the set-up's transform when `aligned`.
+    pub fn monte_carlo_u95(
+        &self,
+        model: &Model,
+        mc: &MonteCarlo,
+        base: &[[f64; 3]],
+        aligned: bool,
+    ) -> Vec<f64> {
+        let devs: Vec<Vec<f64>> = mc
+            .samples
+            .iter()
+            .map(|p| self.deviations(model, p, base, aligned))
+            .collect();
+        (0..3 * base.len())
+            .map(|k| K * std_dev(&devs.iter().map(|d| d[k]).collect::<Vec<_>>()))
             .collect()
     }
 
