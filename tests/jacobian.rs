@@ -69,6 +69,18 @@ fn random_params(model: &Model, rng: &mut Rng) -> Vec<f64> {
         .collect()
 }
 
+/// A central-difference step that balances truncation against rounding at coordinates of
+/// ~2000 mm.
+fn fd_step(info: &volver::core::model::ParamInfo) -> f64 {
+    if info.name.contains(".phi") {
+        1e-5
+    } else if info.unit == volver::core::iso::Unit::Rad {
+        1e-6
+    } else {
+        1e-4
+    }
+}
+
 fn check(machine: Machine, seed: u64) -> usize {
     let text = model_toml(&machine);
     let model = Model::from_toml_str(machine, &text, "generated model").unwrap();
@@ -90,15 +102,7 @@ fn check(machine: Machine, seed: u64) -> usize {
                 "value of the dual pass equals the f64 model"
             );
             for j in 0..n {
-                // Steps that balance truncation against rounding at coordinates of ~2000 mm.
-                let info = &model.params()[j];
-                let h = if info.name.contains(".phi") {
-                    1e-5
-                } else if info.unit == volver::core::iso::Unit::Rad {
-                    1e-6
-                } else {
-                    1e-4
-                };
+                let h = fd_step(&model.params()[j]);
                 let mut pp = p.clone();
                 let mut pm = p.clone();
                 pp[j] += h;
@@ -126,13 +130,7 @@ fn check(machine: Machine, seed: u64) -> usize {
             );
             for j in 0..n {
                 let info = &model.params()[j];
-                let h = if info.name.contains(".phi") {
-                    1e-5
-                } else if info.unit == volver::core::iso::Unit::Rad {
-                    1e-6
-                } else {
-                    1e-4
-                };
+                let h = fd_step(info);
                 let (mut pp, mut pm) = (p.clone(), p.clone());
                 pp[j] += h;
                 pm[j] -= h;
