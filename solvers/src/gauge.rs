@@ -146,20 +146,9 @@ impl Gauge {
     /// `params` in the function metric): for a solution found without the gauge. Every residual
     /// is unchanged to the extent the held directions are flat.
     pub fn project(&self, params: &[f64]) -> Vec<f64> {
-        let n = params.len();
-        let k = self.held.len();
-        if k == 0 {
-            return params.to_vec();
-        }
-        // Directions are M-orthonormal: the coefficient along d_i is d_iᵀ M (p − r).
-        let diff: Vec<f64> = (0..n).map(|j| params[j] - self.reference[j]).collect();
+        // The directions are M-orthonormal: the component along d_i is its offset.
         let mut p = params.to_vec();
-        for h in &self.held {
-            let c: f64 = (0..n)
-                .map(|i| {
-                    h.direction[i] * (0..n).map(|j| self.metric[(i, j)] * diff[j]).sum::<f64>()
-                })
-                .sum();
+        for (h, c) in self.held.iter().zip(self.offsets(params)) {
             for (pj, dj) in p.iter_mut().zip(&h.direction) {
                 *pj -= c * dj;
             }
