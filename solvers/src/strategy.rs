@@ -275,18 +275,26 @@ pub fn identify_errors(
                 names.join("+")
             };
             let task = Task::holding(problem, |_, info| !free(info), &p, &label);
-            let mut sol = solver.solve(&task, &p, options, observer);
-            if strategy.gauge && problem.machine().is_some() && !sol.summary.termination.failed() {
-                // The phase's own gauge: its free errors' reference is zero (the held ones stay
-                // where the phase holds them), the tracker's the rigid fit to that; the
-                // directions are those flat at the solution.
+            // The phase's own gauge: its free errors' reference is zero (the held ones stay
+            // where the phase holds them), the tracker's the rigid fit to that; the directions
+            // are those the design cannot identify there.
+            let phase_gauge = if strategy.gauge && problem.machine().is_some() {
                 let reference = gauge_reference(&problem, &p, free);
-                if let Some(g) =
-                    crate::gauge::gauge(&task, &reference, &sol.params, crate::gauge::TOLERANCE)
-                {
-                    sol = onto_gauge(solver, &task, &g, sol, options, observer);
-                    gauge = Some(g);
-                }
+                crate::gauge::gauge(&task, &reference, &reference, crate::gauge::TOLERANCE)
+            } else {
+                None
+            };
+            // Solved under the gauge's constraints, from the start moved onto it: the engine
+            // never wanders along what the data cannot see.
+            let mut sol = match &phase_gauge {
+                Some(g) => solver.solve(&g.apply(&task), &g.project(&p), options, observer),
+                None => solver.solve(&task, &p, options, observer),
+            };
+            if let Some(g) = phase_gauge
+                && !sol.summary.termination.failed()
+            {
+                sol = onto_gauge(&task, &g, sol, options);
+                gauge = Some(g);
             }
             termination = sol.summary.termination.clone();
             let failed = termination.failed();
@@ -313,7 +321,7 @@ pub fn identify_errors(
             "gauge",
         );
         let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors));
-        gauge = crate::gauge::gauge(&base, &reference, &p, crate::gauge::TOLERANCE);
+        gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
         if let Some(g) = &gauge {
             p = g.project(&p);
         }
@@ -335,57 +343,34 @@ fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bo
     init_tracker(problem, &reference).unwrap_or(reference)
 }
 
-/// Relative rise of the objective above which a solution moved onto the gauge is polished by a
-/// second solve under the gauge's constraints (the held directions are flat to first order at
-/// the solution; the model's curvature makes a long move along them cost a little).
-const POLISH_ABOVE: f64 = 1e-6;
-
-/// `sol` (of `task`, found without the gauge) moved along the held combinations onto the gauge
-/// `g`; when that raises the objective by more than [`POLISH_ABOVE`], polished by a solve under
-/// the gauge's constraints from there (its steps and evaluations added to the summary). The
-/// held combinations are on the gauge either way.
-fn onto_gauge(
-    solver: &dyn Solver,
-    task: &Task,
-    g: &Gauge,
-    mut sol: Solution,
-    options: &Options,
-    observer: &mut dyn Observer,
-) -> Solution {
+/// `sol` (of `task` under the gauge `g`'s constraints) settled on the gauge: moved along the
+/// held combinations onto it (a no-op when the engine kept the constraints) and polished to the
+/// optimum under its constraints ([`crate::gauge::settle`]: Newton steps until the gradient, not
+/// the cost's rounding, says it is there), so that the result does not depend on where the engine
+/// stopped along the weakly identified directions. Its Newton steps and passes are added to the
+/// summary.
+fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solution {
     let problem = &task.problem;
-    let cost = |p: &[f64]| match options.objective {
-        crate::Objective::Phi => problem.phi(p),
-        crate::Objective::Ve => problem.ve(p),
+    let t0 = Instant::now();
+    let mut out = sol;
+    let projected = g.project(&out.params);
+    out.params = match crate::gauge::settle(
+        &g.apply(task),
+        &projected,
+        options.objective,
+        options.irls_final_epsilon,
+    ) {
+        Some((q, report)) => {
+            out.summary.iterations += report.steps;
+            out.summary.jacobian_evaluations += report.jacobian_evaluations;
+            out.summary.evaluations += report.evaluations + report.jacobian_evaluations;
+            q
+        }
+        None => projected,
     };
-    let before = cost(&sol.params);
-    let projected = g.project(&sol.params);
-    let after = cost(&projected);
-    if !after.is_finite() {
-        return sol;
-    }
-    sol.params = projected;
-    if after <= before * (1.0 + POLISH_ABOVE) {
-        sol.summary.final_ = evaluate(problem, &sol.params);
-        return sol;
-    }
-    // From a point this near the optimum, the IRLS smoothing of Φ need not start wide.
-    let near = Options {
-        irls_initial_epsilon: options
-            .irls_final_epsilon
-            .max(1e-6 * options.irls_initial_epsilon),
-        ..options.clone()
-    };
-    let polish = solver.solve(&g.apply(task), &sol.params, &near, observer);
-    sol.summary.iterations += polish.summary.iterations;
-    sol.summary.evaluations += polish.summary.evaluations;
-    sol.summary.jacobian_evaluations += polish.summary.jacobian_evaluations;
-    sol.summary.time_s += polish.summary.time_s;
-    if !polish.summary.termination.failed() && cost(&polish.params) <= after {
-        sol.params = g.project(&polish.params);
-        sol.summary.termination = polish.summary.termination;
-    }
-    sol.summary.final_ = evaluate(problem, &sol.params);
-    sol
+    out.summary.final_ = evaluate(problem, &out.params);
+    out.summary.time_s += t0.elapsed().as_secs_f64();
+    out
 }
 
 /// Fewest equations (3 per distinct pose and reflector) per free parameter a mesh must give.

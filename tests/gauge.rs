@@ -1,0 +1,186 @@
+//! The gauge is a rule, not a neighbourhood: on test 4, where the paper's model leaves seven
+//! combinations unidentified, every engine of the build, from different starts and with the
+//! linear axes written in different bases, ends at the same error functions and tracker pose
+//! (to 1e-9 relative; measured 1e-11 … 3e-11), and so does the native LM on test 3.
+//!
+//! Agreement is judged on the *functions* (their values over the travel, angles × 1000 mm) and
+//! the tracker's pose, never on raw coefficients: the bases differ.
+
+use volver::core::machine::Machine;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::Plan;
+use volver::core::problem::Problem;
+use volver::core::simulate::{Magnitudes, Simulation, Truth};
+use volver::solvers::gauge::LEVER_MM;
+use volver::solvers::strategy::{Identification, Strategy, identify};
+use volver::solvers::{Options, Silent, engine, engine_names};
+
+/// The paper's model with the linear axes in `basis` (tracker position identified).
+fn paper_model(basis: &str) -> Model {
+    let text = format!(
+        "squareness = \"from-straightness\"\n[[error]]\nname = [\"EXX\", \"EYX\", \"EZX\", \"EAX\", \
+         \"EBX\", \"ECX\", \"EXZ\", \"EYZ\", \"EZZ\", \"EAZ\", \"EBZ\", \"ECZ\"]\n{basis}\n\
+         [[error]]\nname = [\"A0Z\", \"B0Z\"]\n[[error]]\nname = [\"EXC\", \"EYC\", \"EZC\", \
+         \"EAC\", \"EBC\", \"ECC\"]\nbasis = \"fourier\"\norder = 1\n[tracker]\nidentify = [\"x\", \
+         \"y\", \"z\"]\n"
+    );
+    Model::from_toml_str(Machine::default_xcfz(), &text, "inline").unwrap()
+}
+
+/// Data of `plan` for a random truth inside the paper's model, with the paper's tracker noise.
+fn measured(plan: &str, seed: u64) -> MeasurementSet {
+    let m = Machine::default_xcfz();
+    let truth = Truth::random(
+        &m,
+        paper_model("basis = \"legendre\"\ndegree = 3").spec(),
+        &Magnitudes::default(),
+        seed,
+    )
+    .unwrap();
+    let mut sim = Simulation::new(Plan::preset(&m, plan).unwrap(), truth, seed);
+    sim.noise = TrackerNoise::PAPER;
+    sim.run().unwrap().measurements
+}
+
+/// Every error function's values at 65 positions of its travel (mm, angles × [`LEVER_MM`]),
+/// in the order of `reference`'s terms, then the tracker's position (mm).
+fn functions(reference: &Model, model: &Model, params: &[f64]) -> Vec<f64> {
+    let mut v = Vec::new();
+    for t in reference.terms() {
+        let ax = &model.machine().axes()[t.axis];
+        let scale = if t.id.unit() == volver::core::iso::Unit::Mm {
+            1.0
+        } else {
+            LEVER_MM
+        };
+        for s in 0..65 {
+            let u = ax.min + (ax.max - ax.min) * s as f64 / 64.0;
+            v.push(scale * model.error_value(t.id, u, params).unwrap());
+        }
+    }
+    for name in ["tracker.x", "tracker.y", "tracker.z"] {
+        v.push(params[model.param_index(name).unwrap()]);
+    }
+    v
+}
+
+fn rms(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+}
+
+/// A start away from zero errors: every coefficient of an error moved by a seeded amount
+/// (up to 10 µm or 10 µrad); the tracker is fitted rigidly from there.
+fn perturbed(model: &Model, seed: u64) -> Vec<f64> {
+    let mut p = model.initial_params();
+    let mut state = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+    for (j, info) in model.params().iter().enumerate() {
+        if info.name.starts_with("tracker.") {
+            continue;
+        }
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+        p[j] += u * match info.unit {
+            volver::core::iso::Unit::Rad => 2e-5,
+            _ => 2e-2,
+        };
+    }
+    p
+}
+
+#[test]
+fn on_test_4_engines_starts_and_bases_end_on_the_same_functions() {
+    agree("test4", 7, true);
+}
+
+#[test]
+fn on_test_3_starts_and_bases_end_on_the_same_functions() {
+    agree("test3", 1, false);
+}
+
+/// Fits `plan`'s data (seed `seed`) with the native LM from zero errors (the reference), from
+/// two perturbed starts and in the monomial basis, and with `all_engines` every other engine of
+/// the build; each must end on the reference's functions to 1e-9 relative.
+fn agree(plan: &str, seed: u64, all_engines: bool) {
+    let data = measured(plan, seed);
+    let legendre = paper_model("basis = \"legendre\"\ndegree = 3");
+    let monomial = paper_model("basis = \"monomial\"\ndegree = 3");
+    let options = Options {
+        max_iterations: 2000,
+        ..Options::default()
+    };
+    let strategy = Strategy::default();
+    let run = |model: &Model, name: &str, start: &[f64]| -> Identification {
+        let problem = Problem::new(model, &data).unwrap();
+        let t0 = std::time::Instant::now();
+        let id = identify(
+            engine(name).unwrap().as_ref(),
+            problem,
+            start,
+            &strategy,
+            &options,
+            &mut Silent,
+        );
+        assert!(!id.termination.failed(), "{name}: {}", id.termination);
+        eprintln!(
+            "{name}: {:.1} s, {} iterations, Φ {:.12} mm, {}",
+            t0.elapsed().as_secs_f64(),
+            id.iterations(),
+            id.final_.phi_mm,
+            id.termination
+        );
+        id
+    };
+    let base = run(&legendre, "lm", &legendre.initial_params());
+    let g = base.gauge.as_ref().expect("the paper's model has a gauge");
+    assert!(g.held.len() >= 6, "held {}", g.held.len());
+    let reference = functions(&legendre, &legendre, &base.params);
+    let size = rms(&reference);
+    let mut cases: Vec<(String, Identification, &Model)> = Vec::new();
+    // Engines that fit Φ exactly or nearly (MMA and BOBYQA are first-order or derivative-free
+    // and stop far from the optimum).
+    for name in engine_names()
+        .into_iter()
+        .filter(|n| all_engines && !matches!(*n, "lm" | "nlopt-mma" | "nlopt-bobyqa"))
+    {
+        cases.push((
+            name.to_string(),
+            run(&legendre, name, &legendre.initial_params()),
+            &legendre,
+        ));
+    }
+    for seed in [1, 2] {
+        cases.push((
+            format!("lm from start {seed}"),
+            run(&legendre, "lm", &perturbed(&legendre, seed)),
+            &legendre,
+        ));
+    }
+    cases.push((
+        "lm, monomial basis".into(),
+        run(&monomial, "lm", &monomial.initial_params()),
+        &monomial,
+    ));
+    let mut failures = Vec::new();
+    for (name, id, model) in &cases {
+        let f = functions(&legendre, model, &id.params);
+        let diff: Vec<f64> = f.iter().zip(&reference).map(|(a, b)| a - b).collect();
+        let rel = rms(&diff) / size;
+        let dphi = (id.final_.phi_mm - base.final_.phi_mm) / base.final_.phi_mm;
+        let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
+        println!("{name}: functions differ by {rel:.2e} relative, Φ by {dphi:.2e}, {held} held");
+        if rel > 1e-9 {
+            for (k, t) in legendre.terms().iter().enumerate() {
+                let seg = &diff[65 * k..65 * k + 65];
+                let r = &reference[65 * k..65 * k + 65];
+                eprintln!("  {}: diff {:.3e} of {:.3e}", t.id, rms(seg), rms(r));
+            }
+            eprintln!("  tracker {:?}", &diff[diff.len() - 3..]);
+            failures.push(format!("{name}: {rel:.2e}"));
+        }
+    }
+    assert!(failures.is_empty(), "{failures:?}");
+}
