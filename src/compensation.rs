@@ -69,7 +69,7 @@ pub struct CompensateArgs {
 }
 
 /// `--max-u-um` must be a positive length.
-fn check_max_u(v: f64) -> Result<()> {
+pub fn check_max_u(v: f64) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
         bail!("--max-u-um {v}: the limit must be a positive length (µm)");
     }

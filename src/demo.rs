@@ -321,6 +321,8 @@ pub fn run(out_dir: &Path) -> Result<()> {
             um(sa.emm_um),
             um(rigid.emm_um)
         )],
+        tool: crate::compensation::reflector_centroid(&model2),
+        max_u_um: 25.0,
     };
     let html = report::html(&input)?;
     let report_path = out_dir.join("report.html");

@@ -595,6 +595,14 @@ struct ReportArgs {
     /// read; default: beside the report, with the extension `.json`.
     #[arg(long)]
     results: Option<PathBuf>,
+    /// The tool point whose compensated position's uncertainty the report maps, mm in the frame
+    /// of the last tool-side axis (like a reflector offset); default the reflectors' centroid.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    tool_offset: Option<String>,
+    /// The U (µm, k = 2) above which `compensate` and `tables` refuse; the report says whether
+    /// the tool point passes.
+    #[arg(long, default_value_t = 25.0)]
+    max_u_um: f64,
 }
 
 /// `model` with the candidates `ids` (from `volver diagnose`) added in turn.
@@ -615,6 +623,8 @@ fn with_candidates(machine: &Machine, mut model: Model, ids: &[String]) -> Resul
 
 fn report_command(a: ReportArgs) -> Result<()> {
     let (machine, model, data) = a.inputs.load()?;
+    compensation::check_max_u(a.max_u_um)?;
+    let tool = compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let problem = Problem::new(&model, &data)?;
     let id1 = volver::solvers::strategy::fit(problem);
     if id1.termination.failed() {
@@ -698,6 +708,8 @@ fn report_command(a: ReportArgs) -> Result<()> {
         engines: Vec::new(),
         cross,
         notes: Vec::new(),
+        tool,
+        max_u_um: a.max_u_um,
     };
     let html = report::html(&input)?;
     let results_path = a
@@ -858,15 +870,18 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     let mut results = ResultsFile::from_model(&model, &id.params)?;
     // The uncertainty the results carry, so that compensate, tables and report state the U of
     // what they derive.
-    if !id.termination.failed()
-        && let Some(cov) = volver::solvers::uncertainty::linear(
+    let covariance = if id.termination.failed() {
+        None
+    } else {
+        volver::solvers::uncertainty::linear(
             &problem,
             id.gauge.as_ref(),
             &id.params,
             objective,
             noise_model,
         )
-    {
+    };
+    if let Some(cov) = &covariance {
         let held = id
             .gauge
             .as_ref()
@@ -896,6 +911,13 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         options.rank_tolerance,
         1.0,
     );
+    // Each value is allowed its uncertainty from the data: the fit's covariance (the gauge's,
+    // its held combinations at the reference need no allowance), else the analysis'.
+    let data_columns: Option<Vec<Vec<f64>>> = covariance.as_ref().map(|c| {
+        (0..c.data.ncols())
+            .map(|k| (0..c.data.nrows()).map(|j| c.data[(j, k)]).collect())
+            .collect()
+    });
     // The fit is on the gauge (values along the unidentified combinations at the reference),
     // unless the gauge could not be computed: then the minimum-norm point of the analysis.
     let representative = match (&id.gauge, &determined, &tracker_start) {
@@ -908,7 +930,9 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         &representative,
         &volver::core::plausibility::Context {
             tracker_start: tracker_start.as_deref(),
-            covariance_factor: determined.as_ref().map(|a| a.covariance_factor.as_slice()),
+            covariance_factor: data_columns
+                .as_deref()
+                .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
             emm_um: Some(id.final_.stats.emm_um),
             relaxed: false,
         },

@@ -49,6 +49,12 @@ pub struct ReportInput<'a> {
     pub cross: Vec<(String, f64, f64, f64)>,
     /// Free text paragraphs (what the demo did, where the files are).
     pub notes: Vec<String>,
+    /// The tool point (mm, in the frame of the last tool-side axis) whose compensated position's
+    /// uncertainty the report maps.
+    pub tool: [f64; 3],
+    /// The U (µm, k = 2) above which `compensate` and `tables` refuse: the report says whether
+    /// this tool point passes.
+    pub max_u_um: f64,
 }
 
 /// Per-cell means over the points that share the two plotted axes' positions.
@@ -403,6 +409,9 @@ pub fn html(input: &ReportInput) -> Result<String> {
             ],
         ));
     }
+    if let Some(cov) = &cov {
+        tool_point_uncertainty(&mut s, input, model, params, last.id.gauge.as_ref(), cov)?;
+    }
     // Error functions.
     let _ = writeln!(
         s,
@@ -649,4 +658,112 @@ pub fn html(input: &ReportInput) -> Result<String> {
         env!("CARGO_PKG_VERSION")
     );
     Ok(s)
+}
+
+/// The section on the uncertainty of the compensated tool point: U (k = 2, the largest of its
+/// three coordinates) over the default grid of the volume (5 positions per axis), after the
+/// set-up's rigid transform and raw, as colour maps over the two most-measured linear axes
+/// (the largest U over the other axes' positions), with the worst held combination named.
+fn tool_point_uncertainty(
+    s: &mut String,
+    input: &ReportInput,
+    model: &Model,
+    params: &[f64],
+    gauge: Option<&volver::solvers::gauge::Gauge>,
+    cov: &Covariance,
+) -> Result<()> {
+    let m = model.machine();
+    let grid = crate::uncertainty::default_grid(m, 5)?;
+    let tg = volver::solvers::uncertainty::ToolGrid {
+        commands: grid.positions,
+        tool: input.tool,
+    };
+    let aligned = tg.uncertainty(model, params, cov, true);
+    let raw = tg.uncertainty(model, params, cov, false);
+    let umax = |v: &[volver::solvers::uncertainty::PointUncertainty]| {
+        v.iter()
+            .map(|p| p.u95_max_mm() * 1e3)
+            .fold(0.0_f64, f64::max)
+    };
+    let (ua, ur) = (umax(&aligned), umax(&raw));
+    let worst = aligned
+        .iter()
+        .max_by(|a, b| a.u95_max_mm().total_cmp(&b.u95_max_mm()))
+        .and_then(|p| {
+            let held: f64 = p.u95_held_mm.iter().fold(0.0, |m, v| m.max(*v));
+            let data: f64 = p.u95_data_mm.iter().fold(0.0, |m, v| m.max(*v));
+            (held > data).then_some(p.worst_held).flatten()
+        });
+    let verdict = if ua <= input.max_u_um {
+        format!(
+            "within the {:.0} µm that <code>compensate</code> and <code>tables</code> accept",
+            input.max_u_um
+        )
+    } else {
+        format!(
+            "above the {:.0} µm that <code>compensate</code> and <code>tables</code> accept: they \
+             refuse this tool offset unless <code>--force</code>{}",
+            input.max_u_um,
+            match (worst, gauge) {
+                (Some(c), Some(g)) => format!(
+                    "; most of it is the held combination {} (not determined by the data: a \
+                     third reflector off the line through the two, or one at the tool's length, \
+                     would determine it)",
+                    escape(&crate::uncertainty::combination_text(model, g, c))
+                ),
+                _ => String::new(),
+            }
+        )
+    };
+    let _ = writeln!(
+        s,
+        "<h2>Uncertainty of the compensated tool point</h2><p>Expanded uncertainty U (k = 2, the \
+         largest of the three coordinates) of the tool point at ({:.1}, {:.1}, {:.1}) mm from the \
+         last tool-side axis, over {} commands of the volume: the data's part (linearised, σ from the \
+         residuals) and the held combinations' prior. After the set-up's rigid transform (what a workpiece set-up \
+         absorbs anyway) U is at most <b>{ua:.1} µm</b>, {verdict}; raw, in the workpiece frame, \
+         at most {ur:.1} µm. <code>volver uncertainty --tool-offset x,y,z</code> lists every point; \
+         <code>--monte-carlo N</code> checks the linearisation.</p>",
+        input.tool[0],
+        input.tool[1],
+        input.tool[2],
+        tg.commands.len()
+    );
+    let Some((ka, kb)) = (0..m.axes().len())
+        .filter(|&k| !m.axes()[k].axis.is_rotary() && m.axes()[k].max > m.axes()[k].min)
+        .collect::<Vec<_>>()
+        .get(..2)
+        .map(|v| (v[0], v[1]))
+    else {
+        return Ok(());
+    };
+    let cells = |v: &[volver::solvers::uncertainty::PointUncertainty]| {
+        let mut out: Vec<Cell> = Vec::new();
+        for (c, p) in tg.commands.iter().zip(v) {
+            let (x, y) = (
+                m.axes()[ka].to_file_units(c.0[ka]),
+                m.axes()[kb].to_file_units(c.0[kb]),
+            );
+            let u = p.u95_max_mm() * 1e3;
+            match out
+                .iter_mut()
+                .find(|q| (q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9)
+            {
+                Some(q) => q.a = q.a.max(u),
+                None => out.push(Cell { x, y, a: u, b: 0.0 }),
+            }
+        }
+        out
+    };
+    let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
+    s.push_str(&plot::colour_maps(
+        "U (k = 2) of the compensated tool point, largest over the other axes (µm)",
+        &format!("{la} (mm)"),
+        &format!("{lb} (mm)"),
+        &[
+            ("after the set-up's rigid transform", cells(&aligned)),
+            ("raw, workpiece frame", cells(&raw)),
+        ],
+    ));
+    Ok(())
 }

@@ -580,6 +580,40 @@ fn the_report_is_one_self_contained_html_file() {
     assert!(!html.contains("<script"));
     assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
     assert!(!html.contains("NaN") && !html.contains("inf µm"));
+    // The U of the compensated tool point: stated for the reflectors' centroid by default; a
+    // tool 100 mm below the reflectors (the turn of the tool about the line through them is
+    // not measured) has a larger U, and the report says the exports would refuse it.
+    let stated = |html: &str| -> f64 {
+        let i = html
+            .find("<h2>Uncertainty of the compensated tool point</h2>")
+            .expect("the U section");
+        let rest = &html[i..];
+        let j = rest.find("U is at most <b>").unwrap() + "U is at most <b>".len();
+        rest[j..].split(' ').next().unwrap().parse().unwrap()
+    };
+    let u_centroid = stated(&html);
+    let out = volver(&[
+        "report",
+        "--data",
+        &d("sim/measurements.csv"),
+        "--tool-offset",
+        "-30,75,-100",
+        "--out",
+        &d("far.html"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let far = std::fs::read_to_string(d("far.html")).unwrap();
+    let u_far = stated(&far);
+    assert!(
+        u_far > 2.0 * u_centroid && u_far > 25.0,
+        "U {u_far} µm for the far tool against {u_centroid} µm at the centroid"
+    );
+    assert!(far.contains("they refuse this tool offset unless <code>--force</code>"));
+    assert!(far.contains("U (k = 2) of the compensated tool point"));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
