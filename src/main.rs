@@ -197,6 +197,12 @@ struct IdentifyArgs {
     /// residuals' variance.
     #[arg(long)]
     noise: Option<String>,
+    /// Prior magnitudes per error kind: `typical` or KIND=VALUE in the kind's unit (the kinds
+    /// of `simulate --magnitude`, e.g. straightness=10 µm, angular=20 µrad); repeatable, applied
+    /// over the typical ones. With it the result is the maximum a posteriori solution (what the
+    /// data do not determine is decided by the priors) instead of the gauge's minimum norm.
+    #[arg(long, value_name = "KIND=VALUE")]
+    prior: Vec<String>,
     /// Phases: one, two, tr, rt, three-tr, three-rt (table 1 of the paper).
     #[arg(long, default_value = "one")]
     strategy: String,
@@ -766,6 +772,9 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
     // The noise model of the uncertainty the results file records (checked before the fit).
     let noise_model = uncertainty::noise_of(a.noise.as_deref())?;
+    let priors = (!a.prior.is_empty())
+        .then(|| volver::solvers::prior::Priors::parse(&a.prior))
+        .transpose()?;
     let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
     if a.subloops == 0 {
         anyhow::bail!("--subloops must be at least 1");
@@ -837,7 +846,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         print_observability(&observability);
         println!();
     }
-    let id = identify(
+    let mut id = identify(
         solver.as_ref(),
         problem,
         &model.initial_params(),
@@ -845,6 +854,42 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         &options,
         &mut Progress { quiet: a.json },
     );
+    // The uncertainty the results carry, so that compensate, tables and report state the U of
+    // what they derive; with --prior, the maximum a posteriori solution and its covariance.
+    let mut covariance = if id.termination.failed() {
+        None
+    } else {
+        volver::solvers::uncertainty::linear(
+            &problem,
+            id.gauge.as_ref(),
+            &id.params,
+            objective,
+            noise_model,
+        )
+    };
+    let rule = match (&priors, &id.gauge) {
+        (Some(p), _) => p.rule(),
+        (None, Some(_)) => volver::solvers::gauge::RULE.to_string(),
+        (None, None) => "none".to_string(),
+    };
+    if let (Some(p), Some(cov)) = (&priors, &covariance) {
+        let post = volver::solvers::prior::maximum_a_posteriori(
+            &model,
+            id.gauge.as_ref(),
+            &id.params,
+            cov,
+            p,
+        )
+        .context("the maximum a posteriori solution (a decomposition failed)")?;
+        id.params = post.params;
+        id.final_ = volver::solvers::evaluate(&problem, &id.params);
+        covariance = Some(post.covariance);
+    } else if priors.is_some() {
+        anyhow::bail!(
+            "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
+            id.termination
+        );
+    }
     if !a.no_history {
         let path = a
             .history
@@ -868,19 +913,6 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         )?;
     }
     let mut results = ResultsFile::from_model(&model, &id.params)?;
-    // The uncertainty the results carry, so that compensate, tables and report state the U of
-    // what they derive.
-    let covariance = if id.termination.failed() {
-        None
-    } else {
-        volver::solvers::uncertainty::linear(
-            &problem,
-            id.gauge.as_ref(),
-            &id.params,
-            objective,
-            noise_model,
-        )
-    };
     if let Some(cov) = &covariance {
         let held = id
             .gauge
@@ -891,12 +923,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
                     .collect()
             })
             .unwrap_or_default();
-        let rule = if id.gauge.is_some() {
-            volver::solvers::gauge::RULE
-        } else {
-            "none"
-        };
-        results.uncertainty = Some(cov.to_record(rule, held));
+        results.uncertainty = Some(cov.to_record(&rule, held));
     }
     // Honest exits: a failed run, a run stopped by a limit and a run with implausible sizes exit
     // non-zero and write no results (a later `compensate` or `tables` must not use them),
@@ -1011,7 +1038,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             "converged": id.termination.converged(),
             "phases": id.phases,
             "parameters": params,
-            "gauge": id.gauge.as_ref().map(|_| volver::solvers::gauge::RULE),
+            "gauge": (rule != "none").then_some(&rule),
             "unidentifiable": weak.iter().map(|(c, names)| serde_json::json!({
                 "relative_curvature": c,
                 "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
@@ -1067,7 +1094,12 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
             id.termination,
             if held > 0 {
                 format!(
-                    "; {held} combination(s) not identifiable from these data held by the gauge"
+                    "; {held} combination(s) not identifiable from these data {}",
+                    if priors.is_some() {
+                        "decided by the priors"
+                    } else {
+                        "held by the gauge"
+                    }
                 )
             } else {
                 String::new()
@@ -1075,16 +1107,20 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
         );
         if !weak.is_empty() {
             println!(
-                "  not identifiable from these data (held at the reference; the parameters each \
-                 combination moves):"
+                "  not identifiable from these data ({}; the parameters each combination moves):",
+                if priors.is_some() {
+                    "decided by the priors"
+                } else {
+                    "held at the reference"
+                }
             );
             for (c, names) in &weak {
                 let list: Vec<String> = names.iter().map(|(n, s)| format!("{n} {s:+.2}")).collect();
                 println!("    {}   (relative curvature {c:.1e})", list.join(", "));
             }
         }
-        if held > 0 {
-            println!("  gauge: {}", volver::solvers::gauge::RULE);
+        if held > 0 || priors.is_some() {
+            println!("  gauge: {rule}");
         }
         for i in &implausible {
             println!("  implausible: {i}");

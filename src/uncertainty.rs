@@ -42,6 +42,10 @@ pub struct UncertaintyArgs {
     /// X=0:1400:200,C=0:330:30,Z=0:600:150 (mm, degrees); default: 5 positions over each axis.
     #[arg(long)]
     grid: Option<String>,
+    /// Prior magnitudes per error kind (`typical` or KIND=VALUE, as `identify --prior`): the
+    /// maximum a posteriori solution and its posterior U instead of the gauge's.
+    #[arg(long, value_name = "KIND=VALUE")]
+    prior: Vec<String>,
     /// Engine (`lm`, …).
     #[arg(long, default_value = "lm")]
     solver: String,
@@ -129,7 +133,16 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     let solver = volver::solvers::engine(&a.solver).map_err(anyhow::Error::msg)?;
     let problem = Problem::new(&model, &data)?;
     let options = Options::default();
-    let id = identify(
+    let priors = (!a.prior.is_empty())
+        .then(|| volver::solvers::prior::Priors::parse(&a.prior))
+        .transpose()?;
+    if priors.is_some() && a.monte_carlo.is_some() {
+        bail!(
+            "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
+             the posterior of the priors is stated linearised only (run them apart)"
+        );
+    }
+    let mut id = identify(
         solver.as_ref(),
         problem,
         &model.initial_params(),
@@ -148,6 +161,22 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
         noise,
     )
     .context("the Jacobian at the solution is not finite or a decomposition failed")?;
+    let cov = match &priors {
+        Some(p) => {
+            let post = volver::solvers::prior::maximum_a_posteriori(
+                &model,
+                id.gauge.as_ref(),
+                &id.params,
+                &cov,
+                p,
+            )
+            .context("the maximum a posteriori solution (a decomposition failed)")?;
+            id.params = post.params;
+            id.final_ = volver::solvers::evaluate(&problem, &id.params);
+            post.covariance
+        }
+        None => cov,
+    };
     let plan = grid_of(&machine, a.grid.as_deref())?;
     let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let grid = ToolGrid {
@@ -209,12 +238,15 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
             .map(|(i, ax)| ax.to_file_units(plan.positions[k].0[i]))
             .collect()
     };
-    let gauge_rule = id.gauge.as_ref().map(|_| RULE);
+    let gauge_rule: Option<String> = match &priors {
+        Some(p) => Some(p.rule()),
+        None => id.gauge.as_ref().map(|_| RULE.to_string()),
+    };
     if a.json {
         let um3 = |v: [f64; 3]| v.map(|x| x * 1e3);
         let obj = serde_json::json!({
             "gauge": gauge_rule,
-            "held_prior_mm": HELD_PRIOR_MM,
+            "held_prior_mm": if priors.is_some() { None } else { Some(HELD_PRIOR_MM) },
             "noise": noise.to_string(),
             "sigma_mm": cov.sigma_mm,
             "coverage_factor": K,
@@ -264,6 +296,18 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     );
     println!("  noise model: {noise}");
     match (&id.gauge, gauge_rule) {
+        (g, Some(rule)) if priors.is_some() => {
+            println!("  gauge: {rule}");
+            if let Some(g) = g.as_ref().filter(|g| !g.held.is_empty()) {
+                println!(
+                    "  combinations these data do not determine (decided by the priors; U is \
+                     the posterior's, in the \"U data\" column):"
+                );
+                for c in 0..g.held.len() {
+                    println!("    {}: {}", c + 1, combination_text(&model, g, c));
+                }
+            }
+        }
         (Some(g), Some(rule)) if !g.held.is_empty() => {
             println!("  gauge: {rule}");
             println!(

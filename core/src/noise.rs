@@ -204,7 +204,22 @@ impl TrackerNoise {
             Distribution::Normal => rng.normal(),
             Distribution::Uniform => 2.0 * rng.uniform() - 1.0,
         };
-        let (na, ne, nr) = (draw(), draw(), draw());
+        let deviates = [draw(), draw(), draw()];
+        self.apply_deviates(p, deviates)
+    }
+
+    /// The reading of the point `p` (tracker frame, mm) for given deviates of azimuth, elevation
+    /// and range (standard normal, or on [−1, 1] for a uniform noise), each scaled by its value:
+    /// what [`TrackerNoise::apply`] draws, for quadratures over the noise.
+    ///
+    /// ```
+    /// use volver_core::noise::TrackerNoise;
+    /// let p = [1000.0, 0.0, 0.0];
+    /// let q = TrackerNoise::PAPER.apply_deviates(p, [0.0, 0.0, 1.0]);
+    /// // ±(4 µm + 0.8 µm/m) in range at 1 m: 4.8 µm.
+    /// assert!((q[0] - 1000.0048).abs() < 1e-9 && q[1].abs() < 1e-12);
+    /// ```
+    pub fn apply_deviates(&self, p: [f64; 3], [na, ne, nr]: [f64; 3]) -> [f64; 3] {
         if self.is_none() {
             return p;
         }

@@ -241,6 +241,18 @@ impl Magnitudes {
         })
     }
 
+    /// The magnitude of one kind (a name of [`MAGNITUDE_KINDS`], in its unit); zero for a name
+    /// that is not one.
+    ///
+    /// ```
+    /// use volver_core::simulate::Magnitudes;
+    /// assert_eq!(Magnitudes::default().get("axial"), 10.0);
+    /// ```
+    pub fn get(&self, kind: &str) -> f64 {
+        let mut m = *self;
+        m.slot(kind).map_or(0.0, |v| *v)
+    }
+
     /// Sets one kind from text `KIND=VALUE` (the value in the kind's unit), as the CLI's
     /// `--magnitude` option takes it.
     ///
@@ -252,7 +264,13 @@ impl Magnitudes {
     /// assert!(m.set_from_text("wobble=1").is_err());
     /// ```
     pub fn set_from_text(&mut self, text: &str) -> Result<()> {
-        let place = || Place::file("--magnitude").at_field(text.to_string());
+        self.set_from_option(text, "--magnitude")
+    }
+
+    /// As [`Magnitudes::set_from_text`], for the command-line option `option` (which errors
+    /// name).
+    pub fn set_from_option(&mut self, text: &str, option: &str) -> Result<()> {
+        let place = || Place::file(option).at_field(text.to_string());
         let (kind, value) = text
             .split_once('=')
             .ok_or_else(|| Error::input(place(), "expected KIND=VALUE, e.g. straightness=20"))?;

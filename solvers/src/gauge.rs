@@ -63,20 +63,44 @@ pub const RULE: &str = "minimum norm in the function metric: the combinations th
 /// parameters in the same units (µm/h and ppm weigh as µm). The error functions are linear in
 /// their coefficients except the sine series' phases, whose derivative is taken at `params`.
 pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
+    weighted_metric(
+        model,
+        params,
+        |id| {
+            if id.unit() == Unit::Mm { 1.0 } else { LEVER_MM }
+        },
+        |info| match info.unit {
+            Unit::Rad => LEVER_MM,
+            Unit::Ppm => 1e-3,
+            Unit::Mm | Unit::MmPerHour => 1.0,
+        },
+    )
+}
+
+/// A metric of the same form as [`function_metric`] with other weights: `pᵀ M p` is the sum
+/// over the error functions of the mean square of `term_scale(id) × value` at 65 evenly spaced
+/// positions of their travel, plus `(other_scale(info) × p_j)²` for every parameter no error
+/// function covers. A scale of zero leaves its part out. [`crate::prior`] weighs each function
+/// by one over its prior magnitude with it.
+pub fn weighted_metric(
+    model: &Model,
+    params: &[f64],
+    term_scale: impl Fn(volver_core::iso::ErrorId) -> f64,
+    other_scale: impl Fn(&volver_core::model::ParamInfo) -> f64,
+) -> Mat<f64> {
     let n = model.n_params();
     let mut m = Mat::<f64>::zeros(n, n);
     let mut covered = vec![false; n];
     let mut grad = vec![0.0; n];
     for t in model.terms() {
         let ax = &model.machine().axes()[t.axis];
-        let scale = if t.id.unit() == Unit::Mm {
-            1.0
-        } else {
-            LEVER_MM
-        };
+        let scale = term_scale(t.id);
         let range: Vec<usize> = t.params.clone().collect();
         for &j in &range {
             covered[j] = true;
+        }
+        if scale == 0.0 {
+            continue;
         }
         for s in 0..SAMPLES {
             let u = ax.min + (ax.max - ax.min) * s as f64 / (SAMPLES - 1) as f64;
@@ -97,11 +121,7 @@ pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
         if covered[j] {
             continue;
         }
-        let w = match info.unit {
-            Unit::Rad => LEVER_MM,
-            Unit::Ppm => 1e-3,
-            Unit::Mm | Unit::MmPerHour => 1.0,
-        };
+        let w = other_scale(info);
         m[(j, j)] = w * w;
     }
     m

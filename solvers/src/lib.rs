@@ -31,6 +31,7 @@ pub mod nlopt;
 pub mod nullspace;
 pub mod observability;
 pub mod options;
+pub mod prior;
 pub mod strategy;
 pub mod strd;
 pub mod summary;

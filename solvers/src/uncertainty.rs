@@ -9,8 +9,9 @@
 //! `B = Σ J_iᵀ E[ψ ψᵀ] J_i`, reduced to the free coordinates, with the expectations taken over
 //! the noise of each point: the tracker's spherical model ([`TrackerNoise`], azimuth, elevation
 //! and range at the point's own distance, normal or uniform) when it is given, else an isotropic
-//! normal with the residuals' variance. The expectations are averages over
-//! [`NOISE_DRAWS`] seeded draws per point, so the result is deterministic.
+//! normal with the residuals' variance. The expectations are in closed form for the isotropic
+//! normal and a product Gauss rule over the tracker's three deviates, so the result is
+//! deterministic and free of sampling noise.
 //!
 //! **The gauge's combinations.** The data say nothing about the combinations the gauge holds;
 //! their values are the reference's by rule. A quantity that depends on one is not determined by
@@ -34,9 +35,6 @@ use volver_core::noise::TrackerNoise;
 use volver_core::problem::Problem;
 use volver_core::random::Rng;
 use volver_core::results::UncertaintyRecord;
-
-/// Draws of the noise per point for the sandwich's expectations.
-pub const NOISE_DRAWS: usize = 256;
 
 /// Prior standard deviation (mm RMS of the error functions, angles × [`crate::gauge::LEVER_MM`],
 /// so 100 µm or 100 µrad) of each combination the gauge holds: the size a machine's unidentified
@@ -155,7 +153,11 @@ impl Covariance {
             gauge: gauge.to_string(),
             noise: self.noise.to_string(),
             sigma_mm: self.sigma_mm,
-            held_prior_mm: HELD_PRIOR_MM,
+            held_prior_mm: if self.held.ncols() > 0 {
+                HELD_PRIOR_MM
+            } else {
+                0.0
+            },
             held,
             data_factor: cols(&self.data),
             held_factor: cols(&self.held),
@@ -234,7 +236,6 @@ pub fn linear(
     let mut a = Mat::<f64>::zeros(nf, nf);
     let mut b = Mat::<f64>::zeros(nf, nf);
     let mut jac = vec![0.0; 3 * n];
-    let mut rng = Rng::new(0x5eed_u64);
     for i in 0..npts {
         problem.residual_and_jacobian(i, params, &mut jac);
         if jac.iter().any(|v| !v.is_finite()) {
@@ -248,7 +249,7 @@ pub fn linear(
             Some((_, data)) => data.points[i].measured,
             None => [0.0; 3],
         };
-        let (ea, eb) = expectations(objective, noise, x, sigma_mm, &mut rng);
+        let (ea, eb) = expectations(objective, noise, x, sigma_mm);
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
         a += jz.transpose() * (&ea * &jz);
@@ -287,41 +288,122 @@ pub fn linear(
     })
 }
 
-/// `E[∂ψ/∂r]` and `E[ψψᵀ]` at a point measured at `x`, over [`NOISE_DRAWS`] draws of the noise
-/// (the residual at the truth is minus the noise).
+/// Nodes per deviate of the Gauss rules over the tracker's noise.
+const GAUSS_NODES: usize = 16;
+
+/// The `m`-node Gauss rule of a probability distribution (nodes, weights summing to 1), by
+/// Golub–Welsch: the eigenvalues of the Jacobi matrix of its orthogonal polynomials, the weights
+/// the squared first components of its eigenvectors. `uniform`: on [−1, 1] (Legendre);
+/// otherwise the standard normal (Hermite).
+fn gauss_rule(m: usize, uniform: bool) -> Vec<(f64, f64)> {
+    let jacobi = Mat::from_fn(m, m, |i, j| {
+        let k = i.max(j);
+        if i.abs_diff(j) != 1 {
+            0.0
+        } else if uniform {
+            k as f64 / ((4 * k * k - 1) as f64).sqrt()
+        } else {
+            (k as f64).sqrt()
+        }
+    });
+    let e = jacobi
+        .self_adjoint_eigen(Side::Lower)
+        .expect("a small symmetric tridiagonal matrix");
+    let (s, u) = (e.S().column_vector(), e.U());
+    (0..m).map(|i| (s[i], u[(0, i)] * u[(0, i)])).collect()
+}
+
+/// The rule over one deviate of the tracker's noise: Gauss–Legendre panels whose edges meet
+/// zero (where `Φ`'s integrand has its cusp), [−1, 0] and [0, 1] for the uniform distribution,
+/// [−6, −2], [−2, 0], [0, 2], [2, 6] weighted by the normal density for the normal one
+/// (renormalised: the tails beyond 6 σ hold 2e-9), [`GAUSS_NODES`] nodes in all.
+fn noise_rule(distribution: volver_core::noise::Distribution) -> Vec<(f64, f64)> {
+    let edges: &[f64] = match distribution {
+        volver_core::noise::Distribution::Uniform => &[-1.0, 0.0, 1.0],
+        volver_core::noise::Distribution::Normal => &[-6.0, -2.0, 0.0, 2.0, 6.0],
+    };
+    let panels = edges.len() - 1;
+    let base = gauss_rule(GAUSS_NODES / panels, true);
+    let mut rule: Vec<(f64, f64)> = Vec::with_capacity(GAUSS_NODES);
+    for p in edges.windows(2) {
+        let (mid, half) = (0.5 * (p[0] + p[1]), 0.5 * (p[1] - p[0]));
+        for &(z, w) in &base {
+            let x = mid + half * z;
+            let density = match distribution {
+                volver_core::noise::Distribution::Uniform => 0.5,
+                volver_core::noise::Distribution::Normal => (-0.5 * x * x).exp(),
+            };
+            // `w` sums to 1 over a panel: 2 × half is its length.
+            rule.push((x, 2.0 * half * w * density));
+        }
+    }
+    let total: f64 = rule.iter().map(|r| r.1).sum();
+    rule.iter().map(|&(x, w)| (x, w / total)).collect()
+}
+
+/// `E[∂ψ/∂r]` and `E[ψψᵀ]` at a point measured at `x` (the residual at the truth is minus the
+/// noise). For the isotropic normal, in closed form: `ve` gives `I` and `σ² I`; `Φ` gives
+/// `(2/3) E[1/‖r‖] I = (2/3) √(2/π)/σ I` and `I/3`. For the tracker's model, by a product Gauss
+/// rule over its three deviates ([`noise_rule`], [`GAUSS_NODES`]³ nodes; a deterministic
+/// quadrature, within 1 % of sampled means in the tests). No random draws: noise in these expectations would not share the
+/// normal matrix' structure, and the information matrix `A B⁻¹ A` that the priors
+/// ([`crate::prior`]) combine with would carry it from the strong directions into the weak ones.
 fn expectations(
     objective: Objective,
     noise: NoiseModel,
     x: [f64; 3],
     sigma_mm: f64,
-    rng: &mut Rng,
 ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
+    let diag = |v: f64| {
+        let mut m = [[0.0; 3]; 3];
+        for (i, row) in m.iter_mut().enumerate() {
+            row[i] = v;
+        }
+        m
+    };
+    let tracker = match noise {
+        NoiseModel::Residual => {
+            return match objective {
+                Objective::Ve => (diag(1.0), diag(sigma_mm * sigma_mm)),
+                Objective::Phi => (
+                    diag(2.0 / 3.0 * (2.0 / std::f64::consts::PI).sqrt() / sigma_mm),
+                    diag(1.0 / 3.0),
+                ),
+            };
+        }
+        NoiseModel::Tracker(t) => t,
+    };
+    let rule = noise_rule(tracker.distribution);
     let mut ea = [[0.0; 3]; 3];
     let mut eb = [[0.0; 3]; 3];
-    let w = 1.0 / NOISE_DRAWS as f64;
-    for _ in 0..NOISE_DRAWS {
-        let e = noise.draw(x, sigma_mm, rng);
-        let r = [-e[0], -e[1], -e[2]];
-        match objective {
-            Objective::Phi => {
-                let nr = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-                if nr == 0.0 {
-                    continue;
-                }
-                let u = [r[0] / nr, r[1] / nr, r[2] / nr];
-                for p in 0..3 {
-                    for q in 0..3 {
-                        let id = if p == q { 1.0 } else { 0.0 };
-                        ea[p][q] += w * (id - u[p] * u[q]) / nr;
-                        eb[p][q] += w * u[p] * u[q];
+    for &(za, wa) in &rule {
+        for &(ze, we) in &rule {
+            for &(zr, wr) in &rule {
+                let w = wa * we * wr;
+                let y = tracker.apply_deviates(x, [za, ze, zr]);
+                let r = [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+                match objective {
+                    Objective::Phi => {
+                        let nr = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+                        if nr == 0.0 {
+                            continue;
+                        }
+                        let u = [r[0] / nr, r[1] / nr, r[2] / nr];
+                        for p in 0..3 {
+                            for q in 0..3 {
+                                let id = if p == q { 1.0 } else { 0.0 };
+                                ea[p][q] += w * (id - u[p] * u[q]) / nr;
+                                eb[p][q] += w * u[p] * u[q];
+                            }
+                        }
                     }
-                }
-            }
-            Objective::Ve => {
-                for p in 0..3 {
-                    ea[p][p] += w;
-                    for q in 0..3 {
-                        eb[p][q] += w * r[p] * r[q];
+                    Objective::Ve => {
+                        for p in 0..3 {
+                            ea[p][p] += w;
+                            for q in 0..3 {
+                                eb[p][q] += w * r[p] * r[q];
+                            }
+                        }
                     }
                 }
             }
@@ -635,6 +717,84 @@ pub fn remove_rigid(points: &[[f64; 3]], d: &mut [f64]) {
             let b = basis(i, col);
             for r in 0..3 {
                 d[3 * i + r] -= coef[(col, 0)] * b[r];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Sample means of `E[∂ψ/∂r]` and `E[ψψᵀ]` over `draws` seeded draws of the noise.
+    fn sampled(
+        objective: Objective,
+        noise: NoiseModel,
+        x: [f64; 3],
+        sigma: f64,
+        draws: usize,
+    ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
+        let mut rng = Rng::new(7);
+        let (mut ea, mut eb) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
+        let w = 1.0 / draws as f64;
+        for _ in 0..draws {
+            let e = noise.draw(x, sigma, &mut rng);
+            let r = [-e[0], -e[1], -e[2]];
+            let nr = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+            for p in 0..3 {
+                for q in 0..3 {
+                    let id = if p == q { 1.0 } else { 0.0 };
+                    match objective {
+                        Objective::Phi => {
+                            ea[p][q] += w * (id - r[p] * r[q] / (nr * nr)) / nr;
+                            eb[p][q] += w * r[p] * r[q] / (nr * nr);
+                        }
+                        Objective::Ve => {
+                            ea[p][q] += w * id;
+                            eb[p][q] += w * r[p] * r[q];
+                        }
+                    }
+                }
+            }
+        }
+        (ea, eb)
+    }
+
+    /// The closed forms and the Gauss rules agree with 400 000 draws (within 1 % of each
+    /// matrix' largest entry, the draws' own scatter being ~0.3 %), for both objectives, the
+    /// isotropic normal and the tracker's normal and uniform models at a near and a far point.
+    #[test]
+    fn expectations_match_sampled_means() {
+        let uniform = TrackerNoise::PAPER;
+        let normal = TrackerNoise {
+            distribution: volver_core::noise::Distribution::Normal,
+            ..TrackerNoise::PAPER
+        };
+        for objective in [Objective::Phi, Objective::Ve] {
+            for noise in [
+                NoiseModel::Residual,
+                NoiseModel::Tracker(uniform),
+                NoiseModel::Tracker(normal),
+            ] {
+                for x in [[900.0, -400.0, 300.0], [3500.0, 1200.0, -800.0]] {
+                    let sigma = 0.02;
+                    let (qa, qb) = expectations(objective, noise, x, sigma);
+                    let (sa, sb) = sampled(objective, noise, x, sigma, 400_000);
+                    for (q, s) in [(qa, sa), (qb, sb)] {
+                        let big = s.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+                        for p in 0..3 {
+                            for c in 0..3 {
+                                assert!(
+                                    (q[p][c] - s[p][c]).abs() <= 0.01 * big,
+                                    "{objective:?} {noise} at {x:?}: [{p}][{c}] {} against \
+                                     sampled {}",
+                                    q[p][c],
+                                    s[p][c]
+                                );
+                            }
+                        }
+                    }
+                }
             }
         }
     }

@@ -1,0 +1,236 @@
+//! Prior magnitudes per error kind, and the maximum a posteriori (MAP) solution they give.
+//!
+//! By default volver fixes what the data cannot determine by the gauge's rule ([`crate::gauge`]:
+//! the unidentified combinations held at the reference, minimum norm in the function metric).
+//! A metrologist who knows how large a machine's errors of each kind plausibly are can say so
+//! instead: [`Priors`] gives each ISO 230 error kind (positioning, straightness, angular,
+//! squareness, radial, axial, tilt, angular positioning, location, location tilt; the kinds of
+//! [`Magnitudes`]) a prior magnitude, the RMS of each such error function over its travel. The
+//! prior is normal, centred on the reference (zero errors), with precision
+//! `M_w = Σ_f (mean square of f over its travel) / s_f²` ([`Priors::metric`]); the tracker's
+//! pose and the other effects' parameters have a flat prior unless `tracker` is given (mm, the
+//! same for its angles times [`crate::gauge::LEVER_MM`]).
+//!
+//! [`maximum_a_posteriori`] combines it with what the data say, linearised as in GUM: the data
+//! give the estimate `p̂` (on the gauge) with covariance `D Dᵀ` ([`Covariance::data`]) and say
+//! nothing along the held combinations `G`. Writing `p = p̂ + D a + G b`, the likelihood is
+//! `exp(−½ aᵀa)` and the prior `exp(−½ (p − p₀)ᵀ M_w (p − p₀))`, so the posterior is normal with
+//! precision `Λ = diag(I, 0) + Eᵀ M_w E` (`E = [D G]`) and mean `p̂ − E Λ⁻¹ Eᵀ M_w (p̂ − p₀)`,
+//! its covariance `E Λ⁻¹ Eᵀ`. This is exact for a model linear in its parameters with normal
+//! noise; otherwise it is the GUM linearisation around `p̂`. Along a combination the data
+//! determine well the prior changes nothing; along one they do not determine, the prior decides
+//! and its U is the prior's; in between (nearly flat directions) the two are weighed.
+
+use crate::gauge::{Gauge, LEVER_MM, weighted_metric};
+use crate::uncertainty::Covariance;
+use faer::{Mat, Side};
+use volver_core::iso::Unit;
+use volver_core::model::Model;
+use volver_core::simulate::{MAGNITUDE_KINDS, Magnitudes};
+
+/// Prior magnitudes per error kind (µm, µrad as in [`Magnitudes`]; `tracker` in mm). A kind
+/// whose magnitude is zero gets a flat prior.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Priors {
+    /// The magnitude of each kind.
+    pub magnitudes: Magnitudes,
+}
+
+impl Priors {
+    /// The priors of texts as the CLI's `--prior` takes them: `typical` (the magnitudes of a
+    /// large, uncompensated machine tool, [`Magnitudes::default`]) or `KIND=VALUE` in the kind's
+    /// unit, applied in order over the typical magnitudes.
+    ///
+    /// ```
+    /// use volver_solvers::prior::Priors;
+    /// let p = Priors::parse(&["straightness=5".to_string()]).unwrap();
+    /// assert_eq!(p.magnitudes.straightness_um, 5.0);
+    /// assert_eq!(p.magnitudes.positioning_um, 50.0); // typical
+    /// assert!(Priors::parse(&["wobble=1".to_string()]).is_err());
+    /// ```
+    pub fn parse(texts: &[String]) -> volver_core::Result<Priors> {
+        let mut magnitudes = Magnitudes::default();
+        for t in texts {
+            if t.trim() != "typical" {
+                magnitudes.set_from_option(t, "--prior")?;
+            }
+        }
+        Ok(Priors { magnitudes })
+    }
+
+    /// The prior standard deviation of an error function (mm or rad RMS over its travel);
+    /// zero for a flat prior.
+    pub fn sigma_of(&self, id: volver_core::iso::ErrorId) -> f64 {
+        self.magnitudes.for_error(id)
+    }
+
+    /// The prior's precision `M_w` at `params` (a sine series' phases are weighed at their
+    /// amplitude there): each error function's mean square over its travel divided by its
+    /// kind's magnitude squared; the tracker's position over `tracker` mm squared and its angles
+    /// over (`tracker` / [`LEVER_MM`]) rad squared; every other parameter flat.
+    pub fn metric(&self, model: &Model, params: &[f64]) -> Mat<f64> {
+        let tracker_mm = self.magnitudes.tracker_mm;
+        weighted_metric(
+            model,
+            params,
+            |id| {
+                let s = self.sigma_of(id);
+                if s > 0.0 { 1.0 / s } else { 0.0 }
+            },
+            |info| match (info.group, info.unit) {
+                (volver_core::iso::Group::Tracker, Unit::Mm) if tracker_mm > 0.0 => {
+                    1.0 / tracker_mm
+                }
+                (volver_core::iso::Group::Tracker, Unit::Rad) if tracker_mm > 0.0 => {
+                    LEVER_MM / tracker_mm
+                }
+                _ => 0.0,
+            },
+        )
+    }
+
+    /// The rule, as every output that depends on it prints it.
+    pub fn rule(&self) -> String {
+        let m = self.magnitudes;
+        let parts: Vec<String> = MAGNITUDE_KINDS
+            .iter()
+            .map(|(kind, unit, _)| {
+                let v = m.get(kind);
+                if v > 0.0 {
+                    format!("{kind} {v} {unit}")
+                } else {
+                    format!("{kind} flat")
+                }
+            })
+            .collect();
+        format!(
+            "maximum a posteriori: normal priors centred on zero errors with RMS over the travel \
+             {} (tracker pose flat unless given; other effects flat), combined with the data's \
+             estimate on the gauge and its linearised covariance",
+            parts.join(", ")
+        )
+    }
+}
+
+/// The posterior of [`maximum_a_posteriori`].
+#[derive(Clone, Debug)]
+pub struct Posterior {
+    /// The MAP parameters.
+    pub params: Vec<f64>,
+    /// Their covariance, all of it in [`Covariance::data`] (no combination is left to a
+    /// separate prior: the priors decide the ones the data do not).
+    pub covariance: Covariance,
+    /// How far the priors moved the solution from the data's estimate, in the prior's metric
+    /// (`√(Δpᵀ M_w Δp)`, in prior standard deviations).
+    pub shift: f64,
+}
+
+/// The maximum a posteriori solution for priors `priors`, from the data's estimate `params`
+/// (on the gauge `gauge`, whose reference is the prior's centre) and its linearised covariance
+/// `cov` ([`crate::uncertainty::linear`]). `None` when a decomposition fails or a value is not
+/// finite.
+///
+/// ```
+/// use volver_core::{machine::Machine, model::Model, plan::Plan, problem::Problem};
+/// use volver_core::simulate::{Magnitudes, Simulation, Truth};
+/// use volver_core::noise::TrackerNoise;
+/// use volver_solvers::prior::{Priors, maximum_a_posteriori};
+/// use volver_solvers::uncertainty::{NoiseModel, linear};
+/// let m = Machine::default_xcfz();
+/// let model = Model::default_xcfz();
+/// let truth = Truth::random(&m, model.spec(), &Magnitudes::default(), 3).unwrap();
+/// let mut sim = Simulation::new(Plan::preset(&m, "test4").unwrap(), truth, 3);
+/// sim.noise = TrackerNoise::PAPER;
+/// let data = sim.run().unwrap().measurements;
+/// let problem = Problem::new(&model, &data).unwrap();
+/// let id = volver_solvers::strategy::fit(problem);
+/// let cov = linear(&problem, id.gauge.as_ref(), &id.params, Default::default(),
+///                  NoiseModel::Residual).unwrap();
+/// let priors = Priors::parse(&["typical".to_string()]).unwrap();
+/// let post = maximum_a_posteriori(&model, id.gauge.as_ref(), &id.params, &cov, &priors).unwrap();
+/// // The data determine most of the model: the priors move the fit by little, and the fit
+/// // stays as good.
+/// assert!(post.shift < 3.0, "{}", post.shift);
+/// assert!(problem.phi(&post.params) < 1.05 * problem.phi(&id.params));
+/// ```
+pub fn maximum_a_posteriori(
+    model: &Model,
+    gauge: Option<&Gauge>,
+    params: &[f64],
+    cov: &Covariance,
+    priors: &Priors,
+) -> Option<Posterior> {
+    let n = params.len();
+    let reference: Vec<f64> = match gauge {
+        Some(g) => g.reference.clone(),
+        None => model.initial_params(),
+    };
+    let mw = priors.metric(model, params);
+    // E = [D G]: the data's factor, then the held combinations (no information from the data).
+    let k = cov.data.ncols();
+    let held: Vec<&Vec<f64>> = gauge
+        .map(|g| g.held.iter().map(|h| &h.direction).collect())
+        .unwrap_or_default();
+    let m = k + held.len();
+    let e = Mat::from_fn(n, m, |j, c| {
+        if c < k {
+            cov.data[(j, c)]
+        } else {
+            held[c - k][j]
+        }
+    });
+    let mwe = &mw * &e;
+    let mut lambda = e.transpose() * &mwe;
+    for c in 0..k {
+        lambda[(c, c)] += 1.0;
+    }
+    let dp: Vec<f64> = params.iter().zip(&reference).map(|(p, r)| p - r).collect();
+    // rhs = −Eᵀ M_w (p̂ − p₀).
+    let rhs: Vec<f64> = (0..m)
+        .map(|c| -(0..n).map(|j| mwe[(j, c)] * dp[j]).sum::<f64>())
+        .collect();
+    if (0..m).any(|a| (0..m).any(|b| !lambda[(a, b)].is_finite()))
+        || rhs.iter().any(|v| !v.is_finite())
+    {
+        return None;
+    }
+    // Λ⁺ by its eigen-decomposition: a direction neither the data nor the prior sees (a flat
+    // prior on a held combination) stays where the data's estimate put it, with no variance
+    // (the gauge's rule still holds it).
+    let eig = lambda.self_adjoint_eigen(Side::Lower).ok()?;
+    let (s, v) = (eig.S().column_vector(), eig.U());
+    let smax = (0..m).map(|i| s[i]).fold(0.0_f64, f64::max);
+    let kept: Vec<usize> = (0..m).filter(|&i| s[i] > 1e-12 * smax).collect();
+    let mut z = vec![0.0; m];
+    for &i in &kept {
+        let c = (0..m).map(|r| v[(r, i)] * rhs[r]).sum::<f64>() / s[i];
+        for (r, zr) in z.iter_mut().enumerate() {
+            *zr += c * v[(r, i)];
+        }
+    }
+    let step: Vec<f64> = (0..n)
+        .map(|j| (0..m).map(|c| e[(j, c)] * z[c]).sum())
+        .collect();
+    let post: Vec<f64> = params.iter().zip(&step).map(|(p, d)| p + d).collect();
+    let shift = (0..n)
+        .map(|a| step[a] * (0..n).map(|b| mw[(a, b)] * step[b]).sum::<f64>())
+        .sum::<f64>()
+        .max(0.0)
+        .sqrt();
+    // Posterior factor E V diag(1/√s).
+    let ev = &e * v;
+    let factor = Mat::from_fn(n, kept.len(), |j, c| ev[(j, kept[c])] / s[kept[c]].sqrt());
+    if post.iter().any(|x| !x.is_finite()) || !shift.is_finite() {
+        return None;
+    }
+    Some(Posterior {
+        params: post,
+        covariance: Covariance {
+            data: factor,
+            held: Mat::zeros(n, 0),
+            sigma_mm: cov.sigma_mm,
+            noise: cov.noise,
+        },
+        shift,
+    })
+}
