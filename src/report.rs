@@ -317,20 +317,37 @@ pub fn html(input: &ReportInput) -> Result<String> {
         .fits
         .iter()
         .map(|f| {
-            vec![
+            // U (k = 2) of each EMM as a mean over these points, from the modules' spread.
+            let modules = |params: &[f64]| -> Result<Vec<f64>> {
+                let problem = Problem::new(f.model, input.data)?;
+                Ok(problem
+                    .residuals(params)
+                    .into_iter()
+                    .map(volver::core::problem::norm)
+                    .collect())
+            };
+            let start = f.model.initial_params();
+            let tracker =
+                volver::solvers::init::init_tracker(&Problem::new(f.model, input.data)?, &start)
+                    .unwrap_or(start);
+            let (u0, u1) = (
+                volver::core::metrics::emm_u95_um(&modules(&tracker)?),
+                volver::core::metrics::emm_u95_um(&modules(&f.id.params)?),
+            );
+            Ok(vec![
                 f.label.clone(),
                 f.model.n_params().to_string(),
-                format!("{:.3}", f.id.initial.stats.emm_um),
-                format!("{:.3}", f.id.final_.stats.emm_um),
+                format!("{:.3} ± {u0:.3}", f.id.initial.stats.emm_um),
+                format!("{:.3} ± {u1:.3}", f.id.final_.stats.emm_um),
                 format!("{:.3}", f.id.final_.stats.emax_um),
                 format!("{:.2} %", f.id.residual_percent()),
                 input.noise_um.map_or("–".into(), |n| {
-                    format!("{:.3}", f.id.final_.stats.emm_um / n)
+                    format!("{:.3} ± {:.3}", f.id.final_.stats.emm_um / n, u1 / n)
                 }),
                 f.id.termination.to_string(),
-            ]
+            ])
         })
-        .collect();
+        .collect::<Result<_>>()?;
     s.push_str(&table(
         &[
             "model",
@@ -344,6 +361,10 @@ pub fn html(input: &ReportInput) -> Result<String> {
         ],
         &rows,
     ));
+    let _ = writeln!(
+        s,
+        "<p>Each EMM carries its U (k = 2) as a mean over these points: twice the modules' standard deviation over √N, how far it would scatter were the noise drawn again.</p>"
+    );
     if let Some(n) = input.noise_um {
         let _ = writeln!(
             s,

@@ -580,6 +580,11 @@ fn the_report_is_one_self_contained_html_file() {
     assert!(!html.contains("<script"));
     assert!(!html.contains("src=\"http") && !html.contains("href=\"http"));
     assert!(!html.contains("NaN") && !html.contains("inf µm"));
+    // Every EMM of the summary with its U.
+    assert!(html.contains("Each EMM carries its U (k = 2)"));
+    let summary = &html[html.find("<h2>Summary</h2>").unwrap()..];
+    let summary = &summary[..summary.find("</table>").unwrap()];
+    assert!(summary.matches(" ± ").count() >= 2, "{summary}");
     // The U of the compensated tool point: stated for the reflectors' centroid by default; a
     // tool 100 mm below the reflectors (the turn of the tool about the line through them is
     // not measured) has a larger U, and the report says the exports would refuse it.

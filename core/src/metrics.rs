@@ -22,6 +22,26 @@ pub struct ErrorStats {
     pub emax_um: f64,
 }
 
+/// The expanded uncertainty (k = 2, µm) of an EMM as the mean of `modules` (mm): twice their
+/// standard deviation over the square root of their number — how far the EMM of these points
+/// would scatter had their noise been drawn again. Zero for fewer than two modules.
+///
+/// ```
+/// use volver_core::metrics::emm_u95_um;
+/// // Modules 1, 2, 3 µm: s = 1 µm, U = 2 × 1 / √3 µm.
+/// let u = emm_u95_um(&[0.001, 0.002, 0.003]);
+/// assert!((u - 2.0 / 3f64.sqrt()).abs() < 1e-12);
+/// ```
+pub fn emm_u95_um(modules: &[f64]) -> f64 {
+    let n = modules.len();
+    if n < 2 {
+        return 0.0;
+    }
+    let mean = modules.iter().sum::<f64>() / n as f64;
+    let var = modules.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    2.0 * (var / n as f64).sqrt() * 1e3
+}
+
 impl ErrorStats {
     /// Statistics of the differences between two equally long lists of points (mm). Zero for
     /// empty lists.
