@@ -671,9 +671,10 @@ fn report_command(a: ReportArgs) -> Result<()> {
             MeasurementSet::load(&machine, path).context("reading the reference measurements")?;
         Problem::new(&model, &set)?.check_scale(&path.display().to_string())?;
         let lm = volver::solvers::lm::LevenbergMarquardt;
+        let reference = Problem::new(last_model, &set)?;
         let cv = volver::solvers::strategy::cross_validate(
             &lm,
-            Problem::new(last_model, &set)?,
+            reference,
             last_params,
             &options,
             &mut volver::solvers::Silent,
@@ -683,11 +684,10 @@ fn report_command(a: ReportArgs) -> Result<()> {
         } else {
             format!("model \"{}\" + {}", model.spec().name, a.add.join(" + "))
         };
-        cross.push((
+        cross.push(report::CrossRow::new(
             format!("{} ({model_label})", a.inputs.data.display()),
-            cv.initial.stats.emm_um,
-            cv.final_.stats.emm_um,
-            cv.residual_percent(),
+            &reference,
+            &cv,
         ));
     }
     let mut fits = vec![report::Fit {

@@ -27,6 +27,38 @@ pub struct Fit<'a> {
     pub id: &'a Identification,
 }
 
+/// One cross-validation row: errors identified on one set compensate a reference test.
+pub struct CrossRow {
+    /// What the errors were identified on (and with which model).
+    pub label: String,
+    /// EMM of the reference before compensation (tracker pose fitted), µm.
+    pub emm_before_um: f64,
+    /// EMM after compensation, µm.
+    pub emm_after_um: f64,
+    /// U (k = 2) of that EMM as a mean over the reference's points, µm.
+    pub emm_after_u95_um: f64,
+    /// EMM after / EMM before, %.
+    pub residual_percent: f64,
+}
+
+impl CrossRow {
+    /// The row of `cv` ([`volver::solvers::strategy::cross_validate`] on `reference`).
+    pub fn new(label: String, reference: &Problem, cv: &Identification) -> CrossRow {
+        let modules: Vec<f64> = reference
+            .residuals(&cv.params)
+            .into_iter()
+            .map(norm)
+            .collect();
+        CrossRow {
+            label,
+            emm_before_um: cv.initial.stats.emm_um,
+            emm_after_um: cv.final_.stats.emm_um,
+            emm_after_u95_um: volver::core::metrics::emm_u95_um(&modules),
+            residual_percent: cv.residual_percent(),
+        }
+    }
+}
+
 /// Everything the report shows.
 pub struct ReportInput<'a> {
     /// Title.
@@ -45,8 +77,8 @@ pub struct ReportInput<'a> {
     pub candidates: Vec<Score>,
     /// Per-engine rows (engine, EMM µm, EMax µm, residual %, termination), when compared.
     pub engines: Vec<(String, f64, f64, f64, String)>,
-    /// Cross-validation rows (identified on, EMM before µm, after µm, residual %).
-    pub cross: Vec<(String, f64, f64, f64)>,
+    /// Cross-validation rows.
+    pub cross: Vec<CrossRow>,
     /// Free text paragraphs (what the demo did, where the files are).
     pub notes: Vec<String>,
     /// The tool point (mm, in the frame of the last tool-side axis) whose compensated position's
@@ -654,10 +686,10 @@ pub fn html(input: &ReportInput) -> Result<String> {
             .iter()
             .map(|c| {
                 vec![
-                    c.0.clone(),
-                    format!("{:.3}", c.1),
-                    format!("{:.3}", c.2),
-                    format!("{:.2} %", c.3),
+                    c.label.clone(),
+                    format!("{:.3}", c.emm_before_um),
+                    format!("{:.3} ± {:.3}", c.emm_after_um, c.emm_after_u95_um),
+                    format!("{:.2} %", c.residual_percent),
                 ]
             })
             .collect();
@@ -665,7 +697,11 @@ pub fn html(input: &ReportInput) -> Result<String> {
             &["identified on", "EMM before µm", "EMM after µm", "residual"],
             &rows,
         ));
-        let data: Vec<(String, f64)> = input.cross.iter().map(|c| (c.0.clone(), c.3)).collect();
+        let data: Vec<(String, f64)> = input
+            .cross
+            .iter()
+            .map(|c| (c.label.clone(), c.residual_percent))
+            .collect();
         s.push_str(&plot::bars(
             "Residual on the reference after compensation",
             "residual (%)",
