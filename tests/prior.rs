@@ -8,7 +8,7 @@
 mod common;
 
 use common::volver;
-use volver::core::machine::{Commands, Machine};
+use volver::core::machine::Machine;
 use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::noise::TrackerNoise;
@@ -22,19 +22,8 @@ use volver::solvers::strategy::{Identification, Strategy, identify};
 use volver::solvers::uncertainty::{NoiseModel, ToolGrid, linear};
 use volver::solvers::{Objective, Options, Silent};
 
-/// The tool at the reflectors' centroid over 8 × 12 × 5 commands of the volume.
 fn grid(m: &Machine) -> ToolGrid {
-    let mut commands: Vec<Commands> = Vec::new();
-    for x in (0..=1400).step_by(200) {
-        for c in (0..=330).step_by(30) {
-            for z in (0..=600).step_by(150) {
-                commands.push(m.commands_from_file_units(&[x as f64, c as f64, z as f64]));
-            }
-        }
-    }
-    let r = m.reflectors();
-    let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
-    ToolGrid { commands, tool }
+    common::tool_grid(m)
 }
 
 /// Test-4 data (paper noise) of a truth drawn at `magnitudes`.
@@ -64,6 +53,17 @@ fn fit(problem: Problem, objective: Objective) -> Identification {
     id
 }
 
+/// [`fit`] and its linearised covariance under `noise`.
+fn fit_with_covariance(
+    problem: Problem,
+    objective: Objective,
+    noise: NoiseModel,
+) -> (Identification, volver::solvers::uncertainty::Covariance) {
+    let id = fit(problem, objective);
+    let cov = linear(&problem, id.gauge.as_ref(), &id.params, objective, noise).unwrap();
+    (id, cov)
+}
+
 fn priors(texts: &[&str]) -> Priors {
     Priors::parse(&texts.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap()
 }
@@ -78,15 +78,7 @@ fn weak_priors_leave_the_data_estimate() {
     let g = grid(model.machine());
     let (_, data) = replica(11, &Magnitudes::default());
     let problem = Problem::new(&model, &data).unwrap();
-    let id = fit(problem, Objective::Phi);
-    let cov = linear(
-        &problem,
-        id.gauge.as_ref(),
-        &id.params,
-        Objective::Phi,
-        NoiseModel::Residual,
-    )
-    .unwrap();
+    let (id, cov) = fit_with_covariance(problem, Objective::Phi, NoiseModel::Residual);
     // Every kind the same in µm and µrad and the tracker's pose in mm: the gauge's own metric,
     // scaled (1 µrad weighs as 1 µm, the tracker's millimetre as a function's RMS millimetre).
     let wide = |um: f64| {
@@ -163,15 +155,7 @@ fn the_map_point_is_where_the_posterior_gradient_vanishes() {
         let pr = priors(&texts);
         let (_, data) = replica(seed, &Magnitudes::default().scaled(0.5));
         let problem = Problem::new(&model, &data).unwrap();
-        let id = fit(problem, Objective::Ve);
-        let cov = linear(
-            &problem,
-            id.gauge.as_ref(),
-            &id.params,
-            Objective::Ve,
-            NoiseModel::Residual,
-        )
-        .unwrap();
+        let (id, cov) = fit_with_covariance(problem, Objective::Ve, NoiseModel::Residual);
         let post = maximum_a_posteriori(&model, id.gauge.as_ref(), &id.params, &cov, &pr).unwrap();
         let reference = &id.gauge.as_ref().unwrap().reference;
         let mw = pr.metric(&model, &id.params);
@@ -234,15 +218,7 @@ fn priors_narrow_the_raw_intervals_and_still_cover_the_truth() {
     for r in 0..8u64 {
         let (truth, data) = replica(300 + r, &Magnitudes::default());
         let problem = Problem::new(&model, &data).unwrap();
-        let id = fit(problem, Objective::Phi);
-        let cov = linear(
-            &problem,
-            id.gauge.as_ref(),
-            &id.params,
-            Objective::Phi,
-            noise,
-        )
-        .unwrap();
+        let (id, cov) = fit_with_covariance(problem, Objective::Phi, noise);
         let post = maximum_a_posteriori(&model, id.gauge.as_ref(), &id.params, &cov, &pr).unwrap();
         let ug = g.uncertainty(&model, &id.params, &cov, false);
         let um = g.uncertainty(&model, &post.params, &post.covariance, false);

@@ -9,7 +9,7 @@
 mod common;
 
 use common::volver;
-use volver::core::machine::{Commands, Machine};
+use volver::core::machine::Machine;
 use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::noise::TrackerNoise;
@@ -22,19 +22,8 @@ use volver::solvers::strategy::{Identification, Strategy, fit, identify};
 use volver::solvers::uncertainty::{K, NoiseModel, ToolGrid, linear, monte_carlo};
 use volver::solvers::{Options, Silent};
 
-/// The tool at the reflectors' centroid over 8 × 12 × 5 commands of the volume.
 fn grid(m: &Machine) -> ToolGrid {
-    let mut commands: Vec<Commands> = Vec::new();
-    for x in (0..=1400).step_by(200) {
-        for c in (0..=330).step_by(30) {
-            for z in (0..=600).step_by(150) {
-                commands.push(m.commands_from_file_units(&[x as f64, c as f64, z as f64]));
-            }
-        }
-    }
-    let r = m.reflectors();
-    let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
-    ToolGrid { commands, tool }
+    common::tool_grid(m)
 }
 
 /// Test-4 data of a random truth inside the paper's model, its magnitudes scaled by `scale`.
