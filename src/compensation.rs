@@ -148,9 +148,16 @@ pub fn vouch(
         ua * 1e3,
         ur * 1e3,
         if record.gauge == "none" {
-            "none"
+            "none".to_string()
+        } else if record.held_factor.is_empty() {
+            // A rule that leaves no combination to a separate prior: the priors of
+            // `identify --prior` (maximum a posteriori), stated as recorded.
+            record.gauge.split(':').next().unwrap_or("").to_string()
         } else {
-            "held combinations at the reference, a prior of 100 µm RMS each"
+            format!(
+                "held combinations at the reference, a prior of {:.0} µm RMS each",
+                record.held_prior_mm * 1e3
+            )
         }
     );
     if ua * 1e3 > max_u_um {

@@ -914,9 +914,11 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     }
     let mut results = ResultsFile::from_model(&model, &id.params)?;
     if let Some(cov) = &covariance {
+        // One name per column of the held factor: none when the priors decided them.
         let held = id
             .gauge
             .as_ref()
+            .filter(|_| priors.is_none())
             .map(|g| {
                 (0..g.held.len())
                     .map(|c| uncertainty::combination_text(&model, g, c))

@@ -292,6 +292,15 @@ fn the_cli_states_the_map_rule() {
     assert!(rule.contains("straightness 10 µm"), "{rule}");
     let results = std::fs::read_to_string(d("fit.json")).unwrap();
     assert!(results.contains("maximum a posteriori"));
+    // The exports say which rule the U they state comes from.
+    let out = volver(&["tables", "--results", &d("fit.json"), "--out", &d("tables")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("(gauge: maximum a posteriori)"), "{text}");
     let out = volver(&[
         "uncertainty",
         "--data",
