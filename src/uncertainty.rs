@@ -261,7 +261,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
                 "u_monte_carlo": u_params_mc.as_ref().map(|u| u[j]),
             })).collect::<Vec<_>>(),
             "combinations": id.gauge.as_ref().map(|g| g.held.iter().map(|h| serde_json::json!({
-                "held": true,
+                "held": priors.is_none(),
                 "relative_curvature": h.relative_curvature,
                 "parameters": h.parameters.iter().map(|&(j, s)| serde_json::json!({
                     "name": model.params()[j].name, "share": s,
