@@ -338,3 +338,57 @@ fn squareness_from_slope_on_a_workpiece_side_axis() {
         }
     }
 }
+
+/// Terms of one axis in one basis share the basis' values at a point (evaluated once): every
+/// error value at a point, and every column of the Jacobian, is the same as evaluated term by
+/// term, whatever the order of the terms (grouped, interleaved with another basis, or a sine
+/// series between them), at the last bit of a dot product.
+#[test]
+fn shared_basis_values_give_each_term_its_own_value() {
+    let m = volver::core::machine::Machine::default_xcfz();
+    let text = "[[error]]\nname = [\"EXX\", \"EYX\"]\nbasis = \"legendre\"\ndegree = 3\n\
+                [[error]]\nname = [\"EZX\"]\nbasis = \"monomial\"\ndegree = 3\n\
+                [[error]]\nname = [\"EAX\", \"EBX\"]\nbasis = \"legendre\"\ndegree = 3\n\
+                [[error]]\nname = [\"EXC\", \"EYC\"]\nbasis = \"sine\"\norder = 2\n\
+                [[error]]\nname = [\"EZC\", \"ECC\"]\nbasis = \"fourier\"\norder = 2\n";
+    let model = Model::from_toml_str(m.clone(), text, "inline").unwrap();
+    let n = model.n_params();
+    let params: Vec<f64> = (0..n)
+        .map(|j| 1e-3 * ((j as f64) * 0.71 + 0.3).sin())
+        .collect();
+    let cmd = m.commands_from_file_units(&[612.5, 37.0, 250.0]);
+    let e = model.errors_at(&cmd, &params);
+    let mut jac = vec![0.0; 3 * n];
+    let p = model.predict_with_jacobian(&cmd, 1, &params, &mut jac);
+    let q = model.predict(&cmd, 1, &params);
+    for c in 0..3 {
+        assert!((p[c] - q[c]).abs() < 1e-12, "{p:?} {q:?}");
+    }
+    let mut grad = vec![0.0; 16];
+    for t in model.terms() {
+        let k = t.params.len();
+        let v = model
+            .error_value_gradient(t.id, cmd.0[t.axis], &params, &mut grad)
+            .unwrap();
+        let slot = match t.id {
+            volver::core::iso::ErrorId::Component { component, .. } => {
+                e.component[t.axis][component.index()]
+            }
+            _ => unreachable!(),
+        };
+        assert!((v - slot).abs() <= 1e-15, "{}: {v} against {slot}", t.id);
+        // Each column of the Jacobian is the chain's sensitivity to this value times the
+        // basis value: the ratio of two columns of one term is the ratio of their basis values.
+        for a in 1..k {
+            let (ja, j0) = (t.params.start + a, t.params.start);
+            for r in 0..3 {
+                let (x, y) = (jac[r * n + ja] * grad[0], jac[r * n + j0] * grad[a]);
+                assert!(
+                    (x - y).abs() <= 1e-12 * (x.abs() + y.abs()) + 1e-300,
+                    "{}",
+                    t.id
+                );
+            }
+        }
+    }
+}

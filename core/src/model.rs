@@ -1068,13 +1068,27 @@ impl Model {
         self.check_len(params);
         let mut vals = [S::zero(); MAX_SLOTS];
         let mut g = [S::zero(); MAX_COEFFS];
+        let mut prev: Option<&Term> = None;
         for (i, t) in self.terms.iter().enumerate() {
             let r = t.params.clone();
-            vals[i] = t.basis.eval_at(
-                self.argument_at(t, commands),
-                &params[r.clone()],
-                &mut g[..r.len()],
-            );
+            // Terms of one axis in one basis share its values at the point (EXX … ECX in a
+            // cubic, EXC … ECC in one harmonic): evaluated once, each term is then a dot
+            // product. The sine series' values depend on its own phases.
+            vals[i] = match prev {
+                Some(q) if q.axis == t.axis && q.basis == t.basis && t.basis.is_linear() => {
+                    let k = r.len();
+                    params[r]
+                        .iter()
+                        .zip(&g[..k])
+                        .fold(S::zero(), |acc, (c, b)| acc + *b * *c)
+                }
+                _ => t.basis.eval_at(
+                    self.argument_at(t, commands),
+                    &params[r.clone()],
+                    &mut g[..r.len()],
+                ),
+            };
+            prev = Some(t);
         }
         for (k, v) in params[self.tracker_start..self.tracker_start + TRACKER_DOF]
             .iter()
@@ -1195,11 +1209,24 @@ impl Model {
         );
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter.
         let mut vals = [0.0; MAX_SLOTS];
+        let mut prev: Option<&Term> = None;
         for (i, t) in self.terms.iter().enumerate() {
             let r = t.params.clone();
-            vals[i] = t
-                .basis
-                .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]);
+            // As in `errors_with_commands`: one axis in one basis, its values once.
+            vals[i] = match prev {
+                Some(q) if q.axis == t.axis && q.basis == t.basis && t.basis.is_linear() => {
+                    jac.copy_within(q.params.clone(), r.start);
+                    params[r.clone()]
+                        .iter()
+                        .zip(&jac[r])
+                        .map(|(c, b)| c * b)
+                        .sum()
+                }
+                _ => t
+                    .basis
+                    .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]),
+            };
+            prev = Some(t);
         }
         let m = self.terms.len() + TRACKER_DOF;
         vals[self.terms.len()..m]
