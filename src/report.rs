@@ -44,16 +44,11 @@ pub struct CrossRow {
 impl CrossRow {
     /// The row of `cv` ([`volver::solvers::strategy::cross_validate`] on `reference`).
     pub fn new(label: String, reference: &Problem, cv: &Identification) -> CrossRow {
-        let modules: Vec<f64> = reference
-            .residuals(&cv.params)
-            .into_iter()
-            .map(norm)
-            .collect();
         CrossRow {
             label,
             emm_before_um: cv.initial.stats.emm_um,
             emm_after_um: cv.final_.stats.emm_um,
-            emm_after_u95_um: volver::core::metrics::emm_u95_um(&modules),
+            emm_after_u95_um: reference.emm_u95_um(&cv.params),
             residual_percent: cv.residual_percent(),
         }
     }
@@ -349,22 +344,14 @@ pub fn html(input: &ReportInput) -> Result<String> {
         .fits
         .iter()
         .map(|f| {
-            // U (k = 2) of each EMM as a mean over these points, from the modules' spread.
-            let modules = |params: &[f64]| -> Result<Vec<f64>> {
-                let problem = Problem::new(f.model, input.data)?;
-                Ok(problem
-                    .residuals(params)
-                    .into_iter()
-                    .map(volver::core::problem::norm)
-                    .collect())
-            };
+            // U (k = 2) of each EMM as a mean over these points, from the modules' spread;
+            // before: zero errors with the tracker fitted, as the identification starts.
+            let problem = Problem::new(f.model, input.data)?;
             let start = f.model.initial_params();
-            let tracker =
-                volver::solvers::init::init_tracker(&Problem::new(f.model, input.data)?, &start)
-                    .unwrap_or(start);
+            let tracker = volver::solvers::init::init_tracker(&problem, &start).unwrap_or(start);
             let (u0, u1) = (
-                volver::core::metrics::emm_u95_um(&modules(&tracker)?),
-                volver::core::metrics::emm_u95_um(&modules(&f.id.params)?),
+                problem.emm_u95_um(&tracker),
+                problem.emm_u95_um(&f.id.params),
             );
             Ok(vec![
                 f.label.clone(),

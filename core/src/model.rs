@@ -433,6 +433,9 @@ pub struct Model {
     params: Vec<ParamInfo>,
     /// Error-value slot of each parameter: term index, or terms.len() + tracker index.
     slot_of: Vec<usize>,
+    /// Per term: whether it shares its basis' values at a point with the term before it (same
+    /// axis, same basis, linear in its coefficients), so that they are evaluated once.
+    shares_basis: Vec<bool>,
     tracker_start: usize,
     has_location: [bool; MAX_AXES],
     constraints: Constraints,
@@ -646,6 +649,16 @@ impl Model {
                 Owner::Effect(k) => terms.len() + TRACKER_DOF + k,
             })
             .collect();
+        // Terms of one axis in one basis (EXX … ECX in a cubic, EXC … ECC in one harmonic) share
+        // the basis' values at a point; the sine series' values depend on its own phases.
+        let shares_basis = (0..terms.len())
+            .map(|i| {
+                i > 0
+                    && terms[i].axis == terms[i - 1].axis
+                    && terms[i].basis == terms[i - 1].basis
+                    && terms[i].basis.is_linear()
+            })
+            .collect();
         let mut has_location = [false; MAX_AXES];
         for t in &terms {
             if matches!(t.id, ErrorId::Location { .. }) {
@@ -774,6 +787,7 @@ impl Model {
             terms,
             params,
             slot_of,
+            shares_basis,
             tracker_start,
             has_location,
             constraints: Constraints { rows },
@@ -1068,27 +1082,23 @@ impl Model {
         self.check_len(params);
         let mut vals = [S::zero(); MAX_SLOTS];
         let mut g = [S::zero(); MAX_COEFFS];
-        let mut prev: Option<&Term> = None;
         for (i, t) in self.terms.iter().enumerate() {
             let r = t.params.clone();
-            // Terms of one axis in one basis share its values at the point (EXX … ECX in a
-            // cubic, EXC … ECC in one harmonic): evaluated once, each term is then a dot
-            // product. The sine series' values depend on its own phases.
-            vals[i] = match prev {
-                Some(q) if q.axis == t.axis && q.basis == t.basis && t.basis.is_linear() => {
-                    let k = r.len();
-                    params[r]
-                        .iter()
-                        .zip(&g[..k])
-                        .fold(S::zero(), |acc, (c, b)| acc + *b * *c)
-                }
-                _ => t.basis.eval_at(
+            // A term sharing the previous one's basis values (`shares_basis`) is a
+            // dot product with them.
+            vals[i] = if self.shares_basis[i] {
+                let k = r.len();
+                params[r]
+                    .iter()
+                    .zip(&g[..k])
+                    .fold(S::zero(), |acc, (c, b)| acc + *b * *c)
+            } else {
+                t.basis.eval_at(
                     self.argument_at(t, commands),
                     &params[r.clone()],
                     &mut g[..r.len()],
-                ),
+                )
             };
-            prev = Some(t);
         }
         for (k, v) in params[self.tracker_start..self.tracker_start + TRACKER_DOF]
             .iter()
@@ -1209,24 +1219,20 @@ impl Model {
         );
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter.
         let mut vals = [0.0; MAX_SLOTS];
-        let mut prev: Option<&Term> = None;
         for (i, t) in self.terms.iter().enumerate() {
             let r = t.params.clone();
-            // As in `errors_with_commands`: one axis in one basis, its values once.
-            vals[i] = match prev {
-                Some(q) if q.axis == t.axis && q.basis == t.basis && t.basis.is_linear() => {
-                    jac.copy_within(q.params.clone(), r.start);
-                    params[r.clone()]
-                        .iter()
-                        .zip(&jac[r])
-                        .map(|(c, b)| c * b)
-                        .sum()
-                }
-                _ => t
-                    .basis
-                    .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r]),
+            // As in `errors_with_commands`: the previous term's basis values, copied.
+            vals[i] = if self.shares_basis[i] {
+                jac.copy_within(self.terms[i - 1].params.clone(), r.start);
+                params[r.clone()]
+                    .iter()
+                    .zip(&jac[r])
+                    .map(|(c, b)| c * b)
+                    .sum()
+            } else {
+                t.basis
+                    .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r])
             };
-            prev = Some(t);
         }
         let m = self.terms.len() + TRACKER_DOF;
         vals[self.terms.len()..m]

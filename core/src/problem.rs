@@ -362,6 +362,15 @@ impl<'a> Problem<'a> {
     pub fn stats(&self, params: &[f64]) -> ErrorStats {
         ErrorStats::of_modules((0..self.n_points()).map(|i| norm(self.residual(i, params))))
     }
+
+    /// The expanded uncertainty (k = 2, µm) of the residuals' EMM as a mean over the points
+    /// ([`crate::metrics::emm_u95_um`]).
+    pub fn emm_u95_um(&self, params: &[f64]) -> f64 {
+        let modules: Vec<f64> = (0..self.n_points())
+            .map(|i| norm(self.residual(i, params)))
+            .collect();
+        crate::metrics::emm_u95_um(&modules)
+    }
 }
 
 /// Euclidean norm of a 3-vector.

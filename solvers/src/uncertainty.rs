@@ -235,6 +235,11 @@ pub fn linear(
     let sigma_mm = (sq / (3 * npts).saturating_sub(nf).max(1) as f64).sqrt();
     let mut a = Mat::<f64>::zeros(nf, nf);
     let mut b = Mat::<f64>::zeros(nf, nf);
+    // The Gauss rule over the tracker's deviates, once (the isotropic normal needs none).
+    let rule = match noise {
+        NoiseModel::Tracker(t) => noise_rule(t.distribution),
+        NoiseModel::Residual => Vec::new(),
+    };
     let mut jac = vec![0.0; 3 * n];
     for i in 0..npts {
         problem.residual_and_jacobian(i, params, &mut jac);
@@ -249,7 +254,7 @@ pub fn linear(
             Some((_, data)) => data.points[i].measured,
             None => [0.0; 3],
         };
-        let (ea, eb) = expectations(objective, noise, x, sigma_mm);
+        let (ea, eb) = expectations(objective, noise, x, sigma_mm, &rule);
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
         a += jz.transpose() * (&ea * &jz);
@@ -353,6 +358,7 @@ fn expectations(
     noise: NoiseModel,
     x: [f64; 3],
     sigma_mm: f64,
+    rule: &[(f64, f64)],
 ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
     let diag = |v: f64| {
         let mut m = [[0.0; 3]; 3];
@@ -373,12 +379,11 @@ fn expectations(
         }
         NoiseModel::Tracker(t) => t,
     };
-    let rule = noise_rule(tracker.distribution);
     let mut ea = [[0.0; 3]; 3];
     let mut eb = [[0.0; 3]; 3];
-    for &(za, wa) in &rule {
-        for &(ze, we) in &rule {
-            for &(zr, wr) in &rule {
+    for &(za, wa) in rule {
+        for &(ze, we) in rule {
+            for &(zr, wr) in rule {
                 let w = wa * we * wr;
                 let y = tracker.apply_deviates(x, [za, ze, zr]);
                 let r = [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
@@ -778,7 +783,11 @@ mod tests {
             ] {
                 for x in [[900.0, -400.0, 300.0], [3500.0, 1200.0, -800.0]] {
                     let sigma = 0.02;
-                    let (qa, qb) = expectations(objective, noise, x, sigma);
+                    let rule = match noise {
+                        NoiseModel::Tracker(t) => noise_rule(t.distribution),
+                        NoiseModel::Residual => Vec::new(),
+                    };
+                    let (qa, qb) = expectations(objective, noise, x, sigma, &rule);
                     let (sa, sb) = sampled(objective, noise, x, sigma, 400_000);
                     for (q, s) in [(qa, sa), (qb, sb)] {
                         let big = s.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
