@@ -306,30 +306,44 @@ fn dot<S: Real>(a: &[f64], b: &[S]) -> S {
 
 /// Legendre P_0..P_{n−1} at x into `out`.
 fn legendre_p<S: Real>(x: S, out: &mut [S]) {
+    // Bonnet's recursion (k + 1)·P_{k+1} = (2k + 1)·x·P_k − k·P_{k−1}, with the two previous
+    // values kept in registers: reading them back from `out` right after writing them stalls
+    // store-to-load forwarding and cost most of a polynomial's evaluation.
     let n = out.len();
-    if n > 0 {
-        out[0] = S::one();
+    if n == 0 {
+        return;
     }
-    if n > 1 {
-        out[1] = x;
+    out[0] = S::one();
+    if n == 1 {
+        return;
     }
-    for k in 1..n.saturating_sub(1) {
-        let kf = k as f64;
-        out[k + 1] = (x * (2.0 * kf + 1.0) * out[k] - out[k - 1] * kf) / (kf + 1.0);
+    out[1] = x;
+    let (mut prev, mut cur) = (S::one(), x);
+    for (k, o) in out.iter_mut().enumerate().skip(2) {
+        let kf = (k - 1) as f64;
+        let next = (x * (2.0 * kf + 1.0) * cur - prev * kf) / (kf + 1.0);
+        *o = next;
+        (prev, cur) = (cur, next);
     }
 }
 
 /// Chebyshev T_0..T_{n−1} at x into `out` (eq. 15).
 fn chebyshev_t<S: Real>(x: S, out: &mut [S]) {
+    // T_{k+1} = 2x·T_k − T_{k−1}, the previous values in registers (see `legendre_p`).
     let n = out.len();
-    if n > 0 {
-        out[0] = S::one();
+    if n == 0 {
+        return;
     }
-    if n > 1 {
-        out[1] = x;
+    out[0] = S::one();
+    if n == 1 {
+        return;
     }
-    for k in 1..n.saturating_sub(1) {
-        out[k + 1] = x * out[k] * 2.0 - out[k - 1];
+    out[1] = x;
+    let (mut prev, mut cur) = (S::one(), x);
+    for o in out.iter_mut().skip(2) {
+        let next = x * cur * 2.0 - prev;
+        *o = next;
+        (prev, cur) = (cur, next);
     }
 }
 

@@ -33,9 +33,11 @@ use crate::basis::{Basis, BasisKind, MAX_COEFFS};
 use crate::chain::MAX_AXES;
 use crate::error::{Error, Place, Result, from_toml, line_of_text};
 use crate::iso::{Axis, ErrorId, Group, Unit};
-use crate::kinematics::{PointErrors, Real, TRACKER_DOF, TRACKER_NAMES, predict};
+use crate::kinematics::{
+    ErrorsJacobian, PointErrors, Real, TRACKER_DOF, TRACKER_NAMES, predict,
+    predict_with_errors_jacobian, tool_in_workpiece_with_errors_jacobian,
+};
 use crate::machine::{Commands, Machine};
-use num_dual::DualSVec64;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -51,9 +53,9 @@ pub const DEFAULT_MODEL_LABEL: &str = "<embedded paper error model>";
 /// Most error values (modelled errors plus the tracker pose) one point may depend on.
 pub const MAX_SLOTS: usize = 72;
 
-/// What one dual pass of [`Model`]'s exact Jacobian differentiates.
+/// What the reverse pass of [`Model`]'s exact Jacobian differentiates.
 #[derive(Clone, Copy)]
-enum DualTarget<'a> {
+enum JacobianTarget<'a> {
     /// The point a reflector at this offset (frame of the last tool-side axis) is measured at.
     Reflector(&'a [f64; 3]),
     /// The tool point at this offset, in the workpiece frame.
@@ -217,7 +219,7 @@ impl EffectsSpec {
     }
 }
 
-/// One effect value at a point (a dual slot after the tracker's).
+/// One effect value at a point (a slot after the tracker's).
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum EffectSlot {
     /// Tool shift component c: value = drift rate × t (h).
@@ -413,6 +415,41 @@ pub struct Term {
     pub params: Range<usize>,
 }
 
+/// Where one term's value goes in [`PointErrors`], decided when the model is built.
+#[derive(Clone, Copy, Debug)]
+struct TermPlace {
+    /// Chain position of its axis.
+    axis: usize,
+    /// A location (or squareness) error rather than a component error.
+    location: bool,
+    /// Its ISO component's index (EX… or X0… order).
+    component: usize,
+}
+
+/// Most terms in one [`TermGroup`]: the six component errors and six location errors of an axis.
+const MAX_GROUP: usize = 12;
+
+/// Consecutive terms of one axis in one basis (EXX … ECX in a cubic, EXC … ECC in one harmonic),
+/// with their coefficients consecutive in the layout: the basis' values at a point are computed
+/// once and every term's value is their dot product with its coefficients. A basis that is not
+/// linear in its coefficients (the sine series) makes a group of one.
+#[derive(Clone, Debug)]
+struct TermGroup {
+    /// Chain position of the axis.
+    axis: usize,
+    /// The terms' indices.
+    terms: Range<usize>,
+    /// Coefficients per term.
+    len: usize,
+    /// The first term's first parameter; term `terms.start + i` starts at `params + i·len`.
+    params: usize,
+    /// The basis' argument is `u·scale + shift`: the angle itself for periodic bases, otherwise
+    /// the position normalised to [−1, 1] over the travel.
+    scale: f64,
+    /// See `scale`.
+    shift: f64,
+}
+
 /// A machine plus an error model, compiled: parameter layout, constraints, evaluation.
 ///
 /// ```
@@ -433,9 +470,10 @@ pub struct Model {
     params: Vec<ParamInfo>,
     /// Error-value slot of each parameter: term index, or terms.len() + tracker index.
     slot_of: Vec<usize>,
-    /// Per term: whether it shares its basis' values at a point with the term before it (same
-    /// axis, same basis, linear in its coefficients), so that they are evaluated once.
-    shares_basis: Vec<bool>,
+    /// Per term: where its value goes.
+    places: Vec<TermPlace>,
+    /// The terms in groups that share their basis' values at a point.
+    groups: Vec<TermGroup>,
     tracker_start: usize,
     has_location: [bool; MAX_AXES],
     constraints: Constraints,
@@ -649,16 +687,6 @@ impl Model {
                 Owner::Effect(k) => terms.len() + TRACKER_DOF + k,
             })
             .collect();
-        // Terms of one axis in one basis (EXX … ECX in a cubic, EXC … ECC in one harmonic) share
-        // the basis' values at a point; the sine series' values depend on its own phases.
-        let shares_basis = (0..terms.len())
-            .map(|i| {
-                i > 0
-                    && terms[i].axis == terms[i - 1].axis
-                    && terms[i].basis == terms[i - 1].basis
-                    && terms[i].basis.is_linear()
-            })
-            .collect();
         let mut has_location = [false; MAX_AXES];
         for t in &terms {
             if matches!(t.id, ErrorId::Location { .. }) {
@@ -781,13 +809,23 @@ impl Model {
                 rhs: value,
             });
         }
+        let places = terms
+            .iter()
+            .map(|t| TermPlace {
+                axis: t.axis,
+                location: matches!(t.id, ErrorId::Location { .. }),
+                component: t.id.component().index(),
+            })
+            .collect();
+        let groups = term_groups(&machine, &terms);
         Ok(Model {
             machine,
             spec,
             terms,
             params,
             slot_of,
-            shares_basis,
+            places,
+            groups,
             tracker_start,
             has_location,
             constraints: Constraints { rows },
@@ -919,6 +957,41 @@ impl Model {
         ))
     }
 
+    /// The values of a group's terms at `commands` into `vals[..n]` (n terms), the basis'
+    /// values (its derivatives with respect to the first term's coefficients) into `g`.
+    #[inline]
+    fn group_values<S: Real>(
+        &self,
+        grp: &TermGroup,
+        commands: &[S; MAX_AXES],
+        params: &[f64],
+        g: &mut [S; MAX_COEFFS],
+        vals: &mut [S],
+    ) {
+        let (len, n) = (grp.len, grp.terms.len());
+        let x = commands[grp.axis] * grp.scale + grp.shift;
+        let first = &params[grp.params..grp.params + len];
+        vals[0] = self.terms[grp.terms.start]
+            .basis
+            .eval_at(x, first, &mut g[..len]);
+        let rest = &mut vals[1..n];
+        let block = &params[grp.params + len..grp.params + n * len];
+        // The usual lengths unrolled: a cubic (4), one harmonic (3), a constant (1).
+        match len {
+            1 => dots::<S, 1>(g, block, rest),
+            3 => dots::<S, 3>(g, block, rest),
+            4 => dots::<S, 4>(g, block, rest),
+            _ => {
+                for (v, coeffs) in rest.iter_mut().zip(block.chunks_exact(len)) {
+                    *v = coeffs
+                        .iter()
+                        .zip(&g[..len])
+                        .fold(S::zero(), |acc, (c, b)| acc + *b * *c);
+                }
+            }
+        }
+    }
+
     fn check_len(&self, params: &[f64]) {
         assert_eq!(
             params.len(),
@@ -943,8 +1016,15 @@ impl Model {
             e.tracker[k] = value(self.terms.len() + k);
         }
         let base = self.terms.len() + TRACKER_DOF;
+        self.place_effects(&mut e, |i| value(base + i));
+        e
+    }
+
+    /// Places the effects' values (`value(i)` for the i-th effect) into [`PointErrors`].
+    #[inline]
+    fn place_effects<S: Real>(&self, e: &mut PointErrors<S>, value: impl Fn(usize) -> S) {
         for (i, (slot, _)) in self.effects.iter().enumerate() {
-            let v = value(base + i);
+            let v = value(i);
             match *slot {
                 EffectSlot::Drift(c) => e.tool_shift[c] = v,
                 EffectSlot::Reflector { c, .. } => e.reflector_delta[c] += v,
@@ -952,7 +1032,6 @@ impl Model {
                 EffectSlot::Screw { k, dir, .. } => e.component[k][dir] += v,
             }
         }
-        e
     }
 
     /// Whether the model needs the measurements' time stamps (thermal drift).
@@ -1080,34 +1159,34 @@ impl Model {
         params: &[f64],
     ) -> PointErrors<S> {
         self.check_len(params);
-        let mut vals = [S::zero(); MAX_SLOTS];
+        let mut e = PointErrors::zero();
+        e.has_location = self.has_location;
         let mut g = [S::zero(); MAX_COEFFS];
-        for (i, t) in self.terms.iter().enumerate() {
-            let r = t.params.clone();
-            // A term sharing the previous one's basis values (`shares_basis`) is a
-            // dot product with them.
-            vals[i] = if self.shares_basis[i] {
-                let k = r.len();
-                params[r]
-                    .iter()
-                    .zip(&g[..k])
-                    .fold(S::zero(), |acc, (c, b)| acc + *b * *c)
-            } else {
-                t.basis.eval_at(
-                    self.argument_at(t, commands),
-                    &params[r.clone()],
-                    &mut g[..r.len()],
-                )
-            };
+        let mut v = [S::zero(); MAX_GROUP];
+        for grp in &self.groups {
+            self.group_values(grp, commands, params, &mut g, &mut v);
+            for (i, v) in grp.terms.clone().zip(v) {
+                let place = self.places[i];
+                if place.location {
+                    e.location[place.axis][place.component] = v;
+                } else {
+                    e.component[place.axis][place.component] = v;
+                }
+            }
         }
         for (k, v) in params[self.tracker_start..self.tracker_start + TRACKER_DOF]
             .iter()
             .enumerate()
         {
-            vals[self.terms.len() + k] = S::from(*v);
+            e.tracker[k] = S::from(*v);
         }
-        self.effect_values(commands, reflector, t_s, params, &mut vals, None);
-        self.point_errors(|i| vals[i])
+        if !self.effects.is_empty() {
+            let mut vals = [S::zero(); MAX_SLOTS];
+            self.effect_values(commands, reflector, t_s, params, &mut vals, None);
+            let base = self.terms.len() + TRACKER_DOF;
+            self.place_effects(&mut e, |i| vals[base + i]);
+        }
+        e
     }
 
     /// Where the tool point `tool` (mm, in the frame of the last tool-side axis) sits relative
@@ -1132,8 +1211,8 @@ impl Model {
     }
 
     /// [`Model::tool_point`] and its exact Jacobian with respect to every parameter, written to
-    /// `jac` (row-major 3 × n_params): forward-mode duals over the error values at the commands,
-    /// then the bases' derivatives, as [`Model::predict_with_jacobian`]. The measurement's
+    /// `jac` (row-major 3 × n_params): the chain's derivative with respect to the error values at
+    /// the commands, then the bases' derivatives, as [`Model::predict_with_jacobian`]. The measurement's
     /// parameters (tracker pose, reflector offsets, range scale, drift) get zero columns.
     ///
     /// # Panics
@@ -1147,7 +1226,7 @@ impl Model {
     ) -> [f64; 3] {
         self.point_with_jacobian(
             commands,
-            DualTarget::Tool(tool),
+            JacobianTarget::Tool(tool),
             usize::MAX,
             0.0,
             params,
@@ -1158,10 +1237,12 @@ impl Model {
     /// Predicted point and its exact Jacobian with respect to every parameter, written to `jac`
     /// (row-major 3 × n_params: row c holds ∂x_c/∂p).
     ///
-    /// The chain is differentiated with forward-mode duals over the few error *values* at the
-    /// point (one per modelled error, plus the tracker pose), then multiplied by each basis'
-    /// derivative with respect to its coefficients (the basis values; for the sine series also
-    /// the derivative with respect to the phases). No finite differences.
+    /// The chain is differentiated with respect to the few error *values* at the point (one per
+    /// modelled error, plus the tracker pose) by its hand-derived reverse pass
+    /// ([`crate::kinematics::predict_with_errors_jacobian`], tested against forward-mode dual
+    /// numbers), then multiplied by each basis' derivative with respect to its coefficients (the
+    /// basis values; for the sine series also the derivative with respect to the phases). No
+    /// finite differences.
     ///
     /// # Panics
     /// As [`Model::predict`], and when `jac.len() != 3 * n_params()`.
@@ -1190,7 +1271,7 @@ impl Model {
         let refl = &self.machine.reflectors()[reflector].offset;
         self.point_with_jacobian(
             commands,
-            DualTarget::Reflector(refl),
+            JacobianTarget::Reflector(refl),
             reflector,
             t_s,
             params,
@@ -1199,12 +1280,12 @@ impl Model {
     }
 
     /// The exact Jacobian shared by [`Model::predict_with_jacobian_at`] and
-    /// [`Model::tool_point_with_jacobian`]: the error values and their bases' derivatives, one
-    /// dual pass over the values for `target`, then the chain rule.
+    /// [`Model::tool_point_with_jacobian`]: the error values and their bases' derivatives, the
+    /// chain's reverse pass over the values for `target`, then the chain rule.
     fn point_with_jacobian(
         &self,
         commands: &Commands,
-        target: DualTarget,
+        target: JacobianTarget,
         reflector: usize,
         t_s: f64,
         params: &[f64],
@@ -1217,22 +1298,22 @@ impl Model {
             3 * n,
             "Jacobian buffer must hold 3 × n_params values"
         );
-        // Row 0 first holds ∂value(slot)/∂p_j for each parameter.
+        // Row 0 first holds ∂value(slot)/∂p_j for each parameter: a term's basis values.
         let mut vals = [0.0; MAX_SLOTS];
-        for (i, t) in self.terms.iter().enumerate() {
-            let r = t.params.clone();
-            // As in `errors_with_commands`: the previous term's basis values, copied.
-            vals[i] = if self.shares_basis[i] {
-                jac.copy_within(self.terms[i - 1].params.clone(), r.start);
-                params[r.clone()]
-                    .iter()
-                    .zip(&jac[r])
-                    .map(|(c, b)| c * b)
-                    .sum()
-            } else {
-                t.basis
-                    .eval(self.argument(t, commands), &params[r.clone()], &mut jac[r])
-            };
+        let mut g = [0.0; MAX_COEFFS];
+        for grp in &self.groups {
+            let n = grp.terms.len();
+            self.group_values(
+                grp,
+                &commands.0,
+                params,
+                &mut g,
+                &mut vals[grp.terms.clone()],
+            );
+            for i in 0..n {
+                let start = grp.params + i * grp.len;
+                jac[start..start + grp.len].copy_from_slice(&g[..grp.len]);
+            }
         }
         let m = self.terms.len() + TRACKER_DOF;
         vals[self.terms.len()..m]
@@ -1240,18 +1321,16 @@ impl Model {
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
         self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
-        let mut g = [[0.0; MAX_SLOTS]; 3];
-        let v = &vals[..m];
-        let point = match m {
-            0..=8 => self.value_jacobian::<8>(commands, target, v, &mut g),
-            9..=16 => self.value_jacobian::<16>(commands, target, v, &mut g),
-            17..=24 => self.value_jacobian::<24>(commands, target, v, &mut g),
-            25..=32 => self.value_jacobian::<32>(commands, target, v, &mut g),
-            33..=40 => self.value_jacobian::<40>(commands, target, v, &mut g),
-            41..=48 => self.value_jacobian::<48>(commands, target, v, &mut g),
-            49..=64 => self.value_jacobian::<64>(commands, target, v, &mut g),
-            _ => self.value_jacobian::<MAX_SLOTS>(commands, target, v, &mut g),
+        let e = self.point_errors(|i| vals[i]);
+        let (point, de) = match target {
+            JacobianTarget::Reflector(refl) => {
+                predict_with_errors_jacobian(&self.machine, commands, refl, &e)
+            }
+            JacobianTarget::Tool(tool) => {
+                tool_in_workpiece_with_errors_jacobian(&self.machine, commands, tool, &e)
+            }
         };
+        let g = self.slot_columns(&de, m);
         let (r0, rest) = jac.split_at_mut(n);
         let (r1, r2) = rest.split_at_mut(n);
         for j in 0..n {
@@ -1308,38 +1387,45 @@ impl Model {
         [x[0].v2, x[1].v2, x[2].v2]
     }
 
-    /// Point and ∂point/∂(error value) for every slot, by one dual pass with N derivatives:
-    /// the reflector seen by the tracker, or the tool point in the workpiece frame (the
-    /// measurement's effects zeroed, as [`Model::tool_point`]).
-    #[inline(never)]
-    fn value_jacobian<const N: usize>(
-        &self,
-        commands: &Commands,
-        target: DualTarget,
-        vals: &[f64],
-        g: &mut [[f64; MAX_SLOTS]; 3],
-    ) -> [f64; 3] {
-        let mut e = self.point_errors(|i| DualSVec64::<N>::from_re(vals[i]).derivative(i));
-        let x = match target {
-            DualTarget::Reflector(refl) => predict(&self.machine, commands, refl, &e),
-            DualTarget::Tool(tool) => {
-                let zero = DualSVec64::<N>::from_re(0.0);
-                e.tool_shift = [zero; 3];
-                e.reflector_delta = [zero; 3];
-                e.range_scale = zero;
-                let cmd: [DualSVec64<N>; MAX_AXES] =
-                    std::array::from_fn(|k| DualSVec64::<N>::from_re(commands.0[k]));
-                crate::kinematics::tool_in_workpiece(&self.machine, &cmd, tool, &e)
+    /// ∂point/∂(error value) of every slot (terms, tracker, effects: the first `m`), by rows,
+    /// from the derivative with respect to the fields of [`PointErrors`] (the placement of
+    /// [`Model::point_errors`]).
+    #[inline]
+    fn slot_columns(&self, de: &ErrorsJacobian, m: usize) -> [[f64; MAX_SLOTS]; 3] {
+        let mut g = [[0.0; MAX_SLOTS]; 3];
+        let mut put = |s: usize, col: [f64; 3]| {
+            for c in 0..3 {
+                g[c][s] = col[c];
             }
         };
-        let mut out = [0.0; 3];
-        for c in 0..3 {
-            out[c] = x[c].re;
-            if let Some(eps) = &x[c].eps.0 {
-                g[c][..vals.len()].copy_from_slice(&eps.as_slice()[..vals.len()]);
-            }
+        for (i, t) in self.terms.iter().enumerate() {
+            let c = t.id.component().index();
+            put(
+                i,
+                match t.id {
+                    ErrorId::Component { .. } => de.component[t.axis][c],
+                    ErrorId::Location { .. } => de.location[t.axis][c],
+                },
+            );
         }
-        out
+        let base = self.terms.len();
+        for k in 0..TRACKER_DOF {
+            put(base + k, de.tracker[k]);
+        }
+        let base = base + TRACKER_DOF;
+        for (i, (slot, _)) in self.effects.iter().enumerate() {
+            put(
+                base + i,
+                match *slot {
+                    EffectSlot::Drift(c) => de.tool_shift[c],
+                    EffectSlot::Reflector { c, .. } => de.reflector_delta[c],
+                    EffectSlot::RangeScale => de.range_scale,
+                    EffectSlot::Screw { k, dir, .. } => de.component[k][dir],
+                },
+            );
+        }
+        debug_assert_eq!(base + self.effects.len(), m);
+        g
     }
 
     /// The size of each effect outside ISO 230 (the parameters of group "other", grouped by
@@ -1406,6 +1492,55 @@ impl Model {
         }
         out
     }
+}
+
+/// `out[i] = Σ_j g[j]·block[i·L + j]`, summed in the basis' order.
+#[inline]
+fn dots<S: Real, const L: usize>(g: &[S; MAX_COEFFS], block: &[f64], out: &mut [S]) {
+    let g: [S; L] = std::array::from_fn(|j| g[j]);
+    for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(L)) {
+        let mut acc = S::zero();
+        for j in 0..L {
+            acc += g[j] * coeffs[j];
+        }
+        *v = acc;
+    }
+}
+
+/// Groups consecutive terms of one axis in one basis linear in its coefficients, with
+/// consecutive coefficients (see [`TermGroup`]).
+fn term_groups(machine: &Machine, terms: &[Term]) -> Vec<TermGroup> {
+    let mut groups: Vec<TermGroup> = Vec::new();
+    for (i, t) in terms.iter().enumerate() {
+        if let Some(g) = groups.last_mut() {
+            let prev = &terms[i - 1];
+            if prev.axis == t.axis
+                && prev.basis == t.basis
+                && t.basis.is_linear()
+                && prev.params.end == t.params.start
+                && g.terms.len() < MAX_GROUP
+            {
+                g.terms.end = i + 1;
+                continue;
+            }
+        }
+        let ax = &machine.axes()[t.axis];
+        let periodic = t.basis.kind().is_periodic();
+        let scale = if periodic {
+            1.0
+        } else {
+            2.0 / (ax.max - ax.min)
+        };
+        groups.push(TermGroup {
+            axis: t.axis,
+            terms: i..i + 1,
+            len: t.params.len(),
+            params: t.params.start,
+            scale,
+            shift: if periodic { 0.0 } else { -ax.min * scale - 1.0 },
+        });
+    }
+    groups
 }
 
 /// The basis of one `[[error]]` entry for an error, with the checks that make it meaningful.
