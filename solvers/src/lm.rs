@@ -24,12 +24,16 @@
 //!   nothing.
 //! * **Refinement** (least squares, nothing held): after convergence, undamped Gauss–Newton
 //!   steps from the QR factor, while they contract and the cost is no worse than its rounding.
-//! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised by iteratively
-//!   reweighted least squares: each pass weights point i by `1/√(‖r_i‖² + ε²)`, with the radial
-//!   direction's curvature reduced by `‖r_i‖²/(‖r_i‖² + ε²)` (Ceres' Triggs correction), which is
-//!   the exact Gauss–Newton model of the smoothed objective `Φ_ε = (1/n) Σ √(‖r_i‖² + ε²)`. ε starts at [`Options::irls_initial_epsilon`] × Φ and shrinks tenfold each time the
-//!   smoothed problem has converged, down to [`Options::irls_final_epsilon`] × Φ; only then do the
-//!   convergence criteria stop the run. Φ_ε − Φ ≤ ε, so the final Φ is exact to that fraction.
+//! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised on the
+//!   smoothed objective `Φ_ε = (1/n) Σ √(‖r_i‖² + ε²)` in two stages. The *majorising* stage
+//!   weights point i by `1/√(‖r_i‖² + ε²)` with its full curvature `J_iᵀJ_i`: that quadratic
+//!   model lies above Φ_ε, so its steps lower Φ whatever their size (iteratively reweighted
+//!   least squares as a majorise–minimise method), with ε = [`Options::irls_initial_epsilon`] ×
+//!   the current Φ. Once a step gains less than 1e-6 of the cost, the *Newton* stage takes over
+//!   with ε = [`Options::irls_final_epsilon`] × Φ and the radial curvature reduced by
+//!   `‖r_i‖²/(‖r_i‖² + ε²)` (Ceres' Triggs correction), the exact Gauss–Newton model of Φ_ε;
+//!   only there do the convergence criteria stop the run. Φ_ε − Φ ≤ ε, so the final Φ is exact
+//!   to that fraction.
 //!
 //! ```
 //! use volver_core::machine::Machine;
@@ -64,6 +68,10 @@ use volver_core::problem::{Problem, norm};
 
 /// Points per block of the normal-equation accumulation.
 pub const BLOCK: usize = 512;
+
+/// The majorising stage of a Φ fit hands over to Newton once a step gains less than this
+/// fraction of the cost.
+const MAJORISING_GAIN: f64 = 1e-6;
 
 /// Gauss–Newton refinements of a converged least-squares fit, at most.
 const REFINEMENTS: usize = 100;
@@ -498,8 +506,20 @@ impl Solver for LevenbergMarquardt {
 
         let phi0 = norms.iter().sum::<f64>() / norms.len() as f64;
         let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
-        let mut eps = (options.irls_initial_epsilon * phi0).max(1e-300);
-        let final_stage = |eps: f64, phi: f64| objective == Objective::Ve || eps <= eps_final(phi);
+        let eps_first = |phi: f64| (options.irls_initial_epsilon * phi).max(1e-300);
+        // Φ runs in two stages. First the majorising stage: weights 1/√(‖r_i‖² + ε²) with the
+        // full curvature JᵢᵀJᵢ on every point (no radial reduction), whose quadratic model lies
+        // above Φ_ε everywhere (‖r‖ ≤ (‖r‖² + ‖r₀‖²)/(2‖r₀‖)), so that its steps decrease Φ
+        // whatever their size: no step is refused while the fit is far from the minimum. ε
+        // follows Φ (ε = irls_initial_epsilon · Φ) and only bounds the weight of a point whose
+        // residual nearly vanishes. Its convergence is linear: once a step gains less than
+        // MAJORISING_GAIN of the cost, the Newton stage takes over: ε = irls_final_epsilon · Φ
+        // and the exact Gauss–Newton model of Φ_ε (the radial curvature reduced by
+        // ‖r‖²/(‖r‖² + ε²), Ceres' Triggs correction), which converges fast near the minimum;
+        // the convergence criteria stop the run only there. Least squares has one stage.
+        let mut newton = objective == Objective::Ve;
+        let mut eps = eps_first(phi0);
+        let final_stage = |newton: bool| newton;
         let mut cost = cost_of(objective, &norms, eps);
         let cost0 = cost;
         let mut lambda = options.initial_damping;
@@ -533,10 +553,18 @@ impl Solver for LevenbergMarquardt {
                     }
                 }
             }
+            if !newton {
+                // The majorising stage's ε follows Φ.
+                eps = eps_first(norms.iter().sum::<f64>() / np as f64);
+                cost = cost_of(objective, &norms, eps);
+            }
             let Some(normal) = accumulate(
                 problem,
                 &p,
-                |r| weight_of(objective, r, eps, np),
+                |r| {
+                    let (w, c) = weight_of(objective, r, eps, np);
+                    (w, if newton { c } else { 0.0 })
+                },
                 objective == Objective::Ve,
             ) else {
                 break Termination::NumericalFailure(format!(
@@ -556,8 +584,7 @@ impl Solver for LevenbergMarquardt {
                 .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
                 .collect();
             let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-            if final_stage(eps, cost) && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0)
-            {
+            if final_stage(newton) && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0) {
                 break Termination::Gradient;
             }
             // Directions whose design curvature is below rank_tolerance × the largest are not
@@ -795,24 +822,17 @@ impl Solver for LevenbergMarquardt {
                     nu = 2.0;
                     let small_change = old - cost <= options.objective_tolerance * old;
                     let phi = norms.iter().sum::<f64>() / np as f64;
-                    if small_step || small_change {
-                        if final_stage(eps, phi) {
-                            break 'outer if small_step {
-                                Termination::ParameterChange
-                            } else {
-                                Termination::ObjectiveChange
-                            };
-                        }
-                        eps = (eps / 10.0).max(eps_final(phi));
-                        refresh = true;
-                        reset_scale = true;
-                        cost = cost_of(objective, &norms, eps);
-                    } else if objective == Objective::Phi
-                        && !final_stage(eps, phi)
-                        && old - cost <= 1e-3 * old
-                    {
-                        // The smoothed problem has nearly converged: sharpen it.
-                        eps = (eps / 10.0).max(eps_final(phi));
+                    if final_stage(newton) && (small_step || small_change) {
+                        break 'outer if small_step {
+                            Termination::ParameterChange
+                        } else {
+                            Termination::ObjectiveChange
+                        };
+                    }
+                    if !newton && (small_step || old - cost <= MAJORISING_GAIN * old) {
+                        // The majorising stage has slowed down: Newton takes over.
+                        newton = true;
+                        eps = eps_final(phi);
                         refresh = true;
                         reset_scale = true;
                         cost = cost_of(objective, &norms, eps);
@@ -823,10 +843,11 @@ impl Solver for LevenbergMarquardt {
                 nu *= 2.0;
                 if small_step || !lambda.is_finite() || lambda > 1e30 {
                     let phi = norms.iter().sum::<f64>() / np as f64;
-                    if final_stage(eps, phi) {
+                    if final_stage(newton) {
                         break 'outer Termination::ParameterChange;
                     }
-                    eps = (eps / 10.0).max(eps_final(phi));
+                    newton = true;
+                    eps = eps_final(phi);
                     refresh = true;
                     reset_scale = true;
                     cost = cost_of(objective, &norms, eps);

@@ -76,9 +76,11 @@ pub struct Options {
     /// Jacobian).
     pub rank_tolerance: f64,
     /// Φ only: the smoothing ε of the IRLS weights `1/√(‖r‖² + ε²)` starts at this fraction of
-    /// Φ and shrinks tenfold each time the smoothed problem converges. Default 0.1.
+    /// Φ: in the native LM's majorising stage it stays at this fraction of the current Φ; NLopt
+    /// and Ceres shrink it tenfold each time the smoothed problem converges. Default 0.1.
     pub irls_initial_epsilon: f64,
-    /// Φ only: the IRLS ε stops shrinking at this fraction of Φ. Default 1e-9.
+    /// Φ only: the final IRLS ε as a fraction of Φ (the native LM's Newton stage, the others'
+    /// last solve). Default 1e-9.
     pub irls_final_epsilon: f64,
     /// Native LM: correct each step by geodesic acceleration (Transtrum & Sethna 2012): the
     /// exact second directional derivative of the residuals along the step bends it along the
