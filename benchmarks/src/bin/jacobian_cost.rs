@@ -4,8 +4,8 @@
 //! Run: `cargo run --release -p volver-benchmarks --bin jacobian_cost`
 //!
 //! Both timings cover the whole per-point work: evaluating every error function from its
-//! coefficients, the chain, and (for the Jacobian) the dual pass over the error values plus the
-//! chain rule through the bases into a 3 × n row block. Each figure is the best of several
+//! coefficients, the chain, and (for the Jacobian) the chain's reverse pass over the error values
+//! plus the chain rule through the bases into a 3 × n row block. Each figure is the best of several
 //! repetitions over the same points.
 
 use std::hint::black_box;
@@ -78,7 +78,7 @@ fn measure(label: &str, model: &Model) {
     });
     let slots = model.terms().len() + 6;
     println!(
-        "| {label:<44} | {:>6} | {:>5} | {:>10.0} | {:>13.0} | {:>8.1}× |",
+        "| {label:<44} | {:>6} | {:>6} | {:>11.0} | {:>12.0} | {:>8.1}× |",
         model.n_params(),
         slots,
         f64_ns,
@@ -88,15 +88,13 @@ fn measure(label: &str, model: &Model) {
 }
 
 fn main() {
-    println!(
-        "Jacobian cost: exact structured dual-number Jacobian vs one f64 evaluation, per point"
-    );
+    println!("Jacobian cost: exact structured Jacobian vs one f64 evaluation, per point");
     println!("(best of 7 passes over 20 000 random points of the XCFZ machine; single thread)\n");
     println!(
-        "| model                                        | params | duals | f64 eval ns | Jacobian ns   | ratio     |"
+        "| model                                        | params | values | f64 eval ns | Jacobian ns  | ratio     |"
     );
     println!(
-        "|----------------------------------------------|--------|-------|-------------|---------------|-----------|"
+        "|----------------------------------------------|--------|--------|-------------|--------------|-----------|"
     );
     measure("paper model (cubic, 1 harmonic)", &Model::default_xcfz());
     let large = Model::from_toml_str(Machine::default_xcfz(), LARGE_MODEL, "large model")
