@@ -306,9 +306,25 @@ fn dot<S: Real>(a: &[f64], b: &[S]) -> S {
 
 /// Legendre P_0..P_{n−1} at x into `out`.
 fn legendre_p<S: Real>(x: S, out: &mut [S]) {
-    // Bonnet's recursion (k + 1)·P_{k+1} = (2k + 1)·x·P_k − k·P_{k−1}, with the two previous
-    // values kept in registers: reading them back from `out` right after writing them stalls
-    // store-to-load forwarding and cost most of a polynomial's evaluation.
+    // Bonnet's recursion (k + 1)·P_{k+1} = (2k + 1)·x·P_k − k·P_{k−1}.
+    three_term(x, out, |k, prev, cur| {
+        let kf = (k - 1) as f64;
+        (x * (2.0 * kf + 1.0) * cur - prev * kf) / (kf + 1.0)
+    });
+}
+
+/// Chebyshev T_0..T_{n−1} at x into `out` (eq. 15).
+fn chebyshev_t<S: Real>(x: S, out: &mut [S]) {
+    // T_{k+1} = 2x·T_k − T_{k−1}.
+    three_term(x, out, |_, prev, cur| x * cur * 2.0 - prev);
+}
+
+/// A polynomial family by its three-term recurrence: `out[0] = 1`, `out[1] = x`, and
+/// `out[k] = next(k, out[k − 2], out[k − 1])`. The two previous values are kept in registers:
+/// reading them back from `out` right after writing them stalls store-to-load forwarding and
+/// cost most of a polynomial's evaluation.
+#[inline]
+fn three_term<S: Real>(x: S, out: &mut [S], next: impl Fn(usize, S, S) -> S) {
     let n = out.len();
     if n == 0 {
         return;
@@ -320,30 +336,9 @@ fn legendre_p<S: Real>(x: S, out: &mut [S]) {
     out[1] = x;
     let (mut prev, mut cur) = (S::one(), x);
     for (k, o) in out.iter_mut().enumerate().skip(2) {
-        let kf = (k - 1) as f64;
-        let next = (x * (2.0 * kf + 1.0) * cur - prev * kf) / (kf + 1.0);
-        *o = next;
-        (prev, cur) = (cur, next);
-    }
-}
-
-/// Chebyshev T_0..T_{n−1} at x into `out` (eq. 15).
-fn chebyshev_t<S: Real>(x: S, out: &mut [S]) {
-    // T_{k+1} = 2x·T_k − T_{k−1}, the previous values in registers (see `legendre_p`).
-    let n = out.len();
-    if n == 0 {
-        return;
-    }
-    out[0] = S::one();
-    if n == 1 {
-        return;
-    }
-    out[1] = x;
-    let (mut prev, mut cur) = (S::one(), x);
-    for o in out.iter_mut().skip(2) {
-        let next = x * cur * 2.0 - prev;
-        *o = next;
-        (prev, cur) = (cur, next);
+        let v = next(k, prev, cur);
+        *o = v;
+        (prev, cur) = (cur, v);
     }
 }
 
