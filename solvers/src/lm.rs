@@ -519,7 +519,6 @@ impl Solver for LevenbergMarquardt {
         // the convergence criteria stop the run only there. Least squares has one stage.
         let mut newton = objective == Objective::Ve;
         let mut eps = eps_first(phi0);
-        let final_stage = |newton: bool| newton;
         let mut cost = cost_of(objective, &norms, eps);
         let cost0 = cost;
         let mut lambda = options.initial_damping;
@@ -584,7 +583,7 @@ impl Solver for LevenbergMarquardt {
                 .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
                 .collect();
             let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-            if final_stage(newton) && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0) {
+            if newton && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0) {
                 break Termination::Gradient;
             }
             // Directions whose design curvature is below rank_tolerance × the largest are not
@@ -822,7 +821,7 @@ impl Solver for LevenbergMarquardt {
                     nu = 2.0;
                     let small_change = old - cost <= options.objective_tolerance * old;
                     let phi = norms.iter().sum::<f64>() / np as f64;
-                    if final_stage(newton) && (small_step || small_change) {
+                    if newton && (small_step || small_change) {
                         break 'outer if small_step {
                             Termination::ParameterChange
                         } else {
@@ -843,7 +842,7 @@ impl Solver for LevenbergMarquardt {
                 nu *= 2.0;
                 if small_step || !lambda.is_finite() || lambda > 1e30 {
                     let phi = norms.iter().sum::<f64>() / np as f64;
-                    if final_stage(newton) {
+                    if newton {
                         break 'outer Termination::ParameterChange;
                     }
                     newton = true;
