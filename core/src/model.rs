@@ -435,19 +435,12 @@ const MAX_GROUP: usize = 12;
 /// linear in its coefficients (the sine series) makes a group of one.
 #[derive(Clone, Debug)]
 struct TermGroup {
-    /// Chain position of the axis.
-    axis: usize,
     /// The terms' indices.
     terms: Range<usize>,
     /// Coefficients per term.
     len: usize,
     /// The first term's first parameter; term `terms.start + i` starts at `params + i·len`.
     params: usize,
-    /// The basis' argument is `u·scale + shift`: the angle itself for periodic bases, otherwise
-    /// the position normalised to [−1, 1] over the travel.
-    scale: f64,
-    /// See `scale`.
-    shift: f64,
 }
 
 /// A machine plus an error model, compiled: parameter layout, constraints, evaluation.
@@ -817,7 +810,7 @@ impl Model {
                 component: t.id.component().index(),
             })
             .collect();
-        let groups = term_groups(&machine, &terms);
+        let groups = term_groups(&terms);
         Ok(Model {
             machine,
             spec,
@@ -969,7 +962,7 @@ impl Model {
         vals: &mut [S],
     ) {
         let (len, n) = (grp.len, grp.terms.len());
-        let x = commands[grp.axis] * grp.scale + grp.shift;
+        let x = self.argument_at(&self.terms[grp.terms.start], commands);
         let first = &params[grp.params..grp.params + len];
         vals[0] = self.terms[grp.terms.start]
             .basis
@@ -1509,7 +1502,7 @@ fn dots<S: Real, const L: usize>(g: &[S; MAX_COEFFS], block: &[f64], out: &mut [
 
 /// Groups consecutive terms of one axis in one basis linear in its coefficients, with
 /// consecutive coefficients (see [`TermGroup`]).
-fn term_groups(machine: &Machine, terms: &[Term]) -> Vec<TermGroup> {
+fn term_groups(terms: &[Term]) -> Vec<TermGroup> {
     let mut groups: Vec<TermGroup> = Vec::new();
     for (i, t) in terms.iter().enumerate() {
         if let Some(g) = groups.last_mut() {
@@ -1524,20 +1517,10 @@ fn term_groups(machine: &Machine, terms: &[Term]) -> Vec<TermGroup> {
                 continue;
             }
         }
-        let ax = &machine.axes()[t.axis];
-        let periodic = t.basis.kind().is_periodic();
-        let scale = if periodic {
-            1.0
-        } else {
-            2.0 / (ax.max - ax.min)
-        };
         groups.push(TermGroup {
-            axis: t.axis,
             terms: i..i + 1,
             len: t.params.len(),
             params: t.params.start,
-            scale,
-            shift: if periodic { 0.0 } else { -ax.min * scale - 1.0 },
         });
     }
     groups
