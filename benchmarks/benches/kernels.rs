@@ -10,7 +10,8 @@ use volver_core::model::Model;
 use volver_core::plan::Plan;
 use volver_core::problem::Problem;
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
-use volver_solvers::lm::{LevenbergMarquardt, normal_equations};
+use volver_solvers::kernels::normal_equations;
+use volver_solvers::lm::LevenbergMarquardt;
 use volver_solvers::strategy::{Strategy, identify};
 use volver_solvers::{Options, Silent};
 

@@ -23,7 +23,7 @@
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
 
 use crate::Task;
-use crate::lm::{Reduced, reduced_normal};
+use crate::coordinates::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
 use volver_core::iso::{Axis, ErrorId};

@@ -41,8 +41,9 @@
 //! # }
 //! ```
 
-use crate::free::{Begun, begin, held_values};
+use crate::coordinates::held_values;
 use crate::options::{Objective, Options};
+use crate::run::{Begun, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use std::sync::atomic::{AtomicUsize, Ordering};

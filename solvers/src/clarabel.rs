@@ -43,9 +43,9 @@
 //! assert!(b <= a * (1.0 + 1e-9) && b > 0.99 * a, "Φ: LM {a}, SOCP {b}");
 //! ```
 
-use crate::free::{Begun, begin};
 use crate::lm::LevenbergMarquardt;
 use crate::options::{Objective, Options};
+use crate::run::{Begun, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::clarabel::algebra::CscMatrix;
@@ -255,7 +255,7 @@ fn model_value(objective: Objective, lin: &Linearisation, k: usize, delta: &[f64
 }
 
 fn objective_value(objective: Objective, norms: &[f64]) -> f64 {
-    crate::free::cost_of(objective, norms, 0.0)
+    crate::loss::cost_of(objective, norms, 0.0)
 }
 
 impl Solver for ProxLinear {
@@ -344,7 +344,7 @@ impl Solver for ProxLinear {
                 let p_new = free.step(&p, &delta);
                 let z_new: Vec<f64> = z.iter().zip(&delta).map(|(a, b)| a + b).collect();
                 run.summary.evaluations += 1;
-                let new = crate::free::norms(problem, &p_new);
+                let new = crate::loss::norms(problem, &p_new);
                 let cost_new = new
                     .as_ref()
                     .map(|v| objective_value(objective, v))

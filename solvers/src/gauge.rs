@@ -209,7 +209,7 @@ impl Gauge {
 pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
     let problem: &Problem = &task.problem;
     let n = reference.len();
-    let (h, _) = crate::lm::normal_equations(problem, at)?;
+    let (h, _) = crate::kernels::normal_equations(problem, at)?;
     let metric = if problem.machine().is_some() {
         function_metric(problem.model(), at)
     } else {
@@ -353,7 +353,7 @@ const STALE_STEPS: usize = 2;
 /// (the radial direction of a Φ point carries less curvature than the tangential ones), in the
 /// Jacobi-scaled free coordinates, with a backtracking line search; until the predicted
 /// decrease is below 1e-30 of the objective, no step lowers it, or (once the cost's change is
-/// within its rounding) [`STALE_STEPS`] steps in a row find no smaller predicted decrease: the
+/// within its rounding) two steps in a row find no smaller predicted decrease: the
 /// result is then the point of smallest predicted decrease.
 ///
 /// This is what makes the gauge a rule rather than a neighbourhood: engines stop at different
@@ -367,12 +367,12 @@ pub fn settle(
     objective: crate::Objective,
     irls_final_epsilon: f64,
 ) -> Option<(Vec<f64>, Settled)> {
-    use crate::free::{cost_of, norms, weight_of};
+    use crate::loss::{cost_of, norms, weight_of};
     let problem = &task.problem;
     let np = problem.n_points();
     let n = p.len();
-    let plain = crate::lm::accumulate(problem, p, |_| (1.0, 0.0), false)?;
-    let (d, ns) = crate::lm::scaled_null_space(&plain.h, &task.constraints, p);
+    let plain = crate::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)?;
+    let (d, ns) = crate::coordinates::scaled_null_space(&plain.h, &task.constraints, p);
     let ns = ns.ok()?;
     let nf = ns.n_free();
     let basis = ns.basis();
@@ -427,7 +427,7 @@ pub fn settle(
     let mut stale = 0;
     for _ in 0..SETTLE_STEPS {
         let normal =
-            crate::lm::accumulate(problem, &x, |r| weight_of(objective, r, eps, np), false)?;
+            crate::kernels::accumulate(problem, &x, |r| weight_of(objective, r, eps, np), false)?;
         report.jacobian_evaluations += 1;
         let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
         let hz = basis.transpose() * (&hs * basis);
@@ -535,7 +535,7 @@ fn weak_second_order(
     objective: crate::Objective,
     eps: f64,
 ) -> Option<Mat<f64>> {
-    use crate::free::weight_of;
+    use crate::loss::weight_of;
     let (n, nf, np) = (x.len(), hz.nrows(), problem.n_points());
     let eh = hz.self_adjoint_eigen(Side::Lower).ok()?;
     let (sv, v) = (eh.S().column_vector(), eh.U());

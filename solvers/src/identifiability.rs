@@ -10,7 +10,7 @@
 //! coordinate, `Σ‖r‖² / (3n − rank)`, mapped back to the parameters.
 
 use crate::Task;
-use crate::lm::{Reduced, reduced_normal};
+use crate::coordinates::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::model::{Constraint, ConstraintKind};
 
@@ -233,7 +233,7 @@ fn hold_weak_once<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option
         .collect();
     // The LM's design: curvatures μ and directions w = S₀ u in z. It steps only in the span of
     // the kept w; holding w_i means holding its coordinate c_i = (S₀⁻¹ u_i)ᵀ z.
-    let (mu, w) = crate::lm::design_from_reduced(&hz)?;
+    let (mu, w) = crate::coordinates::design_from_reduced(&hz)?;
     let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
     let counted = task
         .constraints

@@ -21,17 +21,20 @@ pub mod candidates;
 pub mod ceres;
 #[cfg(feature = "clarabel")]
 pub mod clarabel;
-mod free;
+mod coordinates;
 pub mod gauge;
 pub mod identifiability;
 pub mod init;
+pub mod kernels;
 pub mod lm;
+mod loss;
 #[cfg(feature = "nlopt")]
 pub mod nlopt;
 pub mod nullspace;
 pub mod observability;
 pub mod options;
 pub mod prior;
+mod run;
 pub mod strategy;
 pub mod strd;
 pub mod summary;

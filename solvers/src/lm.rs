@@ -1,10 +1,11 @@
 //! The native Levenberg–Marquardt engine on `faer`.
 //!
-//! * **Row blocks.** Each pass runs over the points in blocks of [`BLOCK`] points; no dense
-//!   Jacobian of the whole problem is kept. For Φ the block's weighted Jacobian rows (3 per
-//!   point) are multiplied into the lower triangle of `JᵀWJ`; for least squares (ve) they update
-//!   the triangular factor R of the rows by a QR of `[R; block]` (a sequential QR), with the
-//!   residuals as one more column.
+//! * **Passes** ([`crate::kernels`]): each pass runs over the points in blocks of
+//!   [`crate::kernels::BLOCK`] on every thread, reduced in block order (the same bits whatever
+//!   the threads); no dense Jacobian of the whole problem is kept. For Φ each block's weighted
+//!   Jacobian rows (3 per point) are multiplied into its `JᵀWJ`; for least squares (ve) they are
+//!   triangularised by a QR, with the residuals as one more column, and merged into the running
+//!   factor R by a QR of `[R; R_block]`.
 //! * **Scaling.** Parameters are scaled by the inverse column norms of the starting Jacobian, so
 //!   millimetres and radians (whose columns differ by the lever arms, ~10³) weigh alike.
 //! * **Constraints** by null-space elimination in the scaled coordinates: `p = D (s₀ + N z)`,
@@ -56,18 +57,15 @@
 //! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
-use crate::free::{Begun, begin, cost_of, weight_of};
-use crate::nullspace::NullSpace;
+use crate::coordinates::{Free, design_from_reduced, design_of};
+use crate::kernels::{accumulate, damped_lstsq, normal_solve, solve_spd};
+use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
+use crate::run::{Begun, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
-use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
-use faer::prelude::*;
-use faer::{Accum, Mat, Par, Side};
+use faer::Mat;
 use volver_core::problem::{Problem, norm};
-
-/// Points per block of the normal-equation accumulation.
-pub const BLOCK: usize = 512;
 
 /// The majorising stage of a Φ fit hands over to Newton once a step gains less than this
 /// fraction of the cost.
@@ -80,279 +78,13 @@ const REFINEMENTS: usize = 100;
 #[derive(Clone, Copy, Debug, Default)]
 pub struct LevenbergMarquardt;
 
-/// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
-/// they come from.
-pub(crate) struct Normal {
-    pub(crate) h: Mat<f64>,
-    pub(crate) g: Vec<f64>,
-    /// With `factor`: see [`Factor`].
-    pub(crate) factor: Option<Factor>,
-}
-
-/// The triangular factor of a pass, for plain least squares (no radial correction on any
-/// point).
-pub(crate) struct Factor {
-    /// R (n × n) of the weighted Jacobian rows `W^½ J`, accumulated block by block (a
-    /// sequential QR: only R is kept, never the rows): `H = RᵀR`.
-    pub(crate) r: Mat<f64>,
-    /// `c = Qᵀ W^½ r`: the cost's quadratic model is `½‖R δ + c‖²` up to a constant and
-    /// `g = Rᵀ c`. Solving with R and c instead of H and g keeps the condition number of the
-    /// Jacobian instead of its square (as MINPACK and Ceres' dense QR do).
-    pub(crate) c: Vec<f64>,
-}
-
-/// `H = Σ J_iᵀ W_i J_i` and `g = Σ w_i J_iᵀ r_i`, where `weight(‖r_i‖)` gives `(w_i, c_i)` and
-/// `W_i = w_i (I − c_i r̂_i r̂_iᵀ)` (the exact Gauss–Newton Hessian of the loss on each point:
-/// `c = 0` for ve; for Φ_ε the radial direction carries less curvature than the tangential ones,
-/// Ceres' "Triggs correction"). H is accumulated block by block from the rows `W_i^½ J_i`:
-/// with `factor` (least squares only) as `RᵀR`, R updated by a QR of `[R; block]`, else by a
-/// rank-k update. `None` when a residual or Jacobian entry is not finite, or when `factor` is
-/// asked of a pass that is not plain least squares.
-pub(crate) fn accumulate(
-    problem: &Problem,
-    p: &[f64],
-    weight: impl Fn(f64) -> (f64, f64),
-    factor: bool,
-) -> Option<Normal> {
-    let n = p.len();
-    let np = problem.n_points();
-    let mut g = vec![0.0; n];
-    let mut h = Mat::<f64>::zeros(n, n);
-    // With `factor`: R and the residual column (column-major, (n+1)²). A block's rows
-    // (column-major, the weighted residuals in column n).
-    let nc = n + 1;
-    let mut rf = vec![0.0; if factor { nc * nc } else { 0 }];
-    let mut blk = vec![0.0; 3 * BLOCK * nc];
-    let mut row = vec![0.0; 3 * n];
-    let mut start = 0;
-    while start < np {
-        let m = (np - start).min(BLOCK);
-        let rows = 3 * m;
-        for b in 0..m {
-            let r = problem.residual_and_jacobian(start + b, p, &mut row);
-            let nr = norm(r);
-            if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
-                return None;
-            }
-            let (w, c) = weight(nr);
-            if factor && c != 0.0 {
-                return None;
-            }
-            // W^½ = √w (I − k r̂ r̂ᵀ) with (1 − k)² = 1 − c.
-            let k = 1.0 - (1.0 - c).max(0.0).sqrt();
-            let rhat = if nr > 0.0 {
-                r.map(|v| v / nr)
-            } else {
-                [0.0; 3]
-            };
-            let sw = w.sqrt();
-            for j in 0..n {
-                let col = [row[j], row[n + j], row[2 * n + j]];
-                let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
-                g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
-                for c in 0..3 {
-                    blk[j * rows + 3 * b + c] = sw * (col[c] - k * rhat[c] * radial);
-                }
-            }
-            if factor {
-                for c in 0..3 {
-                    blk[n * rows + 3 * b + c] = sw * r[c];
-                }
-            }
-        }
-        if factor {
-            qr_update(&mut rf, nc, &mut blk[..rows * nc], rows);
-        } else {
-            let jv =
-                faer::MatRef::from_column_major_slice(&blk[..rows * nc], rows, nc).subcols(0, n);
-            triangular_matmul(
-                h.as_mut(),
-                BlockStructure::TriangularLower,
-                Accum::Add,
-                jv.transpose(),
-                BlockStructure::Rectangular,
-                jv,
-                BlockStructure::Rectangular,
-                1.0,
-                Par::Seq,
-            );
-        }
-        start += m;
-    }
-    let factor = factor.then(|| {
-        let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);
-        h = r.transpose() * &r;
-        Factor {
-            r,
-            c: (0..n).map(|i| rf[n * nc + i]).collect(),
-        }
-    });
-    for j in 0..n {
-        for i in 0..j {
-            h[(i, j)] = h[(j, i)];
-        }
-    }
-    Some(Normal { h, g, factor })
-}
-
-/// `Σ aᵢ bᵢ` with four running sums (so that the loop vectorises).
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
-    let tail: f64 = ac
-        .remainder()
-        .iter()
-        .zip(bc.remainder())
-        .map(|(x, y)| x * y)
-        .sum();
-    for (x, y) in ac.zip(bc) {
-        for k in 0..4 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    acc[0] + acc[1] + acc[2] + acc[3] + tail
-}
-
-/// One step of a sequential QR: the upper-triangular `r` (`nc` × `nc`, column-major) becomes
-/// the R factor of `[r; b]`, where `b` holds `rows` rows (column-major); `b` is overwritten.
-/// Householder reflections that exploit r's zeros: only row j of r and the block change when
-/// column j is eliminated, so the cost is about twice that of adding `bᵀb` to a normal matrix.
-fn qr_update(r: &mut [f64], nc: usize, b: &mut [f64], rows: usize) {
-    for j in 0..nc {
-        let (left, right) = b.split_at_mut((j + 1) * rows);
-        let x = &mut left[j * rows..];
-        let sigma = dot(x, x);
-        if sigma == 0.0 {
-            continue;
-        }
-        let x0 = r[j * nc + j];
-        let alpha = -x0.signum() * (x0 * x0 + sigma).sqrt();
-        let v0 = x0 - alpha;
-        let beta = 2.0 / (v0 * v0 + sigma);
-        r[j * nc + j] = alpha;
-        for col in j + 1..nc {
-            let y = &mut right[(col - j - 1) * rows..(col - j) * rows];
-            let rj = &mut r[col * nc + j];
-            let s = beta * (v0 * *rj + dot(x, y));
-            *rj -= s * v0;
-            for (yi, xi) in y.iter_mut().zip(x.iter()) {
-                *yi -= s * xi;
-            }
-        }
-        x.iter_mut().for_each(|v| *v = 0.0);
-    }
-}
-
-/// The Gauss–Newton normal equations of `½ Σ ‖r_i‖²` at `params`: `JᵀJ` (n × n) and `Jᵀr`,
-/// accumulated over row blocks of [`BLOCK`] points exactly as the native engine forms them (no
-/// dense Jacobian is held). `None` when a residual or Jacobian entry is not finite. For
-/// identifiability studies and benchmarks.
-///
-/// ```
-/// use volver_core::{model::Model, plan::Plan, problem::Problem};
-/// use volver_core::simulate::{Magnitudes, Simulation, Truth};
-/// let m = volver_core::machine::Machine::default_xcfz();
-/// let truth = Truth::random_complete(&m, &Magnitudes::default(), 1).unwrap();
-/// let data = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 1).run().unwrap().measurements;
-/// let model = Model::default_xcfz();
-/// let problem = Problem::new(&model, &data).unwrap();
-/// let (jtj, jtr) = volver_solvers::lm::normal_equations(&problem, &model.initial_params()).unwrap();
-/// assert_eq!((jtj.nrows(), jtr.len()), (model.n_params(), model.n_params()));
-/// ```
-pub fn normal_equations(problem: &Problem, params: &[f64]) -> Option<(Mat<f64>, Vec<f64>)> {
-    accumulate(problem, params, |_| (1.0, 0.0), false).map(|n| (n.h, n.g))
-}
-
-/// Column scaling `D` (inverse column norms of the Jacobian, from the diagonal of `JᵀJ`; 1 for
-/// a parameter the data do not see) and the null space of the constraints in the scaled
-/// coordinates `s = p / D`, anchored at `anchor`.
-pub(crate) fn scaled_null_space(
-    h: &Mat<f64>,
-    constraints: &volver_core::model::Constraints,
-    anchor: &[f64],
-) -> (
-    Vec<f64>,
-    Result<NullSpace, crate::nullspace::ConstraintError>,
-) {
-    let n = anchor.len();
-    // A column at rounding level (a sinusoid the mesh samples only at its zeros) must not be
-    // blown up to unit norm: column norms are floored at 1e-12 of the largest.
-    let cmax = (0..n).map(|j| h[(j, j)]).fold(0.0_f64, f64::max);
-    let d: Vec<f64> = (0..n)
-        .map(|j| {
-            let c = h[(j, j)].max(1e-24 * cmax);
-            if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
-        })
-        .collect();
-    let (a, b) = constraints.dense(n);
-    let a_scaled: Vec<f64> = (0..b.len() * n).map(|k| a[k] * d[k % n]).collect();
-    let anchor_scaled: Vec<f64> = anchor.iter().zip(&d).map(|(p, d)| p / d).collect();
-    let ns = NullSpace::new(&a_scaled, &b, &anchor_scaled);
-    (d, ns)
-}
-
-/// The least-squares normal equations of a task at `params`, reduced to the scaled free
-/// coordinates: `p = D (s₀ + N z)`, `H_z = Nᵀ D JᵀJ D N`, `g_z = Nᵀ D Jᵀ r`.
-pub(crate) struct Reduced {
-    /// Column scaling D.
-    pub(crate) d: Vec<f64>,
-    /// Null space of the scaled constraints.
-    pub(crate) ns: NullSpace,
-    /// Reduced normal matrix.
-    pub(crate) hz: Mat<f64>,
-    /// Reduced gradient of ½‖r‖².
-    pub(crate) gz: Vec<f64>,
-}
-
-/// [`Reduced`] normal equations; `None` when the Jacobian is not finite or the constraints
-/// cannot be eliminated.
-pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
-    let n = params.len();
-    let normal = accumulate(&task.problem, params, |_| (1.0, 0.0), false)?;
-    let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
-    let ns = ns.ok()?;
-    let nf = ns.n_free();
-    let basis = ns.basis();
-    let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
-    let hz = basis.transpose() * (&hs * basis);
-    let gz: Vec<f64> = (0..nf)
-        .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * normal.g[i]).sum())
-        .collect();
-    Some(Reduced { d, ns, hz, gz })
-}
-
-/// The design's curvatures (ascending, Marquardt-scaled) and their directions in the free
-/// coordinates z, from a normal matrix `h` in the parameters.
-fn design_of(free: &crate::free::Free, h: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
-    let n = h.nrows();
-    let dv = &free.d;
-    let basis = free.ns.basis();
-    let hs = Mat::from_fn(n, n, |i, j| dv[i] * h[(i, j)] * dv[j]);
-    design_from_reduced(&(basis.transpose() * (&hs * basis)))
-}
-
-/// [`design_of`] from the reduced normal matrix `H_z`.
-pub(crate) fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
-    let nf = h0.nrows();
-    let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
-    let s0: Vec<f64> = (0..nf)
-        .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
-        .collect();
-    let hp0 = Mat::from_fn(nf, nf, |i, j| s0[i] * h0[(i, j)] * s0[j]);
-    let evd = hp0.self_adjoint_eigen(Side::Lower).ok()?;
-    let mu: Vec<f64> = (0..nf).map(|i| evd.S().column_vector()[i]).collect();
-    let u = evd.U();
-    // Directions in z: S₀ v.
-    Some((mu, Mat::from_fn(nf, nf, |k, i| s0[k] * u[(k, i)])))
-}
-
 /// Geodesic acceleration's right-hand side in the free coordinates z: `Nᵀ D Σ J_iᵀ W_i r_i''`,
 /// where `r_i''` is the exact second derivative of residual i along the step `delta` (z) and
 /// `W_i` its Gauss–Newton weight (as in [`accumulate`]). One Jacobian and one second-derivative
 /// pass; `None` when a value is not finite.
 fn curvature_gradient(
     problem: &Problem,
-    free: &crate::free::Free,
+    free: &Free,
     p: &[f64],
     delta: &[f64],
     objective: Objective,
@@ -386,68 +118,6 @@ fn curvature_gradient(
         .map(|k| (0..n).map(|i| basis[(i, k)] * free.d[i] * b[i]).sum())
         .collect();
     bz.iter().all(|v| v.is_finite()).then_some(bz)
-}
-
-/// The damped least-squares step `argmin ‖R' y + c‖² + λ‖y‖²` by a QR of `[R'; √λ I]`, and that
-/// QR's triangular factor `R_λ` (`R_λᵀ R_λ = R'ᵀR' + λI`); `None` if not finite.
-fn damped_lstsq(rps: &Mat<f64>, c: &[f64], lambda: f64) -> Option<(Vec<f64>, Mat<f64>)> {
-    let (n, nr) = (rps.nrows(), rps.ncols());
-    let sl = lambda.sqrt();
-    let a = Mat::from_fn(n + nr, nr, |i, j| {
-        if i < n {
-            rps[(i, j)]
-        } else if i - n == j {
-            sl
-        } else {
-            0.0
-        }
-    });
-    let b = Mat::from_fn(n + nr, 1, |i, _| if i < n { -c[i] } else { 0.0 });
-    let qr = a.qr();
-    let y = qr.solve_lstsq(&b);
-    let y: Vec<f64> = (0..nr).map(|i| y[(i, 0)]).collect();
-    let rl = qr.thin_R().to_owned();
-    y.iter().all(|v| v.is_finite()).then_some((y, rl))
-}
-
-/// `(R_λᵀ R_λ)⁻¹ rhs` by two triangular solves; `None` if not finite.
-fn normal_solve(rl: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
-    use faer::linalg::triangular_solve::{
-        solve_lower_triangular_in_place, solve_upper_triangular_in_place,
-    };
-    let k = rhs.len();
-    let mut x = Mat::from_fn(k, 1, |i, _| rhs[i]);
-    solve_lower_triangular_in_place(rl.transpose(), x.as_mut(), Par::Seq);
-    solve_upper_triangular_in_place(rl.as_ref(), x.as_mut(), Par::Seq);
-    let x: Vec<f64> = (0..k).map(|i| x[(i, 0)]).collect();
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
-
-/// Solves `a x = rhs` for symmetric positive semi-definite `a`: Cholesky, or an SVD
-/// pseudo-inverse that drops directions below 1e-14 of the largest singular value.
-fn solve_spd(a: &Mat<f64>, rhs: &[f64]) -> Option<Vec<f64>> {
-    let k = rhs.len();
-    let b = Mat::from_fn(k, 1, |i, _| rhs[i]);
-    if let Ok(llt) = a.llt(Side::Lower) {
-        let x = llt.solve(&b);
-        let v: Vec<f64> = (0..k).map(|i| x[(i, 0)]).collect();
-        if v.iter().all(|x| x.is_finite()) {
-            return Some(v);
-        }
-    }
-    let svd = a.svd().ok()?;
-    let (u, s, v) = (svd.U(), svd.S().column_vector(), svd.V());
-    let smax = (0..k).map(|i| s[i]).fold(0.0, f64::max);
-    let mut x = vec![0.0; k];
-    for r in 0..k {
-        if s[r] > 1e-14 * smax {
-            let c = (0..k).map(|i| u[(i, r)] * rhs[i]).sum::<f64>() / s[r];
-            for (j, xj) in x.iter_mut().enumerate() {
-                *xj += v[(j, r)] * c;
-            }
-        }
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 impl Solver for LevenbergMarquardt {
@@ -782,8 +452,7 @@ impl Solver for LevenbergMarquardt {
                 };
                 let p_new = free.step(&p, &total);
                 let z_new: Vec<f64> = z.iter().zip(&total).map(|(a, b)| a + b).collect();
-                let norms_new: Vec<f64> =
-                    (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
+                let norms_new = norms_of(problem, &p_new);
                 run.summary.evaluations += 1;
                 let cost_new = cost_of(objective, &norms_new, eps);
                 if !cost_new.is_finite() {
@@ -900,8 +569,7 @@ impl Solver for LevenbergMarquardt {
                 }
                 last_step = step;
                 let p_new = free.step(&p, &dz);
-                let norms_new: Vec<f64> =
-                    (0..np).map(|i| norm(problem.residual(i, &p_new))).collect();
+                let norms_new = norms_of(problem, &p_new);
                 run.summary.evaluations += 1;
                 let cost_new = cost_of(objective, &norms_new, eps);
                 let accepted = cost_new <= cost + rounding;

@@ -40,8 +40,9 @@
 //! # }
 //! ```
 
-use crate::free::{Begun, begin, cost_and_gradient, cost_of, norms};
+use crate::loss::{cost_and_gradient, cost_of, norms};
 use crate::options::{Objective, Options};
+use crate::run::{Begun, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::nlopt as nl;
@@ -85,8 +86,8 @@ struct State<'o> {
     gradients: usize,
     best: f64,
     nonfinite: Option<String>,
-    /// Non-finite objective calls, by call number, for [`crate::free::Edge`].
-    edge: crate::free::Edge,
+    /// Non-finite objective calls, by call number, for [`crate::run::Edge`].
+    edge: crate::run::Edge,
     observer: &'o mut dyn Observer,
 }
 

@@ -9,7 +9,7 @@
 //! bases of higher degree, random poses, the paper's noise). For each:
 //!
 //! * kernels (single thread, best of several passes): one f64 evaluation and one exact Jacobian
-//!   row block per point, the JᵀJ formation of the native engine (`lm::normal_equations` minus
+//!   row block per point, the JᵀJ formation of the native engine (`kernels::normal_equations` minus
 //!   the Jacobian pass) in GF/s and as a fraction of a dense matrix multiply (faer, 1024³)
 //!   measured in the same run;
 //! * each engine identifying Φ from the model's start (tracker fitted rigidly first), in a child
@@ -204,10 +204,10 @@ fn kernels(size: &Size) -> serde_json::Value {
         }
     });
     let normal_s = best(reps, || {
-        black_box(volver_solvers::lm::normal_equations(&problem, &p));
+        black_box(volver_solvers::kernels::normal_equations(&problem, &p));
     });
     let a0 = ALLOCATIONS.load(Ordering::Relaxed);
-    black_box(volver_solvers::lm::normal_equations(&problem, &p));
+    black_box(volver_solvers::kernels::normal_equations(&problem, &p));
     let normal_allocations = ALLOCATIONS.load(Ordering::Relaxed) - a0;
     // A dense matrix multiply, single thread, in the same run.
     let k = 1024;

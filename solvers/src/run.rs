@@ -1,154 +1,16 @@
-//! What every engine shares: the start and end of a run (validation, the initial and final
-//! evaluations, the summary), the scaled constraint-free coordinates `p = D (s₀ + N z)`, the
-//! smoothed objectives and their exact gradient from the dual-number Jacobian.
+//! What every engine shares at the start and end of a run: validation of the options and the
+//! start, the initial and final evaluations, the summary, the scaled free coordinates and the
+//! start projected onto the constraints, and the watch for trial points where the model is not
+//! finite.
 
-use crate::lm::{Normal, accumulate, scaled_null_space};
-use crate::nullspace::NullSpace;
-use crate::options::{Objective, Options};
+use crate::coordinates::{Free, scaled_null_space};
+use crate::kernels::{Normal, accumulate};
+use crate::loss::norms;
+use crate::options::Options;
 use crate::summary::{Summary, Termination};
 use crate::{Solution, Task, evaluate};
 use std::time::Instant;
-use volver_core::model::Constraints;
 use volver_core::problem::Problem;
-
-/// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
-pub(crate) struct Free {
-    /// Column scaling D.
-    pub(crate) d: Vec<f64>,
-    /// Null space of the scaled constraints.
-    pub(crate) ns: NullSpace,
-    /// Parameters held at a value: set exactly, not to rounding.
-    pub(crate) fixed: Vec<(usize, f64)>,
-}
-
-impl Free {
-    pub(crate) fn new(d: Vec<f64>, ns: NullSpace, constraints: &Constraints) -> Free {
-        Free {
-            d,
-            ns,
-            fixed: held_values(constraints),
-        }
-    }
-
-    pub(crate) fn n_free(&self) -> usize {
-        self.ns.n_free()
-    }
-
-    /// The parameters at free coordinates `z`.
-    pub(crate) fn params(&self, z: &[f64]) -> Vec<f64> {
-        let mut p: Vec<f64> = self
-            .ns
-            .expand(z)
-            .iter()
-            .zip(&self.d)
-            .map(|(s, d)| s * d)
-            .collect();
-        for &(j, v) in &self.fixed {
-            p[j] = v;
-        }
-        p
-    }
-
-    /// `p + D N dz`: a step of `dz` in the free coordinates taken from `p` itself (held
-    /// parameters stay exact). Unlike [`Free::params`] of an accumulated z, it keeps every
-    /// parameter's absolute precision: z counts the distance from the anchor, and a parameter
-    /// that travels far from its start (MGH10's b1, from 2 to 10⁻⁵⁰ and back) would otherwise be
-    /// known only to the rounding of that distance.
-    pub(crate) fn step(&self, p: &[f64], dz: &[f64]) -> Vec<f64> {
-        let b = self.ns.basis();
-        let mut out: Vec<f64> = (0..p.len())
-            .map(|i| p[i] + self.d[i] * (0..dz.len()).map(|k| b[(i, k)] * dz[k]).sum::<f64>())
-            .collect();
-        for &(j, v) in &self.fixed {
-            out[j] = v;
-        }
-        out
-    }
-
-    /// `M = D N` (n × free): `∂p/∂z`.
-    #[cfg(any(feature = "nlopt", feature = "clarabel"))]
-    pub(crate) fn tangent(&self) -> faer::Mat<f64> {
-        let b = self.ns.basis();
-        faer::Mat::from_fn(b.nrows(), b.ncols(), |i, k| self.d[i] * b[(i, k)])
-    }
-}
-
-/// Parameters a constraint holds at a value (a single coefficient).
-pub(crate) fn held_values(constraints: &Constraints) -> Vec<(usize, f64)> {
-    constraints
-        .rows
-        .iter()
-        .filter_map(|r| match r.coeffs.as_slice() {
-            [(j, c)] if *c != 0.0 => Some((*j, r.rhs / c)),
-            _ => None,
-        })
-        .collect()
-}
-
-/// The smoothed objective from residual modules: ve, or `Φ_ε = (1/n) Σ √(‖r‖² + ε²)`.
-pub(crate) fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
-    let n = norms.len() as f64;
-    match objective {
-        Objective::Ve => norms.iter().map(|r| r * r).sum::<f64>() / n,
-        Objective::Phi => {
-            norms
-                .iter()
-                .map(|r| (r * r + eps * eps).sqrt())
-                .sum::<f64>()
-                / n
-        }
-    }
-}
-
-/// Weight of a point in the Gauss–Newton model of the cost: twice the derivative of the
-/// point's loss with respect to ‖r‖², over n (so that `Σ w_i J_iᵀ r_i` is the gradient), and the
-/// radial reduction c of its Hessian.
-pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f64, f64) {
-    match objective {
-        Objective::Ve => (2.0 / n as f64, 0.0),
-        Objective::Phi => {
-            let s = r * r + eps * eps;
-            (1.0 / (s.sqrt() * n as f64), r * r / s)
-        }
-    }
-}
-
-/// Residual modules at `p`; `None` if one is not finite.
-pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
-    let v: Vec<f64> = (0..problem.n_points())
-        .map(|i| volver_core::problem::norm(problem.residual(i, p)))
-        .collect();
-    v.iter().all(|x| x.is_finite()).then_some(v)
-}
-
-/// The smoothed cost at `p` and its exact gradient with respect to `p` (one dual-number
-/// Jacobian pass, no normal matrix); `None` if a residual or Jacobian entry is not finite.
-#[cfg(feature = "nlopt")]
-pub(crate) fn cost_and_gradient(
-    problem: &Problem,
-    objective: Objective,
-    eps: f64,
-    p: &[f64],
-) -> Option<(f64, Vec<f64>)> {
-    let n = p.len();
-    let np = problem.n_points();
-    let mut g = vec![0.0; n];
-    let mut row = vec![0.0; 3 * n];
-    let mut norms = Vec::with_capacity(np);
-    for i in 0..np {
-        let r = problem.residual_and_jacobian(i, p, &mut row);
-        let nr = volver_core::problem::norm(r);
-        if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
-            return None;
-        }
-        let (w, _) = weight_of(objective, nr, eps, np);
-        for (j, gj) in g.iter_mut().enumerate() {
-            *gj += w * (row[j] * r[0] + row[n + j] * r[1] + row[2 * n + j] * r[2]);
-        }
-        norms.push(nr);
-    }
-    Some((cost_of(objective, &norms, eps), g))
-}
 
 /// Where a solve met trial points whose residuals or Jacobian are not finite (evaluation
 /// numbers as counted in the summary).
