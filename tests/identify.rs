@@ -404,7 +404,15 @@ fn combined_independent_and_cross_validation_methods() {
     // Joint on the reference itself: cross-validation reproduces its own fit.
     let joint = identify(&LevenbergMarquardt, pr[3], &p0, &s, &o, &mut Silent);
     let cv = reference(&joint.params);
-    assert!(cv.final_.stats.emm_um <= joint.final_.stats.emm_um * (1.0 + 1e-9));
+    // The data are noise-free: both EMMs are ~6.6e-5 µm, where each residual's own rounding is
+    // ~4e-10 µm (ε × 2 m from the tracker): up to 1e-9 µm of difference is rounding (measured
+    // 6e-12 µm).
+    assert!(
+        cv.final_.stats.emm_um <= joint.final_.stats.emm_um * (1.0 + 1e-9) + 1e-9,
+        "cross-validation {} µm against its own fit {} µm",
+        cv.final_.stats.emm_um,
+        joint.final_.stats.emm_um
+    );
     // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
     let (lin, rot) = combined(&LevenbergMarquardt, pr[0], pr[2], &p0, &s, &o, &mut Silent);
     for (j, info) in model.params().iter().enumerate() {

@@ -87,7 +87,27 @@ impl NullSpace {
                 redundant: 0,
             });
         }
-        let am = Mat::from_fn(k, n, |i, j| a[i * n + j]);
+        // Each row (with its value) is divided by its norm first: rows of very different sizes
+        // (a parameter fixed in scaled coordinates beside a dense gauge combination) would
+        // otherwise make the SVD's rank test and the consistency test answer the largest row's
+        // rounding instead of the question. A zero row constrains nothing if its value is zero.
+        let mut ae = vec![0.0; k * n];
+        let mut be = vec![0.0; k];
+        for i in 0..k {
+            let row = &a[i * n..(i + 1) * n];
+            let norm = row.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if norm > 0.0 {
+                for (e, v) in ae[i * n..(i + 1) * n].iter_mut().zip(row) {
+                    *e = v / norm;
+                }
+                be[i] = b[i] / norm;
+            } else if b[i] != 0.0 {
+                return Err(ConstraintError::Inconsistent {
+                    residual: b[i].abs(),
+                });
+            }
+        }
+        let am = Mat::from_fn(k, n, |i, j| ae[i * n + j]);
         let svd = am.svd().map_err(|_| ConstraintError::Svd)?;
         let s = svd.S().column_vector();
         let smax = (0..k.min(n)).map(|i| s[i]).fold(0.0, f64::max);
@@ -96,7 +116,7 @@ impl NullSpace {
         let (u, v) = (svd.U(), svd.V());
         // p0 = anchor − A⁺ (A anchor − b)
         let resid: Vec<f64> = (0..k)
-            .map(|i| (0..n).map(|j| a[i * n + j] * anchor[j]).sum::<f64>() - b[i])
+            .map(|i| (0..n).map(|j| ae[i * n + j] * anchor[j]).sum::<f64>() - be[i])
             .collect();
         let mut p0 = anchor.to_vec();
         for r in 0..rank {
@@ -105,11 +125,18 @@ impl NullSpace {
                 *pj -= v[(j, r)] * coef;
             }
         }
-        let residual = (0..k)
-            .map(|i| ((0..n).map(|j| a[i * n + j] * p0[j]).sum::<f64>() - b[i]).abs())
-            .fold(0.0, f64::max);
-        let scale = 1.0 + b.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
-        if residual > 1e-9 * scale {
+        // Consistency in the normalised rows: each row's miss against what its evaluation
+        // rounds (its value and the size of the terms it sums).
+        let misses = (0..k).any(|i| {
+            let row = &ae[i * n..(i + 1) * n];
+            let value: f64 = row.iter().zip(&p0).map(|(a, p)| a * p).sum();
+            let size: f64 = row.iter().zip(&p0).map(|(a, p)| (a * p).abs()).sum();
+            (value - be[i]).abs() > 1e-9 * (1.0 + be[i].abs() + size)
+        });
+        if misses {
+            let residual = (0..k)
+                .map(|i| ((0..n).map(|j| a[i * n + j] * p0[j]).sum::<f64>() - b[i]).abs())
+                .fold(0.0, f64::max);
             return Err(ConstraintError::Inconsistent { residual });
         }
         let basis = Mat::from_fn(n, n - rank, |i, j| v[(i, rank + j)]);
@@ -186,6 +213,40 @@ mod tests {
         assert!((z[0] - 0.3).abs() < 1e-14 && (z[1] + 0.7).abs() < 1e-14);
         // p0 is the nearest constrained point to the anchor.
         assert!((ns.p0()[0] - 0.5).abs() < 1e-14 && ns.p0()[3].abs() < 1e-14);
+    }
+
+    /// Rows 10¹¹ apart in size (a parameter fixed in scaled coordinates beside small dense
+    /// combinations) are eliminated, each to its own rounding.
+    #[test]
+    fn accepts_rows_of_very_different_sizes() {
+        let n = 12;
+        let truth: Vec<f64> = (0..n).map(|j| 0.1 * (j as f64 - 5.5)).collect();
+        let mut a = Vec::new();
+        for i in 0..2 {
+            let mut row = vec![0.0; n];
+            row[i] = 4.6e7;
+            a.push(row);
+        }
+        for i in 0..7 {
+            a.push(
+                (0..n)
+                    .map(|j| 1e-4 * (((i * 7 + j * 3) % 11) as f64 - 5.0) / 5.0)
+                    .collect(),
+            );
+        }
+        let b: Vec<f64> = a
+            .iter()
+            .map(|row| row.iter().zip(&truth).map(|(x, y)| x * y).sum())
+            .collect();
+        let flat: Vec<f64> = a.concat();
+        let ns = NullSpace::new(&flat, &b, &[0.3; 12]).unwrap();
+        assert_eq!(ns.n_free(), n - 9);
+        let p = ns.expand(&[0.1, -0.2, 0.3]);
+        for (row, bi) in a.iter().zip(&b) {
+            let size: f64 = row.iter().map(|v| v.abs()).sum();
+            let v: f64 = row.iter().zip(&p).map(|(x, y)| x * y).sum();
+            assert!((v - bi).abs() <= 1e-12 * size, "{v} against {bi}");
+        }
     }
 
     #[test]

@@ -243,7 +243,8 @@ fn forward_step(
             sq
         },
     };
-    (add(t, mat_vec(&ri, &inner)), step)
+    // The value as the generic chain computes it (bit for bit), not through the matrix.
+    (add(t, rot_err_inv(w, inner)), step)
 }
 
 /// The frame axis k rides on → axis k's own frame (workpiece side), with the step's derivatives.
