@@ -1,5 +1,13 @@
 //! The native Levenberg–Marquardt engine on `faer`.
 //!
+//! A solve is a state (the point, the IRLS stage, λ, the design, the damping scale) moved by
+//! named steps, in the manner of Ceres' `TrustRegionMinimizer`: a *Jacobian pass* forms the
+//! weighted normal equations; the *restriction* reduces them to the free coordinates, applies the
+//! gradient test and keeps the identifiable design directions; *trial steps* at growing λ are
+//! each *judged* (gain ratio, then the parameter- and objective-change tests) until one is
+//! accepted; a Φ fit's *next stage* swaps the majorising model for Newton's; a converged
+//! least-squares fit is *refined*. Each stopping test is a predicate of its own.
+//!
 //! * **Passes** ([`crate::kernels`]): each pass runs over the points in blocks of
 //!   [`crate::kernels::BLOCK`] on every thread, reduced in block order (the same bits whatever
 //!   the threads); no dense Jacobian of the whole problem is kept. For Φ each block's weighted
@@ -120,6 +128,632 @@ fn curvature_gradient(
     bz.iter().all(|v| v.is_finite()).then_some(bz)
 }
 
+/// The model of the cost a step uses (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Stage {
+    /// Φ's majorising stage: every point with its full curvature, ε following Φ.
+    Majorising,
+    /// The exact Gauss–Newton model (Triggs-corrected for Φ); least squares' only stage.
+    Newton,
+}
+
+/// A Jacobian pass restricted to the directions steps may take: the free coordinates' normal
+/// equations, the span of the identifiable design directions and the damping's scaling.
+struct Restricted {
+    /// `H_z = Nᵀ D H D N` and `g_z = Nᵀ D g` in the free coordinates.
+    hz: Mat<f64>,
+    gz: Vec<f64>,
+    /// The identifiable span (free coordinates × its dimension); `None`: all of z.
+    q: Option<Mat<f64>>,
+    /// The scaling `S = M^-½` of the span's coordinates (Moré's M).
+    sc: Vec<f64>,
+    /// `S H_q S` and `S g_q`.
+    hp: Mat<f64>,
+    gp: Vec<f64>,
+    /// Least squares: `R_z = R D N`, `R' = R_z Q S` and `c` (see [`crate::kernels::Factor`]).
+    factor: Option<(Mat<f64>, Mat<f64>, Vec<f64>)>,
+}
+
+impl Restricted {
+    /// From the span's scaled coordinates back to z.
+    fn to_z(&self, y: &[f64]) -> Vec<f64> {
+        let y: Vec<f64> = y.iter().zip(&self.sc).map(|(y, s)| y * s).collect();
+        match &self.q {
+            None => y,
+            Some(q) => {
+                let (nf, nr) = (q.nrows(), q.ncols());
+                (0..nf)
+                    .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
+                    .collect()
+            }
+        }
+    }
+}
+
+/// A trial step: the step in z (velocity plus half the acceleration) and the damped system's
+/// velocity alone, for the predicted decrease.
+struct Trial {
+    total: Vec<f64>,
+    delta: Vec<f64>,
+}
+
+/// What became of a trial step.
+enum Verdict {
+    /// Accepted, or the stage changed: the next Jacobian pass.
+    NextPass,
+    /// Refused: another trial with more damping.
+    Retry,
+}
+
+/// The state of one native solve, in the manner of Ceres' `TrustRegionMinimizer`: each
+/// iteration is a [`Lm::jacobian_pass`], its [`Lm::restrict`]ion to the identifiable directions,
+/// then [`Lm::trial_step`]s, each [`Lm::judge`]d (accepted or refused) until one is accepted or
+/// a criterion stops the run; [`Lm::next_stage`] changes the IRLS stage of a Φ fit and
+/// [`Lm::refine`] polishes a converged least-squares fit.
+struct Lm<'t, 'a, 'o> {
+    run: crate::run::Run<'t, 'a>,
+    problem: &'t Problem<'a>,
+    options: &'o Options,
+    objective: Objective,
+    free: Free,
+    /// Whether some constraint rows are dense (a gauge): steps then always go in the design's
+    /// directions (a diagonal damping in z has no meaning).
+    dense_rows: bool,
+    /// The parameters, the step's distance from the start in the scaled free coordinates, and
+    /// the residual modules at p.
+    p: Vec<f64>,
+    z: Vec<f64>,
+    norms: Vec<f64>,
+    stage: Stage,
+    eps: f64,
+    cost: f64,
+    /// The first cost (the gradient test's scale) and Φ at the start.
+    cost0: f64,
+    phi0: f64,
+    lambda: f64,
+    nu: f64,
+    /// The design's curvatures and directions in z, how many times it was computed, and
+    /// whether the next pass recomputes it (a new IRLS stage).
+    design: (Vec<f64>, Mat<f64>),
+    design_generation: usize,
+    refresh: bool,
+    /// Moré's scaling: the largest diagonal seen in the current coordinates, which ones, and
+    /// whether the next pass starts it afresh.
+    dmax: Vec<f64>,
+    scale_coords: Option<(usize, usize)>,
+    reset_scale: bool,
+}
+
+impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
+    /// The state at the start; `Err` is the finished solution when the design cannot be
+    /// decomposed.
+    fn new(
+        begun: Begun<'t, 'a>,
+        task: &'t Task<'a>,
+        options: &'o Options,
+    ) -> Result<Self, Box<Solution>> {
+        let Begun {
+            run,
+            free,
+            first,
+            p0,
+            norms0,
+        } = begun;
+        // What the data cannot identify is a property of the design: it is read from the
+        // unweighted normal matrix (Marquardt-scaled, eigen-decomposed), not from the
+        // IRLS-weighted matrices of a Φ fit, whose weights spread the curvatures by up to Φ/ε and
+        // would hide identifiable directions near its end. For ve the current matrix is the
+        // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
+        // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
+        let Some(design) = design_of(&free, &first.h) else {
+            return Err(Box::new(run.finish(
+                p0,
+                Termination::NumericalFailure(
+                    "the eigen-decomposition of the design's normal matrix failed".into(),
+                ),
+            )));
+        };
+        let objective = options.objective;
+        let np = norms0.len();
+        let phi0 = norms0.iter().sum::<f64>() / np as f64;
+        let eps = (options.irls_initial_epsilon * phi0).max(1e-300);
+        let cost = cost_of(objective, &norms0, eps);
+        // A gauge's rows are dense combinations of every parameter, so the free coordinates z
+        // mix them all and a diagonal damping in z has no meaning (measured on test 3: 214
+        // iterations instead of 42). Steps are then taken in the design's directions, as when
+        // some are held.
+        let dense_rows = task
+            .constraints
+            .rows
+            .iter()
+            .any(|r| r.kind == volver_core::model::ConstraintKind::Gauge);
+        Ok(Lm {
+            problem: &task.problem,
+            run,
+            options,
+            objective,
+            z: vec![0.0; free.n_free()],
+            free,
+            dense_rows,
+            p: p0,
+            norms: norms0,
+            stage: if objective == Objective::Ve {
+                Stage::Newton
+            } else {
+                Stage::Majorising
+            },
+            eps,
+            cost,
+            cost0: cost,
+            phi0,
+            lambda: options.initial_damping,
+            nu: 2.0,
+            design,
+            design_generation: 0,
+            refresh: false,
+            dmax: Vec::new(),
+            scale_coords: None,
+            reset_scale: false,
+        })
+    }
+
+    fn np(&self) -> usize {
+        self.norms.len()
+    }
+
+    /// Φ at the current point (mm).
+    fn phi(&self) -> f64 {
+        self.norms.iter().sum::<f64>() / self.np() as f64
+    }
+
+    /// A point's weight and radial reduction in the current stage's model.
+    fn weight(&self, r: f64) -> (f64, f64) {
+        let (w, c) = weight_of(self.objective, r, self.eps, self.np());
+        (w, if self.stage == Stage::Newton { c } else { 0.0 })
+    }
+
+    /// The progress report of a trial.
+    fn report(&self, observer: &mut dyn Observer, step: f64, accepted: bool) {
+        observer.iteration(&Iteration {
+            iteration: self.run.summary.iterations,
+            evaluations: self.run.summary.evaluations,
+            cost: self.cost,
+            emm_um: self.phi() * 1e3,
+            damping: self.lambda,
+            step,
+            accepted,
+        });
+    }
+
+    // The stopping tests.
+
+    /// The gradient test (Newton stage only): the largest scaled gradient component below
+    /// `gradient_tolerance` of the first cost.
+    fn gradient_converged(&self, gmax: f64) -> bool {
+        self.stage == Stage::Newton
+            && (self.cost == 0.0 || gmax <= self.options.gradient_tolerance * self.cost0)
+    }
+
+    /// Criterion 1, minimum parameter change, for a step of length `step` in z.
+    fn small_step(&self, step: f64) -> bool {
+        let znorm = self.z.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let tol = self.options.parameter_tolerance;
+        step <= tol * (znorm + tol)
+    }
+
+    /// Criterion 2, minimum objective change, for an accepted step from the cost `old`.
+    fn small_change(&self, old: f64) -> bool {
+        old - self.cost <= self.options.objective_tolerance * old
+    }
+
+    /// Whether the majorising stage has slowed down: an accepted step from `old` gained less
+    /// than [`MAJORISING_GAIN`] of the cost.
+    fn majorising_slowed(&self, old: f64) -> bool {
+        old - self.cost <= MAJORISING_GAIN * old
+    }
+
+    /// The damping has grown past any use.
+    fn damping_exhausted(&self) -> bool {
+        !self.lambda.is_finite() || self.lambda > 1e30
+    }
+
+    // The named steps.
+
+    /// One Jacobian pass at the current point: the design refreshed when a stage began, the
+    /// majorising stage's ε moved to the current Φ, the weighted normal equations.
+    fn jacobian_pass(&mut self) -> Result<crate::kernels::Normal, Termination> {
+        let iterations = self.run.summary.iterations;
+        if self.run.summary.evaluations >= self.options.max_evaluations {
+            return Err(Termination::EvaluationLimit);
+        }
+        if self.refresh && self.objective == Objective::Phi {
+            self.refresh = false;
+            let refreshed = accumulate(self.problem, &self.p, |_| (1.0, 0.0), false)
+                .and_then(|h| design_of(&self.free, &h.h));
+            self.run.summary.evaluations += 1;
+            self.run.summary.jacobian_evaluations += 1;
+            let Some(d) = refreshed else {
+                return Err(Termination::NumericalFailure(format!(
+                    "the design's normal matrix failed at iteration {iterations}"
+                )));
+            };
+            self.design = d;
+            self.design_generation += 1;
+        }
+        if self.stage == Stage::Majorising {
+            self.eps = (self.options.irls_initial_epsilon * self.phi()).max(1e-300);
+            self.cost = cost_of(self.objective, &self.norms, self.eps);
+        }
+        let normal = accumulate(
+            self.problem,
+            &self.p,
+            |r| self.weight(r),
+            self.objective == Objective::Ve,
+        )
+        .ok_or_else(|| {
+            Termination::NumericalFailure(format!(
+                "the Jacobian is not finite at iteration {iterations}"
+            ))
+        })?;
+        self.run.summary.evaluations += 1;
+        self.run.summary.jacobian_evaluations += 1;
+        Ok(normal)
+    }
+
+    /// The pass reduced to the free coordinates, the gradient test, and the restriction to the
+    /// identifiable directions with Moré's scaling.
+    fn restrict(&mut self, normal: crate::kernels::Normal) -> Result<Restricted, Termination> {
+        let iterations = self.run.summary.iterations;
+        let n = self.problem.n_params();
+        let nf = self.free.n_free();
+        // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
+        let dv = &self.free.d;
+        let hs = Mat::from_fn(n, n, |i, j| dv[i] * normal.h[(i, j)] * dv[j]);
+        let basis = self.free.ns.basis();
+        let t = &hs * basis;
+        let hz = basis.transpose() * &t;
+        let gz: Vec<f64> = (0..nf)
+            .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
+            .collect();
+        let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        if self.gradient_converged(gmax) {
+            return Err(Termination::Gradient);
+        }
+        // Directions whose design curvature is below rank_tolerance × the largest are not
+        // identifiable from the data: steps stay in the span q of the others. The
+        // Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once Φ is
+        // below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
+        // tolerance relaxes in proportion, so such a fit may use every direction.
+        let tolerance = self.options.rank_tolerance * (1e4 * self.phi() / self.phi0).min(1.0);
+        if self.objective == Objective::Ve {
+            // Uniform weights: the current matrix is the design.
+            self.design = design_from_reduced(&hz).ok_or_else(|| {
+                Termination::NumericalFailure(format!(
+                    "the eigen-decomposition of the normal matrix failed at iteration {iterations}"
+                ))
+            })?;
+            self.design_generation += 1;
+        }
+        let (mu0, dirs0) = (&self.design.0, &self.design.1);
+        let mu0_max = mu0[nf - 1].max(0.0);
+        // A zero tolerance holds nothing (not even a direction whose curvature rounds to ≤ 0).
+        let keep: Vec<usize> = (0..nf)
+            .filter(|&i| tolerance == 0.0 || mu0[i] > tolerance * mu0_max)
+            .collect();
+        self.run.summary.unidentifiable = nf - keep.len();
+        let q = (keep.len() < nf || self.dense_rows)
+            .then(|| Mat::from_fn(nf, keep.len(), |k, c| dirs0[(k, keep[c])]));
+        let (hq, gq) = match &q {
+            None => (hz.clone(), gz.clone()),
+            Some(q) => {
+                let hq = q.transpose() * (&hz * q);
+                let gq: Vec<f64> = (0..q.ncols())
+                    .map(|c| (0..nf).map(|k| q[(k, c)] * gz[k]).sum())
+                    .collect();
+                (hq, gq)
+            }
+        };
+        // Damping: λ M with M the diagonal of the largest diag(H) seen in the step's
+        // coordinates (Moré's scaling, as MINPACK: it never shrinks, so a parameter whose
+        // column fades as the fit runs into a flat region is still damped at its earlier
+        // scale). The maximum runs while the coordinates stay the same: z, or the span q of
+        // the identifiable design directions until the design is refreshed (every iteration
+        // for ve, every IRLS stage for Φ); a new IRLS stage also restarts it (a new cost).
+        let nr = gq.len();
+        let coords = q.as_ref().map(|_| (self.design_generation, nr));
+        if self.reset_scale || coords != self.scale_coords || self.dmax.len() != nr {
+            self.reset_scale = false;
+            self.scale_coords = coords;
+            self.dmax = vec![0.0; nr];
+        }
+        for (i, v) in self.dmax.iter_mut().enumerate() {
+            *v = (*v).max(hq[(i, i)]);
+        }
+        // A direction the data have never seen is damped at unit scale (MINPACK's rule); no
+        // floor relative to the others, whose curvatures may legitimately span 10²⁰ along
+        // the path of a strongly nonlinear model (MGH10).
+        // Scaled by S = M^-½: H' = S H S, g' = S g, and the damping is λ I.
+        let sc: Vec<f64> = self
+            .dmax
+            .iter()
+            .map(|&v| 1.0 / if v > 0.0 { v } else { 1.0 }.sqrt())
+            .collect();
+        let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
+        let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
+        // Least squares: the factor in the same coordinates, R_z = R D N and R' = R_z Q S,
+        // so that each step solves min ‖R' y + c‖² + λ‖y‖² by QR.
+        let factor = normal.factor.map(|f| {
+            let rd = Mat::from_fn(n, n, |i, j| f.r[(i, j)] * dv[j]);
+            let rz = &rd * basis;
+            let rq = match &q {
+                None => rz.clone(),
+                Some(q) => &rz * q,
+            };
+            let rps = Mat::from_fn(n, nr, |i, j| rq[(i, j)] * sc[j]);
+            (rz, rps, f.c)
+        });
+        Ok(Restricted {
+            hz,
+            gz,
+            q,
+            sc,
+            hp,
+            gp,
+            factor,
+        })
+    }
+
+    /// The damped step at the current λ, corrected by geodesic acceleration when asked;
+    /// `Ok(None)` when the acceleration refuses it (λ has grown: try again).
+    fn trial_step(
+        &mut self,
+        r: &Restricted,
+        observer: &mut dyn Observer,
+    ) -> Result<Option<Trial>, Termination> {
+        let iterations = self.run.summary.iterations;
+        let nr = r.gp.len();
+        let lambda = self.lambda;
+        // Cholesky of the damped system (an SVD pseudo-inverse if it fails).
+        let damped = Mat::from_fn(nr, nr, |i, j| {
+            r.hp[(i, j)] + if i == j { lambda } else { 0.0 }
+        });
+        let rhs: Vec<f64> = r.gp.iter().map(|g| -g).collect();
+        // With the factor: the QR of [R'; √λ I], whose R_λ also gives (H' + λI)⁻¹ for the
+        // acceleration; else Cholesky of the damped normal matrix.
+        let lsq = r
+            .factor
+            .as_ref()
+            .and_then(|(_, rps, c)| damped_lstsq(rps, c, lambda));
+        let y = match &lsq {
+            Some((y, _)) => y.clone(),
+            None => solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]),
+        };
+        let delta = r.to_z(&y);
+        if delta.iter().any(|v| !v.is_finite()) {
+            return Err(Termination::NumericalFailure(format!(
+                "the step is not finite at iteration {iterations}"
+            )));
+        }
+        // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
+        // refused (as a failed step) when 2‖a‖ > α‖δ‖ in the damping norm.
+        let mut total = delta.clone();
+        if self.options.geodesic_acceleration {
+            let ynorm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let accel = (ynorm > 0.0)
+                .then(|| {
+                    curvature_gradient(
+                        self.problem,
+                        &self.free,
+                        &self.p,
+                        &delta,
+                        self.objective,
+                        self.eps,
+                    )
+                })
+                .flatten();
+            self.run.summary.evaluations += 1;
+            self.run.summary.jacobian_evaluations += 1;
+            let Some(bz) = accel else {
+                return Err(Termination::NumericalFailure(format!(
+                    "the second derivative along the step is not finite at iteration {iterations}"
+                )));
+            };
+            let nf = self.free.n_free();
+            let bq: Vec<f64> = match &r.q {
+                None => bz,
+                Some(q) => (0..nr)
+                    .map(|c| (0..nf).map(|k| q[(k, c)] * bz[k]).sum())
+                    .collect(),
+            };
+            let rhs: Vec<f64> = bq.iter().zip(&r.sc).map(|(b, s)| -b * s).collect();
+            let ya = match &lsq {
+                Some((_, rl)) => normal_solve(rl, &rhs),
+                None => solve_spd(&damped, &rhs),
+            }
+            .unwrap_or_else(|| vec![f64::NAN; nr]);
+            let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
+            // A NaN ratio refuses the step too.
+            let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
+            if !small_enough {
+                let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+                self.report(observer, step, false);
+                self.lambda *= self.nu;
+                self.nu *= 2.0;
+                if self.damping_exhausted() {
+                    return Err(Termination::NumericalFailure(format!(
+                        "geodesic acceleration refused every step up to damping 1e30 at \
+                         iteration {iterations}"
+                    )));
+                }
+                return Ok(None);
+            }
+            for (t, a) in total.iter_mut().zip(r.to_z(&ya)) {
+                *t += 0.5 * a;
+            }
+        }
+        Ok(Some(Trial { total, delta }))
+    }
+
+    /// Evaluates a trial and accepts or refuses it on the gain ratio, then applies the stopping
+    /// tests and the stage change that follow.
+    fn judge(
+        &mut self,
+        r: &Restricted,
+        trial: Trial,
+        observer: &mut dyn Observer,
+    ) -> Result<Verdict, Termination> {
+        let n = self.problem.n_params();
+        let nf = self.free.n_free();
+        let Trial { total, delta } = trial;
+        let step = total.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let small_step = self.small_step(step);
+        // Predicted decrease of the quadratic model along δ (the velocity; the acceleration
+        // only bends the path): from the factor, −(cᵀv + ½‖v‖²) with v = R_z δ, else from H_z
+        // and g_z.
+        let pred = match &r.factor {
+            Some((rz, _, c)) => {
+                let v: Vec<f64> = (0..n)
+                    .map(|i| (0..nf).map(|k| rz[(i, k)] * delta[k]).sum())
+                    .collect();
+                -(0..n).map(|i| c[i] * v[i] + 0.5 * v[i] * v[i]).sum::<f64>()
+            }
+            None => {
+                let hd: Vec<f64> = (0..nf)
+                    .map(|i| (0..nf).map(|j| r.hz[(i, j)] * delta[j]).sum())
+                    .collect();
+                -(0..nf)
+                    .map(|i| r.gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
+                    .sum::<f64>()
+            }
+        };
+        let p_new = self.free.step(&self.p, &total);
+        let z_new: Vec<f64> = self.z.iter().zip(&total).map(|(a, b)| a + b).collect();
+        let norms_new = norms_of(self.problem, &p_new);
+        self.run.summary.evaluations += 1;
+        let cost_new = cost_of(self.objective, &norms_new, self.eps);
+        if !cost_new.is_finite() {
+            self.run.nonfinite_trial();
+        }
+        let rho = if cost_new.is_finite() && pred > 0.0 {
+            (self.cost - cost_new) / pred
+        } else {
+            -1.0
+        };
+        let accepted = rho > 1e-4;
+        if !accepted {
+            self.report(observer, step, false);
+            self.lambda *= self.nu;
+            self.nu *= 2.0;
+            if small_step || self.damping_exhausted() {
+                if self.stage == Stage::Newton {
+                    return Err(Termination::ParameterChange);
+                }
+                self.next_stage(true);
+                return Ok(Verdict::NextPass);
+            }
+            return Ok(Verdict::Retry);
+        }
+        self.run.improved();
+        let old = self.cost;
+        self.p = p_new;
+        self.z = z_new;
+        self.norms = norms_new;
+        self.cost = cost_new;
+        self.report(observer, step, true);
+        self.lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+        self.nu = 2.0;
+        match self.stage {
+            Stage::Newton if small_step => Err(Termination::ParameterChange),
+            Stage::Newton if self.small_change(old) => Err(Termination::ObjectiveChange),
+            Stage::Majorising if small_step || self.majorising_slowed(old) => {
+                // The majorising stage has slowed down: Newton takes over.
+                self.next_stage(false);
+                Ok(Verdict::NextPass)
+            }
+            _ => Ok(Verdict::NextPass),
+        }
+    }
+
+    /// Φ's Newton stage begins: ε = irls_final_epsilon · Φ, the design refreshed and Moré's
+    /// scaling restarted at the next pass; `restart_damping` when the majorising stage ended
+    /// on refused steps.
+    fn next_stage(&mut self, restart_damping: bool) {
+        self.stage = Stage::Newton;
+        self.eps = (self.options.irls_final_epsilon * self.phi()).max(1e-300);
+        self.refresh = true;
+        self.reset_scale = true;
+        self.cost = cost_of(self.objective, &self.norms, self.eps);
+        if restart_damping {
+            self.lambda = self.options.initial_damping;
+            self.nu = 2.0;
+        }
+    }
+
+    /// Least squares: Gauss–Newton refinement of the converged point. The damped steps stop
+    /// once the cost can no longer tell better from worse (steps refused at rounding raise λ
+    /// until the step is negligible); the undamped steps from the QR factor go on to the
+    /// minimum (to the Jacobian's condition, not its square) while they contract and the cost
+    /// is no worse than its own rounding. Skipped when directions are held as unidentifiable.
+    fn refine(&mut self, observer: &mut dyn Observer) {
+        let problem = self.problem;
+        let np = self.np();
+        let n = problem.n_params();
+        // The cost's rounding: each residual is rounded to a few ε of its observation.
+        let rounding = 8.0 * f64::EPSILON * 2.0 / np as f64
+            * (0..np)
+                .map(|i| self.norms[i] * (self.norms[i] + problem.observation_scale(i)))
+                .sum::<f64>();
+        let mut last_step = f64::INFINITY;
+        for _ in 0..REFINEMENTS {
+            let summary = &self.run.summary;
+            if summary.iterations >= self.options.max_iterations
+                || summary.evaluations + 2 > self.options.max_evaluations
+            {
+                break;
+            }
+            let (objective, eps) = (self.objective, self.eps);
+            let Some(f) = accumulate(problem, &self.p, |r| weight_of(objective, r, eps, np), true)
+                .and_then(|normal| normal.factor)
+            else {
+                break;
+            };
+            self.run.summary.evaluations += 1;
+            self.run.summary.jacobian_evaluations += 1;
+            self.run.summary.iterations += 1;
+            let rz =
+                &Mat::from_fn(n, n, |i, j| f.r[(i, j)] * self.free.d[j]) * self.free.ns.basis();
+            let Some((dz, _)) = damped_lstsq(&rz, &f.c, 0.0) else {
+                break;
+            };
+            // Gauss–Newton converges linearly on a problem with residuals: go on while the
+            // steps contract and are not negligible.
+            let step = dz.iter().map(|v| v * v).sum::<f64>().sqrt();
+            let contracting = step < last_step;
+            if !contracting || self.small_step(step) {
+                break;
+            }
+            last_step = step;
+            let p_new = self.free.step(&self.p, &dz);
+            let norms_new = norms_of(problem, &p_new);
+            self.run.summary.evaluations += 1;
+            let cost_new = cost_of(self.objective, &norms_new, self.eps);
+            let accepted = cost_new <= self.cost + rounding;
+            if accepted {
+                self.z.iter_mut().zip(&dz).for_each(|(a, b)| *a += b);
+                self.p = p_new;
+                self.norms = norms_new;
+                self.cost = cost_new;
+            }
+            let lambda = std::mem::replace(&mut self.lambda, 0.0);
+            self.report(observer, step, accepted);
+            self.lambda = lambda;
+            if !accepted {
+                break;
+            }
+        }
+    }
+}
+
 impl Solver for LevenbergMarquardt {
     fn name(&self) -> &'static str {
         "lm"
@@ -132,469 +766,49 @@ impl Solver for LevenbergMarquardt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let Begun {
-            mut run,
-            free,
-            first,
-            p0: mut p,
-            norms0: mut norms,
-        } = match begin(self.name(), task, start, options) {
+        let begun = match begin(self.name(), task, start, options) {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let problem = &task.problem;
-        let n = problem.n_params();
-        let objective = options.objective;
-        let nf = free.n_free();
-        // A gauge's rows are dense combinations of every parameter, so the free coordinates z
-        // mix them all and a diagonal damping in z has no meaning (measured on test 3: 214
-        // iterations instead of 42). Steps are then taken in the design's directions, as when
-        // some are held.
-        let dense_rows = task
-            .constraints
-            .rows
-            .iter()
-            .any(|r| r.kind == volver_core::model::ConstraintKind::Gauge);
-        // The step's distance from the start in the scaled free coordinates (the parameter
-        // criterion's scale); the parameters themselves are stepped from p (Free::step).
-        let mut z = vec![0.0; nf];
-        // What the data cannot identify is a property of the design: it is read from the
-        // unweighted normal matrix (Marquardt-scaled, eigen-decomposed), not from the
-        // IRLS-weighted matrices of a Φ fit, whose weights spread the curvatures by up to Φ/ε and
-        // would hide identifiable directions near its end. For ve the current matrix is the
-        // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
-        // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
-        let Some(mut design) = design_of(&free, &first.h) else {
-            return run.finish(
-                p,
-                Termination::NumericalFailure(
-                    "the eigen-decomposition of the design's normal matrix failed".into(),
-                ),
-            );
+        let mut lm = match Lm::new(begun, task, options) {
+            Ok(lm) => lm,
+            Err(solution) => return *solution,
         };
-        let mut refresh = false;
-
-        let phi0 = norms.iter().sum::<f64>() / norms.len() as f64;
-        let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
-        let eps_first = |phi: f64| (options.irls_initial_epsilon * phi).max(1e-300);
-        // Φ runs in two stages. First the majorising stage: weights 1/√(‖r_i‖² + ε²) with the
-        // full curvature JᵢᵀJᵢ on every point (no radial reduction), whose quadratic model lies
-        // above Φ_ε everywhere (‖r‖ ≤ (‖r‖² + ‖r₀‖²)/(2‖r₀‖)), so that its steps decrease Φ
-        // whatever their size: no step is refused while the fit is far from the minimum. ε
-        // follows Φ (ε = irls_initial_epsilon · Φ) and only bounds the weight of a point whose
-        // residual nearly vanishes. Its convergence is linear: once a step gains less than
-        // MAJORISING_GAIN of the cost, the Newton stage takes over: ε = irls_final_epsilon · Φ
-        // and the exact Gauss–Newton model of Φ_ε (the radial curvature reduced by
-        // ‖r‖²/(‖r‖² + ε²), Ceres' Triggs correction), which converges fast near the minimum;
-        // the convergence criteria stop the run only there. Least squares has one stage.
-        let mut newton = objective == Objective::Ve;
-        let mut eps = eps_first(phi0);
-        let mut cost = cost_of(objective, &norms, eps);
-        let cost0 = cost;
-        let mut lambda = options.initial_damping;
-        let mut nu = 2.0;
-        let mut dmax: Vec<f64> = Vec::new();
-        let mut reset_scale = false;
-        let mut scale_coords: Option<(usize, usize)> = None;
-        let mut design_generation = 0_usize;
-        let np = problem.n_points();
-        let termination = 'outer: loop {
-            // One Jacobian pass at the current point.
-            if run.summary.evaluations >= options.max_evaluations {
-                break Termination::EvaluationLimit;
-            }
-            if refresh && objective == Objective::Phi {
-                refresh = false;
-                let refreshed = accumulate(problem, &p, |_| (1.0, 0.0), false)
-                    .and_then(|h| design_of(&free, &h.h));
-                run.summary.evaluations += 1;
-                run.summary.jacobian_evaluations += 1;
-                match refreshed {
-                    Some(d) => {
-                        design = d;
-                        design_generation += 1;
-                    }
-                    None => {
-                        break Termination::NumericalFailure(format!(
-                            "the design's normal matrix failed at iteration {}",
-                            run.summary.iterations
-                        ));
-                    }
-                }
-            }
-            if !newton {
-                // The majorising stage's ε follows Φ.
-                eps = eps_first(norms.iter().sum::<f64>() / np as f64);
-                cost = cost_of(objective, &norms, eps);
-            }
-            let Some(normal) = accumulate(
-                problem,
-                &p,
-                |r| {
-                    let (w, c) = weight_of(objective, r, eps, np);
-                    (w, if newton { c } else { 0.0 })
-                },
-                objective == Objective::Ve,
-            ) else {
-                break Termination::NumericalFailure(format!(
-                    "the Jacobian is not finite at iteration {}",
-                    run.summary.iterations
-                ));
+        let termination = 'passes: loop {
+            let restricted = match lm.jacobian_pass().and_then(|normal| lm.restrict(normal)) {
+                Ok(r) => r,
+                Err(t) => break t,
             };
-            run.summary.evaluations += 1;
-            run.summary.jacobian_evaluations += 1;
-            // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
-            let dv = &free.d;
-            let hs = Mat::from_fn(n, n, |i, j| dv[i] * normal.h[(i, j)] * dv[j]);
-            let basis = free.ns.basis();
-            let t = &hs * basis;
-            let hz = basis.transpose() * &t;
-            let gz: Vec<f64> = (0..nf)
-                .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
-                .collect();
-            let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-            if newton && (cost == 0.0 || gmax <= options.gradient_tolerance * cost0) {
-                break Termination::Gradient;
-            }
-            // Directions whose design curvature is below rank_tolerance × the largest are not
-            // identifiable from the data: steps stay in the span q of the others. The
-            // Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once Φ is
-            // below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
-            // tolerance relaxes in proportion, so such a fit may use every direction.
-            let phi_now = norms.iter().sum::<f64>() / np as f64;
-            let tolerance = options.rank_tolerance * (1e4 * phi_now / phi0).min(1.0);
-            if objective == Objective::Ve {
-                // Uniform weights: the current matrix is the design.
-                let Some(d) = design_from_reduced(&hz) else {
-                    break Termination::NumericalFailure(format!(
-                        "the eigen-decomposition of the normal matrix failed at iteration {}",
-                        run.summary.iterations
-                    ));
-                };
-                design = d;
-                design_generation += 1;
-            }
-            let (mu0, dirs0) = (&design.0, &design.1);
-            let mu0_max = mu0[nf - 1].max(0.0);
-            // A zero tolerance holds nothing (not even a direction whose curvature rounds to ≤ 0).
-            let keep: Vec<usize> = (0..nf)
-                .filter(|&i| tolerance == 0.0 || mu0[i] > tolerance * mu0_max)
-                .collect();
-            run.summary.unidentifiable = nf - keep.len();
-            let q = (keep.len() < nf || dense_rows)
-                .then(|| Mat::from_fn(nf, keep.len(), |k, c| dirs0[(k, keep[c])]));
-            let (hq, gq) = match &q {
-                None => (hz.clone(), gz.clone()),
-                Some(q) => {
-                    let hq = q.transpose() * (&hz * q);
-                    let gq: Vec<f64> = (0..q.ncols())
-                        .map(|c| (0..nf).map(|k| q[(k, c)] * gz[k]).sum())
-                        .collect();
-                    (hq, gq)
-                }
-            };
-            // Damping: λ M with M the diagonal of the largest diag(H) seen in the step's
-            // coordinates (Moré's scaling, as MINPACK: it never shrinks, so a parameter whose
-            // column fades as the fit runs into a flat region is still damped at its earlier
-            // scale). The maximum runs while the coordinates stay the same: z, or the span q of
-            // the identifiable design directions until the design is refreshed (every iteration
-            // for ve, every IRLS stage for Φ); a new IRLS stage also restarts it (a new cost).
-            let nr = gq.len();
-            let coords = q.as_ref().map(|_| (design_generation, nr));
-            if reset_scale || coords != scale_coords || dmax.len() != nr {
-                reset_scale = false;
-                scale_coords = coords;
-                dmax = vec![0.0; nr];
-            }
-            for (i, v) in dmax.iter_mut().enumerate() {
-                *v = (*v).max(hq[(i, i)]);
-            }
-            // A direction the data have never seen is damped at unit scale (MINPACK's rule); no
-            // floor relative to the others, whose curvatures may legitimately span 10²⁰ along
-            // the path of a strongly nonlinear model (MGH10).
-            // Scaled by S = M^-½: H' = S H S, g' = S g, and the damping is λ I.
-            let sc: Vec<f64> = dmax
-                .iter()
-                .map(|&v| 1.0 / if v > 0.0 { v } else { 1.0 }.sqrt())
-                .collect();
-            let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
-            let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
-            // Least squares: the factor in the same coordinates, R_z = R D N and R' = R_z Q S,
-            // so that each step solves min ‖R' y + c‖² + λ‖y‖² by QR.
-            let factor = normal.factor.as_ref().map(|f| {
-                let rd = Mat::from_fn(n, n, |i, j| f.r[(i, j)] * dv[j]);
-                let rz = &rd * basis;
-                let rq = match &q {
-                    None => rz.clone(),
-                    Some(q) => &rz * q,
-                };
-                let rps = Mat::from_fn(n, nr, |i, j| rq[(i, j)] * sc[j]);
-                (rz, rps, &f.c)
-            });
-            // From the scaled span coordinates back to z.
-            let to_z = |y: &[f64]| -> Vec<f64> {
-                let y: Vec<f64> = y.iter().zip(&sc).map(|(y, s)| y * s).collect();
-                match &q {
-                    None => y,
-                    Some(q) => (0..nf)
-                        .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
-                        .collect(),
-                }
-            };
-            // Try steps until one is accepted or a criterion stops the run.
+            // Trial steps until one is accepted, the stage changes or a criterion stops the run.
             loop {
-                if run.summary.iterations >= options.max_iterations {
-                    break 'outer Termination::IterationLimit;
+                let summary = &lm.run.summary;
+                if summary.iterations >= options.max_iterations {
+                    break 'passes Termination::IterationLimit;
                 }
-                if run.summary.iterations > 0 && run.summary.evaluations >= options.max_evaluations
-                {
-                    break 'outer Termination::EvaluationLimit;
+                if summary.iterations > 0 && summary.evaluations >= options.max_evaluations {
+                    break 'passes Termination::EvaluationLimit;
                 }
-                run.summary.iterations += 1;
-                // Cholesky of the damped system (an SVD pseudo-inverse if it fails).
-                let damped = Mat::from_fn(nr, nr, |i, j| {
-                    hp[(i, j)] + if i == j { lambda } else { 0.0 }
-                });
-                let rhs: Vec<f64> = gp.iter().map(|g| -g).collect();
-                // With the factor: the QR of [R'; √λ I], whose R_λ also gives (H' + λI)⁻¹ for
-                // the acceleration; else Cholesky of the damped normal matrix.
-                let lsq = factor
-                    .as_ref()
-                    .and_then(|(_, rps, c)| damped_lstsq(rps, c, lambda));
-                let y = match &lsq {
-                    Some((y, _)) => y.clone(),
-                    None => solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]),
-                };
-                let delta = to_z(&y);
-                if delta.iter().any(|v| !v.is_finite()) {
-                    break 'outer Termination::NumericalFailure(format!(
-                        "the step is not finite at iteration {}",
-                        run.summary.iterations
-                    ));
-                }
-                // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
-                // refused (as a failed step) when 2‖a‖ > α‖δ‖ in the damping norm.
-                let mut total = delta.clone();
-                if options.geodesic_acceleration {
-                    let ynorm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
-                    let accel = (ynorm > 0.0)
-                        .then(|| curvature_gradient(problem, &free, &p, &delta, objective, eps))
-                        .flatten();
-                    run.summary.evaluations += 1;
-                    run.summary.jacobian_evaluations += 1;
-                    let Some(bz) = accel else {
-                        break 'outer Termination::NumericalFailure(format!(
-                            "the second derivative along the step is not finite at iteration {}",
-                            run.summary.iterations
-                        ));
-                    };
-                    let bq: Vec<f64> = match &q {
-                        None => bz,
-                        Some(q) => (0..nr)
-                            .map(|c| (0..nf).map(|k| q[(k, c)] * bz[k]).sum())
-                            .collect(),
-                    };
-                    let rhs: Vec<f64> = bq.iter().zip(&sc).map(|(b, s)| -b * s).collect();
-                    let ya = match &lsq {
-                        Some((_, rl)) => normal_solve(rl, &rhs),
-                        None => solve_spd(&damped, &rhs),
-                    }
-                    .unwrap_or_else(|| vec![f64::NAN; nr]);
-                    let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
-                    // A NaN ratio refuses the step too.
-                    let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
-                    if !small_enough {
-                        observer.iteration(&Iteration {
-                            iteration: run.summary.iterations,
-                            evaluations: run.summary.evaluations,
-                            cost,
-                            emm_um: norms.iter().sum::<f64>() / np as f64 * 1e3,
-                            damping: lambda,
-                            step: delta.iter().map(|v| v * v).sum::<f64>().sqrt(),
-                            accepted: false,
-                        });
-                        lambda *= nu;
-                        nu *= 2.0;
-                        if !lambda.is_finite() || lambda > 1e30 {
-                            break 'outer Termination::NumericalFailure(format!(
-                                "geodesic acceleration refused every step up to damping 1e30 at iteration {}",
-                                run.summary.iterations
-                            ));
-                        }
-                        continue;
-                    }
-                    for (t, a) in total.iter_mut().zip(to_z(&ya)) {
-                        *t += 0.5 * a;
-                    }
-                }
-                let step = total.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let small_step =
-                    step <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
-                // Predicted decrease of the quadratic model along δ (the velocity; the
-                // acceleration only bends the path): from the factor, −(cᵀv + ½‖v‖²) with
-                // v = R_z δ, else from H_z and g_z.
-                let pred = match &factor {
-                    Some((rz, _, c)) => {
-                        let v: Vec<f64> = (0..n)
-                            .map(|i| (0..nf).map(|k| rz[(i, k)] * delta[k]).sum())
-                            .collect();
-                        -(0..n).map(|i| c[i] * v[i] + 0.5 * v[i] * v[i]).sum::<f64>()
-                    }
-                    None => {
-                        let hd: Vec<f64> = (0..nf)
-                            .map(|i| (0..nf).map(|j| hz[(i, j)] * delta[j]).sum())
-                            .collect();
-                        -(0..nf)
-                            .map(|i| gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
-                            .sum::<f64>()
-                    }
-                };
-                let p_new = free.step(&p, &total);
-                let z_new: Vec<f64> = z.iter().zip(&total).map(|(a, b)| a + b).collect();
-                let norms_new = norms_of(problem, &p_new);
-                run.summary.evaluations += 1;
-                let cost_new = cost_of(objective, &norms_new, eps);
-                if !cost_new.is_finite() {
-                    run.nonfinite_trial();
-                }
-                let rho = if cost_new.is_finite() && pred > 0.0 {
-                    (cost - cost_new) / pred
-                } else {
-                    -1.0
-                };
-                let accepted = rho > 1e-4;
-                if accepted {
-                    run.improved();
-                }
-                observer.iteration(&Iteration {
-                    iteration: run.summary.iterations,
-                    evaluations: run.summary.evaluations,
-                    cost: if accepted { cost_new } else { cost },
-                    emm_um: if accepted {
-                        norms_new.iter().sum::<f64>() / np as f64 * 1e3
-                    } else {
-                        norms.iter().sum::<f64>() / np as f64 * 1e3
-                    },
-                    damping: lambda,
-                    step,
-                    accepted,
-                });
-                if accepted {
-                    let old = cost;
-                    p = p_new;
-                    z = z_new;
-                    norms = norms_new;
-                    cost = cost_new;
-                    lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
-                    nu = 2.0;
-                    let small_change = old - cost <= options.objective_tolerance * old;
-                    let phi = norms.iter().sum::<f64>() / np as f64;
-                    if newton && (small_step || small_change) {
-                        break 'outer if small_step {
-                            Termination::ParameterChange
-                        } else {
-                            Termination::ObjectiveChange
-                        };
-                    }
-                    if !newton && (small_step || old - cost <= MAJORISING_GAIN * old) {
-                        // The majorising stage has slowed down: Newton takes over.
-                        newton = true;
-                        eps = eps_final(phi);
-                        refresh = true;
-                        reset_scale = true;
-                        cost = cost_of(objective, &norms, eps);
-                    }
-                    break;
-                }
-                lambda *= nu;
-                nu *= 2.0;
-                if small_step || !lambda.is_finite() || lambda > 1e30 {
-                    let phi = norms.iter().sum::<f64>() / np as f64;
-                    if newton {
-                        break 'outer Termination::ParameterChange;
-                    }
-                    newton = true;
-                    eps = eps_final(phi);
-                    refresh = true;
-                    reset_scale = true;
-                    cost = cost_of(objective, &norms, eps);
-                    lambda = options.initial_damping;
-                    nu = 2.0;
-                    break;
+                lm.run.summary.iterations += 1;
+                let verdict = lm
+                    .trial_step(&restricted, observer)
+                    .and_then(|trial| match trial {
+                        Some(trial) => lm.judge(&restricted, trial, observer),
+                        None => Ok(Verdict::Retry),
+                    });
+                match verdict {
+                    Ok(Verdict::NextPass) => break,
+                    Ok(Verdict::Retry) => {}
+                    Err(t) => break 'passes t,
                 }
             }
         };
-        // Least squares: Gauss–Newton refinement of the converged point. The damped steps
-        // stop once the cost can no longer tell better from worse (steps refused at rounding
-        // raise λ until the step is negligible); the undamped steps from the QR factor go on to
-        // the minimum (to the Jacobian's condition, not its square) while they contract and the
-        // cost is no worse than its own rounding. Skipped when directions are held as
-        // unidentifiable.
-        if objective == Objective::Ve && termination.converged() && run.summary.unidentifiable == 0
+        if options.objective == Objective::Ve
+            && termination.converged()
+            && lm.run.summary.unidentifiable == 0
         {
-            // The cost's rounding: each residual is rounded to a few ε of its observation.
-            let rounding = 8.0 * f64::EPSILON * 2.0 / np as f64
-                * (0..np)
-                    .map(|i| norms[i] * (norms[i] + problem.observation_scale(i)))
-                    .sum::<f64>();
-            let mut last_step = f64::INFINITY;
-            for _ in 0..REFINEMENTS {
-                if run.summary.iterations >= options.max_iterations
-                    || run.summary.evaluations + 2 > options.max_evaluations
-                {
-                    break;
-                }
-                let Some(f) = accumulate(problem, &p, |r| weight_of(objective, r, eps, np), true)
-                    .and_then(|normal| normal.factor)
-                else {
-                    break;
-                };
-                run.summary.evaluations += 1;
-                run.summary.jacobian_evaluations += 1;
-                run.summary.iterations += 1;
-                let rz = &Mat::from_fn(n, n, |i, j| f.r[(i, j)] * free.d[j]) * free.ns.basis();
-                let Some((dz, _)) = damped_lstsq(&rz, &f.c, 0.0) else {
-                    break;
-                };
-                // Gauss–Newton converges linearly on a problem with residuals: go on while the
-                // steps contract and are not negligible.
-                let step = dz.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let contracting = step < last_step;
-                if !contracting
-                    || step <= options.parameter_tolerance * (znorm + options.parameter_tolerance)
-                {
-                    break;
-                }
-                last_step = step;
-                let p_new = free.step(&p, &dz);
-                let norms_new = norms_of(problem, &p_new);
-                run.summary.evaluations += 1;
-                let cost_new = cost_of(objective, &norms_new, eps);
-                let accepted = cost_new <= cost + rounding;
-                observer.iteration(&Iteration {
-                    iteration: run.summary.iterations,
-                    evaluations: run.summary.evaluations,
-                    cost: if accepted { cost_new } else { cost },
-                    emm_um: if accepted { &norms_new } else { &norms }
-                        .iter()
-                        .sum::<f64>()
-                        / np as f64
-                        * 1e3,
-                    damping: 0.0,
-                    step,
-                    accepted,
-                });
-                if !accepted {
-                    break;
-                }
-                z.iter_mut().zip(&dz).for_each(|(a, b)| *a += b);
-                p = p_new;
-                norms = norms_new;
-                cost = cost_new;
-            }
+            lm.refine(observer);
         }
+        let Lm { run, p, .. } = lm;
         run.finish(p, termination)
     }
 }
