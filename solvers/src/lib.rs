@@ -33,6 +33,7 @@ pub mod nlopt;
 pub mod nullspace;
 pub mod observability;
 pub mod options;
+pub mod polish;
 pub mod prior;
 mod run;
 pub mod strategy;

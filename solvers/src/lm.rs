@@ -6,7 +6,8 @@
 //! gradient test and keeps the identifiable design directions; *trial steps* at growing λ are
 //! each *judged* (gain ratio, then the parameter- and objective-change tests) until one is
 //! accepted; a Φ fit's *next stage* swaps the majorising model for Newton's; a converged
-//! least-squares fit is *refined*. Each stopping test is a predicate of its own.
+//! fit is *refined* (least squares) or *polished* (Φ). Each stopping test is a predicate of its
+//! own.
 //!
 //! * **Passes** ([`crate::kernels`]): each pass runs over the points in blocks of
 //!   [`crate::kernels::BLOCK`] on every thread, reduced in block order (the same bits whatever
@@ -31,8 +32,11 @@
 //!   are read from the design, the unweighted normal matrix (current for ve; refreshed at each
 //!   IRLS stage for Φ), and steps stay in the span of the others. A zero tolerance holds
 //!   nothing.
-//! * **Refinement** (least squares, nothing held): after convergence, undamped Gauss–Newton
-//!   steps from the QR factor, while they contract and the cost is no worse than its rounding.
+//! * **Refinement** (nothing held): after convergence, for least squares undamped Gauss–Newton
+//!   steps from the QR factor, while they contract and the cost is no worse than its rounding;
+//!   for Φ Newton steps judged by the exact gradient ([`crate::polish::settle`]): the optimum
+//!   of Φ interpolates some points (a residual at the kink of its norm), where the damped steps
+//!   slow down and stop on the objective-change test above it (5e-4 on test 1).
 //! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised on the
 //!   smoothed objective `Φ_ε = (1/n) Σ √(‖r_i‖² + ε²)` in two stages. The *majorising* stage
 //!   weights point i by `1/√(‖r_i‖² + ε²)` with its full curvature `J_iᵀJ_i`: that quadratic
@@ -754,6 +758,23 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     }
 }
 
+impl Lm<'_, '_, '_> {
+    /// Φ: Newton polish of the converged point ([`crate::polish::settle`]).
+    fn polish(&mut self, task: &Task) {
+        if let Some((q, report)) = crate::polish::settle(
+            task,
+            &self.p,
+            self.objective,
+            self.options.irls_final_epsilon,
+        ) {
+            self.run.summary.iterations += report.steps;
+            self.run.summary.jacobian_evaluations += report.jacobian_evaluations;
+            self.run.summary.evaluations += report.evaluations + report.jacobian_evaluations;
+            self.p = q;
+        }
+    }
+}
+
 impl Solver for LevenbergMarquardt {
     fn name(&self) -> &'static str {
         "lm"
@@ -807,6 +828,12 @@ impl Solver for LevenbergMarquardt {
             && lm.run.summary.unidentifiable == 0
         {
             lm.refine(observer);
+        }
+        if options.objective == Objective::Phi
+            && termination.converged()
+            && lm.run.summary.unidentifiable == 0
+        {
+            lm.polish(task);
         }
         let Lm { run, p, .. } = lm;
         run.finish(p, termination)

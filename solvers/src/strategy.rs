@@ -345,7 +345,7 @@ fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bo
 
 /// `sol` (of `task` under the gauge `g`'s constraints) settled on the gauge: moved along the
 /// held combinations onto it (a no-op when the engine kept the constraints) and polished to the
-/// optimum under its constraints ([`crate::gauge::settle`]: Newton steps until the gradient, not
+/// optimum under its constraints ([`crate::polish::settle`]: Newton steps until the gradient, not
 /// the cost's rounding, says it is there), so that the result does not depend on where the engine
 /// stopped along the weakly identified directions. Its Newton steps and passes are added to the
 /// summary.
@@ -354,7 +354,7 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
     let t0 = Instant::now();
     let mut out = sol;
     let projected = g.project(&out.params);
-    out.params = match crate::gauge::settle(
+    out.params = match crate::polish::settle(
         &g.apply(task),
         &projected,
         options.objective,
