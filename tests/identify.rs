@@ -96,6 +96,30 @@ fn with_the_papers_noise_the_fit_reaches_the_noise_error() {
     assert!((0.97..=1.02).contains(&ratio), "final/noise = {ratio}");
 }
 
+/// The same data give the same bits on one thread as on two or three, for Φ and ve: the passes
+/// over the points run on rayon's pool and are reduced in a fixed order, and the dense algebra
+/// (faer, without its rayon feature) runs on one thread whatever the pool.
+#[test]
+fn identification_gives_the_same_bits_on_any_number_of_threads() {
+    let sim = simulate("test4", TrackerNoise::PAPER, 9);
+    let model = Model::default_xcfz();
+    for objective in [Objective::Phi, Objective::Ve] {
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| fit(&model, &sim.measurements, objective))
+        };
+        let one = on(1);
+        for threads in [2, 3] {
+            let other = on(threads);
+            assert_eq!(one.params, other.params, "{objective}, {threads} threads");
+            assert_eq!(one.iterations(), other.iterations());
+        }
+    }
+}
+
 fn model_with(linear: &str, rotary: &str) -> Model {
     let rotary_block = if rotary.is_empty() {
         String::new()

@@ -770,6 +770,7 @@ impl Lm<'_, '_, '_> {
             self.run.summary.iterations += report.steps;
             self.run.summary.jacobian_evaluations += report.jacobian_evaluations;
             self.run.summary.evaluations += report.evaluations + report.jacobian_evaluations;
+            self.run.summary.polished = true;
             self.p = q;
         }
     }

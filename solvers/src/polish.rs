@@ -113,9 +113,9 @@ pub fn settle(
             crate::Objective::Ve => 2.0 * cost.sqrt(),
         };
     // Within the cost's rounding the cost cannot tell a better point from a worse one: there
-    // the gradient decides. `best` is the point of smallest decrement seen since the cost last
-    // fell by more than its rounding, `stale` the steps since it was found.
-    let mut best: Option<(Vec<f64>, f64)> = None;
+    // the gradient decides. `best` is the point of smallest decrement (with its cost) seen since
+    // the cost last fell by more than its rounding, `stale` the steps since it was found.
+    let mut best: Option<(Vec<f64>, f64, f64)> = None;
     let mut stale = 0;
     // Whether the exact second-order term is in, and the last decrement whose step was taken
     // above the cost's rounding.
@@ -192,14 +192,16 @@ pub fn settle(
             )?)?;
         }
         match &best {
-            Some((_, d0)) if decrement >= *d0 => {
+            // Below the best's cost by more than the rounding: better, whatever its decrement
+            // (steps each within the rounding add up).
+            Some((_, d0, c0)) if decrement >= *d0 && cost >= c0 - floor => {
                 stale += 1;
                 if stale >= STALE_STEPS {
                     break;
                 }
             }
             _ => {
-                best = Some((x.clone(), decrement));
+                best = Some((x.clone(), decrement, cost));
                 stale = 0;
             }
         }
@@ -244,7 +246,7 @@ pub fn settle(
         }
         report.steps += 1;
     }
-    if let Some((x0, d0)) = best {
+    if let Some((x0, d0, _)) = best {
         (x, report.decrement) = (x0, d0);
     }
     Some((x, report))

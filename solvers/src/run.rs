@@ -128,6 +128,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 jacobian_evaluations: 0,
                 time_s: 0.0,
                 termination: Termination::NoFreeParameters,
+                polished: false,
             },
             edge: Edge::default(),
             t0: Instant::now(),

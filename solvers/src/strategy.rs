@@ -347,13 +347,19 @@ fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bo
 /// held combinations onto it (a no-op when the engine kept the constraints) and polished to the
 /// optimum under its constraints ([`crate::polish::settle`]: Newton steps until the gradient, not
 /// the cost's rounding, says it is there), so that the result does not depend on where the engine
-/// stopped along the weakly identified directions. Its Newton steps and passes are added to the
-/// summary.
+/// stopped along the weakly identified directions (not again when the engine polished it under
+/// them itself, [`Summary::polished`]). Its Newton steps and passes are added to the summary.
 fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solution {
     let problem = &task.problem;
     let t0 = Instant::now();
     let mut out = sol;
     let projected = g.project(&out.params);
+    if out.summary.polished {
+        // The engine polished it under these very constraints.
+        out.params = projected;
+        out.summary.final_ = evaluate(problem, &out.params);
+        return out;
+    }
     out.params = match crate::polish::settle(
         &g.apply(task),
         &projected,

@@ -114,6 +114,11 @@ pub struct Summary {
     pub time_s: f64,
     /// The criterion that stopped it.
     pub termination: Termination,
+    /// Whether the engine ended with a Newton polish of the optimum under the task's
+    /// constraints ([`crate::polish::settle`]; the native LM on a converged Φ fit with nothing
+    /// held), so that the identification need not polish it again.
+    #[serde(default)]
+    pub polished: bool,
 }
 
 impl Summary {
