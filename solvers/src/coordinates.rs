@@ -124,31 +124,39 @@ pub(crate) struct Reduced {
     pub(crate) gz: Vec<f64>,
 }
 
+/// Normal equations in the parameters reduced to the scaled free coordinates
+/// `p = D (s₀ + N z)`: `H_z = Nᵀ D H D N` and, with `g`, `g_z = Nᵀ D g`.
+pub(crate) fn reduce(
+    d: &[f64],
+    basis: faer::MatRef<'_, f64>,
+    h: &Mat<f64>,
+    g: Option<&[f64]>,
+) -> (Mat<f64>, Vec<f64>) {
+    let (n, nf) = (d.len(), basis.ncols());
+    let hs = Mat::from_fn(n, n, |i, j| d[i] * h[(i, j)] * d[j]);
+    let hz = basis.transpose() * (&hs * basis);
+    let gz = g.map_or_else(Vec::new, |g| {
+        (0..nf)
+            .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * g[i]).sum())
+            .collect()
+    });
+    (hz, gz)
+}
+
 /// [`Reduced`] normal equations; `None` when the Jacobian is not finite or the constraints
 /// cannot be eliminated.
 pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
-    let n = params.len();
     let normal = accumulate(&task.problem, params, |_| (1.0, 0.0), false)?;
     let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
     let ns = ns.ok()?;
-    let nf = ns.n_free();
-    let basis = ns.basis();
-    let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
-    let hz = basis.transpose() * (&hs * basis);
-    let gz: Vec<f64> = (0..nf)
-        .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * normal.g[i]).sum())
-        .collect();
+    let (hz, gz) = reduce(&d, ns.basis(), &normal.h, Some(&normal.g));
     Some(Reduced { d, ns, hz, gz })
 }
 
 /// The design's curvatures (ascending, Marquardt-scaled) and their directions in the free
 /// coordinates z, from a normal matrix `h` in the parameters.
 pub(crate) fn design_of(free: &Free, h: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)> {
-    let n = h.nrows();
-    let dv = &free.d;
-    let basis = free.ns.basis();
-    let hs = Mat::from_fn(n, n, |i, j| dv[i] * h[(i, j)] * dv[j]);
-    design_from_reduced(&(basis.transpose() * (&hs * basis)))
+    design_from_reduced(&reduce(&free.d, free.ns.basis(), h, None).0)
 }
 
 /// [`design_of`] from the reduced normal matrix `H_z`.

@@ -69,7 +69,7 @@
 //! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
-use crate::coordinates::{Free, design_from_reduced, design_of};
+use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
 use crate::kernels::{accumulate, damped_lstsq, normal_solve, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
@@ -317,13 +317,13 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     }
 
     /// The progress report of a trial.
-    fn report(&self, observer: &mut dyn Observer, step: f64, accepted: bool) {
+    fn report(&self, observer: &mut dyn Observer, damping: f64, step: f64, accepted: bool) {
         observer.iteration(&Iteration {
             iteration: self.run.summary.iterations,
             evaluations: self.run.summary.evaluations,
             cost: self.cost,
             emm_um: self.phi() * 1e3,
-            damping: self.lambda,
+            damping,
             step,
             accepted,
         });
@@ -412,13 +412,8 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         let nf = self.free.n_free();
         // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
         let dv = &self.free.d;
-        let hs = Mat::from_fn(n, n, |i, j| dv[i] * normal.h[(i, j)] * dv[j]);
         let basis = self.free.ns.basis();
-        let t = &hs * basis;
-        let hz = basis.transpose() * &t;
-        let gz: Vec<f64> = (0..nf)
-            .map(|k| (0..n).map(|i| basis[(i, k)] * dv[i] * normal.g[i]).sum())
-            .collect();
+        let (hz, gz) = reduce(dv, basis, &normal.h, Some(&normal.g));
         let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
         if self.gradient_converged(gmax) {
             return Err(Termination::Gradient);
@@ -580,7 +575,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
             if !small_enough {
                 let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
-                self.report(observer, step, false);
+                self.report(observer, self.lambda, step, false);
                 self.lambda *= self.nu;
                 self.nu *= 2.0;
                 if self.damping_exhausted() {
@@ -645,7 +640,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         };
         let accepted = rho > 1e-4;
         if !accepted {
-            self.report(observer, step, false);
+            self.report(observer, self.lambda, step, false);
             self.lambda *= self.nu;
             self.nu *= 2.0;
             if small_step || self.damping_exhausted() {
@@ -663,7 +658,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         self.z = z_new;
         self.norms = norms_new;
         self.cost = cost_new;
-        self.report(observer, step, true);
+        self.report(observer, self.lambda, step, true);
         self.lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
         self.nu = 2.0;
         match self.stage {
@@ -748,9 +743,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
                 self.norms = norms_new;
                 self.cost = cost_new;
             }
-            let lambda = std::mem::replace(&mut self.lambda, 0.0);
-            self.report(observer, step, accepted);
-            self.lambda = lambda;
+            self.report(observer, 0.0, step, accepted);
             if !accepted {
                 break;
             }

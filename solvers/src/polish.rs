@@ -62,31 +62,13 @@ pub fn settle(
     use crate::loss::{cost_of, norms, weight_of};
     let problem = &task.problem;
     let np = problem.n_points();
-    let n = p.len();
     let plain = crate::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)?;
     let (d, ns) = crate::coordinates::scaled_null_space(&plain.h, &task.constraints, p);
-    let ns = ns.ok()?;
-    let nf = ns.n_free();
-    let basis = ns.basis();
     // Parameters a constraint fixes on its own stay exactly at their value (the null space
     // leaves rounding there).
-    let fixed: Vec<(usize, f64)> = task
-        .constraints
-        .rows
-        .iter()
-        .filter_map(|row| match row.coeffs.as_slice() {
-            [(j, c)] if *c != 0.0 => Some((*j, row.rhs / c)),
-            _ => None,
-        })
-        .collect();
-    let at = |z: &[f64]| -> Vec<f64> {
-        let s = ns.expand(z);
-        let mut x: Vec<f64> = s.iter().zip(&d).map(|(s, d)| s * d).collect();
-        for &(j, v) in &fixed {
-            x[j] = v;
-        }
-        x
-    };
+    let free = crate::coordinates::Free::new(d, ns.ok()?, &task.constraints);
+    let (d, nf, basis) = (&free.d, free.n_free(), free.ns.basis());
+    let at = |z: &[f64]| free.params(z);
     let mut z = vec![0.0; nf];
     let mut x = at(&z);
     let eps = irls_final_epsilon * problem.phi(&x);
@@ -128,11 +110,7 @@ pub fn settle(
         let normal =
             crate::kernels::accumulate(problem, &x, |r| weight_of(objective, r, eps, np), false)?;
         report.jacobian_evaluations += 1;
-        let hs = Mat::from_fn(n, n, |i, j| d[i] * normal.h[(i, j)] * d[j]);
-        let hz = basis.transpose() * (&hs * basis);
-        let gz: Vec<f64> = (0..nf)
-            .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * normal.g[i]).sum())
-            .collect();
+        let (hz, gz) = crate::coordinates::reduce(d, basis, &normal.h, Some(&normal.g));
         // A step taken within the cost's rounding is judged by the slope of the cost along it,
         // which the exact gradient gives to a much finer rounding than the cost's: when the
         // slope at its end is positive and above OVERSHOOT of its start's, the step went past
@@ -180,7 +158,7 @@ pub fn settle(
         // dual numbers, k (k + 1) / 2 passes for k directions) for the rest of the run.
         let (mut dz, mut decrement) = if exact {
             newton(&weak_second_order(
-                problem, &x, &d, basis, &hz, objective, eps,
+                problem, &x, d, basis, &hz, objective, eps,
             )?)?
         } else {
             newton(&hz)?
@@ -188,7 +166,7 @@ pub fn settle(
         if !exact && previous.is_some_and(|d0| decrement > SLOW * d0) {
             exact = true;
             (dz, decrement) = newton(&weak_second_order(
-                problem, &x, &d, basis, &hz, objective, eps,
+                problem, &x, d, basis, &hz, objective, eps,
             )?)?;
         }
         match &best {
