@@ -18,6 +18,14 @@ use volver_core::problem::{Problem, norm};
 /// runs in block order (so the block size, not the number of threads, fixes the rounding).
 pub const BLOCK: usize = 512;
 
+thread_local! {
+    /// A thread's scratch for [`block_part`]: the block's weighted rows (3 [`BLOCK`] (n+1)) and
+    /// one point's Jacobian rows (3n), kept between passes (a fresh block buffer is a large
+    /// allocation, mapped and zeroed page by page at every pass).
+    static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+}
+
 /// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
 /// they come from.
 pub(crate) struct Normal {
@@ -69,10 +77,15 @@ pub(crate) fn accumulate(
         let last = (first + wave).min(blocks);
         let parts: Vec<Option<BlockPart>> = (first..last)
             .into_par_iter()
-            .map_init(
-                || (vec![0.0; 3 * BLOCK * nc], vec![0.0; 3 * n]),
-                |(blk, row), b| block_part(problem, p, &weight, factor, b, blk, row),
-            )
+            .map(|b| {
+                SCRATCH.with(|s| {
+                    let (blk, row) = &mut *s.borrow_mut();
+                    // Every entry a block reads it writes first: no zeroing needed.
+                    blk.resize(3 * BLOCK * nc, 0.0);
+                    row.resize(3 * n, 0.0);
+                    block_part(problem, p, &weight, factor, b, blk, row)
+                })
+            })
             .collect();
         for part in parts {
             let part = part?;
@@ -175,12 +188,12 @@ fn block_part(
         qr_update(&mut rb, nc, &mut blk[..rows * nc], rows);
         rb
     } else {
-        let mut hb = Mat::<f64>::zeros(n, n);
+        let mut hb = vec![0.0; n * n];
         let jv = faer::MatRef::from_column_major_slice(&blk[..rows * nc], rows, nc).subcols(0, n);
         triangular_matmul(
-            hb.as_mut(),
+            faer::MatMut::from_column_major_slice_mut(&mut hb, n, n),
             BlockStructure::TriangularLower,
-            Accum::Add,
+            Accum::Replace,
             jv.transpose(),
             BlockStructure::Rectangular,
             jv,
@@ -188,7 +201,7 @@ fn block_part(
             1.0,
             Par::Seq,
         );
-        (0..n * n).map(|k| hb[(k % n, k / n)]).collect()
+        hb
     };
     Some(BlockPart { g, m })
 }

@@ -243,6 +243,7 @@ fn kernels(size: &Size) -> serde_json::Value {
 /// Counts steps and allocations between the first and the last step.
 #[derive(Default)]
 struct Steps {
+    start: Option<Instant>,
     steps: usize,
     first: Option<(usize, usize)>,
     last: Option<(usize, usize)>,
@@ -256,8 +257,15 @@ impl Observer for Steps {
         self.last = Some(now);
         if std::env::var_os("VOLVER_BENCH_TRACE").is_some() {
             eprintln!(
-                "step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {} allocations {}",
-                it.iteration, it.evaluations, it.cost, it.emm_um, it.damping, it.accepted, now.1
+                "{:9.6} s step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {} allocations {}",
+                self.start.map_or(f64::NAN, |t| t.elapsed().as_secs_f64()),
+                it.iteration,
+                it.evaluations,
+                it.cost,
+                it.emm_um,
+                it.damping,
+                it.accepted,
+                now.1
             );
         }
     }
@@ -277,8 +285,11 @@ fn run_engine(size: &Size, name: &str) -> serde_json::Value {
         max_evaluations: 10 * (size.max_steps)(name) + 20,
         ..Options::default()
     };
-    let mut steps = Steps::default();
     let t = Instant::now();
+    let mut steps = Steps {
+        start: Some(t),
+        ..Steps::default()
+    };
     let id = identify(
         engine.as_ref(),
         problem,
