@@ -244,6 +244,8 @@ fn kernels(size: &Size) -> serde_json::Value {
 #[derive(Default)]
 struct Steps {
     start: Option<Instant>,
+    /// Accepted steps: time since the start (s) and EMM (µm).
+    trace: Vec<(f64, f64)>,
     steps: usize,
     first: Option<(usize, usize)>,
     last: Option<(usize, usize)>,
@@ -255,17 +257,14 @@ impl Observer for Steps {
         let now = (self.steps, ALLOCATIONS.load(Ordering::Relaxed));
         self.first.get_or_insert(now);
         self.last = Some(now);
+        let t = self.start.map_or(f64::NAN, |t| t.elapsed().as_secs_f64());
+        if it.accepted {
+            self.trace.push((t, it.emm_um));
+        }
         if std::env::var_os("VOLVER_BENCH_TRACE").is_some() {
             eprintln!(
-                "{:9.6} s step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {} allocations {}",
-                self.start.map_or(f64::NAN, |t| t.elapsed().as_secs_f64()),
-                it.iteration,
-                it.evaluations,
-                it.cost,
-                it.emm_um,
-                it.damping,
-                it.accepted,
-                now.1
+                "{t:9.6} s step {:4} evals {:5} cost {:.9e} EMM {:.6} µm λ {:.1e} {} allocations {}",
+                it.iteration, it.evaluations, it.cost, it.emm_um, it.damping, it.accepted, now.1
             );
         }
     }
@@ -303,8 +302,12 @@ fn run_engine(size: &Size, name: &str) -> serde_json::Value {
         (Some((s0, a0)), Some((s1, a1))) if s1 > s0 => (a1 - a0) as f64 / (s1 - s0) as f64,
         _ => f64::NAN,
     };
+    let mut trace = steps.trace;
+    trace.push((time_s, id.final_.stats.emm_um));
     serde_json::json!({
         "engine": name,
+        "trace": trace,
+        "threads": rayon_threads(),
         "phi_mm": problem.phi(&id.params),
         "steps": id.iterations(),
         "evaluations": id.evaluations(),
@@ -317,13 +320,78 @@ fn run_engine(size: &Size, name: &str) -> serde_json::Value {
     })
 }
 
+/// The threads of rayon's pool (the native engine's passes).
+fn rayon_threads() -> usize {
+    rayon::current_num_threads()
+}
+
+/// The expert Ceres program fitting Φ on a size with `threads` threads, as JSON.
+#[cfg(feature = "ceres")]
+fn run_expert(size: &Size, threads: usize) -> serde_json::Value {
+    use volver_benchmarks::expert::Expert;
+    let (model, data) = build(size);
+    let problem = Problem::new(&model, &data).expect("problem");
+    let name = format!(
+        "expert Ceres, {threads} thread{}",
+        if threads > 1 { "s" } else { "" }
+    );
+    let t0 = Instant::now();
+    // The same start as volver's identification: the tracker fitted rigidly first.
+    let prepared = volver_solvers::init::init_tracker(&problem, &model.initial_params())
+        .and_then(|start| Expert::new(&problem, &start).map(|e| (start, e)));
+    let (start, expert) = match prepared {
+        Ok(x) => x,
+        Err(e) => return serde_json::json!({ "engine": name, "error": e }),
+    };
+    let before = t0.elapsed().as_secs_f64();
+    // ε = 1 nm: the smoothed EMM is within 0.001 µm of the EMM.
+    let fit = match expert.fit(&start, threads, 1e-6) {
+        Ok(f) => f,
+        Err(e) => return serde_json::json!({ "engine": name, "error": e }),
+    };
+    let time_s = t0.elapsed().as_secs_f64();
+    let mut trace: Vec<(f64, f64)> = fit
+        .trace
+        .iter()
+        .map(|&(t, emm)| (before + t, emm * 1e3))
+        .collect();
+    trace.push((time_s, fit.final_emm_mm * 1e3));
+    serde_json::json!({
+        "engine": name,
+        "trace": trace,
+        "threads": threads,
+        "phi_mm": problem.phi(&fit.params),
+        "steps": fit.iterations,
+        "time_s": time_s,
+        "termination": fit.message,
+        "peak_mb": peak_mb(),
+        "params": problem.n_params(),
+        "points": problem.n_points(),
+    })
+}
+
+#[cfg(not(feature = "ceres"))]
+fn run_expert(_: &Size, threads: usize) -> serde_json::Value {
+    serde_json::json!({
+        "engine": format!("expert Ceres, {threads} threads"),
+        "error": "built without the `ceres` feature",
+    })
+}
+
 /// Runs `child <what> <size>` in a fresh process and parses its JSON line.
 fn child(what: &str, size: &str) -> serde_json::Value {
+    child_with_threads(what, size, None)
+}
+
+/// [`child`] with rayon's pool at `threads` threads (the native engine's passes).
+fn child_with_threads(what: &str, size: &str, threads: Option<usize>) -> serde_json::Value {
     let exe = std::env::current_exe().expect("own path");
-    let out = Command::new(exe)
-        .args(["child", what, size])
-        .output()
-        .expect("child process");
+    let mut command = Command::new(exe);
+    command.args(["child", what, size]);
+    if let Some(t) = threads {
+        command.env("RAYON_NUM_THREADS", t.to_string());
+    }
+    let out = command.output().expect("child process");
     let text = String::from_utf8_lossy(&out.stdout);
     match text
         .lines()
@@ -412,6 +480,76 @@ fn report(size: &Size) {
     }
 }
 
+/// Time (s) at which a trace first comes within `within` µm of `target` µm.
+fn time_to(trace: &serde_json::Value, target: f64, within: f64) -> f64 {
+    trace
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|p| Some((p[0].as_f64()?, p[1].as_f64()?)))
+        .find(|&(_, emm)| emm <= target + within)
+        .map_or(f64::NAN, |(t, _)| t)
+}
+
+/// The native engine against the expert Ceres program on test 4, 1 and 2 threads each, best
+/// of `reps` runs (each in its own process).
+fn reference(reps: usize) {
+    println!(
+        "\n## Test 4 against Ceres at its best (the expert program, `benchmarks/ceres/expert.cpp`)\n"
+    );
+    let best_of = |what: &str, threads: usize| -> serde_json::Value {
+        (0..reps)
+            .map(|_| child_with_threads(what, "test4", Some(threads)))
+            .min_by(|a, b| f(a, "time_s").total_cmp(&f(b, "time_s")))
+            .unwrap_or_default()
+    };
+    let runs: Vec<serde_json::Value> = [1, 2]
+        .into_iter()
+        .flat_map(|t| [best_of("lm", t), best_of(&format!("expert:{t}"), t)])
+        .collect();
+    if let Some(e) = runs.iter().find_map(|r| r["error"].as_str()) {
+        println!("Not measured: {e}.");
+        return;
+    }
+    // The target: the lower final EMM of the four runs, within 0.01 µm.
+    let best = runs
+        .iter()
+        .filter_map(|r| r["trace"].as_array()?.last()?[1].as_f64())
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "Φ from the model's start (tracker fitted rigidly first, included in the times); best of \
+         {reps} runs by time to stop; target: the lowest final EMM, {best:.4} µm, within 0.01 µm.\n"
+    );
+    println!(
+        "| engine | threads | iterations | final EMM µm | time to stop ms | time to target ms | × volver, stop | × volver, target | termination |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    for pair in runs.chunks(2) {
+        let ours = &pair[0];
+        let ours_target = time_to(&ours["trace"], best, 0.01);
+        for r in pair {
+            let target = time_to(&r["trace"], best, 0.01);
+            let final_emm = r["trace"]
+                .as_array()
+                .and_then(|t| t.last())
+                .and_then(|p| p[1].as_f64())
+                .unwrap_or(f64::NAN);
+            println!(
+                "| {} | {} | {} | {:.4} | {:.1} | {:.1} | {:.2} | {:.2} | {} |",
+                r["engine"].as_str().unwrap_or("?"),
+                r["threads"],
+                r["steps"],
+                final_emm,
+                1e3 * f(r, "time_s"),
+                1e3 * target,
+                f(r, "time_s") / f(ours, "time_s"),
+                target / ours_target,
+                r["termination"].as_str().unwrap_or("?"),
+            );
+        }
+    }
+}
+
 fn scaling() {
     println!("\n## Scaling of the native LM (Φ, to convergence or 30 steps)\n");
     println!("| model | params | points | steps | time s | s/step |");
@@ -463,6 +601,8 @@ fn main() {
         let size = size_of(&args[3]);
         let v = if args[2] == "kernels" {
             kernels(&size)
+        } else if let Some(t) = args[2].strip_prefix("expert:") {
+            run_expert(&size, t.parse().expect("expert:<threads>"))
         } else {
             run_engine(&size, &args[2])
         };
@@ -475,6 +615,7 @@ fn main() {
         "volver bench — engines: {}; one process per measurement; Φ from the model's start",
         volver_solvers::engine_names().join(", ")
     );
+    reference(if quick { 3 } else { 7 });
     for size in sizes() {
         if quick && size.key == "100k" {
             continue;
