@@ -884,6 +884,7 @@ impl Solver for LevenbergMarquardt {
             lm.refine(observer);
         }
         if options.objective == Objective::Phi
+            && options.polish
             && termination.converged()
             && lm.run.summary.unidentifiable == 0
         {

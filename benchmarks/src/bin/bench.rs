@@ -2,7 +2,8 @@
 //! run.
 //!
 //! Run: `cargo run --release -p volver-benchmarks --all-features --bin bench`
-//! (`-- --quick` for the two smaller sizes only).
+//! (`-- --quick` for the two smaller sizes only, `-- --reference-only` for the comparison with the
+//! expert Ceres program only).
 //!
 //! Three problems: the paper's test 4 (1 040 points, the paper's model), 10 000 points × ~200
 //! parameters and 100 000 points × ~500 parameters (the XCFZ machine with Legendre and Fourier
@@ -616,6 +617,9 @@ fn main() {
         volver_solvers::engine_names().join(", ")
     );
     reference(if quick { 3 } else { 7 });
+    if args.iter().any(|a| a == "--reference-only") {
+        return;
+    }
     for size in sizes() {
         if quick && size.key == "100k" {
             continue;
