@@ -4,6 +4,9 @@
 //! regressors of every point, the model's constraints eliminated by substitution) and maps the
 //! free coefficients back to the model's parameters.
 
+// Linked for libceres and libglog, which the program needs (its build metadata gave the headers).
+use volver_ceres_sys as _;
+
 use std::ffi::CStr;
 use std::os::raw::{c_char, c_int};
 use std::time::Instant;

@@ -63,6 +63,11 @@ fn main() {
         )
     });
 
+    // For crates that compile C++ of their own against Ceres (`links = "ceres"`: they read
+    // DEP_CERES_INCLUDE and DEP_CERES_EIGEN).
+    println!("cargo:include={}", ceres.display());
+    println!("cargo:eigen={}", eigen.display());
+
     cc::Build::new()
         .cpp(true)
         .std("c++17")
