@@ -143,7 +143,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
     let start = init_tracker(&problem, &model.initial_params())
         .map_err(anyhow::Error::msg)
         .context("fitting the tracker pose")?;
-    let task = Task::new(problem);
+    let task = Task::new(problem.clone());
     let (task, held) = if a.gauge {
         let lm = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
         let t = hold_weak(&task, &lm.params, 100.0 * options.rank_tolerance)

@@ -67,7 +67,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
     let data = &out.measurements;
     // 2. Identify with the starting model.
     let p1 = Problem::new(&model, data)?;
-    let id1 = fit(p1);
+    let id1 = fit(p1.clone());
     if id1.termination.failed() {
         anyhow::bail!("identification failed: {}", id1.termination);
     }
@@ -126,7 +126,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
     // 4. Add it and refit.
     let model2 = Model::new(m.clone(), candidate.spec.clone())?;
     let p2 = Problem::new(&model2, data)?;
-    let id2 = fit(p2);
+    let id2 = fit(p2.clone());
     if id2.termination.failed() {
         anyhow::bail!("identification failed: {}", id2.termination);
     }
@@ -147,7 +147,13 @@ pub fn run(out_dir: &Path) -> Result<()> {
         (best.id.as_str(), &model2, &id2.params),
     ] {
         let problem = Problem::new(mdl, &reference.measurements)?;
-        let cv = cross_validate(&lm, problem, params, &options, &mut volver::solvers::Silent);
+        let cv = cross_validate(
+            &lm,
+            problem.clone(),
+            params,
+            &options,
+            &mut volver::solvers::Silent,
+        );
         cross.push(report::CrossRow::new(label.to_string(), &problem, &cv));
     }
     println!(

@@ -394,7 +394,7 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
     use volver::solvers::identifiability::analyse;
     let (m, model, set) = inputs.load()?;
     let problem = Problem::new(&model, &set)?;
-    let id = volver::solvers::strategy::fit(problem);
+    let id = volver::solvers::strategy::fit(problem.clone());
     if id.termination.failed() {
         anyhow::bail!("the fit failed: {}", id.termination);
     }
@@ -434,7 +434,7 @@ fn diagnose_command(inputs: Inputs, top: usize, json: bool) -> Result<()> {
     };
     let options = Options::default();
     let ident = analyse(
-        &volver::solvers::Task::new(problem),
+        &volver::solvers::Task::new(problem.clone()),
         &id.params,
         options.rank_tolerance,
         0.99,
@@ -632,7 +632,7 @@ fn report_command(a: ReportArgs) -> Result<()> {
     compensation::check_max_u(a.max_u_um)?;
     let tool = compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let problem = Problem::new(&model, &data)?;
-    let id1 = volver::solvers::strategy::fit(problem);
+    let id1 = volver::solvers::strategy::fit(problem.clone());
     if id1.termination.failed() {
         anyhow::bail!("the fit failed: {}", id1.termination);
     }
@@ -674,7 +674,7 @@ fn report_command(a: ReportArgs) -> Result<()> {
         let reference = Problem::new(last_model, &set)?;
         let cv = volver::solvers::strategy::cross_validate(
             &lm,
-            reference,
+            reference.clone(),
             last_params,
             &options,
             &mut volver::solvers::Silent,
@@ -848,7 +848,7 @@ fn identify_command(a: IdentifyArgs) -> Result<()> {
     }
     let mut id = identify(
         solver.as_ref(),
-        problem,
+        problem.clone(),
         &model.initial_params(),
         &strategy,
         &options,

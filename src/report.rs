@@ -268,7 +268,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let before = problem.residuals(&before_params);
     let after = problem.residuals(params);
     let options = Options::default();
-    let task = volver::solvers::Task::new(problem);
+    let task = volver::solvers::Task::new(problem.clone());
     let ident = analyse(&task, params, options.rank_tolerance, 0.95);
     // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held
     // combinations' prior.

@@ -448,11 +448,51 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         .iter()
         .map(|s| Problem::new(&full, s))
         .collect::<volver::core::Result<_>>()?;
-    let t1 = identify_errors(&lm, pr[0], &p0, Errors::Linear, &st, &options, &mut Silent);
-    let t2 = identify_errors(&lm, pr[1], &p0, Errors::Rotary, &st, &options, &mut Silent);
-    let t3 = identify_errors(&lm, pr[2], &p0, Errors::All, &st, &options, &mut Silent);
-    let t4 = identify_errors(&lm, pr[3], &p0, Errors::All, &st, &options, &mut Silent);
-    let (_, t5) = combined(&lm, pr[0], pr[4], &p0, &st, &options, &mut Silent);
+    let t1 = identify_errors(
+        &lm,
+        pr[0].clone(),
+        &p0,
+        Errors::Linear,
+        &st,
+        &options,
+        &mut Silent,
+    );
+    let t2 = identify_errors(
+        &lm,
+        pr[1].clone(),
+        &p0,
+        Errors::Rotary,
+        &st,
+        &options,
+        &mut Silent,
+    );
+    let t3 = identify_errors(
+        &lm,
+        pr[2].clone(),
+        &p0,
+        Errors::All,
+        &st,
+        &options,
+        &mut Silent,
+    );
+    let t4 = identify_errors(
+        &lm,
+        pr[3].clone(),
+        &p0,
+        Errors::All,
+        &st,
+        &options,
+        &mut Silent,
+    );
+    let (_, t5) = combined(
+        &lm,
+        pr[0].clone(),
+        pr[4].clone(),
+        &p0,
+        &st,
+        &options,
+        &mut Silent,
+    );
     tables.push(Table {
         title: "Table 11: the tests of section 6.2, each identified on its own data, paper's noise"
             .into(),
@@ -490,8 +530,16 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                one; test 2's final EMM is the noise of a single position seen from 1.2 m."
             .into(),
     });
-    let (ind, _, _) = independent(&lm, pr[0], pr[1], &p0, &st, &options, &mut Silent);
-    let cv = |params: &[f64]| cross_validate(&lm, pr[3], params, &options, &mut Silent);
+    let (ind, _, _) = independent(
+        &lm,
+        pr[0].clone(),
+        pr[1].clone(),
+        &p0,
+        &st,
+        &options,
+        &mut Silent,
+    );
+    let cv = |params: &[f64]| cross_validate(&lm, pr[3].clone(), params, &options, &mut Silent);
     let i12 = |emm, emax, res| figures(628.69, 1893.27, emm, emax, res);
     tables.push(Table {
         title: "Table 12: compensation of the reference test 4 by each method's errors".into(),

@@ -144,7 +144,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     }
     let mut id = identify(
         solver.as_ref(),
-        problem,
+        problem.clone(),
         &model.initial_params(),
         &Strategy::default(),
         &options,

@@ -143,7 +143,7 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
             max_evaluations: 5000,
             ..Options::default()
         };
-        let task = Task::new(problem);
+        let task = Task::new(problem.clone());
         let first = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
         let gauge = hold_weak(&task, &first.params, 100.0 * options.rank_tolerance).unwrap();
         let held = gauge.constraints.rows.len() - task.constraints.rows.len();

@@ -25,7 +25,7 @@ fn ranked(model: &Model, truth: Truth, effects: Vec<Effect>) -> Vec<Score> {
     sim.effects = effects;
     let data = sim.run().unwrap().measurements;
     let problem = Problem::new(model, &data).unwrap();
-    let id = fit(problem);
+    let id = fit(problem.clone());
     assert!(id.termination.converged(), "{}", id.termination);
     rank(&problem, &id.params, Options::default().rank_tolerance)
 }

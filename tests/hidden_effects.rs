@@ -73,7 +73,7 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
     let m = Machine::default_xcfz();
     let model = Model::new(m.clone(), spec).unwrap();
     let problem = Problem::new(&model, &sim.measurements).unwrap();
-    let before = fit(problem);
+    let before = fit(problem.clone());
     let ranked = rank(&problem, &before.params, Options::default().rank_tolerance);
     let noise = sim.record.noise_error.emm_um;
     println!(

@@ -20,7 +20,7 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
     let data = sim.run().unwrap().measurements;
     let model = Model::default_xcfz();
     let problem = Problem::new(&model, &data).unwrap();
-    let id = fit(problem);
+    let id = fit(problem.clone());
     let a = analyse(&Task::new(problem), &id.params, 1e-10, 0.99).unwrap();
     println!(
         "free {} rank {} condition {:.3e} (all {:.3e}) σ {:.4} mm",
@@ -77,7 +77,7 @@ fn standard_uncertainties_match_the_scatter_of_identified_parameters() {
         sim.noise = TrackerNoise::PAPER;
         let data = sim.run().unwrap().measurements;
         let problem = Problem::new(&model, &data).unwrap();
-        let id = fit(problem);
+        let id = fit(problem.clone());
         let a = analyse(&Task::new(problem), &id.params, 1e-10, 0.999).unwrap();
         // The problem is identifiable in exact arithmetic, but a direction may fall below the
         // rank tolerance on a draw (ECZ against B0Z, two on seed 1): the parameters it moves get

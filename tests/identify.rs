@@ -341,7 +341,7 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
     // A phase holds what it does not identify, exactly.
     let start = model.initial_params();
     let task = Task::holding(
-        problem,
+        problem.clone(),
         |_, i| i.group == Group::Rotation,
         &start,
         "translation",
@@ -363,7 +363,7 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
         };
         identify_errors(
             &LevenbergMarquardt,
-            problem,
+            problem.clone(),
             &start,
             Errors::All,
             &s,
@@ -423,10 +423,11 @@ fn combined_independent_and_cross_validation_methods() {
         Strategy::default(),
         model.initial_params(),
     );
-    let reference =
-        |params: &[f64]| cross_validate(&LevenbergMarquardt, pr[3], params, &o, &mut Silent);
+    let reference = |params: &[f64]| {
+        cross_validate(&LevenbergMarquardt, pr[3].clone(), params, &o, &mut Silent)
+    };
     // Joint on the reference itself: cross-validation reproduces its own fit.
-    let joint = identify(&LevenbergMarquardt, pr[3], &p0, &s, &o, &mut Silent);
+    let joint = identify(&LevenbergMarquardt, pr[3].clone(), &p0, &s, &o, &mut Silent);
     let cv = reference(&joint.params);
     // The data are noise-free: both EMMs are ~6.6e-5 µm, where each residual's own rounding is
     // ~4e-10 µm (ε × 2 m from the tracker): up to 1e-9 µm of difference is rounding (measured
@@ -438,7 +439,15 @@ fn combined_independent_and_cross_validation_methods() {
         joint.final_.stats.emm_um
     );
     // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
-    let (lin, rot) = combined(&LevenbergMarquardt, pr[0], pr[2], &p0, &s, &o, &mut Silent);
+    let (lin, rot) = combined(
+        &LevenbergMarquardt,
+        pr[0].clone(),
+        pr[2].clone(),
+        &p0,
+        &s,
+        &o,
+        &mut Silent,
+    );
     for (j, info) in model.params().iter().enumerate() {
         if let volver::core::model::Owner::Term { term, .. } = info.owner
             && !model.terms()[term].id.axis().is_rotary()
@@ -452,7 +461,15 @@ fn combined_independent_and_cross_validation_methods() {
     }
     let c = reference(&rot.params);
     // Tests 1 + 2: each group alone.
-    let (ind, _, _) = independent(&LevenbergMarquardt, pr[0], pr[1], &p0, &s, &o, &mut Silent);
+    let (ind, _, _) = independent(
+        &LevenbergMarquardt,
+        pr[0].clone(),
+        pr[1].clone(),
+        &p0,
+        &s,
+        &o,
+        &mut Silent,
+    );
     let i = reference(&ind);
     println!(
         "reference test 4: uncompensated {} µm; joint {} µm; combined {} µm ({:.2} %); independent {} µm ({:.2} %)",

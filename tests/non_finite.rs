@@ -86,7 +86,7 @@ fn a_stop_at_the_edge_of_the_finite_region_is_not_reported_as_convergence() {
     let (ds, x0) = bennett5();
     let start = [-2000.0, -x0 + 0.5, -1.0];
     let problem = Problem::curve(&ds);
-    let runs = every_engine(problem, &start);
+    let runs = every_engine(problem.clone(), &start);
     let best = runs
         .iter()
         .map(|(_, s)| s.summary.final_.phi_mm)
@@ -130,7 +130,7 @@ fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
     let mut claims = 0;
     for ds in nist::all().unwrap() {
         let problem = Problem::curve(&ds);
-        let task = Task::new(problem);
+        let task = Task::new(problem.clone());
         for start in &ds.starts {
             for name in engine_names() {
                 let s = engine(name)

@@ -38,7 +38,7 @@ fn replica(seed: u64, magnitudes: &Magnitudes) -> (Truth, MeasurementSet) {
 fn fit(problem: Problem, objective: Objective) -> Identification {
     let id = identify(
         &LevenbergMarquardt,
-        problem,
+        problem.clone(),
         &problem.model().initial_params(),
         &Strategy::default(),
         &Options {
@@ -59,7 +59,7 @@ fn fit_with_covariance(
     objective: Objective,
     noise: NoiseModel,
 ) -> (Identification, volver::solvers::uncertainty::Covariance) {
-    let id = fit(problem, objective);
+    let id = fit(problem.clone(), objective);
     let cov = linear(&problem, id.gauge.as_ref(), &id.params, objective, noise).unwrap();
     (id, cov)
 }
@@ -78,7 +78,7 @@ fn weak_priors_leave_the_data_estimate() {
     let g = grid(model.machine());
     let (_, data) = replica(11, &Magnitudes::default());
     let problem = Problem::new(&model, &data).unwrap();
-    let (id, cov) = fit_with_covariance(problem, Objective::Phi, NoiseModel::Residual);
+    let (id, cov) = fit_with_covariance(problem.clone(), Objective::Phi, NoiseModel::Residual);
     // Every kind the same in µm and µrad and the tracker's pose in mm: the gauge's own metric,
     // scaled (1 µrad weighs as 1 µm, the tracker's millimetre as a function's RMS millimetre).
     let wide = |um: f64| {
@@ -155,7 +155,7 @@ fn the_map_point_is_where_the_posterior_gradient_vanishes() {
         let pr = priors(&texts);
         let (_, data) = replica(seed, &Magnitudes::default().scaled(0.5));
         let problem = Problem::new(&model, &data).unwrap();
-        let (id, cov) = fit_with_covariance(problem, Objective::Ve, NoiseModel::Residual);
+        let (id, cov) = fit_with_covariance(problem.clone(), Objective::Ve, NoiseModel::Residual);
         let post = maximum_a_posteriori(&model, id.gauge.as_ref(), &id.params, &cov, &pr).unwrap();
         let reference = &id.gauge.as_ref().unwrap().reference;
         let mw = pr.metric(&model, &id.params);

@@ -79,7 +79,7 @@ fn intervals_of_the_tool_point_cover_the_truth_on_100_replicas_of_test_4() {
         // The native LM needs more than its default 200 steps on a few of these (issue 18).
         let id: Identification = identify(
             &LevenbergMarquardt,
-            problem,
+            problem.clone(),
             &model.initial_params(),
             &Strategy::default(),
             &options,
@@ -144,7 +144,7 @@ fn linearised_and_monte_carlo_uncertainties_agree_on_test_4() {
     let g = grid(&m);
     let (_, data) = replica(77, 1.0, TrackerNoise::PAPER);
     let problem = Problem::new(&model, &data).unwrap();
-    let id = fit(problem);
+    let id = fit(problem.clone());
     // Without a tracker model: the residuals' isotropic σ, for both methods.
     let noise = NoiseModel::Residual;
     let cov = linear(
@@ -218,7 +218,7 @@ fn intervals_from_a_misspecified_model_are_not_honest_and_the_diagnosis_flags_it
         let out = sim.run().unwrap();
         let (truth, data) = (out.truth, out.measurements);
         let problem = Problem::new(&model, &data).unwrap();
-        let id = fit(problem);
+        let id = fit(problem.clone());
         let top = &rank(&problem, &id.params, Options::default().rank_tolerance)[0];
         assert!(
             top.strong(),

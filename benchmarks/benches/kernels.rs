@@ -51,7 +51,7 @@ fn kernels(c: &mut Criterion) {
         b.iter(|| {
             black_box(identify(
                 &LevenbergMarquardt,
-                problem,
+                problem.clone(),
                 &p,
                 &Strategy::default(),
                 &Options::default(),

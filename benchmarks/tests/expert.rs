@@ -85,7 +85,7 @@ fn the_program_and_the_native_engine_meet() {
             "{plan}: {fit:?}"
         );
         let from_theirs = volver_solvers::lm::LevenbergMarquardt.solve(
-            &Task::new(problem),
+            &Task::new(problem.clone()),
             &fit.params,
             &phi_options(),
             &mut Silent,

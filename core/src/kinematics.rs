@@ -59,6 +59,11 @@ pub struct PointErrors<S> {
     pub reflector_delta: [S; 3],
     /// The tracker's range scale error (relative: the point is scaled by 1 + this).
     pub range_scale: S,
+    /// Sine and cosine of each rotary axis' nominal chain angle at the commands these values
+    /// belong to, when the caller computed them once for its point (`crate::model::Regressors`);
+    /// `None`: the chain computes them from the commands. Only set by the model's `f64` paths,
+    /// for the very commands it is evaluated at.
+    pub(crate) rotary_sin_cos: Option<[[f64; 2]; MAX_AXES]>,
 }
 
 impl<S: Real> PointErrors<S> {
@@ -73,6 +78,7 @@ impl<S: Real> PointErrors<S> {
             tool_shift: [z; 3],
             reflector_delta: [z; 3],
             range_scale: z,
+            rotary_sin_cos: None,
         }
     }
 }
@@ -173,7 +179,10 @@ fn rotate_about_axis_line<S: Real>(
     k: usize,
     v: V3<S>,
 ) -> V3<S> {
-    let (sin, cos) = angle.sin_cos();
+    let (sin, cos) = match e.rotary_sin_cos {
+        Some(t) => (S::from(t[k][0]), S::from(t[k][1])),
+        None => angle.sin_cos(),
+    };
     if !e.has_location[k] {
         return rot_nominal(dir, sin, cos, v);
     }

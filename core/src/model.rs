@@ -44,6 +44,10 @@ use std::fmt;
 use std::ops::Range;
 use std::path::Path;
 
+mod regressors;
+use regressors::PointRegressors;
+pub use regressors::Regressors;
+
 /// The paper's error model for the embedded XCFZ machine.
 pub const DEFAULT_MODEL_TOML: &str = include_str!("../data/xcfz-paper-model.toml");
 
@@ -985,6 +989,36 @@ impl Model {
         }
     }
 
+    /// [`Model::group_values`] from the basis' values `values` at the point ([`Regressors`]),
+    /// with the same arithmetic (each value a dot product from zero, in coefficient order), so
+    /// the same bits.
+    #[inline]
+    fn group_values_cached<S: Real>(
+        &self,
+        grp: &TermGroup,
+        params: &[f64],
+        values: &[f64],
+        vals: &mut [S],
+    ) {
+        let (len, n) = (grp.len, grp.terms.len());
+        let block = &params[grp.params..grp.params + n * len];
+        match len {
+            1 => dots_cached::<S, 1>(values, block, vals),
+            3 => dots_cached::<S, 3>(values, block, vals),
+            4 => dots_cached::<S, 4>(values, block, vals),
+            _ => {
+                for (v, coeffs) in vals.iter_mut().zip(block.chunks_exact(len)) {
+                    *v = S::from(
+                        coeffs
+                            .iter()
+                            .zip(values)
+                            .fold(0.0, |acc, (c, b)| acc + *b * *c),
+                    );
+                }
+            }
+        }
+    }
+
     fn check_len(&self, params: &[f64]) {
         assert_eq!(
             params.len(),
@@ -1151,13 +1185,31 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> PointErrors<S> {
+        self.errors_with(commands, reflector, t_s, params, None)
+    }
+
+    /// [`Model::errors_with_commands`], with the point's [`Regressors`] when the caller has
+    /// them (`f64` only in practice: the cached values carry no derivative along the commands).
+    fn errors_with<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+    ) -> PointErrors<S> {
         self.check_len(params);
         let mut e = PointErrors::zero();
         e.has_location = self.has_location;
+        e.rotary_sin_cos = cached.map(|c| c.sin_cos);
         let mut g = [S::zero(); MAX_COEFFS];
         let mut v = [S::zero(); MAX_GROUP];
+        let mut at = 0;
         for grp in &self.groups {
-            self.group_values(grp, commands, params, &mut g, &mut v);
+            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
+                Some(values) => self.group_values_cached(grp, params, values, &mut v),
+                None => self.group_values(grp, commands, params, &mut g, &mut v),
+            }
             for (i, v) in grp.terms.clone().zip(v) {
                 let place = self.places[i];
                 if place.location {
@@ -1223,6 +1275,7 @@ impl Model {
             usize::MAX,
             0.0,
             params,
+            None,
             jac,
         )
     }
@@ -1268,6 +1321,7 @@ impl Model {
             reflector,
             t_s,
             params,
+            None,
             jac,
         )
     }
@@ -1275,6 +1329,7 @@ impl Model {
     /// The exact Jacobian shared by [`Model::predict_with_jacobian_at`] and
     /// [`Model::tool_point_with_jacobian`]: the error values and their bases' derivatives, the
     /// chain's reverse pass over the values for `target`, then the chain rule.
+    #[allow(clippy::too_many_arguments)]
     fn point_with_jacobian(
         &self,
         commands: &Commands,
@@ -1282,6 +1337,7 @@ impl Model {
         reflector: usize,
         t_s: f64,
         params: &[f64],
+        cached: Option<PointRegressors<'_>>,
         jac: &mut [f64],
     ) -> [f64; 3] {
         self.check_len(params);
@@ -1294,18 +1350,19 @@ impl Model {
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter: a term's basis values.
         let mut vals = [0.0; MAX_SLOTS];
         let mut g = [0.0; MAX_COEFFS];
+        let mut at = 0;
         for grp in &self.groups {
-            let n = grp.terms.len();
-            self.group_values(
-                grp,
-                &commands.0,
-                params,
-                &mut g,
-                &mut vals[grp.terms.clone()],
-            );
-            for i in 0..n {
-                let start = grp.params + i * grp.len;
-                jac[start..start + grp.len].copy_from_slice(&g[..grp.len]);
+            let out = &mut vals[grp.terms.clone()];
+            let block = &mut jac[grp.params..grp.params + grp.terms.len() * grp.len];
+            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
+                Some(values) => {
+                    self.group_values_cached(grp, params, values, out);
+                    spread(values, block);
+                }
+                None => {
+                    self.group_values(grp, &commands.0, params, &mut g, out);
+                    spread(&g[..grp.len], block);
+                }
             }
         }
         let m = self.terms.len() + TRACKER_DOF;
@@ -1314,7 +1371,8 @@ impl Model {
         jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
         self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
-        let e = self.point_errors(|i| vals[i]);
+        let mut e = self.point_errors(|i| vals[i]);
+        e.rotary_sin_cos = cached.map(|c| c.sin_cos);
         let (point, de) = match target {
             JacobianTarget::Reflector(refl) => {
                 predict_with_errors_jacobian(&self.machine, commands, refl, &e)
@@ -1497,6 +1555,42 @@ fn dots<S: Real, const L: usize>(g: &[S; MAX_COEFFS], block: &[f64], out: &mut [
             acc += g[j] * coeffs[j];
         }
         *v = acc;
+    }
+}
+
+/// [`dots`] with the basis values `g` in `f64` (a point's [`Regressors`]), over the whole
+/// group (`block` holds every term's coefficients, `out` every term's value).
+#[inline]
+fn dots_cached<S: Real, const L: usize>(g: &[f64], block: &[f64], out: &mut [S]) {
+    let g: [f64; L] = std::array::from_fn(|j| g[j]);
+    for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(L)) {
+        let mut acc = 0.0;
+        for j in 0..L {
+            acc += g[j] * coeffs[j];
+        }
+        *v = S::from(acc);
+    }
+}
+
+/// The basis values `g` (one term's coefficients' derivatives) into every term's columns of a
+/// group's stretch of a Jacobian row (`block`: the terms' coefficients one after another).
+#[inline]
+fn spread(g: &[f64], block: &mut [f64]) {
+    fn fixed<const L: usize>(g: &[f64], block: &mut [f64]) {
+        let g: [f64; L] = std::array::from_fn(|j| g[j]);
+        for chunk in block.chunks_exact_mut(L) {
+            chunk.copy_from_slice(&g);
+        }
+    }
+    match g.len() {
+        1 => fixed::<1>(g, block),
+        3 => fixed::<3>(g, block),
+        4 => fixed::<4>(g, block),
+        len => {
+            for chunk in block.chunks_exact_mut(len) {
+                chunk.copy_from_slice(g);
+            }
+        }
     }
 }
 

@@ -22,7 +22,7 @@
 use crate::error::{Error, Result};
 use crate::measure::MeasurementSet;
 use crate::metrics::ErrorStats;
-use crate::model::Model;
+use crate::model::{Model, Regressors};
 
 /// A model and measurements of the same machine.
 ///
@@ -31,16 +31,21 @@ use crate::model::Model;
 /// "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`, Φ is the mean absolute residual and
 /// `n · ve` the residual sum of squares. [`Problem::model`] and [`Problem::data`] exist only for
 /// machine problems.
-#[derive(Clone, Copy, Debug)]
+///
+/// A machine problem computes the model's fixed regressors at its points once
+/// ([`crate::model::Regressors`]: basis values, the rotary axes' sines), shared by its clones,
+/// so that each evaluation is the chain and the dot products alone.
+#[derive(Clone, Debug)]
 pub struct Problem<'a> {
     source: Source<'a>,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 enum Source<'a> {
     Machine {
         model: &'a Model,
         data: &'a MeasurementSet,
+        regressors: std::sync::Arc<Regressors>,
     },
     Curve(&'a crate::nist::Dataset),
 }
@@ -67,8 +72,14 @@ impl<'a> Problem<'a> {
                 p.line, p.reflector
             )));
         }
+        let regressors =
+            std::sync::Arc::new(model.regressors(data.points.iter().map(|p| &p.commands)));
         Ok(Problem {
-            source: Source::Machine { model, data },
+            source: Source::Machine {
+                model,
+                data,
+                regressors,
+            },
         })
     }
 
@@ -120,7 +131,7 @@ impl<'a> Problem<'a> {
     /// assert!(err.to_string().starts_with("m.csv: ") && err.to_string().contains("metres"));
     /// ```
     pub fn check_scale(&self, file: &str) -> Result<()> {
-        let Source::Machine { model, data } = self.source else {
+        let Source::Machine { model, data, .. } = self.source else {
             return Ok(());
         };
         let n = data.points.len();
@@ -181,7 +192,7 @@ impl<'a> Problem<'a> {
     /// The model and measurements of a machine problem; `None` for a curve fit.
     pub fn machine(&self) -> Option<(&'a Model, &'a MeasurementSet)> {
         match self.source {
-            Source::Machine { model, data } => Some((model, data)),
+            Source::Machine { model, data, .. } => Some((model, data)),
             Source::Curve(_) => None,
         }
     }
@@ -245,9 +256,20 @@ impl<'a> Problem<'a> {
     /// Residual of point `i`: predicted minus measured (mm).
     pub fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
         match self.source {
-            Source::Machine { model, data } => {
+            Source::Machine {
+                model,
+                data,
+                ref regressors,
+            } => {
                 let m = &data.points[i];
-                let x = model.predict_at(&m.commands, m.reflector, m.t_s.unwrap_or(0.0), params);
+                let x = model.predict_cached(
+                    regressors,
+                    i,
+                    &m.commands,
+                    m.reflector,
+                    m.t_s.unwrap_or(0.0),
+                    params,
+                );
                 [
                     x[0] - m.measured[0],
                     x[1] - m.measured[1],
@@ -272,9 +294,15 @@ impl<'a> Problem<'a> {
     /// Residual of point `i` and its Jacobian (row-major 3 × n_params) in `jac`.
     pub fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
         match self.source {
-            Source::Machine { model, data } => {
+            Source::Machine {
+                model,
+                data,
+                ref regressors,
+            } => {
                 let m = &data.points[i];
-                let x = model.predict_with_jacobian_at(
+                let x = model.predict_with_jacobian_cached(
+                    regressors,
+                    i,
                     &m.commands,
                     m.reflector,
                     m.t_s.unwrap_or(0.0),
@@ -314,7 +342,7 @@ impl<'a> Problem<'a> {
     /// that geodesic acceleration corrects a Gauss–Newton step by.
     pub fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
         match self.source {
-            Source::Machine { model, data } => {
+            Source::Machine { model, data, .. } => {
                 let m = &data.points[i];
                 model.predict_second_directional_at(
                     &m.commands,

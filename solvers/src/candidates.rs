@@ -411,7 +411,7 @@ pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
     let model = problem.model();
     let data = problem.data();
     let m = (3 * problem.n_points()) as f64;
-    let base_task = Task::new(*problem);
+    let base_task = Task::new(problem.clone());
     let Some((p0, rank0)) = gauss_newton_step(&base_task, params, tolerance) else {
         return Vec::new();
     };
@@ -422,7 +422,7 @@ pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
             let extended = Model::new(model.machine().clone(), c.spec.clone()).ok()?;
             let ext_problem = Problem::new(&extended, data).ok()?;
             let start = carry_over(model, params, &extended);
-            let (q, rank1) = gauss_newton_step(&Task::new(ext_problem), &start, tolerance)?;
+            let (q, rank1) = gauss_newton_step(&Task::new(ext_problem.clone()), &start, tolerance)?;
             let (rss1, emm_um) = linear_prediction(&ext_problem, &start, &q);
             let (size, size_unit) = implied_size(&c.id, model, params, &extended, &q);
             let added = rank1.saturating_sub(rank0);

@@ -62,8 +62,8 @@ impl<'a> Task<'a> {
     /// The problem under the model's own constraints.
     pub fn new(problem: Problem<'a>) -> Task<'a> {
         Task {
-            problem,
             constraints: problem.constraints().into_owned(),
+            problem,
             phase: "all".to_string(),
         }
     }
@@ -75,8 +75,9 @@ impl<'a> Task<'a> {
         at: &[f64],
         phase: &str,
     ) -> Task<'a> {
+        let model = problem.model();
         let mut task = Task::new(problem);
-        for (j, info) in problem.model().params().iter().enumerate() {
+        for (j, info) in model.params().iter().enumerate() {
             if hold(j, info) {
                 task.constraints.rows.push(Constraint {
                     kind: ConstraintKind::Fixed,

@@ -274,7 +274,7 @@ pub fn identify_errors(
             } else {
                 names.join("+")
             };
-            let task = Task::holding(problem, |_, info| !free(info), &p, &label);
+            let task = Task::holding(problem.clone(), |_, info| !free(info), &p, &label);
             // The phase's own gauge: its free errors' reference is zero (the held ones stay
             // where the phase holds them), the tracker's the rigid fit to that; the directions
             // are those the design cannot identify there.
@@ -315,7 +315,7 @@ pub fn identify_errors(
     // identifies (moving along flat combinations: the fit stays, to first order).
     if phases.len() > 1 && !termination.failed() && gauge.is_some() {
         let base = Task::holding(
-            problem,
+            problem.clone(),
             |_, info| !eligible(model, info, errors),
             &p,
             "gauge",
@@ -432,10 +432,11 @@ pub fn identify(
 /// assert!(id.termination.converged() && id.final_.stats.emm_um < id.initial.stats.emm_um);
 /// ```
 pub fn fit(problem: Problem) -> Identification {
+    let start = problem.model().initial_params();
     identify(
         &crate::lm::LevenbergMarquardt,
         problem,
-        &problem.model().initial_params(),
+        &start,
         &Strategy::default(),
         &Options::default(),
         &mut crate::Silent,
@@ -536,7 +537,7 @@ pub fn cross_validate(
     uncompensated[t..t + 6].copy_from_slice(&params[t..t + 6]);
     let before = identify_errors(
         solver,
-        reference,
+        reference.clone(),
         &uncompensated,
         Errors::None,
         &strategy,

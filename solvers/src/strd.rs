@@ -63,7 +63,7 @@ pub struct StrdRun {
 /// Runs `engine` on `dataset` from start `start` (0 or 1).
 pub fn run(dataset: &Dataset, start: usize, engine: &dyn Solver, options: &Options) -> StrdRun {
     let problem = Problem::curve(dataset);
-    let task = Task::new(problem);
+    let task = Task::new(problem.clone());
     let s = engine.solve(&task, &dataset.starts[start], options, &mut Silent);
     let rss = problem.ve(&s.params) * problem.n_points() as f64;
     let finite = s.params.iter().all(|v| v.is_finite()) && rss.is_finite();

@@ -220,7 +220,7 @@ pub fn linear(
 ) -> Option<Covariance> {
     let n = params.len();
     let npts = problem.n_points();
-    let mut task = Task::new(*problem);
+    let mut task = Task::new(problem.clone());
     if let Some(g) = gauge {
         task = g.apply(&task);
     }

@@ -213,6 +213,16 @@ fn translation(machine: &Machine, k: usize, u: f64, e: &PointErrors<f64>) -> (V3
     (t, sq)
 }
 
+/// Sine and cosine of rotary axis k's chain angle: the point's own when it has them
+/// ([`PointErrors::rotary_sin_cos`]), else computed.
+#[inline]
+fn sin_cos_of(e: &PointErrors<f64>, k: usize, angle: f64) -> (f64, f64) {
+    match e.rotary_sin_cos {
+        Some(t) => (t[k][0], t[k][1]),
+        None => angle.sin_cos(),
+    }
+}
+
 /// Axis k's own frame → the frame it rides on (tool side), with the step's derivatives.
 fn forward_step(
     machine: &Machine,
@@ -225,7 +235,7 @@ fn forward_step(
     let (t, sq) = translation(machine, k, u, e);
     let w = tail3(&e.component[k]);
     let (inner, jr, jl, jo) = if ax.axis.is_rotary() {
-        let (sin, cos) = (u * ax.side.sign()).sin_cos();
+        let (sin, cos) = sin_cos_of(e, k, u * ax.side.sign());
         line_rotation(ax.axis.direction(), sin, cos, e, k, q)
     } else {
         (q, IDENTITY, ZERO3, ZERO3)
@@ -261,7 +271,7 @@ fn inverse_step(
     let d = sub(p, t);
     let y = rot_err(w, d);
     let (out, jr, jl, jo) = if ax.axis.is_rotary() {
-        let (sin, cos) = (u * -ax.side.sign()).sin_cos();
+        let (sin, cos) = sin_cos_of(e, k, u * -ax.side.sign());
         line_rotation(ax.axis.direction(), sin, cos, e, k, y)
     } else {
         (y, IDENTITY, ZERO3, ZERO3)
