@@ -19,11 +19,11 @@ use volver_core::problem::{Problem, norm};
 pub const BLOCK: usize = 512;
 
 thread_local! {
-    /// A thread's scratch for [`block_part`]: the block's weighted rows (3 [`BLOCK`] (n+1)) and
-    /// one point's Jacobian rows (3n), kept between passes (a fresh block buffer is a large
+    /// A thread's scratch for [`block_part`]: the block's weighted rows (3 [`BLOCK`] (n+1)),
+    /// one point's Jacobian rows (3n) and, for a factor, the rows transposed, kept between passes (a fresh block buffer is a large
     /// allocation, mapped and zeroed page by page at every pass).
-    static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
 }
 
 /// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
@@ -79,11 +79,14 @@ pub(crate) fn accumulate(
             .into_par_iter()
             .map(|b| {
                 SCRATCH.with(|s| {
-                    let (blk, row) = &mut *s.borrow_mut();
+                    let (blk, row, tb) = &mut *s.borrow_mut();
                     // Every entry a block reads it writes first: no zeroing needed.
                     blk.resize(3 * BLOCK * nc, 0.0);
                     row.resize(3 * n, 0.0);
-                    block_part(problem, p, &weight, factor, b, blk, row)
+                    if factor {
+                        tb.resize(3 * BLOCK * nc, 0.0);
+                    }
+                    block_part(problem, p, &weight, factor, b, (blk, row, tb))
                 })
             })
             .collect();
@@ -134,16 +137,20 @@ struct BlockPart {
     m: Vec<f64>,
 }
 
-/// [`accumulate`]'s work on block `b`, with the scratch `blk` (3 [`BLOCK`] (n+1)) and `row`
-/// (3n).
+/// [`accumulate`]'s work on block `b`, with the scratch `blk` (3 [`BLOCK`] (n+1)), `row` (3n)
+/// and, for a factor, `tb` (3 [`BLOCK`] (n+1)).
+///
+/// The block's weighted rows are written one after another (row ρ = 3q + c of point q at
+/// `blk[ρ (n+1)..]`, its residual last), so that each point's writes are contiguous; the block's
+/// `J_bᵀ W_b J_b` is then the product of that (n × rows, column stride n+1) view with its
+/// transpose. The factor's QR works on columns: the rows are transposed into `tb` first.
 fn block_part(
     problem: &Problem,
     p: &[f64],
     weight: &impl Fn(f64) -> (f64, f64),
     factor: bool,
     b: usize,
-    blk: &mut [f64],
-    row: &mut [f64],
+    (blk, row, tb): (&mut [f64], &mut [f64], &mut [f64]),
 ) -> Option<BlockPart> {
     let n = p.len();
     let nc = n + 1;
@@ -169,34 +176,45 @@ fn block_part(
             [0.0; 3]
         };
         let sw = w.sqrt();
+        let kr = rhat.map(|v| k * v);
+        let (j0, rest) = row.split_at(n);
+        let (j1, j2) = rest.split_at(n);
+        let (j2, g) = (&j2[..n], &mut g[..n]);
+        let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
+        let (o0, rest) = out.split_at_mut(nc);
+        let (o1, o2) = rest.split_at_mut(nc);
         for j in 0..n {
-            let col = [row[j], row[n + j], row[2 * n + j]];
+            let col = [j0[j], j1[j], j2[j]];
             let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
             g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
-            for c in 0..3 {
-                blk[j * rows + 3 * q + c] = sw * (col[c] - k * rhat[c] * radial);
-            }
+            o0[j] = sw * (col[0] - kr[0] * radial);
+            o1[j] = sw * (col[1] - kr[1] * radial);
+            o2[j] = sw * (col[2] - kr[2] * radial);
         }
-        if factor {
-            for c in 0..3 {
-                blk[n * rows + 3 * q + c] = sw * r[c];
-            }
-        }
+        o0[n] = sw * r[0];
+        o1[n] = sw * r[1];
+        o2[n] = sw * r[2];
     }
     let m = if factor {
+        for rho in 0..rows {
+            for j in 0..nc {
+                tb[j * rows + rho] = blk[rho * nc + j];
+            }
+        }
         let mut rb = vec![0.0; nc * nc];
-        qr_update(&mut rb, nc, &mut blk[..rows * nc], rows);
+        qr_update(&mut rb, nc, &mut tb[..rows * nc], rows);
         rb
     } else {
         let mut hb = vec![0.0; n * n];
-        let jv = faer::MatRef::from_column_major_slice(&blk[..rows * nc], rows, nc).subcols(0, n);
+        // n × rows: column ρ is row ρ of the block.
+        let jt = faer::MatRef::from_column_major_slice_with_stride(&blk[..rows * nc], n, rows, nc);
         triangular_matmul(
             faer::MatMut::from_column_major_slice_mut(&mut hb, n, n),
             BlockStructure::TriangularLower,
             Accum::Replace,
-            jv.transpose(),
+            jt,
             BlockStructure::Rectangular,
-            jv,
+            jt.transpose(),
             BlockStructure::Rectangular,
             1.0,
             Par::Seq,
