@@ -148,7 +148,7 @@ pub struct Posterior {
 /// sim.noise = TrackerNoise::PAPER;
 /// let data = sim.run().unwrap().measurements;
 /// let problem = Problem::new(&model, &data).unwrap();
-/// let id = volver_solvers::strategy::fit(problem);
+/// let id = volver_solvers::strategy::fit(problem.clone());
 /// let cov = linear(&problem, id.gauge.as_ref(), &id.params, Default::default(),
 ///                  NoiseModel::Residual).unwrap();
 /// let priors = Priors::parse(&["typical".to_string()]).unwrap();

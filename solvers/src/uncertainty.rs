@@ -201,7 +201,7 @@ fn norm_of_product(f: &Mat<f64>, g: &[f64]) -> f64 {
 /// let data = sim.run().unwrap().measurements;
 /// let model = Model::default_xcfz();
 /// let problem = Problem::new(&model, &data).unwrap();
-/// let id = volver_solvers::strategy::fit(problem);
+/// let id = volver_solvers::strategy::fit(problem.clone());
 /// let noise = NoiseModel::Tracker(TrackerNoise::PAPER);
 /// let cov = linear(&problem, id.gauge.as_ref(), &id.params, Default::default(), noise).unwrap();
 /// // EXX's linear term alone trades with nearly flat combinations on test 3: the data
