@@ -104,11 +104,22 @@ pub(crate) fn scaled_null_space(
             if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
         })
         .collect();
+    let ns = null_space_scaled_by(&d, constraints, anchor);
+    (d, ns)
+}
+
+/// The null space of the constraints in the coordinates `s = p / D` for a given column scaling
+/// `d`, anchored at `anchor`.
+pub(crate) fn null_space_scaled_by(
+    d: &[f64],
+    constraints: &volver_core::model::Constraints,
+    anchor: &[f64],
+) -> Result<NullSpace, crate::nullspace::ConstraintError> {
+    let n = anchor.len();
     let (a, b) = constraints.dense(n);
     let a_scaled: Vec<f64> = (0..b.len() * n).map(|k| a[k] * d[k % n]).collect();
-    let anchor_scaled: Vec<f64> = anchor.iter().zip(&d).map(|(p, d)| p / d).collect();
-    let ns = NullSpace::new(&a_scaled, &b, &anchor_scaled);
-    (d, ns)
+    let anchor_scaled: Vec<f64> = anchor.iter().zip(d).map(|(p, d)| p / d).collect();
+    NullSpace::new(&a_scaled, &b, &anchor_scaled)
 }
 
 /// The least-squares normal equations of a task at `params`, reduced to the scaled free

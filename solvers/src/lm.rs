@@ -814,9 +814,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
 impl Lm<'_, '_, '_> {
     /// Φ: Newton polish of the converged point ([`crate::polish::settle`]).
     fn polish(&mut self, task: &Task) {
-        if let Some((q, report)) = crate::polish::settle(
+        if let Some((q, report)) = crate::polish::settle_scaled(
             task,
             &self.p,
+            Some(&self.free.d),
             self.objective,
             self.options.irls_final_epsilon,
         ) {

@@ -59,11 +59,32 @@ pub fn settle(
     objective: crate::Objective,
     irls_final_epsilon: f64,
 ) -> Option<(Vec<f64>, Settled)> {
+    settle_scaled(task, p, None, objective, irls_final_epsilon)
+}
+
+/// [`settle`] in the column scaling `scale` when the caller has one for this task (the native
+/// LM's, from its start: the Jacobi scaling need not be fresh, and it saves a pass); else the
+/// scaling from the Jacobian at `p`.
+pub(crate) fn settle_scaled(
+    task: &Task,
+    p: &[f64],
+    scale: Option<&[f64]>,
+    objective: crate::Objective,
+    irls_final_epsilon: f64,
+) -> Option<(Vec<f64>, Settled)> {
     use crate::loss::{cost_of, norms, weight_of};
     let problem = &task.problem;
     let np = problem.n_points();
-    let plain = crate::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)?;
-    let (d, ns) = crate::coordinates::scaled_null_space(&plain.h, &task.constraints, p);
+    let (d, ns) = match scale {
+        Some(d) => (
+            d.to_vec(),
+            crate::coordinates::null_space_scaled_by(d, &task.constraints, p),
+        ),
+        None => {
+            let plain = crate::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)?;
+            crate::coordinates::scaled_null_space(&plain.h, &task.constraints, p)
+        }
+    };
     // Parameters a constraint fixes on its own stay exactly at their value (the null space
     // leaves rounding there).
     let free = crate::coordinates::Free::new(d, ns.ok()?, &task.constraints);
