@@ -152,6 +152,9 @@ pub struct Gauge {
     pub held: Vec<Held>,
     /// The function metric at the reference.
     pub metric: Mat<f64>,
+    /// The unweighted normal equations at the point the gauge was found at, handed to the
+    /// tasks it is applied to ([`Gauge::apply`]).
+    plain: Option<std::sync::Arc<crate::PlainNormal>>,
 }
 
 impl Gauge {
@@ -162,6 +165,9 @@ impl Gauge {
         t.constraints
             .rows
             .extend(self.held.iter().map(|h| h.constraint.clone()));
+        if t.problem.n_params() == self.reference.len() {
+            t.plain.clone_from(&self.plain);
+        }
         t
     }
 
@@ -209,7 +215,12 @@ impl Gauge {
 pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
     let problem: &Problem = &task.problem;
     let n = reference.len();
-    let (h, _) = crate::kernels::normal_equations(problem, at)?;
+    let (h, g) = crate::kernels::normal_equations(problem, at)?;
+    let plain = Some(std::sync::Arc::new(crate::PlainNormal {
+        at: at.to_vec(),
+        h: h.clone(),
+        g,
+    }));
     let metric = if problem.machine().is_some() {
         function_metric(problem.model(), at)
     } else {
@@ -241,6 +252,7 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
             reference: reference.to_vec(),
             held: vec![],
             metric,
+            plain: plain.clone(),
         })
     };
     if nf == 0 {
@@ -323,5 +335,6 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
         reference: reference.to_vec(),
         held,
         metric,
+        plain,
     })
 }

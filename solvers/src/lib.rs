@@ -56,6 +56,18 @@ pub struct Task<'a> {
     pub constraints: Constraints,
     /// Label of the phase, for reports.
     pub phase: String,
+    /// The unweighted normal equations at a point, when the caller already formed them there
+    /// (the gauge, at its reference): an engine starting at that very point takes them instead
+    /// of a pass of its own.
+    pub(crate) plain: Option<std::sync::Arc<PlainNormal>>,
+}
+
+/// `JᵀJ` and `Jᵀr` at the point `at` (see [`Task`]).
+#[derive(Debug)]
+pub(crate) struct PlainNormal {
+    pub(crate) at: Vec<f64>,
+    pub(crate) h: faer::Mat<f64>,
+    pub(crate) g: Vec<f64>,
 }
 
 impl<'a> Task<'a> {
@@ -65,6 +77,7 @@ impl<'a> Task<'a> {
             constraints: problem.constraints().into_owned(),
             problem,
             phase: "all".to_string(),
+            plain: None,
         }
     }
 

@@ -160,12 +160,36 @@ impl<'t, 'a> Run<'t, 'a> {
         start: &[f64],
     ) -> Result<(Run<'t, 'a>, Free, Normal), Box<Solution>> {
         let mut run = self;
-        let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0), false) else {
-            let t = Termination::NumericalFailure("the Jacobian is not finite at the start".into());
-            return Err(Box::new(run.finish(start.to_vec(), t)));
+        // The caller's pass when it formed one at this very point (the gauge at its reference).
+        let known = task
+            .plain
+            .as_ref()
+            .filter(|k| {
+                k.at.len() == start.len()
+                    && k.at
+                        .iter()
+                        .zip(start)
+                        .all(|(a, b)| a.to_bits() == b.to_bits())
+            })
+            .map(|k| Normal {
+                h: k.h.clone(),
+                g: k.g.clone(),
+                factor: None,
+            });
+        let first = match known {
+            Some(normal) => normal,
+            None => {
+                let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0), false) else {
+                    let t = Termination::NumericalFailure(
+                        "the Jacobian is not finite at the start".into(),
+                    );
+                    return Err(Box::new(run.finish(start.to_vec(), t)));
+                };
+                run.summary.evaluations += 1;
+                run.summary.jacobian_evaluations += 1;
+                first
+            }
         };
-        run.summary.evaluations += 1;
-        run.summary.jacobian_evaluations += 1;
         let (d, ns) = scaled_null_space(&first.h, &task.constraints, start);
         match ns {
             Ok(ns) => {

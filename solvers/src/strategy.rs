@@ -280,6 +280,18 @@ pub fn identify_errors(
             // are those the design cannot identify there.
             let phase_gauge = if strategy.gauge && problem.machine().is_some() {
                 let reference = gauge_reference(&problem, &p, free);
+                // A start that is the reference but for the tracker's last bits (every free
+                // error at its initial value: the usual start) starts at the reference itself,
+                // the same rigid fit, so that the engine takes the gauge's pass there as its
+                // first.
+                let t = model.tracker_start();
+                let off_tracker = |j: usize| !(t..t + 6).contains(&j);
+                if (0..p.len())
+                    .filter(|&j| off_tracker(j))
+                    .all(|j| p[j].to_bits() == reference[j].to_bits())
+                {
+                    p.clone_from(&reference);
+                }
                 crate::gauge::gauge(&task, &reference, &reference, crate::gauge::TOLERANCE)
             } else {
                 None
