@@ -45,8 +45,9 @@ const SLOW: f64 = 0.1;
 /// once Gauss–Newton steps converge slowly, the residuals' own second derivatives on the
 /// weakest directions, in the Jacobi-scaled free coordinates, with a backtracking line search;
 /// until the predicted decrease is below 1e-30 of the objective, no step lowers it, or (once
-/// the cost's change is within its rounding) two steps in a row find no smaller predicted
-/// decrease: the result is then the point of smallest predicted decrease.
+/// the cost's change is within its rounding) the Newton step would move the error functions by
+/// less than 1e-10 of their size (the point is kept), or two steps in a row find no
+/// smaller predicted decrease (the result is then the point of smallest predicted decrease).
 ///
 /// This is what makes the gauge a rule rather than a neighbourhood: engines stop at different
 /// places in the nearly flat directions that remain identified (curvature 1e-9 … 1e-4 of the
