@@ -1138,7 +1138,19 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [f64; 3] {
-        let e = self.errors_at_point(commands, reflector, t_s, params);
+        self.predict_with(commands, reflector, t_s, params, None)
+    }
+
+    /// [`Model::predict_at`] with the point's [`Regressors`] when the caller has them.
+    fn predict_with(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+    ) -> [f64; 3] {
+        let e = self.errors_with(&commands.0, reflector, t_s, params, cached);
         predict(
             &self.machine,
             commands,
@@ -1314,6 +1326,20 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
+        self.reflector_with_jacobian(commands, reflector, t_s, params, None, jac)
+    }
+
+    /// [`Model::predict_with_jacobian_at`] with the point's [`Regressors`] when the caller has
+    /// them.
+    fn reflector_with_jacobian(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        t_s: f64,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+        jac: &mut [f64],
+    ) -> [f64; 3] {
         let refl = &self.machine.reflectors()[reflector].offset;
         self.point_with_jacobian(
             commands,
@@ -1321,7 +1347,7 @@ impl Model {
             reflector,
             t_s,
             params,
-            None,
+            cached,
             jac,
         )
     }

@@ -270,11 +270,7 @@ impl<'a> Problem<'a> {
                     m.t_s.unwrap_or(0.0),
                     params,
                 );
-                [
-                    x[0] - m.measured[0],
-                    x[1] - m.measured[1],
-                    x[2] - m.measured[2],
-                ]
+                minus(x, m.measured)
             }
             Source::Curve(d) => [d.residual(i, params), 0.0, 0.0],
         }
@@ -309,11 +305,7 @@ impl<'a> Problem<'a> {
                     params,
                     jac,
                 );
-                [
-                    x[0] - m.measured[0],
-                    x[1] - m.measured[1],
-                    x[2] - m.measured[2],
-                ]
+                minus(x, m.measured)
             }
             Source::Curve(d) => {
                 // Forward-mode dual numbers, one direction per parameter (NIST's problems have
@@ -399,6 +391,11 @@ impl<'a> Problem<'a> {
             .collect();
         crate::metrics::emm_u95_um(&modules)
     }
+}
+
+/// `a − b`.
+fn minus(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// Euclidean norm of a 3-vector.

@@ -137,19 +137,7 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [f64; 3] {
-        let e = self.errors_with(
-            &commands.0,
-            reflector,
-            t_s,
-            params,
-            Some(regressors.point(i)),
-        );
-        crate::kinematics::predict(
-            &self.machine,
-            commands,
-            &self.machine.reflectors()[reflector].offset,
-            &e,
-        )
+        self.predict_with(commands, reflector, t_s, params, Some(regressors.point(i)))
     }
 
     /// [`Model::predict_with_jacobian_at`] at point `i` of `regressors` (see
@@ -168,10 +156,8 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
-        let refl = &self.machine.reflectors()[reflector].offset;
-        self.point_with_jacobian(
+        self.reflector_with_jacobian(
             commands,
-            super::JacobianTarget::Reflector(refl),
             reflector,
             t_s,
             params,
