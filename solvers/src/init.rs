@@ -106,8 +106,12 @@ pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, Strin
 type Points = Vec<[f64; 3]>;
 
 fn points(problem: &Problem, p: &[f64]) -> (Points, Points) {
+    use rayon::prelude::*;
     let data = problem.data();
+    // On every core, collected in point order.
     let q = (0..problem.n_points())
+        .into_par_iter()
+        .with_min_len(64)
         .map(|i| {
             let r = problem.residual(i, p);
             let m = data.points[i].measured;

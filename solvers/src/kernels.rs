@@ -67,7 +67,8 @@ pub(crate) fn accumulate(
     let nc = n + 1;
     let blocks = np.div_ceil(BLOCK);
     let mut g = vec![0.0; n];
-    let mut h = Mat::<f64>::zeros(n, n);
+    // The lower triangle of H, column-major (the blocks' parts are added as whole slices).
+    let mut hl = vec![0.0; n * n];
     // With `factor`: R and the residual column (column-major, (n+1)²).
     let mut rf: Option<Vec<f64>> = None;
     // Blocks are computed a wave at a time (bounded memory), each wave on every thread.
@@ -102,16 +103,16 @@ pub(crate) fn accumulate(
                     qr_update(r, nc, &mut rb, nc);
                 }
                 (false, _) => {
-                    for j in 0..n {
-                        for i in j..n {
-                            h[(i, j)] += part.m[j * n + i];
-                        }
+                    // The upper triangle of a part is zero: adding it whole changes nothing.
+                    for (hv, pv) in hl.iter_mut().zip(&part.m) {
+                        *hv += pv;
                     }
                 }
             }
         }
         first = last;
     }
+    let mut h = Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]);
     let factor = factor.then(|| {
         let rf = rf.unwrap_or_else(|| vec![0.0; nc * nc]);
         let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);

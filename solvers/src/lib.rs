@@ -235,9 +235,8 @@ pub fn engine(name: &str) -> Result<Box<dyn Solver>, String> {
 
 /// Φ, ve, EMM and EMax of a problem at `params`.
 pub fn evaluate(problem: &Problem, params: &[f64]) -> Evaluation {
-    let norms: Vec<f64> = (0..problem.n_points())
-        .map(|i| volver_core::problem::norm(problem.residual(i, params)))
-        .collect();
+    // The modules on every core, summed in point order: the same bits as one thread.
+    let norms = crate::loss::norms_of(problem, params);
     let n = norms.len() as f64;
     Evaluation {
         phi_mm: norms.iter().sum::<f64>() / n,
