@@ -171,7 +171,110 @@ pub trait Solver {
     ) -> Solution;
 }
 
-/// Names of the engines this build has, in the order [`engine`] knows them: `lm` always;
+/// One engine of volver: its name, the Cargo feature that brings it, a line for people and, when
+/// this build has it, its constructor. [`ENGINES`] lists them all; [`engine`],
+/// [`engine_names`], the error naming a missing feature and the README's table all read it.
+#[derive(Clone, Copy, Debug)]
+#[non_exhaustive]
+pub struct EngineInfo {
+    /// Its name (`volver identify --solver NAME`).
+    pub name: &'static str,
+    /// The Cargo feature that brings it; `None`: always built.
+    pub feature: Option<&'static str>,
+    /// What it does, in one line.
+    pub description: &'static str,
+    /// Its constructor; `None` when this build lacks the feature.
+    pub make: Option<fn() -> Box<dyn Solver>>,
+}
+
+/// A constructor that exists only with a Cargo feature.
+macro_rules! with_feature {
+    ($name:ident, $feature:literal, $engine:expr) => {
+        #[cfg(feature = $feature)]
+        const $name: Option<fn() -> Box<dyn Solver>> =
+            Some(|| -> Box<dyn Solver> { Box::new($engine) });
+        #[cfg(not(feature = $feature))]
+        const $name: Option<fn() -> Box<dyn Solver>> = None;
+    };
+}
+
+with_feature!(LM_CLARABEL, "clarabel", crate::clarabel::Polished);
+with_feature!(CLARABEL, "clarabel", crate::clarabel::ProxLinear);
+with_feature!(CERES, "ceres", ceres::Ceres::default());
+with_feature!(
+    NLOPT_LBFGS,
+    "nlopt",
+    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Lbfgs)
+);
+with_feature!(
+    NLOPT_SLSQP,
+    "nlopt",
+    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Slsqp)
+);
+with_feature!(
+    NLOPT_MMA,
+    "nlopt",
+    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Mma)
+);
+with_feature!(
+    NLOPT_BOBYQA,
+    "nlopt",
+    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Bobyqa)
+);
+
+/// Every engine volver knows, in the order [`engine_names`] and `volver compare` give them.
+pub const ENGINES: &[EngineInfo] = &[
+    EngineInfo {
+        name: "lm",
+        feature: None,
+        description: "native Levenberg–Marquardt on faer",
+        make: Some(|| -> Box<dyn Solver> { Box::new(lm::LevenbergMarquardt) }),
+    },
+    EngineInfo {
+        name: "lm+clarabel",
+        feature: Some("clarabel"),
+        description: "the LM, then Φ's second-order cone program as a polish",
+        make: LM_CLARABEL,
+    },
+    EngineInfo {
+        name: "clarabel",
+        feature: Some("clarabel"),
+        description: "Φ's convex sub-problem as a second-order cone program (Clarabel), iterated",
+        make: CLARABEL,
+    },
+    EngineInfo {
+        name: "ceres",
+        feature: Some("ceres"),
+        description: "Ceres Solver 2.1 through volver's own FFI crate",
+        make: CERES,
+    },
+    EngineInfo {
+        name: "nlopt-lbfgs",
+        feature: Some("nlopt"),
+        description: "NLopt's L-BFGS with the exact gradient",
+        make: NLOPT_LBFGS,
+    },
+    EngineInfo {
+        name: "nlopt-slsqp",
+        feature: Some("nlopt"),
+        description: "NLopt's SLSQP, the equality constraints taken natively",
+        make: NLOPT_SLSQP,
+    },
+    EngineInfo {
+        name: "nlopt-mma",
+        feature: Some("nlopt"),
+        description: "NLopt's MMA with the exact gradient",
+        make: NLOPT_MMA,
+    },
+    EngineInfo {
+        name: "nlopt-bobyqa",
+        feature: Some("nlopt"),
+        description: "NLopt's BOBYQA, derivative-free, for comparison",
+        make: NLOPT_BOBYQA,
+    },
+];
+
+/// Names of the engines this build has, in the order of [`ENGINES`]: `lm` always;
 /// `lm+clarabel` and `clarabel` with the `clarabel` feature; `ceres` with `ceres`;
 /// `nlopt-lbfgs`, `nlopt-slsqp`, `nlopt-mma` and `nlopt-bobyqa` with `nlopt`.
 ///
@@ -184,53 +287,28 @@ pub trait Solver {
 /// assert!(volver_solvers::engine("simplex").is_err());
 /// ```
 pub fn engine_names() -> Vec<&'static str> {
-    #[allow(unused_mut)]
-    let mut names = vec!["lm"];
-    #[cfg(feature = "clarabel")]
-    names.extend(["lm+clarabel", "clarabel"]);
-    #[cfg(feature = "ceres")]
-    names.push("ceres");
-    #[cfg(feature = "nlopt")]
-    names.extend(["nlopt-lbfgs", "nlopt-slsqp", "nlopt-mma", "nlopt-bobyqa"]);
-    names
+    ENGINES
+        .iter()
+        .filter(|e| e.make.is_some())
+        .map(|e| e.name)
+        .collect()
 }
 
 /// The engine called `name`, or an error listing the engines of this build (and the Cargo
 /// feature that brings a known engine this build lacks).
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, String> {
-    let engine: Box<dyn Solver> = match name {
-        "lm" => Box::new(lm::LevenbergMarquardt),
-        #[cfg(feature = "clarabel")]
-        "clarabel" => Box::new(crate::clarabel::ProxLinear),
-        #[cfg(feature = "clarabel")]
-        "lm+clarabel" => Box::new(crate::clarabel::Polished),
-        #[cfg(feature = "ceres")]
-        "ceres" => Box::new(ceres::Ceres::default()),
-        #[cfg(feature = "nlopt")]
-        "nlopt-lbfgs" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Lbfgs)),
-        #[cfg(feature = "nlopt")]
-        "nlopt-slsqp" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Slsqp)),
-        #[cfg(feature = "nlopt")]
-        "nlopt-mma" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Mma)),
-        #[cfg(feature = "nlopt")]
-        "nlopt-bobyqa" => Box::new(crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Bobyqa)),
-        other => {
-            let feature = match other {
-                "ceres" => Some("ceres"),
-                "clarabel" | "lm+clarabel" => Some("clarabel"),
-                o if o.starts_with("nlopt") => Some("nlopt"),
-                _ => None,
-            };
-            let hint = feature
-                .map(|f| format!(" ('{other}' needs the Cargo feature `{f}`)"))
-                .unwrap_or_default();
-            return Err(format!(
-                "unknown solver '{other}'{hint}: this build has {}",
-                engine_names().join(", ")
-            ));
-        }
-    };
-    Ok(engine)
+    let known = ENGINES.iter().find(|e| e.name == name);
+    if let Some(make) = known.and_then(|e| e.make) {
+        return Ok(make());
+    }
+    let hint = known
+        .and_then(|e| e.feature)
+        .map(|f| format!(" ('{name}' needs the Cargo feature `{f}`)"))
+        .unwrap_or_default();
+    Err(format!(
+        "unknown solver '{name}'{hint}: this build has {}",
+        engine_names().join(", ")
+    ))
 }
 
 /// Φ, ve, EMM and EMax of a problem at `params`.

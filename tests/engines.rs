@@ -1,0 +1,79 @@
+//! The engine table (`volver_solvers::ENGINES`) against what a user reads and gets: the README's
+//! engine table names every engine with its Cargo feature and no other, each engine of the build
+//! answers to its name, and an engine the build lacks is refused with the feature that brings it.
+
+use volver::solvers::{ENGINES, engine, engine_names};
+
+/// The rows of the README's table under "### Engines": (engine names, feature cell).
+fn readme_rows() -> Vec<(Vec<String>, String)> {
+    let readme = include_str!("../README.md");
+    let section = readme
+        .split("### Engines")
+        .nth(1)
+        .expect("the README has an Engines section");
+    section
+        .lines()
+        .skip_while(|l| !l.starts_with("| engine"))
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            let names = cells[1]
+                .split(',')
+                .map(|n| n.trim().trim_matches('`').to_string())
+                .collect();
+            (names, cells[2].to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn the_readme_table_lists_every_engine_with_its_feature() {
+    let rows = readme_rows();
+    assert!(!rows.is_empty(), "no engine table found in the README");
+    for e in ENGINES {
+        let (_, feature) = rows
+            .iter()
+            .find(|(names, _)| names.iter().any(|n| n == e.name))
+            .unwrap_or_else(|| panic!("the README's engine table lacks `{}`", e.name));
+        match e.feature {
+            None => assert!(feature.contains("always"), "{}: {feature}", e.name),
+            Some(f) => assert!(feature.contains(&format!("`{f}`")), "{}: {feature}", e.name),
+        }
+        assert!(!e.description.is_empty());
+    }
+    for (names, _) in &rows {
+        for n in names {
+            assert!(
+                ENGINES.iter().any(|e| e.name == n),
+                "the README names an engine volver does not know: {n}"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_engine_answers_to_its_name_or_names_its_feature() {
+    let names = engine_names();
+    for e in ENGINES {
+        match e.make {
+            Some(_) => {
+                assert!(names.contains(&e.name));
+                assert_eq!(engine(e.name).unwrap().name(), e.name);
+            }
+            None => {
+                let msg = engine(e.name).err().unwrap();
+                let f = e.feature.expect("an engine built always has a constructor");
+                assert!(
+                    msg.contains(&format!("needs the Cargo feature `{f}`")),
+                    "{msg}"
+                );
+            }
+        }
+    }
+    let msg = engine("simplex").err().unwrap();
+    assert!(
+        msg.starts_with("unknown solver 'simplex': this build has lm"),
+        "{msg}"
+    );
+}
