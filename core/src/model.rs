@@ -971,22 +971,8 @@ impl Model {
         vals[0] = self.terms[grp.terms.start]
             .basis
             .eval_at(x, first, &mut g[..len]);
-        let rest = &mut vals[1..n];
         let block = &params[grp.params + len..grp.params + n * len];
-        // The usual lengths unrolled: a cubic (4), one harmonic (3), a constant (1).
-        match len {
-            1 => dots::<S, 1>(g, block, rest),
-            3 => dots::<S, 3>(g, block, rest),
-            4 => dots::<S, 4>(g, block, rest),
-            _ => {
-                for (v, coeffs) in rest.iter_mut().zip(block.chunks_exact(len)) {
-                    *v = coeffs
-                        .iter()
-                        .zip(&g[..len])
-                        .fold(S::zero(), |acc, (c, b)| acc + *b * *c);
-                }
-            }
-        }
+        dots(&g[..len], block, &mut vals[1..n], |v| v);
     }
 
     /// [`Model::group_values`] from the basis' values `values` at the point ([`Regressors`]),
@@ -1000,23 +986,8 @@ impl Model {
         values: &[f64],
         vals: &mut [S],
     ) {
-        let (len, n) = (grp.len, grp.terms.len());
-        let block = &params[grp.params..grp.params + n * len];
-        match len {
-            1 => dots_cached::<S, 1>(values, block, vals),
-            3 => dots_cached::<S, 3>(values, block, vals),
-            4 => dots_cached::<S, 4>(values, block, vals),
-            _ => {
-                for (v, coeffs) in vals.iter_mut().zip(block.chunks_exact(len)) {
-                    *v = S::from(
-                        coeffs
-                            .iter()
-                            .zip(values)
-                            .fold(0.0, |acc, (c, b)| acc + *b * *c),
-                    );
-                }
-            }
-        }
+        let block = &params[grp.params..grp.params + grp.terms.len() * grp.len];
+        dots(values, block, vals, S::from);
     }
 
     fn check_len(&self, params: &[f64]) {
@@ -1571,30 +1542,42 @@ impl Model {
     }
 }
 
-/// `out[i] = Σ_j g[j]·block[i·L + j]`, summed in the basis' order.
+/// Each term's value `Σ_j g_j c_j` (from zero, in coefficient order) for the basis values `g`
+/// and the terms' coefficients one after another in `block`, into `out` (one per term). The
+/// basis values are of the forward model's scalar (`to` the identity) or the `f64` of a point's
+/// [`Regressors`] (`to` = `S::from`); the usual lengths are unrolled: a cubic (4), one harmonic
+/// (3), a constant (1).
 #[inline]
-fn dots<S: Real, const L: usize>(g: &[S; MAX_COEFFS], block: &[f64], out: &mut [S]) {
-    let g: [S; L] = std::array::from_fn(|j| g[j]);
-    for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(L)) {
-        let mut acc = S::zero();
-        for j in 0..L {
-            acc += g[j] * coeffs[j];
+fn dots<T: Real, S: Real>(g: &[T], block: &[f64], out: &mut [S], to: impl Fn(T) -> S) {
+    #[inline]
+    fn fixed<T: Real, S: Real, const L: usize>(
+        g: &[T],
+        block: &[f64],
+        out: &mut [S],
+        to: impl Fn(T) -> S,
+    ) {
+        let g: [T; L] = std::array::from_fn(|j| g[j]);
+        for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(L)) {
+            let mut acc = T::zero();
+            for j in 0..L {
+                acc += g[j] * coeffs[j];
+            }
+            *v = to(acc);
         }
-        *v = acc;
     }
-}
-
-/// [`dots`] with the basis values `g` in `f64` (a point's [`Regressors`]), over the whole
-/// group (`block` holds every term's coefficients, `out` every term's value).
-#[inline]
-fn dots_cached<S: Real, const L: usize>(g: &[f64], block: &[f64], out: &mut [S]) {
-    let g: [f64; L] = std::array::from_fn(|j| g[j]);
-    for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(L)) {
-        let mut acc = 0.0;
-        for j in 0..L {
-            acc += g[j] * coeffs[j];
+    match g.len() {
+        1 => fixed::<T, S, 1>(g, block, out, to),
+        3 => fixed::<T, S, 3>(g, block, out, to),
+        4 => fixed::<T, S, 4>(g, block, out, to),
+        len => {
+            for (v, coeffs) in out.iter_mut().zip(block.chunks_exact(len)) {
+                let mut acc = T::zero();
+                for (b, c) in g.iter().zip(coeffs) {
+                    acc += *b * *c;
+                }
+                *v = to(acc);
+            }
         }
-        *v = S::from(acc);
     }
 }
 

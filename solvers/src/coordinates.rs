@@ -63,6 +63,14 @@ impl Free {
         out
     }
 
+    /// `D N dz`: the change of the parameters along a step `dz` in the free coordinates.
+    pub(crate) fn direction(&self, dz: &[f64]) -> Vec<f64> {
+        let b = self.ns.basis();
+        (0..self.d.len())
+            .map(|i| self.d[i] * (0..dz.len()).map(|k| b[(i, k)] * dz[k]).sum::<f64>())
+            .collect()
+    }
+
     /// `M = D N` (n × free): `∂p/∂z`.
     #[cfg(any(feature = "nlopt", feature = "clarabel"))]
     pub(crate) fn tangent(&self) -> faer::Mat<f64> {

@@ -215,11 +215,11 @@ impl Gauge {
 pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
     let problem: &Problem = &task.problem;
     let n = reference.len();
-    let (h, g) = crate::kernels::normal_equations(problem, at)?;
+    let normal = crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false)?;
+    let h = normal.h.clone();
     let plain = Some(std::sync::Arc::new(crate::PlainNormal {
         at: at.to_vec(),
-        h: h.clone(),
-        g,
+        normal,
     }));
     let metric = if problem.machine().is_some() {
         function_metric(problem.model(), at)

@@ -28,6 +28,7 @@ thread_local! {
 
 /// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
 /// they come from.
+#[derive(Clone, Debug)]
 pub(crate) struct Normal {
     pub(crate) h: Mat<f64>,
     pub(crate) g: Vec<f64>,
@@ -37,6 +38,7 @@ pub(crate) struct Normal {
 
 /// The triangular factor of a pass, for plain least squares (no radial correction on any
 /// point).
+#[derive(Clone, Debug)]
 pub(crate) struct Factor {
     /// R (n × n) of the weighted Jacobian rows `W^½ J`, accumulated block by block (a
     /// sequential QR: only R is kept, never the rows): `H = RᵀR`.

@@ -62,12 +62,11 @@ pub struct Task<'a> {
     pub(crate) plain: Option<std::sync::Arc<PlainNormal>>,
 }
 
-/// `JᵀJ` and `Jᵀr` at the point `at` (see [`Task`]).
+/// The unweighted normal equations (`JᵀJ`, `Jᵀr`) at the point `at` (see [`Task`]).
 #[derive(Debug)]
 pub(crate) struct PlainNormal {
     pub(crate) at: Vec<f64>,
-    pub(crate) h: faer::Mat<f64>,
-    pub(crate) g: Vec<f64>,
+    pub(crate) normal: kernels::Normal,
 }
 
 impl<'a> Task<'a> {

@@ -126,9 +126,7 @@ fn curvature_gradient(
     let np = problem.n_points();
     let basis = free.ns.basis();
     let nf = basis.ncols();
-    let dir: Vec<f64> = (0..n)
-        .map(|i| free.d[i] * (0..nf).map(|k| basis[(i, k)] * delta[k]).sum::<f64>())
-        .collect();
+    let dir = free.direction(delta);
     let mut b = vec![0.0; n];
     let mut row = vec![0.0; 3 * n];
     for i in 0..np {

@@ -296,10 +296,7 @@ fn negligible_step<'f>(
         None => (None, p.iter().map(|v| v * v).sum::<f64>().sqrt()),
     };
     move |dz: &[f64]| {
-        let basis = free.ns.basis();
-        let dp: Vec<f64> = (0..n)
-            .map(|i| free.d[i] * (0..dz.len()).map(|k| basis[(i, k)] * dz[k]).sum::<f64>())
-            .collect();
+        let dp = free.direction(dz);
         let step = match &metric {
             Some(m) => quadratic(m, &dp).sqrt(),
             None => dp.iter().map(|v| v * v).sum::<f64>().sqrt(),

@@ -171,11 +171,7 @@ impl<'t, 'a> Run<'t, 'a> {
                         .zip(start)
                         .all(|(a, b)| a.to_bits() == b.to_bits())
             })
-            .map(|k| Normal {
-                h: k.h.clone(),
-                g: k.g.clone(),
-                factor: None,
-            });
+            .map(|k| k.normal.clone());
         let first = match known {
             Some(normal) => normal,
             None => {
