@@ -1,72 +1,14 @@
-//! `volver compensate` and `volver tables`: using the identified errors on the machine.
+//! Using identified errors on the machine: reading a results file for a control (refusing
+//! implausible sizes), the tool point named on a command line, the controller tables and their
+//! expanded uncertainty.
 
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
-use volver::core::compensate::{Compensator, read_points, written};
-use volver::core::fsio::write_atomic;
-use volver::core::gcode::{Linearise, Program};
-use volver::core::iso::Axis;
-use volver::core::model::Model;
-use volver::core::results::ResultsFile;
-use volver::core::results::UncertaintyRecord;
-use volver::core::tables::ErrorTables;
-use volver::solvers::uncertainty::{Covariance, K, ToolGrid};
-
-/// Options of `volver compensate`.
-#[derive(clap::Args)]
-pub struct CompensateArgs {
-    /// Results file of `volver identify` (machine, error model and identified errors).
-    #[arg(long)]
-    results: PathBuf,
-    /// A point list to correct: CSV with one column per axis (mm, degrees) and an optional id.
-    #[arg(long, conflicts_with = "gcode", required_unless_present = "gcode")]
-    points: Option<PathBuf>,
-    /// A G-code program to correct (G0/G1 moves, G2/G3 arcs linearised; mm).
-    #[arg(long)]
-    gcode: Option<PathBuf>,
-    /// Where to write the corrected points or program.
-    #[arg(long)]
-    out: PathBuf,
-    /// The tool point, mm in the frame of the last tool-side axis (like a reflector offset);
-    /// default: the centroid of the reflectors, where the measurement sees best.
-    #[arg(
-        long,
-        value_name = "X,Y,Z",
-        conflicts_with = "tool_reflector",
-        visible_alias = "tool-offset",
-        allow_hyphen_values = true
-    )]
-    tool: Option<String>,
-    /// Use a reflector's offset as the tool point.
-    #[arg(long, value_name = "ID")]
-    tool_reflector: Option<String>,
-    /// Axes kept at their programmed value (letters, e.g. `C`); default: the rotary axes when
-    /// the machine has three linear ones, else none.
-    #[arg(long, value_name = "AXES")]
-    hold: Option<String>,
-    /// Largest distance between an arc and its chords (mm).
-    #[arg(long, default_value_t = 0.001)]
-    chord_tolerance: f64,
-    /// Split linear moves longer than this (mm) so the corrected path follows the bent one.
-    #[arg(long)]
-    max_segment: Option<f64>,
-    /// Decimals of the written commands (mm, degrees), 0–12.
-    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u8).range(0..=volver::core::gcode::MAX_DECIMALS as i64))]
-    decimals: u8,
-    /// Largest accepted deviation of a corrected command from its target, as solved (mm).
-    #[arg(long, default_value_t = 1e-9)]
-    tolerance: f64,
-    /// Use a results file whose errors are implausible (see `volver identify --accept`).
-    #[arg(long)]
-    accept: bool,
-    /// Refuse when the expanded uncertainty (k = 2) of the compensated tool point over the
-    /// travel, after the set-up's rigid transform, exceeds this (µm).
-    #[arg(long, default_value_t = 25.0)]
-    max_u_um: f64,
-    /// Compensate even when the uncertainty exceeds --max-u-um.
-    #[arg(long)]
-    force: bool,
-}
+use volver_core::fsio::write_atomic;
+use volver_core::model::Model;
+use volver_core::results::{ResultsFile, UncertaintyRecord};
+use volver_core::tables::ErrorTables;
+use volver_solvers::uncertainty::K;
 
 /// `--max-u-um` must be a positive length.
 pub fn check_max_u(v: f64) -> Result<()> {
@@ -76,16 +18,19 @@ pub fn check_max_u(v: f64) -> Result<()> {
     Ok(())
 }
 
-/// Reads a results file; its errors must be plausible ([`volver::core::plausibility`]) unless
+/// Reads a results file; its errors must be plausible ([`volver_core::plausibility`]) unless
 /// `accept`: implausible sizes come from a wrong input and must not reach a control.
-fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>, Option<UncertaintyRecord>)> {
+pub fn load_results(
+    path: &Path,
+    accept: bool,
+) -> Result<(Model, Vec<f64>, Option<UncertaintyRecord>)> {
     let label = path.display().to_string();
     let file = ResultsFile::load(path).context("reading the results file")?;
     let (model, params) = file.to_model(&label)?;
-    let implausible = volver::core::plausibility::check(
+    let implausible = volver_core::plausibility::check(
         &model,
         &params,
-        &volver::core::plausibility::Context {
+        &volver_core::plausibility::Context {
             relaxed: true,
             ..Default::default()
         },
@@ -99,106 +44,10 @@ fn load_results(path: &Path, accept: bool) -> Result<(Model, Vec<f64>, Option<Un
         bail!(
             "{label}: implausible sizes: {}; {} (--accept uses them anyway)",
             list.join("; "),
-            volver::core::plausibility::WHERE_TO_LOOK
+            volver_core::plausibility::WHERE_TO_LOOK
         );
     }
     Ok((model, params, file.uncertainty))
-}
-
-/// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
-/// machine's travel (5 positions per axis), printed after the set-up's rigid transform and raw;
-/// refused when the former exceeds `max_u_um` unless `force`, with the held combination that
-/// makes it and the measurement that would identify it. Returns (after the transform, raw) in
-/// mm, `None` when the results carry no uncertainty (a simulation's truth, an older file).
-pub fn vouch(
-    model: &Model,
-    params: &[f64],
-    record: Option<&UncertaintyRecord>,
-    tool: [f64; 3],
-    max_u_um: f64,
-    force: bool,
-) -> Result<Option<(f64, f64)>> {
-    let Some(record) = record else {
-        println!(
-            "  U unknown: the results file records no uncertainty (`volver identify --out` writes \
-             it); nothing vouches for this compensation"
-        );
-        return Ok(None);
-    };
-    let cov = Covariance::from_record(record, model.n_params());
-    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
-    let grid = ToolGrid {
-        commands: plan.positions,
-        tool,
-    };
-    let aligned = grid.uncertainty(model, params, &cov, true);
-    let raw = grid.uncertainty(model, params, &cov, false);
-    let worst = |us: &[volver::solvers::uncertainty::PointUncertainty]| {
-        us.iter()
-            .enumerate()
-            .map(|(i, u)| (u.u95_max_mm(), i))
-            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
-    };
-    let (ua, ia) = worst(&aligned);
-    let (ur, _) = worst(&raw);
-    println!(
-        "  U (k = 2) of the compensated tool point {} mm over the travel: up to {:.2} µm after \
-         the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {})",
-        point_mm(tool),
-        ua * 1e3,
-        ur * 1e3,
-        if record.gauge == "none" {
-            "none".to_string()
-        } else if record.held_factor.is_empty() {
-            // A rule that leaves no combination to a separate prior: the priors of
-            // `identify --prior` (maximum a posteriori), stated as recorded.
-            record.gauge.split(':').next().unwrap_or("").to_string()
-        } else {
-            format!(
-                "held combinations at the reference, a prior of {:.0} µm RMS each",
-                record.held_prior_mm * 1e3
-            )
-        }
-    );
-    if ua * 1e3 > max_u_um {
-        let held = aligned[ia]
-            .worst_held
-            .and_then(|c| record.held.get(c))
-            .filter(|_| {
-                let h = aligned[ia].u95_held_mm.iter().copied().fold(0.0, f64::max);
-                h > 0.5 * ua
-            });
-        let off_line = distance_from_reflector_line(model, tool).filter(|d| *d > 1.0);
-        let why = match (held, off_line) {
-            (Some(h), Some(d)) => format!(
-                "it comes from a combination the data cannot identify ({h}); the tool point is \
-                 {d:.0} mm off the line through the reflectors, whose turn about that line the \
-                 tracker does not see: measure a reflector at the tool's position, or a third \
-                 reflector off the line"
-            ),
-            (Some(h), None) => format!(
-                "it comes from a combination the data cannot identify ({h}): measure a plan \
-                 that moves it (more positions of the axes it involves, a reflector elsewhere)"
-            ),
-            (None, Some(d)) => format!(
-                "the tool point is {d:.0} mm off the line through the reflectors: measure a \
-                 reflector at the tool's position, or a third reflector off the line"
-            ),
-            (None, None) => "the data determine it poorly: measure more positions, or with \
-                 less noise"
-                .to_string(),
-        };
-        let msg = format!(
-            "U of the compensated tool point reaches {:.1} µm (limit --max-u-um {max_u_um}): \
-             {why}",
-            ua * 1e3
-        );
-        if !force {
-            bail!("{msg}; --force uses the errors anyway");
-        }
-        println!("  warning: {msg} (used anyway: --force)");
-    }
-    Ok(Some((ua, ur)))
 }
 
 /// The tables' expanded uncertainty (k = 2), in the tables' own layout: every value is the
@@ -253,10 +102,6 @@ pub fn table_uncertainty(
     Ok(sq)
 }
 
-fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
-    tool_point_of(a.tool.as_deref(), a.tool_reflector.as_deref(), model)
-}
-
 /// The tool point from `--tool X,Y,Z` (mm, in the frame of the last tool-side axis) or
 /// `--tool-reflector ID`; the reflectors' centroid when neither is given.
 pub fn tool_point_of(
@@ -289,82 +134,12 @@ pub fn tool_point_of(
     }
 }
 
-/// Options of `volver predict`.
-#[derive(clap::Args)]
-pub struct PredictArgs {
-    /// Results file (of `volver identify`, `report`, or a simulation's truth.json).
-    #[arg(long)]
-    results: PathBuf,
-    /// The commands: a plan preset or a grid such as X=0:1400:200,C=0:330:30,Z=0:600:150 (mm,
-    /// degrees).
-    #[arg(long)]
-    grid: String,
-    /// The tool point, mm in the frame of the last tool-side axis; default: the reflectors'
-    /// centroid.
-    #[arg(
-        long,
-        value_name = "X,Y,Z",
-        visible_alias = "tool",
-        allow_hyphen_values = true
-    )]
-    tool_offset: Option<String>,
-    /// Print one JSON object instead of a CSV table.
-    #[arg(long)]
-    json: bool,
-}
-
-/// Runs `volver predict`: the tool point of a results file at each command of a grid, in the
-/// workpiece frame (the tracker pose and the measurement's effects left out), so that an
-/// identified model and another (the truth of a simulation, a second fit) can be put side by
-/// side.
-pub fn predict_command(a: PredictArgs) -> Result<()> {
-    let label = a.results.display().to_string();
-    let file = ResultsFile::load(&a.results).context("reading the results file")?;
-    let (model, params) = file.to_model(&label)?;
-    let m = model.machine();
-    let plan = if a.grid.contains('=') {
-        volver::core::plan::Plan::parse_grid(m, &a.grid)?
-    } else {
-        volver::core::plan::Plan::preset(m, &a.grid)?
-    };
-    let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
-    let rows: Vec<(Vec<f64>, [f64; 3])> = plan
-        .positions
-        .iter()
-        .map(|c| {
-            let files: Vec<f64> = m
-                .axes()
-                .iter()
-                .enumerate()
-                .map(|(k, ax)| ax.to_file_units(c.0[k]))
-                .collect();
-            (files, model.tool_point(&c.0, &tool, &params))
-        })
-        .collect();
-    if a.json {
-        let obj = serde_json::json!({
-            "results": label,
-            "model": model.spec().name,
-            "tool_offset_mm": tool,
-            "axes": m.axes().iter().map(|ax| ax.axis.to_string()).collect::<Vec<_>>(),
-            "points": rows.iter().map(|(c, t)| serde_json::json!({
-                "commands": c, "tool_point_mm": t,
-            })).collect::<Vec<_>>(),
-        });
-        println!("{}", serde_json::to_string_pretty(&obj)?);
-        return Ok(());
-    }
-    let names: Vec<String> = m.axes().iter().map(|ax| ax.axis.to_string()).collect();
-    println!("{},tool_x_mm,tool_y_mm,tool_z_mm", names.join(","));
-    for (c, t) in &rows {
-        let cells: Vec<String> = c.iter().map(|v| format!("{v}")).collect();
-        println!("{},{:.9},{:.9},{:.9}", cells.join(","), t[0], t[1], t[2]);
-    }
-    Ok(())
-}
-
 /// A point in mm as people write it: `(-30, 75, 0)`, each coordinate rounded to 0.1 µm
 /// (`26.6667`, not `26.666666666666668`).
+///
+/// ```
+/// assert_eq!(volver::compensation::point_mm([-30.0, 80.0 / 3.0, -1e-9]), "(-30, 26.6667, 0)");
+/// ```
 pub fn point_mm(p: [f64; 3]) -> String {
     let c: Vec<String> = p
         .iter()
@@ -412,197 +187,6 @@ pub fn distance_from_reflector_line(model: &Model, tool: [f64; 3]) -> Option<f64
     }
 }
 
-/// Runs `volver compensate`.
-pub fn compensate_command(a: CompensateArgs) -> Result<()> {
-    let inputs: Vec<&Path> = [
-        Some(a.results.as_path()),
-        a.points.as_deref(),
-        a.gcode.as_deref(),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
-    volver::core::fsio::check_not_an_input(&a.out, &inputs)?;
-    let (model, params, record) = load_results(&a.results, a.accept)?;
-    let m = model.machine();
-    let tool = parse_tool(&a, &model)?;
-    let comp = match &a.hold {
-        Some(h) => {
-            let held: Vec<Axis> = h
-                .chars()
-                .filter(|c| !c.is_whitespace() && *c != ',')
-                .map(|c| {
-                    Axis::from_letter(c)
-                        .ok_or_else(|| anyhow::anyhow!("--hold {h}: '{c}' is not an axis letter"))
-                })
-                .collect::<Result<_>>()?;
-            Compensator::holding(&model, &params, tool, &held)?
-        }
-        None => Compensator::new(&model, &params, tool)?,
-    };
-    if let Some(d) = distance_from_reflector_line(&model, tool)
-        && d > 1.0
-    {
-        println!(
-            "  warning: the tool point is {d:.1} mm off the line through the reflectors; the tracker does not see the tool side's rotation about that line, so its compensation there rests on unmeasured errors"
-        );
-    }
-    let free: String = comp
-        .free_axes()
-        .iter()
-        .map(|&k| m.axes()[k].axis.letter())
-        .collect();
-    println!(
-        "volver compensate — {} with the errors of {} (model \"{}\"), tool point {} mm, solving for {free}",
-        m.chain(),
-        a.results.display(),
-        model.spec().name,
-        point_mm(tool)
-    );
-    check_max_u(a.max_u_um)?;
-    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
-    if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
-        bail!(
-            "--tolerance {}: the verification tolerance must be a positive length (mm)",
-            a.tolerance
-        );
-    }
-    let (text, worst_solved, worst_written, outside) = if let Some(path) = &a.points {
-        let label = path.display().to_string();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-        let pts = read_points(&text, &label, m)?;
-        let axes = m.axes();
-        let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
-        let mut out = format!(
-            "line,id,{},{},error_um,deviation_um,outside_travel\n",
-            letters.join(","),
-            letters
-                .iter()
-                .map(|l| format!("{l}_programmed"))
-                .collect::<Vec<_>>()
-                .join(",")
-        );
-        let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
-        for p in &pts {
-            let c = comp
-                .compensate(&p.commands)
-                .with_context(|| format!("{label}:{}", p.line))?;
-            let (cells, written) = written(m, &c.commands, usize::from(a.decimals));
-            let prog: Vec<String> = axes
-                .iter()
-                .enumerate()
-                .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
-                .collect();
-            let wd = comp.deviation_mm(&written, c.target);
-            ws = ws.max(c.deviation_mm);
-            ww = ww.max(wd);
-            largest = largest.max(c.error_mm);
-            let off: String = c
-                .outside_travel
-                .iter()
-                .map(|&k| axes[k].axis.letter())
-                .collect();
-            outside += usize::from(!off.is_empty());
-            out.push_str(&format!(
-                "{},{},{},{},{:.4},{:.6},{off}\n",
-                p.line,
-                p.id.clone().unwrap_or_default(),
-                cells.join(","),
-                prog.join(","),
-                c.error_mm * 1e3,
-                wd * 1e3
-            ));
-        }
-        println!(
-            "  {} points from {label}: uncompensated error up to {:.4} µm",
-            pts.len(),
-            largest * 1e3
-        );
-        (out, ws, ww, outside)
-    } else {
-        let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
-        let label = path.display().to_string();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-        let lin = Linearise {
-            chord_tolerance_mm: a.chord_tolerance,
-            max_segment_mm: a.max_segment,
-        };
-        let prog = Program::parse(&text, &label, m, &lin)?;
-        let header = format!(
-            "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm; errors of model {}",
-            env!("CARGO_PKG_VERSION"),
-            a.results.display(),
-            a.chord_tolerance,
-            point_mm(tool),
-            model.spec().name
-        );
-        let (out, rep) = prog.compensate(&comp, m, usize::from(a.decimals), &header)?;
-        println!(
-            "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
-            rep.moves,
-            rep.arcs,
-            a.chord_tolerance,
-            rep.points,
-            rep.max_error_mm * 1e3
-        );
-        (
-            out,
-            rep.max_deviation_mm,
-            rep.max_written_deviation_mm,
-            rep.outside_travel.len(),
-        )
-    };
-    println!(
-        "  verified through the forward model: largest deviation {:.3e} mm as solved, {:.3e} mm as written ({} decimals)",
-        worst_solved, worst_written, a.decimals
-    );
-    if outside > 0 {
-        println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
-    }
-    // A failed verification writes nothing: a program that misses its targets must not reach a
-    // control.
-    if worst_solved.is_nan() || worst_solved > a.tolerance {
-        bail!(
-            "a corrected command misses its target by {worst_solved:.3e} mm, above the tolerance {:.1e} mm; nothing written",
-            a.tolerance
-        );
-    }
-    write_atomic(&a.out, text).with_context(|| format!("writing {}", a.out.display()))?;
-    println!("  written to {}", a.out.display());
-    Ok(())
-}
-
-/// Options of `volver tables`.
-#[derive(clap::Args)]
-pub struct TablesArgs {
-    /// Results file of `volver identify`.
-    #[arg(long)]
-    results: PathBuf,
-    /// Output folder: writes errors-isg.csv, errors-etalon.txt and errors.csv.
-    #[arg(long)]
-    out: PathBuf,
-    /// Step over linear axes (mm).
-    #[arg(long, default_value_t = 10.0)]
-    step: f64,
-    /// Step over rotary axes (degrees).
-    #[arg(long, default_value_t = 5.0)]
-    rotary_step: f64,
-    /// Use a results file whose errors are implausible (see `volver identify --accept`).
-    #[arg(long)]
-    accept: bool,
-    /// The tool point the tables serve, mm in the frame of the last tool-side axis; default:
-    /// the reflectors' centroid.
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    tool_offset: Option<String>,
-    /// Refuse when the expanded uncertainty (k = 2) of the compensated tool point over the
-    /// travel, after the set-up's rigid transform, exceeds this (µm).
-    #[arg(long, default_value_t = 25.0)]
-    max_u_um: f64,
-    /// Write the tables even when the uncertainty exceeds --max-u-um.
-    #[arg(long)]
-    force: bool,
-}
-
 /// Writes the three table formats into `dir`; returns their paths.
 pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -618,52 +202,4 @@ pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
         out.push(p);
     }
     Ok(out)
-}
-
-/// Runs `volver tables`.
-pub fn tables_command(a: TablesArgs) -> Result<()> {
-    let (model, params, record) = load_results(&a.results, a.accept)?;
-    check_max_u(a.max_u_um)?;
-    let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
-    let tables = ErrorTables::from_model(&model, &params, a.step, a.rotary_step)?;
-    println!(
-        "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
-        a.results.display()
-    );
-    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
-    let mut paths = write_tables(&tables, &a.out)?;
-    if let Some(r) = &record {
-        // The formats have no place for U: a companion in errors.csv's layout whose values are
-        // the expanded uncertainty (k = 2) of each error.
-        let u = table_uncertainty(&model, &params, r, &tables, a.step, a.rotary_step)?;
-        let p = a.out.join("errors-u95.csv");
-        write_atomic(&p, u.to_plain_csv()).with_context(|| format!("writing {}", p.display()))?;
-        paths.push(p);
-    }
-    for t in &tables.axes {
-        let names: Vec<&str> = t.errors.iter().map(|e| e.0.as_str()).collect();
-        println!(
-            "  axis {}: {} positions, {}",
-            t.axis,
-            t.positions.len(),
-            names.join(" ")
-        );
-    }
-    let consts: Vec<&str> = tables.constants.iter().map(|c| c.0.as_str()).collect();
-    println!("  constants: {}", consts.join(" "));
-    for p in paths {
-        println!("  written {}", p.display());
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod point_tests {
-    #[test]
-    fn points_are_printed_rounded() {
-        assert_eq!(
-            super::point_mm([-30.0, 80.0 / 3.0, -1e-9]),
-            "(-30, 26.6667, 0)"
-        );
-    }
 }

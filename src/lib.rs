@@ -17,6 +17,14 @@
 pub use volver_core as core;
 pub use volver_solvers as solvers;
 
+pub mod compensation;
+pub mod history;
+pub mod inputs;
+pub mod plot;
+pub mod report;
+pub mod study;
+pub mod uncertainty;
+
 /// The README's Rust examples, compiled and run as doctests.
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]

@@ -5,17 +5,17 @@ use crate::plot::{self, Cell, FunctionPanel, escape};
 use anyhow::Result;
 use std::collections::BTreeMap;
 use std::fmt::Write;
-use volver::core::diagnose;
-use volver::core::iso::ErrorId;
-use volver::core::measure::MeasurementSet;
-use volver::core::model::Model;
-use volver::core::problem::{Problem, norm};
-use volver::solvers::Options;
-use volver::solvers::candidates::Score;
-use volver::solvers::identifiability::analyse;
-use volver::solvers::init::init_tracker;
-use volver::solvers::strategy::Identification;
-use volver::solvers::uncertainty::{Covariance, K};
+use volver_core::diagnose;
+use volver_core::iso::ErrorId;
+use volver_core::measure::MeasurementSet;
+use volver_core::model::Model;
+use volver_core::problem::{Problem, norm};
+use volver_solvers::Options;
+use volver_solvers::candidates::Score;
+use volver_solvers::identifiability::analyse;
+use volver_solvers::init::init_tracker;
+use volver_solvers::strategy::Identification;
+use volver_solvers::uncertainty::{Covariance, K};
 
 /// One fitted model revision shown in the report.
 pub struct Fit<'a> {
@@ -42,7 +42,7 @@ pub struct CrossRow {
 }
 
 impl CrossRow {
-    /// The row of `cv` ([`volver::solvers::strategy::cross_validate`] on `reference`).
+    /// The row of `cv` ([`volver_solvers::strategy::cross_validate`] on `reference`).
     pub fn new(label: String, reference: &Problem, cv: &Identification) -> CrossRow {
         CrossRow {
             label,
@@ -162,7 +162,7 @@ fn function_panels(
     model: &Model,
     params: &[f64],
     cov: Option<&Covariance>,
-    gauge: Option<&volver::solvers::gauge::Gauge>,
+    gauge: Option<&volver_solvers::gauge::Gauge>,
     truth: Option<(&Model, &[f64])>,
 ) -> Vec<FunctionPanel> {
     let m = model.machine();
@@ -268,16 +268,16 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let before = problem.residuals(&before_params);
     let after = problem.residuals(params);
     let options = Options::default();
-    let task = volver::solvers::Task::new(problem.clone());
+    let task = volver_solvers::Task::new(problem.clone());
     let ident = analyse(&task, params, options.rank_tolerance, 0.95);
     // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held
     // combinations' prior.
-    let cov = volver::solvers::uncertainty::linear(
+    let cov = volver_solvers::uncertainty::linear(
         &problem,
         last.id.gauge.as_ref(),
         params,
         options.objective,
-        volver::solvers::uncertainty::NoiseModel::Residual,
+        volver_solvers::uncertainty::NoiseModel::Residual,
     );
     let mut s = String::new();
     let _ = write!(
@@ -348,7 +348,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
             // before: zero errors with the tracker fitted, as the identification starts.
             let problem = Problem::new(f.model, input.data)?;
             let start = f.model.initial_params();
-            let tracker = volver::solvers::init::init_tracker(&problem, &start).unwrap_or(start);
+            let tracker = volver_solvers::init::init_tracker(&problem, &start).unwrap_or(start);
             let (u0, u1) = (
                 problem.emm_u95_um(&tracker),
                 problem.emm_u95_um(&f.id.params),
@@ -561,7 +561,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
             let _ = writeln!(
                 s,
                 "<p><b>Verdict:</b> {}</p>",
-                crate::plot::escape(&volver::solvers::candidates::verdict(
+                crate::plot::escape(&volver_solvers::candidates::verdict(
                     &input.candidates,
                     first.id.final_.stats.emm_um
                 ))
@@ -713,18 +713,18 @@ fn tool_point_uncertainty(
     input: &ReportInput,
     model: &Model,
     params: &[f64],
-    gauge: Option<&volver::solvers::gauge::Gauge>,
+    gauge: Option<&volver_solvers::gauge::Gauge>,
     cov: &Covariance,
 ) -> Result<()> {
     let m = model.machine();
     let grid = crate::uncertainty::default_grid(m, 5)?;
-    let tg = volver::solvers::uncertainty::ToolGrid {
+    let tg = volver_solvers::uncertainty::ToolGrid {
         commands: grid.positions,
         tool: input.tool,
     };
     let aligned = tg.uncertainty(model, params, cov, true);
     let raw = tg.uncertainty(model, params, cov, false);
-    let umax = |v: &[volver::solvers::uncertainty::PointUncertainty]| {
+    let umax = |v: &[volver_solvers::uncertainty::PointUncertainty]| {
         v.iter()
             .map(|p| p.u95_max_mm() * 1e3)
             .fold(0.0_f64, f64::max)
@@ -781,7 +781,7 @@ fn tool_point_uncertainty(
     else {
         return Ok(());
     };
-    let cells = |v: &[volver::solvers::uncertainty::PointUncertainty]| {
+    let cells = |v: &[volver_solvers::uncertainty::PointUncertainty]| {
         let mut out: Vec<Cell> = Vec::new();
         for (c, p) in tg.commands.iter().zip(v) {
             let (x, y) = (

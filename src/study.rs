@@ -9,19 +9,19 @@
 //! paper's tracker read as bounds ([`TrackerNoise::PAPER`]).
 
 use anyhow::Result;
-use volver::core::machine::Machine;
-use volver::core::measure::MeasurementSet;
-use volver::core::model::{ErrorModelSpec, Model};
-use volver::core::noise::TrackerNoise;
-use volver::core::plan::Plan;
-use volver::core::problem::Problem;
-use volver::core::simulate::{Magnitudes, Simulation, Truth};
-use volver::solvers::lm::LevenbergMarquardt;
-use volver::solvers::strategy::{
+use volver_core::machine::Machine;
+use volver_core::measure::MeasurementSet;
+use volver_core::model::{ErrorModelSpec, Model};
+use volver_core::noise::TrackerNoise;
+use volver_core::plan::Plan;
+use volver_core::problem::Problem;
+use volver_core::simulate::{Magnitudes, Simulation, Truth};
+use volver_solvers::lm::LevenbergMarquardt;
+use volver_solvers::strategy::{
     Errors, Identification, Phasing, Strategy, combined, cross_validate, identify_errors,
     independent,
 };
-use volver::solvers::{Options, Silent};
+use volver_solvers::{Options, Silent};
 
 /// A row's figures: initial and final EMM and EMax (µm) and the residual (%).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -148,7 +148,7 @@ fn scaled_to(truth: &Truth, model: &Model, plan: &str, target_um: f64, seed: u64
     for _ in 0..2 {
         let set = measure(&t, plan, TrackerNoise::NONE, seed)?;
         let problem = Problem::new(model, &set)?;
-        let start = volver::solvers::init::init_tracker(&problem, &model.initial_params())
+        let start = volver_solvers::init::init_tracker(&problem, &model.initial_params())
             .map_err(anyhow::Error::msg)?;
         t = scaled(&t, target_um / problem.stats(&start).emm_um);
     }
@@ -447,7 +447,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
     let pr: Vec<Problem> = sets
         .iter()
         .map(|s| Problem::new(&full, s))
-        .collect::<volver::core::Result<_>>()?;
+        .collect::<volver_core::Result<_>>()?;
     let t1 = identify_errors(
         &lm,
         pr[0].clone(),
@@ -602,50 +602,6 @@ pub fn table12_svg(t: &Table) -> String {
         &data,
         None,
     )
-}
-
-/// Prints the tables.
-pub fn print(tables: &[Table]) {
-    let cells = |f: &Figures| {
-        format!(
-            "{:>8.2} {:>8.2} → {:>9.3} {:>9.3} ({:>7.2} %)",
-            f.emm0_um, f.emax0_um, f.emm_um, f.emax_um, f.residual_percent
-        )
-    };
-    for t in tables {
-        println!("\n{}", t.title);
-        println!(
-            "  {:<46}        EMM₀ µm  EMax₀ µm →    EMM µm   EMax µm (residual)",
-            ""
-        );
-        for r in &t.rows {
-            println!(
-                "  {:<46} paper  {}",
-                r.label,
-                r.paper.as_ref().map_or("—".to_string(), cells)
-            );
-            println!(
-                "  {:<46} volver {}{}",
-                "",
-                cells(&r.ours),
-                if r.converged {
-                    String::new()
-                } else {
-                    format!(" * {}", r.termination)
-                }
-            );
-        }
-        if let Some(((pe, pm), (oe, om))) = t.noise {
-            println!(
-                "  {:<46} paper  EMM {pe:.1} µm, EMax {pm:.1} µm; volver EMM {oe:.1} µm, EMax {om:.1} µm",
-                "noise error of the noisy data"
-            );
-        }
-        println!("  note: {}", t.note);
-    }
-    if tables.iter().flat_map(|t| &t.rows).any(|r| !r.converged) {
-        println!("\n  * stopped by a limit, not converged");
-    }
 }
 
 #[cfg(test)]

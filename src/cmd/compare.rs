@@ -1,6 +1,6 @@
 //! `volver compare`: every engine of this build on one problem, side by side.
 
-use crate::Inputs;
+use super::Inputs;
 use anyhow::{Context, Result};
 use clap::Args;
 use serde::Serialize;
@@ -125,7 +125,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
                 anyhow::bail!("--machine and --model need --data");
             }
             let model = Model::default_xcfz();
-            let out = crate::demo_test4(&model)?;
+            let out = volver::inputs::demo_test4(&model)?;
             (
                 model,
                 out.measurements,

@@ -3,10 +3,9 @@
 //! model with it; compensation checked on the true machine; the HTML report and the controller
 //! tables.
 
-use crate::compensation::{reflector_centroid, write_tables};
-use crate::report::{self, Fit, ReportInput};
 use anyhow::{Context, Result};
-use std::path::Path;
+use std::path::PathBuf;
+use volver::compensation::{reflector_centroid, write_tables};
 use volver::core::compensate::Compensator;
 use volver::core::machine::Commands;
 use volver::core::metrics::ErrorStats;
@@ -16,26 +15,27 @@ use volver::core::problem::Problem;
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver::core::tables::ErrorTables;
+use volver::inputs::{DEMO_DIR, DEMO_EFFECT, DEMO_SEED};
+use volver::report::{self, Fit, ReportInput};
 use volver::solvers::Options;
 use volver::solvers::candidates::{library, rank};
 use volver::solvers::strategy::{cross_validate, fit};
 
-/// Seed of the demo's synthetic test.
-pub const DEMO_SEED: u64 = 7;
-
-/// The effect hidden in the demo's data: a second harmonic in every error of the turntable C
-/// (10 µm, 20 µrad), which the paper's model (first harmonics) cannot describe.
-pub const DEMO_EFFECT: &str = "rotary-harmonics=2,10,20";
-
-/// Where the demo writes its files.
-pub const DEMO_DIR: &str = "volver-demo";
+/// Options of `volver demo`.
+#[derive(clap::Args)]
+pub struct DemoArgs {
+    /// Output folder.
+    #[arg(long, default_value = DEMO_DIR)]
+    out: PathBuf,
+}
 
 fn um(v: f64) -> String {
     format!("{v:.2}")
 }
 
 /// Runs the demo.
-pub fn run(out_dir: &Path) -> Result<()> {
+pub fn run(a: DemoArgs) -> Result<()> {
+    let out_dir = a.out.as_path();
     let model = Model::default_xcfz();
     let m = model.machine();
     println!(
@@ -251,7 +251,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
         .max_by(|a, b| a.u95_max_mm().total_cmp(&b.u95_max_mm()))
         .and_then(|u| u.worst_held)
         .zip(id2.gauge.as_ref())
-        .map(|(c, g)| crate::uncertainty::combination_text(&model2, g, c))
+        .map(|(c, g)| volver::uncertainty::combination_text(&model2, g, c))
         .unwrap_or_else(|| "none".into());
     println!(
         "   after the best rigid transform (what the workpiece set-up takes up): EMM {} µm, EMax {} µm; U of the identified tool point there (k = 2) up to {} µm",
@@ -270,7 +270,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
         .as_ref()
         .map(|g| {
             (0..g.held.len())
-                .map(|c| crate::uncertainty::combination_text(&model2, g, c))
+                .map(|c| volver::uncertainty::combination_text(&model2, g, c))
                 .collect()
         })
         .unwrap_or_default();
@@ -281,7 +281,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
     let mut table_paths = write_tables(&tables, &out_dir.join("tables"))?;
     if let Some(r) = &results.uncertainty {
         let u =
-            crate::compensation::table_uncertainty(&model2, &id2.params, r, &tables, 10.0, 5.0)?;
+            volver::compensation::table_uncertainty(&model2, &id2.params, r, &tables, 10.0, 5.0)?;
         let p = out_dir.join("tables").join("errors-u95.csv");
         volver::core::fsio::write_atomic(&p, u.to_plain_csv())
             .with_context(|| format!("writing {}", p.display()))?;
@@ -318,7 +318,7 @@ pub fn run(out_dir: &Path) -> Result<()> {
             um(sa.emm_um),
             um(rigid.emm_um)
         )],
-        tool: crate::compensation::reflector_centroid(&model2),
+        tool: volver::compensation::reflector_centroid(&model2),
         max_u_um: 25.0,
     };
     let html = report::html(&input)?;

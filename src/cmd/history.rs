@@ -1,0 +1,34 @@
+//! `volver history`: the fits of a diagnosis session.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use volver::history;
+
+/// Options of `volver history`.
+#[derive(clap::Args)]
+pub struct HistoryArgs {
+    /// History file written by `volver identify`.
+    #[arg(long, default_value = history::DEFAULT_NAME)]
+    file: PathBuf,
+    /// Write the chart here (SVG).
+    #[arg(long)]
+    svg: Option<PathBuf>,
+}
+
+/// Runs `volver history`.
+pub fn run(a: HistoryArgs) -> Result<()> {
+    let HistoryArgs { file, svg } = a;
+    let records = history::read(&file)?;
+    println!(
+        "volver history — {} fits in {}\n",
+        records.len(),
+        file.display()
+    );
+    print!("{}", history::table(&records));
+    if let Some(path) = svg {
+        volver::core::fsio::write_atomic(&path, history::svg(&records))
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("\n  chart written to {}", path.display());
+    }
+    Ok(())
+}

@@ -1,0 +1,166 @@
+//! `volver layout`: a machine and error model in words and tables.
+
+use super::print_observability;
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use volver::core::machine::TrackerMount;
+use volver::core::model::{ConstraintKind, Model};
+use volver::core::plan::Plan;
+use volver::solvers::nullspace::NullSpace;
+
+/// Options of `volver layout`.
+#[derive(clap::Args)]
+pub struct LayoutArgs {
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Error-model file (TOML); the paper's model when absent (needs the default machine).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// A test plan (preset name or grid such as X=0:1400:200,C=0:330:30,Z=0:600:150): also
+    /// states in words what this layout can and cannot measure, and what would fix it.
+    #[arg(long)]
+    plan: Option<String>,
+}
+
+/// Runs `volver layout`.
+pub fn run(a: LayoutArgs) -> Result<()> {
+    let (_, model) = volver::inputs::machine_and_model(a.machine.as_deref(), a.model.as_deref())?;
+    print_layout(&model)?;
+    if let Some(text) = a.plan {
+        let plan = if text.contains('=') {
+            Plan::parse_grid(model.machine(), &text)?
+        } else {
+            Plan::preset(model.machine(), &text)?
+        };
+        let data = volver::solvers::observability::nominal_data(&model, &plan);
+        println!(
+            "\nWhat plan {} ({} points) can measure with this layout:",
+            plan.name,
+            data.points.len()
+        );
+        print_observability(&volver::solvers::observability::observe(
+            &model,
+            &data,
+            &model.initial_params(),
+        ));
+    }
+    Ok(())
+}
+
+fn print_layout(model: &Model) -> Result<()> {
+    let m = model.machine();
+    println!("Machine: {}", m.spec().name);
+    println!(
+        "Chain {}: workpiece side {} (from the frame out), tool side {}",
+        m.chain(),
+        letters(&m.chain().workpiece),
+        letters(&m.chain().tool)
+    );
+    println!("\n  axis  side       range                     reference   offset (mm)");
+    for a in m.axes() {
+        println!(
+            "  {:<4}  {:<9}  [{:>8.1}, {:>8.1}] {:<4}  {:>8.1} {:<3}  ({}, {}, {})",
+            a.axis.letter(),
+            format!("{:?}", a.side).to_lowercase(),
+            a.to_file_units(a.min),
+            a.to_file_units(a.max),
+            a.file_unit(),
+            a.to_file_units(a.reference),
+            a.file_unit(),
+            a.offset[0],
+            a.offset[1],
+            a.offset[2]
+        );
+    }
+    println!("\n  reflector  offset (mm)");
+    for r in m.reflectors() {
+        println!(
+            "  {:<9}  ({}, {}, {})",
+            r.id, r.offset[0], r.offset[1], r.offset[2]
+        );
+    }
+    let t = m.tracker();
+    println!(
+        "\nTracker: on the {} · nominal T_LT ({}, {}, {}) mm",
+        match t.mount {
+            TrackerMount::Workpiece => "workpiece end of the chain",
+            TrackerMount::Frame => "machine frame",
+        },
+        t.position[0],
+        t.position[1],
+        t.position[2]
+    );
+
+    let spec = model.spec();
+    println!(
+        "\nError model: {} (squareness rule: {})",
+        spec.name, spec.squareness
+    );
+    println!("\n  error  basis                   parameters");
+    for term in model.terms() {
+        let b = &term.basis;
+        let basis = match b.kind() {
+            k if k.is_periodic() => format!("{k}, order {}", b.degree()),
+            volver::core::basis::BasisKind::Chebyshev => {
+                format!("chebyshev, {} nodes", b.degree() + 1)
+            }
+            volver::core::basis::BasisKind::Constant => "constant".to_string(),
+            k => format!("{k}, degree {}", b.degree()),
+        };
+        let names: Vec<&str> = model.params()[term.params.clone()]
+            .iter()
+            .map(|p| p.name.as_str())
+            .collect();
+        println!(
+            "  {:<5}  {:<22}  {}",
+            term.id.to_string(),
+            basis,
+            names.join(" ")
+        );
+    }
+    println!("\nParameter layout ({} parameters):", model.n_params());
+    println!(
+        "  {:>3}  {:<12} {:<4} {:<12} {:>12}",
+        "#", "name", "unit", "group", "start value"
+    );
+    let p0 = model.initial_params();
+    for (i, p) in model.params().iter().enumerate() {
+        println!(
+            "  {:>3}  {:<12} {:<4} {:<12} {:>12}",
+            i,
+            p.name,
+            p.unit.to_string(),
+            p.group.to_string(),
+            p0[i]
+        );
+    }
+    let rows = &model.constraints().rows;
+    println!("\nConstraints A p = b ({} rows):", rows.len());
+    for kind in [
+        ConstraintKind::Reference,
+        ConstraintKind::Squareness,
+        ConstraintKind::Fixed,
+    ] {
+        for r in rows.iter().filter(|r| r.kind == kind) {
+            println!("  {:<10}  {}", format!("{kind:?}").to_lowercase(), r.label);
+        }
+    }
+    let ns = NullSpace::for_model(model).context("eliminating the constraints")?;
+    println!(
+        "\nFree parameters after the constraints: {} of {} (constraint rank {}, {} redundant rows)",
+        ns.n_free(),
+        model.n_params(),
+        ns.rank(),
+        ns.redundant()
+    );
+    Ok(())
+}
+
+fn letters(v: &[volver::core::iso::Axis]) -> String {
+    if v.is_empty() {
+        "(none)".into()
+    } else {
+        v.iter().map(|a| a.letter()).collect()
+    }
+}

@@ -1,0 +1,89 @@
+//! The subcommands: each file parses its arguments, calls the library and prints.
+
+pub mod compare;
+pub mod compensate;
+pub mod demo;
+pub mod diagnose;
+pub mod history;
+pub mod identify;
+pub mod layout;
+pub mod report;
+pub mod simulate;
+pub mod study;
+pub mod uncertainty;
+
+use anyhow::Result;
+use std::path::PathBuf;
+use volver::core::machine::Machine;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
+use volver::solvers::{Iteration, Observer};
+
+/// The machine, error model and measurements that `identify` and `diagnose` read.
+#[derive(clap::Args)]
+pub struct Inputs {
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    pub machine: Option<PathBuf>,
+    /// Error model (TOML); the paper's model when absent (with the embedded machine).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Measurement file (CSV).
+    #[arg(long)]
+    pub data: PathBuf,
+}
+
+impl Inputs {
+    /// The input files given, with `more`.
+    pub fn paths<'a>(&'a self, more: &[Option<&'a std::path::Path>]) -> Vec<&'a std::path::Path> {
+        [
+            self.machine.as_deref(),
+            self.model.as_deref(),
+            Some(self.data.as_path()),
+        ]
+        .into_iter()
+        .chain(more.iter().copied())
+        .flatten()
+        .collect()
+    }
+
+    /// Reads the three files.
+    pub fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
+        volver::inputs::load(self.machine.as_deref(), self.model.as_deref(), &self.data)
+    }
+}
+
+/// Prints one line per accepted step to stderr.
+pub struct Progress {
+    pub quiet: bool,
+}
+
+impl Observer for Progress {
+    fn iteration(&mut self, it: &Iteration) {
+        if !self.quiet && it.accepted {
+            eprintln!(
+                "  iteration {:>4}  evaluations {:>5}  EMM {:>12.6} µm  λ {:.1e}",
+                it.iteration, it.evaluations, it.emm_um, it.damping
+            );
+        }
+    }
+}
+
+/// A length in µm for tables: fixed-point, or scientific when below 0.01 µm.
+pub fn um(v: f64) -> String {
+    if v != 0.0 && v.abs() < 0.01 {
+        format!("{v:.3e}")
+    } else {
+        format!("{v:.4}")
+    }
+}
+
+/// Prints the findings of [`volver::solvers::observability::observe`], or that there are none.
+pub fn print_observability(findings: &[volver::solvers::observability::Finding]) {
+    if findings.is_empty() {
+        println!("  everything the model describes can be identified from these positions");
+    }
+    for f in findings {
+        println!("  - {}\n      fix: {}", f.what, f.fix);
+    }
+}

@@ -1,0 +1,156 @@
+//! `volver report`: identification, diagnosis and the HTML report.
+
+use super::Inputs;
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use volver::core::measure::MeasurementSet;
+use volver::core::problem::Problem;
+use volver::core::results::ResultsFile;
+use volver::solvers::Options;
+
+/// Options of `volver report`.
+#[derive(clap::Args)]
+pub struct ReportArgs {
+    #[command(flatten)]
+    inputs: Inputs,
+    /// Candidates to add to the model before the final fit (ids from `volver diagnose`); the
+    /// report shows the fit without and with them.
+    #[arg(long)]
+    add: Vec<String>,
+    /// True errors (results file), for synthetic data: overlaid on the error functions.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// A reference measurement file: the identified errors compensate it (cross-validation).
+    #[arg(long)]
+    reference: Option<PathBuf>,
+    /// The HTML file to write.
+    #[arg(long, default_value = "volver-report.html")]
+    out: PathBuf,
+    /// The results file of the final fit (JSON) that `volver compensate` and `volver tables`
+    /// read; default: beside the report, with the extension `.json`.
+    #[arg(long)]
+    results: Option<PathBuf>,
+    /// The tool point whose compensated position's uncertainty the report maps, mm in the frame
+    /// of the last tool-side axis (like a reflector offset); default the reflectors' centroid.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    tool_offset: Option<String>,
+    /// The U (µm, k = 2) above which `compensate` and `tables` refuse; the report says whether
+    /// the tool point passes.
+    #[arg(long, default_value_t = 25.0)]
+    max_u_um: f64,
+}
+
+/// Runs `volver report`.
+pub fn run(a: ReportArgs) -> Result<()> {
+    let (machine, model, data) = a.inputs.load()?;
+    volver::compensation::check_max_u(a.max_u_um)?;
+    let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
+    let problem = Problem::new(&model, &data)?;
+    let id1 = volver::solvers::strategy::fit(problem.clone());
+    if id1.termination.failed() {
+        anyhow::bail!("the fit failed: {}", id1.termination);
+    }
+    let options = Options::default();
+    let candidates =
+        volver::solvers::candidates::rank(&problem, &id1.params, options.rank_tolerance);
+    let extended = volver::inputs::with_candidates(&machine, model.clone(), &a.add)?;
+    let id2 = if a.add.is_empty() {
+        None
+    } else {
+        let id = volver::solvers::strategy::fit(Problem::new(&extended, &data)?);
+        if id.termination.failed() {
+            anyhow::bail!(
+                "the fit with {} failed: {}",
+                a.add.join(", "),
+                id.termination
+            );
+        }
+        Some(id)
+    };
+    let truth = match &a.truth {
+        Some(p) => Some(
+            ResultsFile::load(p)
+                .context("reading the truth file")?
+                .to_model(&p.display().to_string())?,
+        ),
+        None => None,
+    };
+    let (last_model, last_params) = match &id2 {
+        Some(id) => (&extended, &id.params),
+        None => (&model, &id1.params),
+    };
+    let mut cross = Vec::new();
+    if let Some(path) = &a.reference {
+        let set =
+            MeasurementSet::load(&machine, path).context("reading the reference measurements")?;
+        Problem::new(&model, &set)?.check_scale(&path.display().to_string())?;
+        let lm = volver::solvers::lm::LevenbergMarquardt;
+        let reference = Problem::new(last_model, &set)?;
+        let cv = volver::solvers::strategy::cross_validate(
+            &lm,
+            reference.clone(),
+            last_params,
+            &options,
+            &mut volver::solvers::Silent,
+        );
+        let model_label = if a.add.is_empty() {
+            format!("model \"{}\"", model.spec().name)
+        } else {
+            format!("model \"{}\" + {}", model.spec().name, a.add.join(" + "))
+        };
+        cross.push(volver::report::CrossRow::new(
+            format!("{} ({model_label})", a.inputs.data.display()),
+            &reference,
+            &cv,
+        ));
+    }
+    let mut fits = vec![volver::report::Fit {
+        label: model.spec().name.clone(),
+        model: &model,
+        id: &id1,
+    }];
+    if let Some(id) = &id2 {
+        fits.push(volver::report::Fit {
+            label: format!("+ {}", a.add.join(" + ")),
+            model: &extended,
+            id,
+        });
+    }
+    let (last_model, last_params) = (last_model.clone(), last_params.clone());
+    let input = volver::report::ReportInput {
+        title: format!("volver report — {}", a.inputs.data.display()),
+        data_label: a.inputs.data.display().to_string(),
+        data: &data,
+        fits,
+        truth: truth.as_ref().map(|(m, p)| (m, p.as_slice())),
+        noise_um: None,
+        candidates,
+        engines: Vec::new(),
+        cross,
+        notes: Vec::new(),
+        tool,
+        max_u_um: a.max_u_um,
+    };
+    let html = volver::report::html(&input)?;
+    let results_path = a
+        .results
+        .clone()
+        .unwrap_or_else(|| a.out.with_extension("json"));
+    let inputs = a
+        .inputs
+        .paths(&[a.reference.as_deref(), a.truth.as_deref()]);
+    for out in [&a.out, &results_path] {
+        volver::core::fsio::check_not_an_input(out, &inputs)?;
+    }
+    volver::core::fsio::write_atomic(&a.out, html)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    ResultsFile::from_model(&last_model, &last_params)?
+        .save(&results_path)
+        .context("writing the results file")?;
+    println!(
+        "volver report — written to {}; the final fit's errors to {} (for compensate and tables)",
+        a.out.display(),
+        results_path.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,255 @@
+//! `volver simulate`: a synthetic test (measurements, true errors, machine file).
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use volver::core::machine::Machine;
+use volver::core::model::{ErrorModelSpec, Model};
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::Plan;
+use volver::core::results::ResultsFile;
+use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth, TruthSource};
+
+/// The magnitude kinds, effects and an example, after `volver simulate --help`.
+pub const SIMULATE_HELP: &str = "\
+Magnitude kinds (--magnitude KIND=VALUE; defaults in brackets):
+  positioning µm [50]           EXX, EYY, EZZ
+  straightness µm [30]          EYX, EZX, EXZ …
+  angular µrad [50]             EAX, EBX, ECX … of linear axes
+  squareness µrad [50]          A0Z, B0Z, C0Y …
+  radial µm [20]                EXC, EYC
+  axial µm [10]                 EZC
+  tilt µrad [30]                EAC, EBC
+  angular-positioning µrad [50] ECC
+  location µm [30]              X0C, Y0C (when the truth model has them)
+  location-tilt µrad [30]       A0C, B0C (when the truth model has them)
+  tracker mm [0]                distance of the true tracker from its nominal position
+
+Effects (--effect, repeatable):
+  thermal-drift=VX,VY,VZ              tool point drifts in the machine frame, µm/h
+  rotary-harmonics=H[,AMP_UM,AMP_URAD] rotary errors get harmonics up to H (default 5 µm, 10 µrad)
+  tracker-tilt=RX,RY                  tracker mounted tilted, µrad
+  ball-screw=AXIS,PERIOD_MM,AMP_UM    periodic positioning error A·sin(2π(u − u_ref)/P)
+  reflector-offset=ID,DX,DY,DZ        reflector off its nominal offset, µm
+  range-scale=PPM                     tracker range scale error
+
+Example:
+  volver simulate --plan test4 --seed 7 --out sim --effect thermal-drift=0,0,15";
+
+/// Options of `volver simulate`.
+#[derive(clap::Args)]
+pub struct SimulateArgs {
+    /// Test plan: table4, table7, test1 … test5, or a grid such as X=0:1400:100,Z=0:600:50,C=0
+    /// (file units: mm, degrees).
+    #[arg(long, default_value = "test4")]
+    plan: String,
+    /// Seed of the true errors, the harmonics' phases and the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output folder (created if missing; files of the same names are replaced).
+    #[arg(long)]
+    out: PathBuf,
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// True errors from a results file (JSON) instead of random ones.
+    #[arg(long, conflicts_with_all = ["truth_model", "magnitude"])]
+    truth: Option<PathBuf>,
+    /// Error model (TOML) giving the structure of the random true errors; every error of the
+    /// machine (cubic / first harmonic) when absent.
+    #[arg(long)]
+    truth_model: Option<PathBuf>,
+    /// Size of the random true errors of one kind, e.g. straightness=20 (see below).
+    #[arg(long = "magnitude", value_name = "KIND=VALUE")]
+    magnitude: Vec<String>,
+    /// Tracker noise: paper (uniform on ±30 µrad, ±30 µrad, ±(4 µm + 0.8 µm/m): the paper's
+    /// "±" values read as bounds, which reproduces its tables 9–10), none, or a distribution and
+    /// four values: normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ) or uniform:… (bounds).
+    #[arg(long, default_value = "paper")]
+    noise: String,
+    /// An effect outside the standard model, hidden in the data (see below); repeatable.
+    #[arg(long = "effect", value_name = "EFFECT=VALUES")]
+    effect: Vec<String>,
+    /// Test duration in hours (time stamps t_s); 10 s per point when absent.
+    #[arg(long)]
+    duration_h: Option<f64>,
+    /// Reflectors measured at each position, ids comma-separated; all when absent.
+    #[arg(long)]
+    reflectors: Option<String>,
+}
+
+/// Runs `volver simulate`.
+pub fn run(a: SimulateArgs) -> Result<()> {
+    let given_machine = match &a.machine {
+        Some(p) => Some(Machine::load(p).context("reading the machine file")?),
+        None => None,
+    };
+    let (truth, source) = match &a.truth {
+        Some(path) => {
+            let label = path.display().to_string();
+            let results = ResultsFile::load(path).context("reading the truth file")?;
+            let truth = Truth::from_results(&results, &label).context("reading the truth file")?;
+            if let Some(m) = &given_machine
+                && m.spec() != truth.model.machine().spec()
+            {
+                anyhow::bail!(
+                    "the machine of {label} differs from --machine {}; leave --machine out to use the truth's machine",
+                    a.machine
+                        .as_ref()
+                        .map(|p| p.display().to_string())
+                        .unwrap_or_default()
+                );
+            }
+            (truth, TruthSource::File { path: label })
+        }
+        None => {
+            let m = given_machine.unwrap_or_else(Machine::default_xcfz);
+            let structure = match &a.truth_model {
+                Some(p) => Model::load(m.clone(), p)
+                    .context("reading the truth model")?
+                    .spec()
+                    .clone(),
+                None => ErrorModelSpec::complete(&m),
+            };
+            let mut magnitudes = Magnitudes::default();
+            for text in &a.magnitude {
+                magnitudes.set_from_text(text)?;
+            }
+            let truth = Truth::random(&m, &structure, &magnitudes, a.seed)
+                .context("drawing the true errors")?;
+            let source = TruthSource::Random {
+                structure: structure.name.clone(),
+                magnitudes,
+            };
+            (truth, source)
+        }
+    };
+    let machine = truth.model.machine().clone();
+    let mut plan = if a.plan.contains('=') {
+        Plan::parse_grid(&machine, &a.plan)?
+    } else {
+        Plan::preset(&machine, &a.plan)? // an unknown name gets the list of presets
+    };
+    if let Some(list) = &a.reflectors {
+        plan.reflectors = list
+            .split(',')
+            .map(|id| {
+                machine.reflector_index(id.trim()).ok_or_else(|| {
+                    anyhow::anyhow!(
+                        "--reflectors: no reflector '{}' in the machine (it has {})",
+                        id.trim(),
+                        machine
+                            .reflectors()
+                            .iter()
+                            .map(|r| r.id.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                })
+            })
+            .collect::<Result<_>>()?;
+    }
+    let mut sim = Simulation::new(plan, truth, a.seed);
+    sim.truth_source = source;
+    sim.noise = TrackerNoise::from_text(&a.noise)?;
+    sim.effects = a
+        .effect
+        .iter()
+        .map(|t| Effect::parse(t))
+        .collect::<volver::core::Result<_>>()?;
+    if let Some(h) = a.duration_h {
+        sim.duration_s = Some(h * 3600.0);
+    }
+    let out = sim.run()?;
+    let files = out.write(&a.out)?;
+    let r = &out.record;
+    println!(
+        "volver simulate — plan {} ({} positions × {} reflectors = {} points), seed {}",
+        r.plan,
+        r.positions,
+        r.reflectors.len(),
+        r.points,
+        r.seed
+    );
+    println!("  machine: {} ({})", machine.spec().name, machine.chain());
+    match &r.truth {
+        TruthSource::Random { structure, .. } => {
+            println!("  true errors: random, structure \"{structure}\"")
+        }
+        TruthSource::File { path } => println!("  true errors: from {path}"),
+        TruthSource::Given => println!("  true errors: given"),
+    }
+    let n = &r.noise;
+    println!(
+        "  noise: {:?} in azimuth {} µrad, elevation {} µrad, range {} µm + {} µm/m ({}; --noise {n})",
+        n.distribution,
+        n.azimuth_urad,
+        n.elevation_urad,
+        n.range_um,
+        n.range_um_per_m,
+        match n.distribution {
+            volver::core::noise::Distribution::Normal => "σ",
+            volver::core::noise::Distribution::Uniform => "bounds ±a, σ = a/√3",
+        }
+    );
+    if r.effects.is_empty() {
+        println!("  hidden effects: none");
+    } else {
+        let list: Vec<String> = r.effects.iter().map(ToString::to_string).collect();
+        println!("  hidden effects: {}", list.join("  "));
+    }
+    println!(
+        "  duration: {:.2} h (t_s from 0 to {:.0} s)",
+        r.duration_s / 3600.0,
+        r.duration_s
+    );
+    println!(
+        "\nMachine error (noise-free vs nominal points): EMM {:>8.2} µm   EMax {:>8.2} µm",
+        r.machine_error.emm_um, r.machine_error.emax_um
+    );
+    println!(
+        "Noise error (measured vs noise-free points):  EMM {:>8.2} µm   EMax {:>8.2} µm",
+        r.noise_error.emm_um, r.noise_error.emax_um
+    );
+    println!("\nWrote:");
+    let what = [
+        format!("{} points", r.points),
+        format!("{} parameters", out.truth.model.n_params()),
+        format!("chain {}", machine.chain()),
+        "inputs and figures".to_string(),
+    ];
+    for (path, what) in files.iter().zip(what) {
+        println!("  {}  ({what})", path.display());
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use volver::core::simulate::{EFFECTS, MAGNITUDE_KINDS};
+
+    /// The help text lists every magnitude kind with its real default, and every effect.
+    #[test]
+    fn simulate_help_matches_the_library() {
+        let defaults = serde_json::to_value(Magnitudes::default()).unwrap();
+        for (kind, unit, _) in MAGNITUDE_KINDS {
+            let field = format!(
+                "{}_{}",
+                kind.replace('-', "_"),
+                match unit {
+                    "µm" => "um",
+                    "µrad" => "urad",
+                    _ => "mm",
+                }
+            );
+            let v = defaults[&field]
+                .as_f64()
+                .unwrap_or_else(|| panic!("{field}"));
+            let entry = format!("{kind} {unit} [{v}]");
+            assert!(SIMULATE_HELP.contains(&entry), "help lacks '{entry}'");
+        }
+        for (_, syntax, _) in EFFECTS {
+            assert!(SIMULATE_HELP.contains(syntax), "help lacks '{syntax}'");
+        }
+    }
+}

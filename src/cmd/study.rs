@@ -1,0 +1,89 @@
+//! `volver study paper`: the paper's studies on synthetic data beside the paper's figures.
+
+use anyhow::{Context, Result};
+use std::path::PathBuf;
+use volver::study::{self, Figures, Table};
+
+/// Options of `volver study`.
+#[derive(clap::Args)]
+pub struct StudyArgs {
+    /// Which study: paper.
+    which: String,
+    /// Seed of the true errors and the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Also draw table 12 (cross-validation: residual % on the reference test 4 after
+    /// compensation with each test's errors, ours beside the paper's) as an SVG chart here.
+    #[arg(long)]
+    svg: Option<PathBuf>,
+}
+
+/// Runs `volver study`.
+pub fn run(a: StudyArgs) -> Result<()> {
+    let StudyArgs { which, seed, svg } = a;
+    if which != "paper" {
+        anyhow::bail!("unknown study '{which}': the study is `paper`");
+    }
+    println!(
+        "volver study paper — the paper's studies on synthetic data (seed {seed}; each \
+         table's true errors scaled to its initial EMM in the paper; the paper's noise \
+         read as bounds, {})",
+        volver::core::noise::TrackerNoise::PAPER
+    );
+    let tables = study::paper(seed)?;
+    print(&tables);
+    if let Some(path) = svg {
+        let t12 = tables
+            .iter()
+            .find(|t| t.title.starts_with("Table 12"))
+            .ok_or_else(|| anyhow::anyhow!("the study has no table 12"))?;
+        volver::core::fsio::write_atomic(&path, study::table12_svg(t12))
+            .with_context(|| format!("writing {}", path.display()))?;
+        println!("\n  table 12 drawn in {}", path.display());
+    }
+    Ok(())
+}
+
+/// Prints the tables.
+fn print(tables: &[Table]) {
+    let cells = |f: &Figures| {
+        format!(
+            "{:>8.2} {:>8.2} → {:>9.3} {:>9.3} ({:>7.2} %)",
+            f.emm0_um, f.emax0_um, f.emm_um, f.emax_um, f.residual_percent
+        )
+    };
+    for t in tables {
+        println!("\n{}", t.title);
+        println!(
+            "  {:<46}        EMM₀ µm  EMax₀ µm →    EMM µm   EMax µm (residual)",
+            ""
+        );
+        for r in &t.rows {
+            println!(
+                "  {:<46} paper  {}",
+                r.label,
+                r.paper.as_ref().map_or("—".to_string(), cells)
+            );
+            println!(
+                "  {:<46} volver {}{}",
+                "",
+                cells(&r.ours),
+                if r.converged {
+                    String::new()
+                } else {
+                    format!(" * {}", r.termination)
+                }
+            );
+        }
+        if let Some(((pe, pm), (oe, om))) = t.noise {
+            println!(
+                "  {:<46} paper  EMM {pe:.1} µm, EMax {pm:.1} µm; volver EMM {oe:.1} µm, EMax {om:.1} µm",
+                "noise error of the noisy data"
+            );
+        }
+        println!("  note: {}", t.note);
+    }
+    if tables.iter().flat_map(|t| &t.rows).any(|r| !r.converged) {
+        println!("\n  * stopped by a limit, not converged");
+    }
+}
