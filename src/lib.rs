@@ -19,6 +19,7 @@ pub use volver_solvers as solvers;
 
 pub mod compensation;
 pub mod history;
+pub mod identification;
 pub mod inputs;
 pub mod plot;
 pub mod report;

@@ -3,11 +3,9 @@
 use super::{Inputs, Progress, print_observability, um};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
-use volver::core::problem::Problem;
-use volver::core::results::ResultsFile;
-use volver::core::simulate::{SimulationRecord, Truth};
-use volver::solvers::strategy::{Phasing, Strategy, identify};
-use volver::solvers::{Objective, Options, Solver};
+use volver::identification::{Outcome, Settings, identify, noise_error};
+use volver::solvers::strategy::Phasing;
+use volver::solvers::{Objective, Options};
 
 /// Options of `volver identify`.
 #[derive(clap::Args)]
@@ -92,17 +90,61 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         volver::core::fsio::write_atomic(path, text)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
-    // The noise model of the uncertainty the results file records (checked before the fit).
-    let noise_model = volver::uncertainty::noise_of(a.noise.as_deref())?;
-    let priors = (!a.prior.is_empty())
-        .then(|| volver::solvers::prior::Priors::parse(&a.prior))
-        .transpose()?;
-    let phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
-    if a.subloops == 0 {
-        anyhow::bail!("--subloops must be at least 1");
+    let settings = settings(&a)?;
+    let noise = match &a.truth {
+        Some(path) => Some(noise_error(path, &machine, &a.inputs.data, &data)?),
+        None => None,
+    };
+    if !a.json {
+        println!(
+            "volver identify — {} points, model \"{}\" ({} parameters), solver {}, objective {}, strategy {}",
+            data.points.len(),
+            model.spec().name,
+            model.n_params(),
+            volver::solvers::engine(&settings.engine)
+                .map_err(anyhow::Error::msg)?
+                .name(),
+            settings.options.objective,
+            settings.phasing.name()
+        );
     }
-    let solver: Box<dyn Solver> = volver::solvers::engine(&a.solver).map_err(anyhow::Error::msg)?;
+    let mut outcome = identify(&model, &data, &settings, &mut Progress { quiet: a.json })?;
+    outcome.noise_error = noise;
+    if !a.json && !outcome.observability.is_empty() {
+        println!("\nWhat these positions can and cannot measure with this layout:");
+        print_observability(&outcome.observability);
+        println!();
+    }
+    if !a.no_history {
+        let path = a
+            .history
+            .clone()
+            .unwrap_or_else(|| volver::history::default_path(&a.inputs.data));
+        volver::history::append(&path, &history_record(&a, &model, &outcome))?;
+    }
+    if let Some(out) = &a.out
+        && outcome.refusal.is_none()
+    {
+        outcome
+            .results
+            .save(out)
+            .context("writing the results file")?;
+    }
+    if a.json {
+        let value = serde_json::to_value(outcome.report()?)?;
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        print_outcome(&outcome, a.out.as_deref());
+    }
+    if let Some(r) = outcome.refusal {
+        anyhow::bail!("{r}; no results written");
+    }
+    Ok(())
+}
+
+/// The library's settings from the arguments (checked before anything is fitted).
+fn settings(a: &IdentifyArgs) -> Result<Settings> {
+    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
     let mut options = Options {
         objective,
         geodesic_acceleration: a.geodesic_acceleration,
@@ -114,350 +156,136 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     if let Some(v) = a.max_evaluations {
         options.max_evaluations = v;
     }
-    options.validate().map_err(anyhow::Error::msg)?;
-    let problem = Problem::new(&model, &data)?;
-    let noise_error = match &a.truth {
-        Some(path) => {
-            let label = path.display().to_string();
-            let truth = Truth::from_results(
-                &ResultsFile::load(path).context("reading the truth file")?,
-                &label,
-            )?;
-            if truth.model.machine().spec() != machine.spec() {
-                anyhow::bail!("the machine of {label} is not the machine of the measurements");
-            }
-            // Effects outside the results format (drift, reflector offsets …) are not in the
-            // truth file; the generator's own record beside it has the exact noise error — when
-            // it belongs to these data: the measurements the generator wrote beside it, with
-            // its number of points.
-            let dir = path.parent().unwrap_or(std::path::Path::new("."));
-            let belongs =
-                volver::core::fsio::same_file(&dir.join("measurements.csv"), &a.inputs.data);
-            let record = belongs
-                .then(|| std::fs::read_to_string(dir.join("simulation.json")).ok())
-                .flatten()
-                .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok())
-                .filter(|r| r.points == data.points.len());
-            match record {
-                Some(r) => Some(r.noise_error),
-                None => Some(Problem::new(&truth.model, &data)?.stats(&truth.params)),
-            }
-        }
-        None => None,
-    };
-    let strategy = Strategy {
-        phasing,
-        subloops: a.subloops,
-        ..Strategy::default()
-    };
-    if !a.json {
-        println!(
-            "volver identify — {} points, model \"{}\" ({} parameters), solver {}, objective {}, strategy {}",
-            data.points.len(),
-            model.spec().name,
-            model.n_params(),
-            solver.name(),
-            objective,
-            phasing.name()
-        );
+    let mut settings = Settings::default();
+    settings.engine.clone_from(&a.solver);
+    settings.options = options;
+    // The noise model of the uncertainty the results file records.
+    settings.noise = volver::uncertainty::noise_of(a.noise.as_deref())?;
+    settings.priors = (!a.prior.is_empty())
+        .then(|| volver::solvers::prior::Priors::parse(&a.prior))
+        .transpose()?;
+    settings.phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
+    if a.subloops == 0 {
+        anyhow::bail!("--subloops must be at least 1");
     }
-    // What these positions can measure with this layout, before anything is fitted.
-    let observability =
-        volver::solvers::observability::observe(&model, &data, &model.initial_params());
-    if !a.json && !observability.is_empty() {
-        println!("\nWhat these positions can and cannot measure with this layout:");
-        print_observability(&observability);
-        println!();
+    settings.subloops = a.subloops;
+    settings.accept = a.accept;
+    volver::solvers::engine(&settings.engine).map_err(anyhow::Error::msg)?;
+    settings.options.validate().map_err(anyhow::Error::msg)?;
+    Ok(settings)
+}
+
+/// The history line of this fit.
+fn history_record(
+    a: &IdentifyArgs,
+    model: &volver::core::model::Model,
+    outcome: &Outcome,
+) -> volver::history::Record {
+    let id = &outcome.id;
+    volver::history::Record {
+        data: a.inputs.data.display().to_string(),
+        model: model.spec().name.clone(),
+        added: a.add.clone(),
+        parameters: model.n_params(),
+        free: id.phases.last().map_or(0, |s| s.free_parameters),
+        emm_initial_um: id.initial.stats.emm_um,
+        emm_final_um: id.final_.stats.emm_um,
+        emax_final_um: id.final_.stats.emax_um,
+        phi_mm: id.final_.phi_mm,
+        noise_error_um: outcome.noise_error.map(|s| s.emm_um),
+        termination: id.termination.to_string(),
     }
-    let mut id = identify(
-        solver.as_ref(),
-        problem.clone(),
-        &model.initial_params(),
-        &strategy,
-        &options,
-        &mut Progress { quiet: a.json },
-    );
-    // The uncertainty the results carry, so that compensate, tables and report state the U of
-    // what they derive; with --prior, the maximum a posteriori solution and its covariance.
-    let mut covariance = if id.termination.failed() {
-        None
-    } else {
-        volver::solvers::uncertainty::linear(
-            &problem,
-            id.gauge.as_ref(),
-            &id.params,
-            objective,
-            noise_model,
-        )
-    };
-    let rule = match (&priors, &id.gauge) {
-        (Some(p), _) => p.rule(),
-        (None, Some(_)) => volver::solvers::gauge::RULE.to_string(),
-        (None, None) => "none".to_string(),
-    };
-    if let (Some(p), Some(cov)) = (&priors, &covariance) {
-        let post = volver::solvers::prior::maximum_a_posteriori(
-            &model,
-            id.gauge.as_ref(),
-            &id.params,
-            cov,
-            p,
-        )
-        .context("the maximum a posteriori solution (a decomposition failed)")?;
-        id.params = post.params;
-        id.final_ = volver::solvers::evaluate(&problem, &id.params);
-        covariance = Some(post.covariance);
-    } else if priors.is_some() {
-        anyhow::bail!(
-            "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
-            id.termination
-        );
-    }
-    if !a.no_history {
-        let path = a
-            .history
-            .clone()
-            .unwrap_or_else(|| volver::history::default_path(&a.inputs.data));
-        volver::history::append(
-            &path,
-            &volver::history::Record {
-                data: a.inputs.data.display().to_string(),
-                model: model.spec().name.clone(),
-                added: a.add.clone(),
-                parameters: model.n_params(),
-                free: id.phases.last().map_or(0, |s| s.free_parameters),
-                emm_initial_um: id.initial.stats.emm_um,
-                emm_final_um: id.final_.stats.emm_um,
-                emax_final_um: id.final_.stats.emax_um,
-                phi_mm: id.final_.phi_mm,
-                noise_error_um: noise_error.map(|s| s.emm_um),
-                termination: id.termination.to_string(),
-            },
-        )?;
-    }
-    let mut results = ResultsFile::from_model(&model, &id.params)?;
-    if let Some(cov) = &covariance {
-        // One name per column of the held factor: none when the priors decided them.
-        let held = id
-            .gauge
-            .as_ref()
-            .filter(|_| priors.is_none())
-            .map(|g| {
-                (0..g.held.len())
-                    .map(|c| volver::uncertainty::combination_text(&model, g, c))
-                    .collect()
-            })
-            .unwrap_or_default();
-        results.uncertainty = Some(cov.to_record(&rule, held));
-    }
-    // Honest exits: a failed run, a run stopped by a limit and a run with implausible sizes exit
-    // non-zero and write no results (a later `compensate` or `tables` must not use them),
-    // unless --accept keeps the last two.
-    // Plausibility of what the data determine: the fit moved to the minimum-norm point along
-    // the directions the data cannot identify (whose values are arbitrary), each value allowed
-    // its expanded uncertainty.
-    let tracker_start = volver::solvers::init::init_tracker(&problem, &model.initial_params()).ok();
-    let determined = volver::solvers::identifiability::analyse(
-        &volver::solvers::Task::new(problem),
-        &id.params,
-        options.rank_tolerance,
-        1.0,
-    );
-    // Each value is allowed its uncertainty from the data: the fit's covariance (the gauge's,
-    // its held combinations at the reference need no allowance), else the analysis'.
-    let data_columns: Option<Vec<Vec<f64>>> = covariance.as_ref().map(|c| {
-        (0..c.data.ncols())
-            .map(|k| (0..c.data.nrows()).map(|j| c.data[(j, k)]).collect())
-            .collect()
-    });
-    // The fit is on the gauge (values along the unidentified combinations at the reference),
-    // unless the gauge could not be computed: then the minimum-norm point of the analysis.
-    let representative = match (&id.gauge, &determined, &tracker_start) {
-        (Some(_), _, _) => id.params.clone(),
-        (None, Some(a), Some(start)) => a.minimum_norm(&id.params, start),
-        _ => id.params.clone(),
-    };
-    let implausible = volver::core::plausibility::check(
-        &model,
-        &representative,
-        &volver::core::plausibility::Context {
-            tracker_start: tracker_start.as_deref(),
-            covariance_factor: data_columns
-                .as_deref()
-                .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
-            emm_um: Some(id.final_.stats.emm_um),
-            relaxed: false,
-        },
-    );
-    let refusal = if id.termination.failed() {
-        Some(format!("identification {}", id.termination))
-    } else if !a.accept && !implausible.is_empty() {
-        let list: Vec<String> = implausible
-            .iter()
-            .take(4)
-            .map(ToString::to_string)
-            .collect();
-        Some(format!(
-            "implausible sizes ({}): {}; {} (--accept keeps the fit anyway)",
-            id.termination,
-            list.join("; "),
-            volver::core::plausibility::WHERE_TO_LOOK
-        ))
-    } else if !a.accept && !id.termination.converged() {
-        Some(format!(
-            "{}, not converged: raise --max-iterations or --max-evaluations, or pass --accept \
-             to keep this fit",
-            id.termination
-        ))
-    } else {
-        None
-    };
-    if let Some(out) = &a.out
-        && refusal.is_none()
-    {
-        results.save(out).context("writing the results file")?;
-    }
-    let params = serde_json::to_value(&results.parameters)?;
-    // The combinations the data cannot identify, by the parameters they move: the gauge held
-    // them at the reference (a metrologist needs to know which errors are therefore not
-    // determined, and by which rule their values were chosen).
-    let weak: Vec<(f64, Vec<(String, f64)>)> = id
-        .gauge
-        .as_ref()
-        .map(|g| {
-            g.held
-                .iter()
-                .map(|h| {
-                    let names = h
-                        .parameters
-                        .iter()
-                        .take(4)
-                        .map(|&(j, share)| (model.params()[j].name.clone(), share))
-                        .collect();
-                    (h.relative_curvature, names)
-                })
-                .collect()
-        })
-        .unwrap_or_default();
+}
+
+/// The summary table of an identification.
+fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
+    let id = &outcome.id;
+    let weak = &outcome.unidentified;
     let held = weak.len();
-    if a.json {
-        let obj = serde_json::json!({
-            "solver": solver.name(),
-            "objective": objective.to_string(),
-            "strategy": phasing.name(),
-            "subloops": a.subloops,
-            "points": data.points.len(),
-            "emm_initial_um": id.initial.stats.emm_um,
-            "emm_final_um": id.final_.stats.emm_um,
-            "emax_initial_um": id.initial.stats.emax_um,
-            "emax_final_um": id.final_.stats.emax_um,
-            "phi_final_mm": id.final_.phi_mm,
-            "ve_final_mm2": id.final_.ve_mm2,
-            "residual_percent": id.residual_percent(),
-            "noise_error_um": noise_error.map(|s| s.emm_um),
-            "noise_emax_um": noise_error.map(|s| s.emax_um),
-            "iterations": id.iterations(),
-            "evaluations": id.evaluations(),
-            "time_s": id.time_s,
-            "termination": id.termination.to_string(),
-            "converged": id.termination.converged(),
-            "phases": id.phases,
-            "parameters": params,
-            "gauge": (rule != "none").then_some(&rule),
-            "unidentifiable": weak.iter().map(|(c, names)| serde_json::json!({
-                "relative_curvature": c,
-                "parameters": names.iter().map(|(n, s)| serde_json::json!({"name": n, "share": s})).collect::<Vec<_>>(),
-            })).collect::<Vec<_>>(),
-            "implausible": implausible.iter().map(ToString::to_string).collect::<Vec<_>>(),
-            "refused": refusal,
-            "observability": observability.iter().map(|f| serde_json::json!({
-                "kind": format!("{:?}", f.kind).to_lowercase(),
-                "what": f.what, "fix": f.fix,
-            })).collect::<Vec<_>>(),
-        });
-        println!("{}", serde_json::to_string_pretty(&obj)?);
-    } else {
+    println!(
+        "\n  {:<32} {:>12} {:>12} {:>10} {:>6} {:>6}  termination",
+        "phase", "EMM µm", "EMax µm", "residual", "iter", "eval"
+    );
+    for s in &id.phases {
         println!(
-            "\n  {:<32} {:>12} {:>12} {:>10} {:>6} {:>6}  termination",
-            "phase", "EMM µm", "EMax µm", "residual", "iter", "eval"
+            "  {:<32} {:>12} {:>12} {:>9.3}% {:>6} {:>6}  {}",
+            s.phase,
+            um(s.final_.stats.emm_um),
+            um(s.final_.stats.emax_um),
+            s.residual_percent(),
+            s.iterations,
+            s.evaluations,
+            s.termination
         );
-        for s in &id.phases {
-            println!(
-                "  {:<32} {:>12} {:>12} {:>9.3}% {:>6} {:>6}  {}",
-                s.phase,
-                um(s.final_.stats.emm_um),
-                um(s.final_.stats.emax_um),
-                s.residual_percent(),
-                s.iterations,
-                s.evaluations,
-                s.termination
-            );
-        }
+    }
+    println!(
+        "\n  initial (errors zero, tracker fitted):  EMM {:>10.4} µm   EMax {:>10.4} µm",
+        id.initial.stats.emm_um, id.initial.stats.emax_um
+    );
+    println!(
+        "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {} %",
+        um(id.final_.stats.emm_um),
+        um(id.final_.stats.emax_um),
+        um(id.residual_percent())
+    );
+    if let Some(n) = outcome.noise_error {
         println!(
-            "\n  initial (errors zero, tracker fitted):  EMM {:>10.4} µm   EMax {:>10.4} µm",
-            id.initial.stats.emm_um, id.initial.stats.emax_um
+            "  noise error (of the measurements):      EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
+            um(n.emm_um),
+            um(n.emax_um),
+            id.final_.stats.emm_um / n.emm_um
         );
-        println!(
-            "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {} %",
-            um(id.final_.stats.emm_um),
-            um(id.final_.stats.emax_um),
-            um(id.residual_percent())
-        );
-        if let Some(n) = noise_error {
-            println!(
-                "  noise error (of the measurements):      EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
-                um(n.emm_um),
-                um(n.emax_um),
-                id.final_.stats.emm_um / n.emm_um
-            );
-        }
-        println!(
-            "  {} iterations, {} evaluations, {:.2} s; {}{}",
-            id.iterations(),
-            id.evaluations(),
-            id.time_s,
-            id.termination,
-            if held > 0 {
-                format!(
-                    "; {held} combination(s) not identifiable from these data {}",
-                    if priors.is_some() {
-                        "decided by the priors"
-                    } else {
-                        "held by the gauge"
-                    }
-                )
-            } else {
-                String::new()
-            }
-        );
-        if !weak.is_empty() {
-            println!(
-                "  not identifiable from these data ({}; the parameters each combination moves):",
-                if priors.is_some() {
+    }
+    println!(
+        "  {} iterations, {} evaluations, {:.2} s; {}{}",
+        id.iterations(),
+        id.evaluations(),
+        id.time_s,
+        id.termination,
+        if held > 0 {
+            format!(
+                "; {held} combination(s) not identifiable from these data {}",
+                if outcome.with_priors {
                     "decided by the priors"
                 } else {
-                    "held at the reference"
+                    "held by the gauge"
                 }
-            );
-            for (c, names) in &weak {
-                let list: Vec<String> = names.iter().map(|(n, s)| format!("{n} {s:+.2}")).collect();
-                println!("    {}   (relative curvature {c:.1e})", list.join(", "));
+            )
+        } else {
+            String::new()
+        }
+    );
+    if !weak.is_empty() {
+        println!(
+            "  not identifiable from these data ({}; the parameters each combination moves):",
+            if outcome.with_priors {
+                "decided by the priors"
+            } else {
+                "held at the reference"
             }
-        }
-        if held > 0 || priors.is_some() {
-            println!("  gauge: {rule}");
-        }
-        for i in &implausible {
-            println!("  implausible: {i}");
-        }
-        if let Some(out) = &a.out
-            && refusal.is_none()
-        {
-            println!("  parameters written to {}", out.display());
+        );
+        for u in weak {
+            let list: Vec<String> = u
+                .parameters
+                .iter()
+                .map(|s| format!("{} {:+.2}", s.name, s.share))
+                .collect();
+            println!(
+                "    {}   (relative curvature {:.1e})",
+                list.join(", "),
+                u.relative_curvature
+            );
         }
     }
-    if let Some(r) = refusal {
-        anyhow::bail!("{r}; no results written");
+    if held > 0 || outcome.with_priors {
+        println!("  gauge: {}", outcome.rule);
     }
-    Ok(())
+    for i in &outcome.implausible {
+        println!("  implausible: {i}");
+    }
+    if let Some(out) = out
+        && outcome.refusal.is_none()
+    {
+        println!("  parameters written to {}", out.display());
+    }
 }

@@ -1,0 +1,477 @@
+//! The whole of `volver identify` as one library call: the fit under the stated gauge, the
+//! uncertainty the results carry (or the maximum a posteriori solution with priors), the
+//! plausibility of what the data determine, the verdict on keeping the fit, and the results
+//! file. [`Outcome::report`] is the serde form the CLI prints with `--json`.
+//!
+//! ```
+//! use volver::identification::{Settings, identify};
+//! let model = volver::core::model::Model::default_xcfz();
+//! let data = volver::inputs::demo_test4(&model).unwrap().measurements;
+//! let outcome = identify(&model, &data, &Settings::default(), &mut volver::solvers::Silent).unwrap();
+//! assert!(outcome.refusal.is_none());
+//! assert!(outcome.id.final_.stats.emm_um < outcome.id.initial.stats.emm_um);
+//! assert_eq!(outcome.results.parameters.len(), model.n_params());
+//! ```
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use std::path::Path;
+use volver_core::machine::Machine;
+use volver_core::measure::MeasurementSet;
+use volver_core::metrics::ErrorStats;
+use volver_core::model::Model;
+use volver_core::plausibility::{self, Implausible};
+use volver_core::problem::Problem;
+use volver_core::results::ResultsFile;
+use volver_core::simulate::{SimulationRecord, Truth};
+use volver_solvers::observability::Finding;
+use volver_solvers::prior::Priors;
+use volver_solvers::strategy::{Identification, Phasing, Strategy};
+use volver_solvers::summary::Summary;
+use volver_solvers::uncertainty::{Covariance, NoiseModel};
+use volver_solvers::{Objective, Observer, Options};
+
+/// What an identification is asked (the options of `volver identify`).
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Settings {
+    /// The engine's name ([`volver_solvers::engine_names`]).
+    pub engine: String,
+    /// The engines' options (objective, limits, the LM's settings).
+    pub options: Options,
+    /// The phases and sub-loops.
+    pub phasing: Phasing,
+    /// How many times the phase sequence may run (fig. 14 of the paper).
+    pub subloops: usize,
+    /// The tracker's noise for the uncertainty the results record.
+    pub noise: NoiseModel,
+    /// Prior magnitudes: the maximum a posteriori solution instead of the gauge's minimum norm.
+    pub priors: Option<Priors>,
+    /// Keep a fit stopped on a limit or with implausible sizes (else it is refused).
+    pub accept: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            engine: "lm".into(),
+            options: Options::default(),
+            phasing: Phasing::One,
+            subloops: 1,
+            noise: NoiseModel::Residual,
+            priors: None,
+            accept: false,
+        }
+    }
+}
+
+/// A combination of parameters the data cannot identify: its curvature relative to the
+/// largest, and the parameters it moves most (at most four) with their shares.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Unidentified {
+    /// Relative curvature in the function metric.
+    pub relative_curvature: f64,
+    /// The parameters it moves, with their shares.
+    pub parameters: Vec<Share>,
+}
+
+/// A parameter's share of a combination.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Share {
+    /// The parameter's name (ISO 230-1, e.g. `EXC.b1`).
+    pub name: String,
+    /// Its share (a component of the unit combination).
+    pub share: f64,
+}
+
+/// Everything an identification produced.
+#[derive(Debug)]
+#[non_exhaustive]
+pub struct Outcome {
+    /// The fit.
+    pub id: Identification,
+    /// The engine's name.
+    pub engine: String,
+    /// Objective, phases and sub-loops as asked.
+    pub objective: Objective,
+    /// The phases.
+    pub phasing: Phasing,
+    /// The sub-loops.
+    pub subloops: usize,
+    /// Measured points.
+    pub points: usize,
+    /// What the positions can and cannot measure with this layout (before any fit).
+    pub observability: Vec<Finding>,
+    /// The covariance the results carry (the posterior's with priors); `None` when the fit
+    /// failed.
+    pub covariance: Option<Covariance>,
+    /// How the values the data do not determine were chosen (`"none"` without a gauge).
+    pub rule: String,
+    /// The combinations the data cannot identify.
+    pub unidentified: Vec<Unidentified>,
+    /// Sizes out of the plausible range.
+    pub implausible: Vec<Implausible>,
+    /// Why the fit must not be used (failed, implausible or not converged without
+    /// [`Settings::accept`]); `None`: it may be written and used.
+    pub refusal: Option<String>,
+    /// The results file of the fit, with its uncertainty.
+    pub results: ResultsFile,
+    /// The noise error of the measurements when the truth is known ([`noise_error`]).
+    pub noise_error: Option<ErrorStats>,
+    /// Whether priors decided what the data do not determine.
+    pub with_priors: bool,
+}
+
+/// The serde form of an [`Outcome`] (`volver identify --json`).
+#[derive(Clone, Debug, Serialize)]
+#[non_exhaustive]
+pub struct Report {
+    /// The engine.
+    pub solver: String,
+    /// `phi` or `ve`.
+    pub objective: String,
+    /// The phases' name.
+    pub strategy: String,
+    /// Sub-loops allowed.
+    pub subloops: usize,
+    /// Measured points.
+    pub points: usize,
+    /// EMM (µm) at the start (errors zero, the tracker fitted rigidly) and at the end.
+    pub emm_initial_um: f64,
+    /// EMM (µm) at the end.
+    pub emm_final_um: f64,
+    /// EMax (µm) at the start.
+    pub emax_initial_um: f64,
+    /// EMax (µm) at the end.
+    pub emax_final_um: f64,
+    /// Φ (mm) at the end.
+    pub phi_final_mm: f64,
+    /// ve (mm²) at the end.
+    pub ve_final_mm2: f64,
+    /// Final EMM as a percentage of the initial.
+    pub residual_percent: f64,
+    /// The measurements' noise error (µm) when the truth is known.
+    pub noise_error_um: Option<f64>,
+    /// Their noise EMax (µm).
+    pub noise_emax_um: Option<f64>,
+    /// Steps tried over every phase.
+    pub iterations: usize,
+    /// Evaluations over every phase.
+    pub evaluations: usize,
+    /// Wall time (s).
+    pub time_s: f64,
+    /// How the fit ended, in words.
+    pub termination: String,
+    /// Whether it converged.
+    pub converged: bool,
+    /// One summary per phase.
+    pub phases: Vec<Summary>,
+    /// The identified values by name (the results file's layout).
+    pub parameters: serde_json::Value,
+    /// The gauge's or the priors' rule; absent without either.
+    pub gauge: Option<String>,
+    /// The combinations the data cannot identify.
+    pub unidentifiable: Vec<Unidentified>,
+    /// Implausible sizes, in words.
+    pub implausible: Vec<String>,
+    /// Why the fit was refused.
+    pub refused: Option<String>,
+    /// What the positions can and cannot measure.
+    pub observability: Vec<Observed>,
+}
+
+/// A statement about the layout, in the JSON form.
+#[derive(Clone, Debug, Serialize)]
+pub struct Observed {
+    /// Its kind, in lower case.
+    pub kind: String,
+    /// What cannot be measured.
+    pub what: String,
+    /// What would fix it.
+    pub fix: String,
+}
+
+/// The noise error of the measurements `data` (read from `data_path`) given the true errors
+/// in `truth_path` (a results file): the generator's own figure from the `simulation.json`
+/// beside the truth when it belongs to these data (the `measurements.csv` written beside it,
+/// with this number of points: it knows effects the results format cannot hold), else the EMM
+/// of the measurements against the truth's prediction.
+pub fn noise_error(
+    truth_path: &Path,
+    machine: &Machine,
+    data_path: &Path,
+    data: &MeasurementSet,
+) -> Result<ErrorStats> {
+    let label = truth_path.display().to_string();
+    let truth = Truth::from_results(
+        &ResultsFile::load(truth_path).context("reading the truth file")?,
+        &label,
+    )?;
+    if truth.model.machine().spec() != machine.spec() {
+        bail!("the machine of {label} is not the machine of the measurements");
+    }
+    let dir = truth_path.parent().unwrap_or(Path::new("."));
+    let belongs = volver_core::fsio::same_file(&dir.join("measurements.csv"), data_path);
+    let record = belongs
+        .then(|| std::fs::read_to_string(dir.join("simulation.json")).ok())
+        .flatten()
+        .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok())
+        .filter(|r| r.points == data.points.len());
+    Ok(match record {
+        Some(r) => r.noise_error,
+        None => Problem::new(&truth.model, data)?.stats(&truth.params),
+    })
+}
+
+/// Identifies `model` from `data` as `settings` ask (see the module documentation); progress
+/// goes to `observer`. `Err` for what cannot start (an unknown engine, invalid options, a
+/// decomposition of the priors that fails); a fit that fails or must not be used is an
+/// `Ok` with [`Outcome::refusal`].
+pub fn identify(
+    model: &Model,
+    data: &MeasurementSet,
+    settings: &Settings,
+    observer: &mut dyn Observer,
+) -> Result<Outcome> {
+    if settings.subloops == 0 {
+        bail!("--subloops must be at least 1");
+    }
+    let solver = volver_solvers::engine(&settings.engine).map_err(anyhow::Error::msg)?;
+    let options = &settings.options;
+    options.validate().map_err(anyhow::Error::msg)?;
+    let problem = Problem::new(model, data)?;
+    let strategy = Strategy {
+        phasing: settings.phasing,
+        subloops: settings.subloops,
+        ..Strategy::default()
+    };
+    let observability =
+        volver_solvers::observability::observe(model, data, &model.initial_params());
+    let mut id = volver_solvers::strategy::identify(
+        solver.as_ref(),
+        problem.clone(),
+        &model.initial_params(),
+        &strategy,
+        options,
+        observer,
+    );
+    let (covariance, rule) = uncertainty_of(&problem, &mut id, settings)?;
+    let mut results = ResultsFile::from_model(model, &id.params)?;
+    if let Some(cov) = &covariance {
+        // One name per column of the held factor: none when the priors decided them.
+        let held = id
+            .gauge
+            .as_ref()
+            .filter(|_| settings.priors.is_none())
+            .map(|g| {
+                (0..g.held.len())
+                    .map(|c| crate::uncertainty::combination_text(model, g, c))
+                    .collect()
+            })
+            .unwrap_or_default();
+        results.uncertainty = Some(cov.to_record(&rule, held));
+    }
+    let implausible = implausible_sizes(&problem, &id, covariance.as_ref(), options);
+    let refusal = refusal(&id, &implausible, settings.accept);
+    let unidentified = unidentified(model, &id);
+    Ok(Outcome {
+        engine: solver.name().to_string(),
+        objective: options.objective,
+        phasing: settings.phasing,
+        subloops: settings.subloops,
+        points: data.points.len(),
+        observability,
+        covariance,
+        rule,
+        unidentified,
+        implausible,
+        refusal,
+        results,
+        noise_error: None,
+        with_priors: settings.priors.is_some(),
+        id,
+    })
+}
+
+/// The covariance the results carry and the rule of the values the data do not determine;
+/// with priors, moves the fit to the maximum a posteriori solution.
+fn uncertainty_of(
+    problem: &Problem,
+    id: &mut Identification,
+    settings: &Settings,
+) -> Result<(Option<Covariance>, String)> {
+    let covariance = if id.termination.failed() {
+        None
+    } else {
+        volver_solvers::uncertainty::linear(
+            problem,
+            id.gauge.as_ref(),
+            &id.params,
+            settings.options.objective,
+            settings.noise,
+        )
+    };
+    let rule = match (&settings.priors, &id.gauge) {
+        (Some(p), _) => p.rule(),
+        (None, Some(_)) => volver_solvers::gauge::RULE.to_string(),
+        (None, None) => "none".to_string(),
+    };
+    match (&settings.priors, covariance) {
+        (Some(p), Some(cov)) => {
+            let post = volver_solvers::prior::maximum_a_posteriori(
+                problem.model(),
+                id.gauge.as_ref(),
+                &id.params,
+                &cov,
+                p,
+            )
+            .context("the maximum a posteriori solution (a decomposition failed)")?;
+            id.params = post.params;
+            id.final_ = volver_solvers::evaluate(problem, &id.params);
+            Ok((Some(post.covariance), rule))
+        }
+        (Some(_), None) => bail!(
+            "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
+            id.termination
+        ),
+        (None, cov) => Ok((cov, rule)),
+    }
+}
+
+/// Plausibility of what the data determine: the fit on the gauge (values along the
+/// unidentified combinations at the reference; else the minimum-norm point of the analysis),
+/// each value allowed its expanded uncertainty from the data.
+fn implausible_sizes(
+    problem: &Problem,
+    id: &Identification,
+    covariance: Option<&Covariance>,
+    options: &Options,
+) -> Vec<Implausible> {
+    let model = problem.model();
+    let tracker_start = volver_solvers::init::init_tracker(problem, &model.initial_params()).ok();
+    let determined = volver_solvers::identifiability::analyse(
+        &volver_solvers::Task::new(problem.clone()),
+        &id.params,
+        options.rank_tolerance,
+        1.0,
+    );
+    // Each value is allowed its uncertainty from the data: the fit's covariance (the gauge's,
+    // its held combinations at the reference need no allowance), else the analysis'.
+    let data_columns: Option<Vec<Vec<f64>>> = covariance.map(|c| {
+        (0..c.data.ncols())
+            .map(|k| (0..c.data.nrows()).map(|j| c.data[(j, k)]).collect())
+            .collect()
+    });
+    let representative = match (&id.gauge, &determined, &tracker_start) {
+        (Some(_), _, _) => id.params.clone(),
+        (None, Some(a), Some(start)) => a.minimum_norm(&id.params, start),
+        _ => id.params.clone(),
+    };
+    plausibility::check(
+        model,
+        &representative,
+        &plausibility::Context {
+            tracker_start: tracker_start.as_deref(),
+            covariance_factor: data_columns
+                .as_deref()
+                .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
+            emm_um: Some(id.final_.stats.emm_um),
+            relaxed: false,
+        },
+    )
+}
+
+/// Honest exits: a failed run, a run stopped by a limit and a run with implausible sizes must
+/// not be used (a later `compensate` or `tables` must not see them), unless `accept` keeps the
+/// last two.
+fn refusal(id: &Identification, implausible: &[Implausible], accept: bool) -> Option<String> {
+    if id.termination.failed() {
+        Some(format!("identification {}", id.termination))
+    } else if !accept && !implausible.is_empty() {
+        let list: Vec<String> = implausible
+            .iter()
+            .take(4)
+            .map(ToString::to_string)
+            .collect();
+        Some(format!(
+            "implausible sizes ({}): {}; {} (--accept keeps the fit anyway)",
+            id.termination,
+            list.join("; "),
+            plausibility::WHERE_TO_LOOK
+        ))
+    } else if !accept && !id.termination.converged() {
+        Some(format!(
+            "{}, not converged: raise --max-iterations or --max-evaluations, or pass --accept \
+             to keep this fit",
+            id.termination
+        ))
+    } else {
+        None
+    }
+}
+
+/// The combinations the gauge held, by the parameters they move (a metrologist needs to know
+/// which errors are not determined, and by which rule their values were chosen).
+fn unidentified(model: &Model, id: &Identification) -> Vec<Unidentified> {
+    let Some(g) = &id.gauge else {
+        return Vec::new();
+    };
+    g.held
+        .iter()
+        .map(|h| Unidentified {
+            relative_curvature: h.relative_curvature,
+            parameters: h
+                .parameters
+                .iter()
+                .take(4)
+                .map(|&(j, share)| Share {
+                    name: model.params()[j].name.clone(),
+                    share,
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+impl Outcome {
+    /// The serde form (`volver identify --json`).
+    pub fn report(&self) -> Result<Report> {
+        let id = &self.id;
+        Ok(Report {
+            solver: self.engine.clone(),
+            objective: self.objective.to_string(),
+            strategy: self.phasing.name().to_string(),
+            subloops: self.subloops,
+            points: self.points,
+            emm_initial_um: id.initial.stats.emm_um,
+            emm_final_um: id.final_.stats.emm_um,
+            emax_initial_um: id.initial.stats.emax_um,
+            emax_final_um: id.final_.stats.emax_um,
+            phi_final_mm: id.final_.phi_mm,
+            ve_final_mm2: id.final_.ve_mm2,
+            residual_percent: id.residual_percent(),
+            noise_error_um: self.noise_error.map(|s| s.emm_um),
+            noise_emax_um: self.noise_error.map(|s| s.emax_um),
+            iterations: id.iterations(),
+            evaluations: id.evaluations(),
+            time_s: id.time_s,
+            termination: id.termination.to_string(),
+            converged: id.termination.converged(),
+            phases: id.phases.clone(),
+            parameters: serde_json::to_value(&self.results.parameters)?,
+            gauge: (self.rule != "none").then(|| self.rule.clone()),
+            unidentifiable: self.unidentified.clone(),
+            implausible: self.implausible.iter().map(ToString::to_string).collect(),
+            refused: self.refusal.clone(),
+            observability: self
+                .observability
+                .iter()
+                .map(|f| Observed {
+                    kind: format!("{:?}", f.kind).to_lowercase(),
+                    what: f.what.clone(),
+                    fix: f.fix.clone(),
+                })
+                .collect(),
+        })
+    }
+}
