@@ -18,6 +18,7 @@ pub use volver_core as core;
 pub use volver_solvers as solvers;
 
 pub mod compensation;
+pub mod diagnosis;
 pub mod history;
 pub mod identification;
 pub mod inputs;

@@ -269,7 +269,12 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let after = problem.residuals(params);
     let options = Options::default();
     let task = volver_solvers::Task::new(problem.clone());
-    let ident = analyse(&task, params, options.rank_tolerance, 0.95);
+    let ident = analyse(
+        &task,
+        params,
+        options.rank_tolerance,
+        crate::diagnosis::CORRELATION_LISTED,
+    );
     // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held
     // combinations' prior.
     let cov = volver_solvers::uncertainty::linear(
