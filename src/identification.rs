@@ -236,9 +236,9 @@ pub fn identify(
     if settings.subloops == 0 {
         bail!("--subloops must be at least 1");
     }
-    let solver = volver_solvers::engine(&settings.engine).map_err(anyhow::Error::msg)?;
+    let solver = volver_solvers::engine(&settings.engine)?;
     let options = &settings.options;
-    options.validate().map_err(anyhow::Error::msg)?;
+    options.validate()?;
     let problem = Problem::new(model, data)?;
     let strategy = Strategy {
         phasing: settings.phasing,

@@ -263,8 +263,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let m = model.machine();
     let problem = Problem::new(model, input.data)?;
     let params = &last.id.params;
-    let before_params =
-        init_tracker(&problem, &model.initial_params()).map_err(anyhow::Error::msg)?;
+    let before_params = init_tracker(&problem, &model.initial_params())?;
     let before = problem.residuals(&before_params);
     let after = problem.residuals(params);
     let options = Options::default();

@@ -148,8 +148,7 @@ fn scaled_to(truth: &Truth, model: &Model, plan: &str, target_um: f64, seed: u64
     for _ in 0..2 {
         let set = measure(&t, plan, TrackerNoise::NONE, seed)?;
         let problem = Problem::new(model, &set)?;
-        let start = volver_solvers::init::init_tracker(&problem, &model.initial_params())
-            .map_err(anyhow::Error::msg)?;
+        let start = volver_solvers::init::init_tracker(&problem, &model.initial_params())?;
         t = scaled(&t, target_um / problem.stats(&start).emm_um);
     }
     Ok(t)

@@ -54,7 +54,7 @@ pub fn held_tracker_values(problem: &Problem) -> [bool; 6] {
 /// measured points (the translation alone when the model holds an angle). Errs when the fit
 /// needs a rotation too large for the small angles of eq. 9 (more than 0.05 rad): the
 /// machine file's tracker `orientation_deg` is then wrong.
-pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, String> {
+pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, crate::Error> {
     let model = problem.model();
     let ts = model.tracker_start();
     let held = held_tracker_values(problem);
@@ -63,7 +63,7 @@ pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, Strin
     let fit_rotation = !held[3] && !held[4] && !held[5];
     if fit_rotation {
         let (q, m) = points(problem, &p);
-        let rf = kabsch(&q, &m)?;
+        let rf = kabsch(&q, &m).map_err(crate::Error::TrackerFit)?;
         // Small-angle vector of R_f ≈ I + [w_f]×.
         let wf = [
             0.5 * (rf[2][1] - rf[1][2]),
@@ -72,11 +72,11 @@ pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, Strin
         ];
         let angle = (wf[0] * wf[0] + wf[1] * wf[1] + wf[2] * wf[2]).sqrt();
         if angle > 0.05 {
-            return Err(format!(
+            return Err(crate::Error::TrackerFit(format!(
                 "the measured points are turned by {:.2}° from the model's: correct the tracker's \
                  orientation_deg in the machine file (the identified angles are small, eq. 9)",
                 angle.to_degrees()
-            ));
+            )));
         }
         for k in 0..3 {
             p[ts + 3 + k] += wf[k];

@@ -22,6 +22,7 @@ pub mod ceres;
 #[cfg(feature = "clarabel")]
 pub mod clarabel;
 mod coordinates;
+mod error;
 pub mod gauge;
 pub mod identifiability;
 pub mod init;
@@ -41,6 +42,7 @@ pub mod strd;
 pub mod summary;
 pub mod uncertainty;
 
+pub use error::Error;
 pub use options::{Objective, Options};
 pub use summary::{Evaluation, Summary, Termination};
 
@@ -295,19 +297,16 @@ pub fn engine_names() -> Vec<&'static str> {
 
 /// The engine called `name`, or an error listing the engines of this build (and the Cargo
 /// feature that brings a known engine this build lacks).
-pub fn engine(name: &str) -> Result<Box<dyn Solver>, String> {
+pub fn engine(name: &str) -> Result<Box<dyn Solver>, Error> {
     let known = ENGINES.iter().find(|e| e.name == name);
     if let Some(make) = known.and_then(|e| e.make) {
         return Ok(make());
     }
-    let hint = known
-        .and_then(|e| e.feature)
-        .map(|f| format!(" ('{name}' needs the Cargo feature `{f}`)"))
-        .unwrap_or_default();
-    Err(format!(
-        "unknown solver '{name}'{hint}: this build has {}",
-        engine_names().join(", ")
-    ))
+    Err(Error::UnknownEngine {
+        name: name.to_string(),
+        feature: known.and_then(|e| e.feature),
+        built: engine_names(),
+    })
 }
 
 /// Φ, ve, EMM and EMax of a problem at `params`.

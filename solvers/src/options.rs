@@ -27,12 +27,12 @@ impl fmt::Display for Objective {
 }
 
 impl std::str::FromStr for Objective {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = crate::Error;
+    fn from_str(s: &str) -> Result<Self, crate::Error> {
         match s {
             "phi" | "Φ" => Ok(Objective::Phi),
             "ve" => Ok(Objective::Ve),
-            _ => Err(format!("unknown objective '{s}': phi or ve")),
+            _ => Err(crate::Error::UnknownObjective(s.to_string())),
         }
     }
 }
@@ -123,7 +123,7 @@ impl Default for Options {
 
 impl Options {
     /// Checks every value; the message names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), crate::Error> {
         let nonneg = [
             ("parameter_tolerance", self.parameter_tolerance),
             ("objective_tolerance", self.objective_tolerance),
@@ -132,9 +132,11 @@ impl Options {
         ];
         for (name, v) in nonneg {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!(
-                    "options.{name} = {v}: expected a finite number ≥ 0"
-                ));
+                return Err(crate::Error::OutOfRange {
+                    field: name,
+                    value: v,
+                    expected: "≥ 0",
+                });
             }
         }
         let positive = [
@@ -144,19 +146,21 @@ impl Options {
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!(
-                    "options.{name} = {v}: expected a finite number > 0"
-                ));
+                return Err(crate::Error::OutOfRange {
+                    field: name,
+                    value: v,
+                    expected: "> 0",
+                });
             }
         }
         if self.irls_final_epsilon > self.irls_initial_epsilon {
-            return Err(format!(
-                "options.irls_final_epsilon = {} exceeds irls_initial_epsilon = {}",
-                self.irls_final_epsilon, self.irls_initial_epsilon
-            ));
+            return Err(crate::Error::EpsilonOrder {
+                initial_epsilon: self.irls_initial_epsilon,
+                final_epsilon: self.irls_final_epsilon,
+            });
         }
         if self.max_iterations == 0 || self.max_evaluations == 0 {
-            return Err("options.max_iterations and max_evaluations must be ≥ 1".into());
+            return Err(crate::Error::NoLimit);
         }
         Ok(())
     }

@@ -135,7 +135,7 @@ impl<'t, 'a> Run<'t, 'a> {
         };
         if let Err(e) = options.validate() {
             return Err(Box::new(
-                run.finish(start.to_vec(), Termination::InvalidInput(e)),
+                run.finish(start.to_vec(), Termination::InvalidInput(e.to_string())),
             ));
         }
         if start.len() != n || start.iter().any(|v| !v.is_finite()) {

@@ -57,7 +57,7 @@ pub const PHASINGS: [&str; 6] = ["one", "two", "tr", "rt", "three-tr", "three-rt
 
 impl Phasing {
     /// From its name (see the module table).
-    pub fn parse(s: &str) -> Result<Phasing, String> {
+    pub fn parse(s: &str) -> Result<Phasing, crate::Error> {
         Ok(match s {
             "one" | "1" => Phasing::One,
             "two" | "2" => Phasing::Two,
@@ -66,7 +66,9 @@ impl Phasing {
             "three-tr" => Phasing::ThreeTr,
             "three-rt" => Phasing::ThreeRt,
             _ => {
-                return Err(format!("unknown phasing '{s}': {}", PHASINGS.join(", ")));
+                return Err(crate::Error::UnknownPhasing {
+                    name: s.to_string(),
+                });
             }
         })
     }
@@ -225,7 +227,13 @@ pub fn identify_errors(
             Ok(q) => p = q,
             Err(e) => {
                 let initial = evaluate(&problem, &p);
-                return done(p, vec![], initial, Termination::InvalidInput(e), None);
+                return done(
+                    p,
+                    vec![],
+                    initial,
+                    Termination::InvalidInput(e.to_string()),
+                    None,
+                );
             }
         }
     }

@@ -438,7 +438,7 @@ pub fn monte_carlo(
     n: usize,
     seed: u64,
     progress: &(dyn Fn(usize) + Sync),
-) -> Result<MonteCarlo, String> {
+) -> Result<MonteCarlo, crate::Error> {
     crate::engine(engine)?;
     // No Newton polish of each replica: it moves a fit by ~1e-9 of its error functions, a
     // millionth of the spread measured here, and costs half of a replica's time.

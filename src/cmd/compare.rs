@@ -59,7 +59,7 @@ impl CompareArgs {
         if let Some(v) = self.max_evaluations {
             options.max_evaluations = v;
         }
-        options.validate().map_err(anyhow::Error::msg)?;
+        options.validate()?;
         Ok(options)
     }
 
@@ -76,7 +76,7 @@ impl CompareArgs {
         };
         names
             .iter()
-            .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::msg))
+            .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::from))
             .collect()
     }
 }
@@ -133,16 +133,15 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
             )
         }
     };
-    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
+    let objective: Objective = a.objective.parse()?;
     let options = a.limits(Options {
         objective,
         ..Options::default()
     })?;
     let engines = a.engines(&[])?;
     let problem = Problem::new(&model, &data)?;
-    let start = init_tracker(&problem, &model.initial_params())
-        .map_err(anyhow::Error::msg)
-        .context("fitting the tracker pose")?;
+    let start =
+        init_tracker(&problem, &model.initial_params()).context("fitting the tracker pose")?;
     let task = Task::new(problem.clone());
     let (task, held) = if a.gauge {
         let lm = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);

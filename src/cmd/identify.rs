@@ -101,9 +101,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             data.points.len(),
             model.spec().name,
             model.n_params(),
-            volver::solvers::engine(&settings.engine)
-                .map_err(anyhow::Error::msg)?
-                .name(),
+            volver::solvers::engine(&settings.engine)?.name(),
             settings.options.objective,
             settings.phasing.name()
         );
@@ -144,7 +142,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
 
 /// The library's settings from the arguments (checked before anything is fitted).
 fn settings(a: &IdentifyArgs) -> Result<Settings> {
-    let objective: Objective = a.objective.parse().map_err(anyhow::Error::msg)?;
+    let objective: Objective = a.objective.parse()?;
     let mut options = Options {
         objective,
         geodesic_acceleration: a.geodesic_acceleration,
@@ -164,14 +162,14 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     settings.priors = (!a.prior.is_empty())
         .then(|| volver::solvers::prior::Priors::parse(&a.prior))
         .transpose()?;
-    settings.phasing = Phasing::parse(&a.strategy).map_err(anyhow::Error::msg)?;
+    settings.phasing = Phasing::parse(&a.strategy)?;
     if a.subloops == 0 {
         anyhow::bail!("--subloops must be at least 1");
     }
     settings.subloops = a.subloops;
     settings.accept = a.accept;
-    volver::solvers::engine(&settings.engine).map_err(anyhow::Error::msg)?;
-    settings.options.validate().map_err(anyhow::Error::msg)?;
+    volver::solvers::engine(&settings.engine)?;
+    settings.options.validate()?;
     Ok(settings)
 }
 

@@ -71,7 +71,7 @@ fn largest(us: &[PointUncertainty]) -> (f64, f64, f64, usize) {
 pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     let (machine, model, data) = a.inputs.load()?;
     let noise = noise_of(a.noise.as_deref())?;
-    let solver = volver::solvers::engine(&a.solver).map_err(anyhow::Error::msg)?;
+    let solver = volver::solvers::engine(&a.solver)?;
     let problem = Problem::new(&model, &data)?;
     let options = Options::default();
     let priors = (!a.prior.is_empty())
@@ -152,8 +152,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
                 n,
                 a.seed,
                 &progress,
-            )
-            .map_err(anyhow::Error::msg)?;
+            )?;
             if mc.samples.len() < 2 {
                 bail!("Monte Carlo: {} of {n} replicas failed to solve", mc.failed);
             }

@@ -293,7 +293,7 @@ fn run_engine(size: &Size, name: &str) -> serde_json::Value {
     let problem = Problem::new(&model, &data).expect("problem");
     let engine = match volver_solvers::engine(name) {
         Ok(e) => e,
-        Err(e) => return serde_json::json!({ "engine": name, "error": e }),
+        Err(e) => return serde_json::json!({ "engine": name, "error": e.to_string() }),
     };
     let options = Options {
         objective: Objective::Phi,
@@ -354,6 +354,7 @@ fn run_expert(size: &Size, threads: usize) -> serde_json::Value {
     let t0 = Instant::now();
     // The same start as volver's identification: the tracker fitted rigidly first.
     let prepared = volver_solvers::init::init_tracker(&problem, &model.initial_params())
+        .map_err(|e| e.to_string())
         .and_then(|start| Expert::new(&problem, &start).map(|e| (start, e)));
     let (start, expert) = match prepared {
         Ok(x) => x,

@@ -1,0 +1,65 @@
+//! What the solvers crate refuses before a solve starts, as one typed error. A run that starts
+//! and then fails is not an error but a [`crate::Termination`] in its summary.
+
+/// Why a solve, an engine or a setting cannot be had.
+///
+/// ```
+/// use volver_solvers::{Error, Options};
+/// let bad = Options { max_iterations: 0, ..Options::default() };
+/// assert_eq!(bad.validate(), Err(Error::NoLimit));
+/// assert!(matches!(volver_solvers::engine("simplex"), Err(Error::UnknownEngine { .. })));
+/// ```
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// No engine of this name in this build; `feature` names the Cargo feature that has it.
+    #[error(
+        "unknown solver '{name}'{}: this build has {}",
+        feature.map(|f| format!(" ('{name}' needs the Cargo feature `{f}`)")).unwrap_or_default(),
+        built.join(", ")
+    )]
+    UnknownEngine {
+        /// The name asked for.
+        name: String,
+        /// The feature of a known engine this build lacks.
+        feature: Option<&'static str>,
+        /// The engines this build has.
+        built: Vec<&'static str>,
+    },
+    /// An option outside its range.
+    #[error("options.{field} = {value}: expected a finite number {expected}")]
+    OutOfRange {
+        /// The option's field in [`crate::Options`].
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// The range, in words (`≥ 0`, `> 0`).
+        expected: &'static str,
+    },
+    /// The final IRLS ε above the initial one.
+    #[error(
+        "options.irls_final_epsilon = {final_epsilon} exceeds irls_initial_epsilon = {initial_epsilon}"
+    )]
+    EpsilonOrder {
+        /// `irls_initial_epsilon`.
+        initial_epsilon: f64,
+        /// `irls_final_epsilon`.
+        final_epsilon: f64,
+    },
+    /// An iteration or evaluation limit of zero.
+    #[error("options.max_iterations and max_evaluations must be ≥ 1")]
+    NoLimit,
+    /// An objective name that is not `phi` or `ve`.
+    #[error("unknown objective '{0}': phi or ve")]
+    UnknownObjective(String),
+    /// A phasing name not in [`crate::strategy::PHASINGS`].
+    #[error("unknown phasing '{name}': {}", crate::strategy::PHASINGS.join(", "))]
+    UnknownPhasing {
+        /// The name asked for.
+        name: String,
+    },
+    /// The tracker's rigid fit cannot be made (collinear points, a rotation beyond the small
+    /// angles of eq. 9, an SVD that did not converge); the text says which.
+    #[error("{0}")]
+    TrackerFit(String),
+}
