@@ -84,6 +84,39 @@ pub struct ReportInput<'a> {
     pub max_u_um: f64,
 }
 
+impl<'a> ReportInput<'a> {
+    /// A report of `fits` (first to last; the last is plotted) of `data`, with nothing else
+    /// known: no truth, no candidates, no engines compared, no cross-validation; the tool point
+    /// at the reflectors' centroid of the last fit's machine and the compensation's default
+    /// limit of 25 µm. Set the other fields as needed.
+    ///
+    /// # Panics
+    /// When `fits` is empty.
+    pub fn new(
+        title: impl Into<String>,
+        data_label: impl Into<String>,
+        data: &'a MeasurementSet,
+        fits: Vec<Fit<'a>>,
+    ) -> ReportInput<'a> {
+        let last = fits.last().expect("a report needs at least one fit");
+        let tool = crate::compensation::reflector_centroid(last.model);
+        ReportInput {
+            title: title.into(),
+            data_label: data_label.into(),
+            data,
+            fits,
+            truth: None,
+            noise_um: None,
+            candidates: Vec::new(),
+            engines: Vec::new(),
+            cross: Vec::new(),
+            notes: Vec::new(),
+            tool,
+            max_u_um: 25.0,
+        }
+    }
+}
+
 /// Per-cell means over the points that share the two plotted axes' positions.
 fn cells(
     problem: &Problem,
