@@ -1,0 +1,408 @@
+//! Compiling an [`ErrorModelSpec`] for a machine into a [`Model`]: terms, parameter layout,
+//! constraints and the groups of terms that share their basis values.
+
+use super::*;
+
+impl Model {
+    pub(super) fn build(
+        machine: Machine,
+        spec: ErrorModelSpec,
+        file: &str,
+        source: Option<&str>,
+    ) -> Result<Model> {
+        let place = |needle: &str, field: &str| {
+            let mut p = Place::file(file).at_field(field);
+            if let Some(line) = source.and_then(|s| line_of_text(s, needle)) {
+                p = p.at_line(line);
+            }
+            p
+        };
+        let mut terms: Vec<Term> = Vec::new();
+        let mut params: Vec<ParamInfo> = Vec::new();
+        for entry in &spec.errors {
+            for raw in entry.name.names() {
+                let bad = |m: String| Error::input(place(raw, "error.name"), m);
+                let id: ErrorId = raw.parse().map_err(bad)?;
+                let Some((axis, ax)) = machine.axis(id.axis()) else {
+                    return Err(bad(format!(
+                        "{id} belongs to axis {}, which the machine's chain {} does not have",
+                        id.axis(),
+                        machine.chain()
+                    )));
+                };
+                if terms.iter().any(|t| t.id == id) {
+                    return Err(bad(format!("{id} is listed twice")));
+                }
+                let basis = term_basis(id, ax.axis.is_rotary(), entry).map_err(bad)?;
+                let start = params.len();
+                let suffixes = basis.suffixes();
+                for (c, suffix) in suffixes.iter().enumerate() {
+                    let name = if suffix.is_empty() {
+                        id.to_string()
+                    } else {
+                        format!("{id}.{suffix}")
+                    };
+                    let unit = if basis.is_phase(c) {
+                        Unit::Rad
+                    } else {
+                        id.unit()
+                    };
+                    params.push(ParamInfo {
+                        name,
+                        unit,
+                        group: id.group(),
+                        owner: Owner::Term {
+                            term: terms.len(),
+                            coeff: c,
+                        },
+                    });
+                }
+                terms.push(Term {
+                    id,
+                    axis,
+                    basis,
+                    params: start..params.len(),
+                });
+            }
+        }
+        if terms.len() + TRACKER_DOF > MAX_SLOTS {
+            return Err(Error::Model(format!(
+                "{} errors are modelled; at most {} fit beside the tracker pose",
+                terms.len(),
+                MAX_SLOTS - TRACKER_DOF
+            )));
+        }
+        let tracker_start = params.len();
+        for (k, n) in TRACKER_NAMES.iter().enumerate() {
+            params.push(ParamInfo {
+                name: format!("tracker.{n}"),
+                unit: if k < 3 { Unit::Mm } else { Unit::Rad },
+                group: Group::Tracker,
+                owner: Owner::Tracker(k),
+            });
+        }
+        let mut effects: Vec<(EffectSlot, usize)> = Vec::new();
+        {
+            let fx = &spec.effects;
+            let mut push =
+                |slot: EffectSlot, names: &[(String, Unit)], params: &mut Vec<ParamInfo>| {
+                    let k = effects.len();
+                    effects.push((slot, params.len()));
+                    for (name, unit) in names {
+                        params.push(ParamInfo {
+                            name: name.clone(),
+                            unit: *unit,
+                            group: Group::Other,
+                            owner: Owner::Effect(k),
+                        });
+                    }
+                };
+            if fx.thermal_drift {
+                for (c, x) in ["x", "y", "z"].iter().enumerate() {
+                    push(
+                        EffectSlot::Drift(c),
+                        &[(format!("drift.{x}"), Unit::MmPerHour)],
+                        &mut params,
+                    );
+                }
+            }
+            for id in &fx.reflector_offset {
+                let Some(r) = machine.reflector_index(id) else {
+                    return Err(Error::input(
+                        place(id, "effects.reflector_offset"),
+                        format!("no reflector '{id}' in the machine"),
+                    ));
+                };
+                for (c, x) in ["x", "y", "z"].iter().enumerate() {
+                    push(
+                        EffectSlot::Reflector { reflector: r, c },
+                        &[(format!("reflector.{id}.{x}"), Unit::Mm)],
+                        &mut params,
+                    );
+                }
+            }
+            if fx.range_scale {
+                push(
+                    EffectSlot::RangeScale,
+                    &[("range.scale".to_string(), Unit::Ppm)],
+                    &mut params,
+                );
+            }
+            for b in &fx.ball_screw {
+                let axis = b
+                    .axis
+                    .chars()
+                    .next()
+                    .filter(|_| b.axis.len() == 1)
+                    .and_then(crate::iso::Axis::from_letter);
+                let Some((k, ax)) = axis
+                    .and_then(|a| machine.axis(a))
+                    .filter(|(_, ax)| !ax.axis.is_rotary())
+                else {
+                    return Err(Error::input(
+                        place(&b.axis, "effects.ball_screw.axis"),
+                        format!("'{}' is not a linear axis of {}", b.axis, machine.chain()),
+                    ));
+                };
+                if !(b.period_mm.is_finite() && b.period_mm > 0.0) {
+                    return Err(Error::input(
+                        place(&b.axis, "effects.ball_screw.period_mm"),
+                        format!("the period {} mm must be positive", b.period_mm),
+                    ));
+                }
+                push(
+                    EffectSlot::Screw {
+                        k,
+                        dir: ax.axis.direction(),
+                        period_mm: b.period_mm,
+                        reference: ax.reference,
+                    },
+                    &[
+                        (format!("screw.{}.a", b.axis), Unit::Mm),
+                        (format!("screw.{}.b", b.axis), Unit::Mm),
+                    ],
+                    &mut params,
+                );
+            }
+        }
+        if terms.len() + TRACKER_DOF + effects.len() > MAX_SLOTS {
+            return Err(Error::Model(format!(
+                "{} errors and {} effect values are modelled; at most {} fit beside the tracker pose",
+                terms.len(),
+                effects.len(),
+                MAX_SLOTS - TRACKER_DOF
+            )));
+        }
+        let slot_of = params
+            .iter()
+            .map(|p| match p.owner {
+                Owner::Term { term, .. } => term,
+                Owner::Tracker(k) => terms.len() + k,
+                Owner::Effect(k) => terms.len() + TRACKER_DOF + k,
+            })
+            .collect();
+        let mut has_location = [false; MAX_AXES];
+        for t in &terms {
+            if matches!(t.id, ErrorId::Location { .. }) {
+                has_location[t.axis] = true;
+            }
+        }
+        let mut initial = vec![0.0; params.len()];
+        initial[tracker_start..tracker_start + 3].copy_from_slice(&machine.tracker().position);
+
+        // Constraints.
+        let mut rows = Vec::new();
+        if spec.reference_constraint {
+            for t in &terms {
+                let ax = &machine.axes()[t.axis];
+                if ax.axis.is_rotary() || !matches!(t.id, ErrorId::Component { .. }) {
+                    continue;
+                }
+                let n = t.basis.n_params();
+                let mut g = [0.0; MAX_COEFFS];
+                t.basis.eval(
+                    ax.normalise(ax.reference),
+                    &[0.0; MAX_COEFFS][..n],
+                    &mut g[..n],
+                );
+                rows.push(Constraint {
+                    kind: ConstraintKind::Reference,
+                    label: format!(
+                        "{}({} = {} {}) = 0",
+                        t.id,
+                        ax.axis,
+                        ax.to_file_units(ax.reference),
+                        ax.file_unit()
+                    ),
+                    coeffs: t
+                        .params
+                        .clone()
+                        .zip(g[..n].iter().copied())
+                        .filter(|(_, v)| *v != 0.0)
+                        .collect(),
+                    rhs: 0.0,
+                });
+            }
+        }
+        if spec.squareness != SquarenessRule::None {
+            for t in terms.iter().filter(|t| t.id.is_squareness()) {
+                let partner = t.id.squareness_partner().expect("squareness has a partner");
+                let Some(p) = terms.iter().find(|q| q.id == partner) else {
+                    continue;
+                };
+                if p.basis.kind().is_periodic()
+                    || p.basis.kind() == BasisKind::Constant
+                    || p.basis.degree() == 0
+                {
+                    continue;
+                }
+                rows.push(match spec.squareness {
+                    SquarenessRule::FromStraightness => Constraint {
+                        kind: ConstraintKind::Squareness,
+                        label: format!("{} = 0 (taken from the slope of {partner})", t.id),
+                        coeffs: vec![(t.params.start, 1.0)],
+                        rhs: 0.0,
+                    },
+                    _ => Constraint {
+                        kind: ConstraintKind::Squareness,
+                        label: format!("slope of {partner} = 0 (carried by {})", t.id),
+                        coeffs: p
+                            .params
+                            .clone()
+                            .zip(p.basis.linear_component())
+                            .filter(|(_, v)| v.abs() > 1e-14)
+                            .collect(),
+                        rhs: 0.0,
+                    },
+                });
+            }
+        }
+        let mut fixed: BTreeMap<usize, (f64, String)> = BTreeMap::new();
+        for name in &spec.tracker.identify {
+            if !TRACKER_NAMES.contains(&name.as_str()) {
+                return Err(Error::input(
+                    place(name, "tracker.identify"),
+                    format!(
+                        "'{name}' is not a tracker pose value; expected some of x, y, z, rx, ry, rz"
+                    ),
+                ));
+            }
+        }
+        for (k, n) in TRACKER_NAMES.iter().enumerate() {
+            if !spec.tracker.identify.iter().any(|s| s == n) {
+                let j = tracker_start + k;
+                fixed.insert(
+                    j,
+                    (initial[j], format!("tracker.{n} held at its nominal value")),
+                );
+            }
+        }
+        for (name, &value) in &spec.fixed {
+            let Some(j) = params.iter().position(|p| &p.name == name) else {
+                return Err(Error::input(
+                    place(name, &format!("fixed.{name}")),
+                    format!(
+                        "there is no parameter '{name}' in this model (names look like EYX.c2, ECC.a1, B0Z, tracker.rx)"
+                    ),
+                ));
+            };
+            if !value.is_finite() {
+                return Err(Error::input(
+                    place(name, &format!("fixed.{name}")),
+                    "a fixed value must be a finite number",
+                ));
+            }
+            fixed.insert(j, (value, format!("{name} fixed")));
+        }
+        for (j, (value, label)) in fixed {
+            initial[j] = value;
+            rows.push(Constraint {
+                kind: ConstraintKind::Fixed,
+                label: format!("{label} = {value} {}", params[j].unit),
+                coeffs: vec![(j, 1.0)],
+                rhs: value,
+            });
+        }
+        let places = terms
+            .iter()
+            .map(|t| TermPlace {
+                axis: t.axis,
+                location: matches!(t.id, ErrorId::Location { .. }),
+                component: t.id.component().index(),
+            })
+            .collect();
+        let groups = term_groups(&terms);
+        Ok(Model {
+            machine,
+            spec,
+            terms,
+            params,
+            slot_of,
+            places,
+            groups,
+            tracker_start,
+            has_location,
+            constraints: Constraints { rows },
+            initial,
+            effects,
+        })
+    }
+}
+
+/// Groups consecutive terms of one axis in one basis linear in its coefficients, with
+/// consecutive coefficients (see [`TermGroup`]).
+pub(super) fn term_groups(terms: &[Term]) -> Vec<TermGroup> {
+    let mut groups: Vec<TermGroup> = Vec::new();
+    for (i, t) in terms.iter().enumerate() {
+        if let Some(g) = groups.last_mut() {
+            let prev = &terms[i - 1];
+            if prev.axis == t.axis
+                && prev.basis == t.basis
+                && t.basis.is_linear()
+                && prev.params.end == t.params.start
+                && g.terms.len() < MAX_GROUP
+            {
+                g.terms.end = i + 1;
+                continue;
+            }
+        }
+        groups.push(TermGroup {
+            terms: i..i + 1,
+            len: t.params.len(),
+            params: t.params.start,
+        });
+    }
+    groups
+}
+
+/// The basis of one `[[error]]` entry for an error, with the checks that make it meaningful.
+pub(super) fn term_basis(
+    id: ErrorId,
+    rotary_axis: bool,
+    e: &ErrorTermSpec,
+) -> std::result::Result<Basis, String> {
+    if let ErrorId::Location { .. } = id {
+        return match e.basis {
+            None | Some(BasisKind::Constant) => Basis::new(BasisKind::Constant, 0),
+            Some(b) => Err(format!(
+                "{id} is a location/squareness error, a constant: give it no basis (found '{b}')"
+            )),
+        };
+    }
+    let Some(kind) = e.basis else {
+        return Err(format!(
+            "{id} needs a basis: monomial, legendre or chebyshev with a degree, fourier or sine with an order, or constant"
+        ));
+    };
+    if kind.is_periodic() && !rotary_axis {
+        return Err(format!(
+            "{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)",
+            id.axis()
+        ));
+    }
+    let degree = match kind {
+        BasisKind::Constant => 0,
+        BasisKind::Fourier | BasisKind::Sine => e.order.ok_or_else(|| {
+            format!("{id}: a {kind} series needs `order` (the number of harmonics)")
+        })?,
+        BasisKind::Chebyshev => match (e.degree, e.nodes) {
+            (Some(d), None) => d,
+            (None, Some(m)) if m >= 1 => m - 1,
+            (None, Some(_)) => return Err(format!("{id}: chebyshev needs at least one node")),
+            (Some(_), Some(_)) => {
+                return Err(format!(
+                    "{id}: give chebyshev either `degree` or `nodes`, not both"
+                ));
+            }
+            (None, None) => {
+                return Err(format!(
+                    "{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)"
+                ));
+            }
+        },
+        BasisKind::Monomial | BasisKind::Legendre => e
+            .degree
+            .ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?,
+    };
+    Basis::new(kind, degree).map_err(|m| format!("{id}: {m}"))
+}

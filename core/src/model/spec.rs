@@ -1,0 +1,269 @@
+//! The error model as written in TOML: which errors, in which bases, the squareness rule,
+//! the tracker's identified components, fixed values and the effects beyond ISO 230.
+
+use super::*;
+
+/// How squareness and straightness share the slope they both describe (paper, section 6.1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SquarenessRule {
+    /// The paper's rule: a squareness whose straightness partner is modelled (B0Z ↔ EXZ) is held
+    /// at zero; the squareness is read from the straightness' slope ([`Model::squareness`]).
+    #[default]
+    FromStraightness,
+    /// The straightness partner's best-fit slope (its Legendre P1 component) is held at zero and
+    /// the squareness parameter carries it: the ISO 230-1 split.
+    Separate,
+    /// No rule: squareness and the straightness slope are interchangeable (not identifiable).
+    None,
+}
+
+/// A name or a list of names.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum OneOrMany {
+    /// One name.
+    One(String),
+    /// Several names.
+    Many(Vec<String>),
+}
+
+impl OneOrMany {
+    /// The names.
+    pub fn names(&self) -> Vec<&str> {
+        match self {
+            OneOrMany::One(s) => vec![s.as_str()],
+            OneOrMany::Many(v) => v.iter().map(String::as_str).collect(),
+        }
+    }
+}
+
+/// One `[[error]]` entry of an error model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ErrorTermSpec {
+    /// ISO 230 name(s) of the error(s).
+    pub name: OneOrMany,
+    /// Basis (absent for location and squareness errors, which are constants).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub basis: Option<BasisKind>,
+    /// Degree of a polynomial basis (Chebyshev: nodes − 1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degree: Option<usize>,
+    /// Number of Chebyshev nodes (alternative to `degree`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nodes: Option<usize>,
+    /// Number of harmonics of a periodic basis.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub order: Option<usize>,
+}
+
+/// The `[tracker]` table of an error model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerModelSpec {
+    /// Which of x, y, z, rx, ry, rz are identified; the others are fixed at their nominal value.
+    pub identify: Vec<String>,
+}
+
+impl Default for TrackerModelSpec {
+    fn default() -> Self {
+        TrackerModelSpec {
+            identify: TRACKER_NAMES.iter().map(|s| s.to_string()).collect(),
+        }
+    }
+}
+
+pub(super) fn default_true() -> bool {
+    true
+}
+
+pub(super) fn is_true(b: &bool) -> bool {
+    *b
+}
+
+/// An error model as written in its TOML file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ErrorModelSpec {
+    /// Human-readable name.
+    #[serde(default)]
+    pub name: String,
+    /// Squareness rule.
+    #[serde(default)]
+    pub squareness: SquarenessRule,
+    /// Linear-axis errors vanish at the axis' reference position (section 5.1). Default true.
+    #[serde(default = "default_true", skip_serializing_if = "is_true")]
+    pub reference_constraint: bool,
+    /// The modelled errors.
+    #[serde(default, rename = "error")]
+    pub errors: Vec<ErrorTermSpec>,
+    /// Tracker pose identification.
+    #[serde(default)]
+    pub tracker: TrackerModelSpec,
+    /// Parameters held at a value (name → value in the parameter's unit).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub fixed: BTreeMap<String, f64>,
+    /// Effects outside the ISO 230 model.
+    #[serde(default, skip_serializing_if = "EffectsSpec::is_empty")]
+    pub effects: EffectsSpec,
+}
+
+/// A periodic positioning error of a linear axis (e.g. a ball screw's pitch error).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BallScrewSpec {
+    /// The linear axis (letter).
+    pub axis: String,
+    /// The period (mm).
+    pub period_mm: f64,
+}
+
+/// The `[effects]` table of an error model: physical effects outside the ISO 230 errors, each
+/// with its parameters in group `other`. Formulas as in the synthetic generator
+/// ([`crate::simulate`]).
+///
+/// ```toml
+/// [effects]
+/// thermal_drift = true          # drift.x, drift.y, drift.z (mm/h): tool point, machine frame, × t_s
+/// reflector_offset = ["R1"]     # reflector.R1.x … (mm): the reflector off its nominal offset
+/// range_scale = true            # range.scale (ppm): points scaled about the tracker
+/// [[effects.ball_screw]]
+/// axis = "X"
+/// period_mm = 700.0             # screw.X.a, screw.X.b (mm): a·sin φ + b·cos φ, φ = 2π(u − u_ref)/P
+/// ```
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EffectsSpec {
+    /// Thermal drift of the tool point with time (needs `t_s` in the measurements).
+    #[serde(skip_serializing_if = "is_false")]
+    pub thermal_drift: bool,
+    /// Reflectors whose offset is identified.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reflector_offset: Vec<String>,
+    /// The tracker's range scale error.
+    #[serde(skip_serializing_if = "is_false")]
+    pub range_scale: bool,
+    /// Periodic positioning errors.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ball_screw: Vec<BallScrewSpec>,
+}
+
+pub(super) fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+impl EffectsSpec {
+    /// No effect.
+    pub fn is_empty(&self) -> bool {
+        *self == EffectsSpec::default()
+    }
+}
+
+/// One effect value at a point (a slot after the tracker's).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum EffectSlot {
+    /// Tool shift component c: value = drift rate × t (h).
+    Drift(usize),
+    /// Reflector offset component c of reflector r: value = δ when r is measured.
+    Reflector { reflector: usize, c: usize },
+    /// Range scale: value = s × 1e-6.
+    RangeScale,
+    /// Positioning error added to chain axis k along `dir`: a·sin φ + b·cos φ.
+    Screw {
+        k: usize,
+        dir: usize,
+        period_mm: f64,
+        reference: f64,
+    },
+}
+
+impl ErrorModelSpec {
+    /// Parses error-model TOML; `file` names the source in messages.
+    pub fn from_toml_str(text: &str, file: &str) -> Result<ErrorModelSpec> {
+        toml::from_str(text).map_err(|e| from_toml(file, text, e))
+    }
+
+    /// Every geometric error of a machine in the paper's bases: the six component errors of each
+    /// linear axis as Legendre cubics, those of each rotary axis as first-harmonic Fourier series
+    /// (their constant absorbs the rotary location errors), the squareness errors of every linear
+    /// axis but the first one in X, Y, Z order, and the tracker translation. For the embedded
+    /// XCFZ machine this is the paper's model.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::model::{ErrorModelSpec, Model};
+    /// let m = Machine::default_xcfz();
+    /// let full = Model::new(m, ErrorModelSpec::complete(&Machine::default_xcfz())).unwrap();
+    /// assert_eq!(full.n_params(), Model::default_xcfz().n_params());
+    /// ```
+    pub fn complete(machine: &Machine) -> ErrorModelSpec {
+        let names = |axis: Axis| -> Vec<String> {
+            ErrorId::components_of(axis)
+                .iter()
+                .map(ToString::to_string)
+                .collect()
+        };
+        let mut linear = Vec::new();
+        let mut rotary = Vec::new();
+        for ax in machine.axes() {
+            if ax.axis.is_rotary() {
+                rotary.extend(names(ax.axis));
+            } else {
+                linear.extend(names(ax.axis));
+            }
+        }
+        let first_linear = machine
+            .axes()
+            .iter()
+            .map(|a| a.axis)
+            .filter(|a| !a.is_rotary())
+            .min();
+        let squareness: Vec<String> = machine
+            .axes()
+            .iter()
+            .map(|a| a.axis)
+            .filter(|&a| !a.is_rotary() && Some(a) != first_linear)
+            .flat_map(ErrorId::location_names)
+            .collect();
+        let entry = |names: Vec<String>, basis, degree, order| ErrorTermSpec {
+            name: OneOrMany::Many(names),
+            basis,
+            degree,
+            nodes: None,
+            order,
+        };
+        let mut errors = Vec::new();
+        if !linear.is_empty() {
+            errors.push(entry(linear, Some(BasisKind::Legendre), Some(3), None));
+        }
+        if !rotary.is_empty() {
+            errors.push(entry(rotary, Some(BasisKind::Fourier), None, Some(1)));
+        }
+        if !squareness.is_empty() {
+            errors.push(entry(squareness, None, None, None));
+        }
+        ErrorModelSpec {
+            name: "complete: cubic linear-axis errors, first-harmonic rotary errors, squareness"
+                .to_string(),
+            squareness: SquarenessRule::FromStraightness,
+            reference_constraint: true,
+            errors,
+            tracker: TrackerModelSpec {
+                identify: TRACKER_NAMES[..3].iter().map(|s| s.to_string()).collect(),
+            },
+            fixed: BTreeMap::new(),
+            effects: EffectsSpec::default(),
+        }
+    }
+}
+
+impl fmt::Display for SquarenessRule {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            SquarenessRule::FromStraightness => "from-straightness",
+            SquarenessRule::Separate => "separate",
+            SquarenessRule::None => "none",
+        })
+    }
+}

@@ -1,0 +1,298 @@
+//! Effects outside the standard error model that a simulation can hide in its data
+//! ([`EFFECTS`]).
+
+use super::*;
+
+/// A physical effect outside the standard model (see the module documentation for formulas).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "effect", rename_all = "kebab-case")]
+pub enum Effect {
+    /// Thermal drift of the tool point in the machine frame.
+    ThermalDrift {
+        /// Drift rate along x, y, z (µm/h).
+        rate_um_per_h: [f64; 3],
+    },
+    /// Higher harmonics of every periodic rotary-axis error.
+    RotaryHarmonics {
+        /// Highest harmonic added (2 ..= 15).
+        max_order: usize,
+        /// Amplitude of each added harmonic of a translation error (µm).
+        translation_um: f64,
+        /// Amplitude of each added harmonic of a rotation error (µrad).
+        rotation_urad: f64,
+    },
+    /// A tracker mounted tilted.
+    TrackerTilt {
+        /// Rotation about the tracker's x axis (µrad).
+        rx_urad: f64,
+        /// Rotation about the tracker's y axis (µrad).
+        ry_urad: f64,
+    },
+    /// A periodic positioning error of a linear axis (ball-screw pitch error).
+    BallScrew {
+        /// The linear axis.
+        axis: Axis,
+        /// Period (mm).
+        period_mm: f64,
+        /// Amplitude (µm).
+        amplitude_um: f64,
+    },
+    /// A reflector whose true offset differs from the machine file's.
+    ReflectorOffset {
+        /// Reflector id.
+        reflector: String,
+        /// True offset minus nominal offset (µm).
+        delta_um: [f64; 3],
+    },
+    /// A tracker whose ranges are scaled.
+    RangeScale {
+        /// Scale error (parts per million).
+        ppm: f64,
+    },
+}
+
+/// The effects: id, CLI syntax and meaning, in the order `volver simulate --help` lists them.
+pub const EFFECTS: [(&str, &str, &str); 6] = [
+    (
+        "thermal-drift",
+        "thermal-drift=VX,VY,VZ",
+        "tool point drifts in the machine frame, µm/h",
+    ),
+    (
+        "rotary-harmonics",
+        "rotary-harmonics=H[,AMP_UM,AMP_URAD]",
+        "rotary-axis errors get harmonics up to H (default 5 µm, 10 µrad each)",
+    ),
+    (
+        "tracker-tilt",
+        "tracker-tilt=RX,RY",
+        "tracker mounted tilted, µrad",
+    ),
+    (
+        "ball-screw",
+        "ball-screw=AXIS,PERIOD_MM,AMP_UM",
+        "periodic positioning error of a linear axis",
+    ),
+    (
+        "reflector-offset",
+        "reflector-offset=ID,DX,DY,DZ",
+        "reflector off its nominal offset, µm",
+    ),
+    (
+        "range-scale",
+        "range-scale=PPM",
+        "tracker range scale error, ppm",
+    ),
+];
+
+impl Effect {
+    /// The effect's stable id (`thermal-drift` …).
+    pub fn id(&self) -> &'static str {
+        match self {
+            Effect::ThermalDrift { .. } => "thermal-drift",
+            Effect::RotaryHarmonics { .. } => "rotary-harmonics",
+            Effect::TrackerTilt { .. } => "tracker-tilt",
+            Effect::BallScrew { .. } => "ball-screw",
+            Effect::ReflectorOffset { .. } => "reflector-offset",
+            Effect::RangeScale { .. } => "range-scale",
+        }
+    }
+
+    /// Parses the CLI syntax of [`EFFECTS`], e.g. `thermal-drift=0,0,20`.
+    ///
+    /// ```
+    /// use volver_core::simulate::Effect;
+    /// let e = Effect::parse("ball-screw=X,10,3").unwrap();
+    /// assert_eq!(e.to_string(), "ball-screw=X,10,3");
+    /// assert!(Effect::parse("ball-screw=X,10").unwrap_err().to_string().contains("AXIS,PERIOD_MM,AMP_UM"));
+    /// ```
+    pub fn parse(text: &str) -> Result<Effect> {
+        let place = || Place::file("--effect").at_field(text.to_string());
+        let ids: Vec<&str> = EFFECTS.iter().map(|e| e.0).collect();
+        let (id, args) = text.split_once('=').unwrap_or((text, ""));
+        let id = id.trim();
+        let Some(&(_, syntax, _)) = EFFECTS.iter().find(|e| e.0 == id) else {
+            return Err(Error::input(
+                place(),
+                format!("unknown effect '{id}'; effects are {}", ids.join(", ")),
+            ));
+        };
+        let args: Vec<&str> = args
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .collect();
+        let bad = |why: String| Error::input(place(), format!("{why}; expected {syntax}"));
+        let num = |s: &str| -> Result<f64> {
+            s.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| bad(format!("'{s}' is not a finite number")))
+        };
+        let nums = |a: &[&str]| -> Result<Vec<f64>> { a.iter().map(|s| num(s)).collect() };
+        let count = |n: usize| -> Result<()> {
+            if args.len() == n {
+                Ok(())
+            } else {
+                Err(bad(format!("{} values given", args.len())))
+            }
+        };
+        Ok(match id {
+            "thermal-drift" => {
+                count(3)?;
+                let v = nums(&args)?;
+                Effect::ThermalDrift {
+                    rate_um_per_h: [v[0], v[1], v[2]],
+                }
+            }
+            "rotary-harmonics" => {
+                if args.len() != 1 && args.len() != 3 {
+                    return Err(bad(format!("{} values given", args.len())));
+                }
+                let max_order = args[0]
+                    .parse::<usize>()
+                    .map_err(|_| bad(format!("'{}' is not a whole number", args[0])))?;
+                let amps = nums(&args[1..])?;
+                Effect::RotaryHarmonics {
+                    max_order,
+                    translation_um: amps.first().copied().unwrap_or(5.0),
+                    rotation_urad: amps.get(1).copied().unwrap_or(10.0),
+                }
+            }
+            "tracker-tilt" => {
+                count(2)?;
+                let v = nums(&args)?;
+                Effect::TrackerTilt {
+                    rx_urad: v[0],
+                    ry_urad: v[1],
+                }
+            }
+            "ball-screw" => {
+                count(3)?;
+                let mut letters = args[0].chars();
+                let axis = match (letters.next().and_then(Axis::from_letter), letters.next()) {
+                    (Some(a), None) => a,
+                    _ => return Err(bad(format!("'{}' is not an axis letter", args[0]))),
+                };
+                let v = nums(&args[1..])?;
+                Effect::BallScrew {
+                    axis,
+                    period_mm: v[0],
+                    amplitude_um: v[1],
+                }
+            }
+            "reflector-offset" => {
+                count(4)?;
+                let v = nums(&args[1..])?;
+                Effect::ReflectorOffset {
+                    reflector: args[0].to_string(),
+                    delta_um: [v[0], v[1], v[2]],
+                }
+            }
+            _ => {
+                count(1)?;
+                Effect::RangeScale { ppm: num(args[0])? }
+            }
+        })
+    }
+
+    /// Checks the effect against a machine.
+    pub fn validate(&self, machine: &Machine) -> Result<()> {
+        let place = || Place::file("effects").at_field(self.id());
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let fail = |m: String| Err(Error::input(place(), m));
+        match self {
+            Effect::ThermalDrift { rate_um_per_h } if !finite(rate_um_per_h) => {
+                fail("the drift rate must be finite".into())
+            }
+            Effect::RotaryHarmonics {
+                max_order,
+                translation_um,
+                rotation_urad,
+            } => {
+                if !(2..=MAX_HARMONIC).contains(max_order) {
+                    fail(format!(
+                        "highest harmonic {max_order} is outside 2..={MAX_HARMONIC}"
+                    ))
+                } else if !finite(&[*translation_um, *rotation_urad]) {
+                    fail("the amplitudes must be finite".into())
+                } else if !machine.axes().iter().any(|a| a.axis.is_rotary()) {
+                    fail(format!(
+                        "the machine {} has no rotary axis",
+                        machine.chain()
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::TrackerTilt { rx_urad, ry_urad } if !finite(&[*rx_urad, *ry_urad]) => {
+                fail("the tilt must be finite".into())
+            }
+            Effect::BallScrew {
+                axis,
+                period_mm,
+                amplitude_um,
+            } => {
+                if axis.is_rotary() || machine.axis(*axis).is_none() {
+                    fail(format!(
+                        "{axis} is not a linear axis of {}",
+                        machine.chain()
+                    ))
+                } else if !(period_mm.is_finite() && *period_mm > 0.0) {
+                    fail(format!("the period {period_mm} mm must be positive"))
+                } else if !amplitude_um.is_finite() {
+                    fail("the amplitude must be finite".into())
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::ReflectorOffset {
+                reflector,
+                delta_um,
+            } => {
+                if machine.reflector_index(reflector).is_none() {
+                    let ids: Vec<&str> =
+                        machine.reflectors().iter().map(|r| r.id.as_str()).collect();
+                    fail(format!(
+                        "no reflector '{reflector}' in the machine (it has {})",
+                        ids.join(", ")
+                    ))
+                } else if !finite(delta_um) {
+                    fail("the offset error must be finite".into())
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::RangeScale { ppm } if !(ppm.is_finite() && *ppm > -1e6) => {
+                fail(format!("{ppm} ppm is not a finite scale above −10⁶ ppm"))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl fmt::Display for Effect {
+    /// The CLI syntax, which [`Effect::parse`] reads back.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}=", self.id())?;
+        match self {
+            Effect::ThermalDrift { rate_um_per_h: v } => write!(f, "{},{},{}", v[0], v[1], v[2]),
+            Effect::RotaryHarmonics {
+                max_order,
+                translation_um,
+                rotation_urad,
+            } => write!(f, "{max_order},{translation_um},{rotation_urad}"),
+            Effect::TrackerTilt { rx_urad, ry_urad } => write!(f, "{rx_urad},{ry_urad}"),
+            Effect::BallScrew {
+                axis,
+                period_mm,
+                amplitude_um,
+            } => write!(f, "{axis},{period_mm},{amplitude_um}"),
+            Effect::ReflectorOffset {
+                reflector,
+                delta_um: d,
+            } => write!(f, "{reflector},{},{},{}", d[0], d[1], d[2]),
+            Effect::RangeScale { ppm } => write!(f, "{ppm}"),
+        }
+    }
+}
