@@ -1,8 +1,11 @@
 //! `volver report`: one self-contained HTML file (inline SVG, no scripts, no network) with the
 //! machine, the model, the summary tables, the plots, the diagnosis and the identifiability.
 
-use crate::plot::{self, Cell, FunctionPanel, escape};
+mod figures;
+
+use crate::plot::{self, escape};
 use anyhow::Result;
+use figures::{cells, function_panels, micro, plotted_axes, table, tool_point_uncertainty};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use volver_core::diagnose;
@@ -15,7 +18,7 @@ use volver_solvers::candidates::Score;
 use volver_solvers::identifiability::analyse;
 use volver_solvers::init::init_tracker;
 use volver_solvers::strategy::Identification;
-use volver_solvers::uncertainty::{Covariance, K};
+use volver_solvers::uncertainty::{Covariance, K, PointUncertainty};
 
 /// One fitted model revision shown in the report.
 pub struct Fit<'a> {
@@ -117,175 +120,6 @@ impl<'a> ReportInput<'a> {
     }
 }
 
-/// Per-cell means over the points that share the two plotted axes' positions.
-fn cells(
-    problem: &Problem,
-    axes: (usize, usize),
-    vectors: &[[f64; 3]],
-    dirs: (usize, usize),
-) -> (Vec<Cell>, Vec<Cell>) {
-    let data = problem.data();
-    let m = problem.model().machine();
-    let (ka, kb) = axes;
-    // Per cell: position, sum of modules, sum of vectors, count.
-    type Sums = (f64, f64, f64, [f64; 3], usize);
-    let mut groups: BTreeMap<(i64, i64), Sums> = BTreeMap::new();
-    for (p, v) in data.points.iter().zip(vectors) {
-        let (x, y) = (
-            m.axes()[ka].to_file_units(p.commands.0[ka]),
-            m.axes()[kb].to_file_units(p.commands.0[kb]),
-        );
-        let key = ((x * 1e3).round() as i64, (y * 1e3).round() as i64);
-        let g = groups.entry(key).or_insert((x, y, 0.0, [0.0; 3], 0));
-        g.2 += norm(*v) * 1e3;
-        for (acc, vc) in g.3.iter_mut().zip(v) {
-            *acc += vc * 1e3;
-        }
-        g.4 += 1;
-    }
-    let map = groups
-        .values()
-        .map(|g| Cell {
-            x: g.0,
-            y: g.1,
-            a: g.2 / g.4 as f64,
-            b: 0.0,
-        })
-        .collect();
-    let arrows = groups
-        .values()
-        .map(|g| Cell {
-            x: g.0,
-            y: g.1,
-            a: g.3[dirs.0] / g.4 as f64,
-            b: g.3[dirs.1] / g.4 as f64,
-        })
-        .collect();
-    (map, arrows)
-}
-
-/// The two linear axes with the most distinct positions in the data (chain positions).
-fn plotted_axes(problem: &Problem) -> Option<(usize, usize)> {
-    let m = problem.model().machine();
-    let mut counts: Vec<(usize, usize)> = (0..m.axes().len())
-        .filter(|&k| !m.axes()[k].axis.is_rotary())
-        .map(|k| {
-            let mut v: Vec<i64> = problem
-                .data()
-                .points
-                .iter()
-                .map(|p| (p.commands.0[k] * 1e3).round() as i64)
-                .collect();
-            v.sort_unstable();
-            v.dedup();
-            (v.len(), k)
-        })
-        .collect();
-    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-    match counts[..] {
-        [(_, a), (_, b), ..] => Some((a.min(b), a.max(b))),
-        _ => None,
-    }
-}
-
-/// The error functions of a fit against their axis positions, with bands of their expanded
-/// uncertainty (k = 2: the data's and the held combinations' prior); a function the prior
-/// dominates is titled as not determined.
-fn function_panels(
-    model: &Model,
-    params: &[f64],
-    cov: Option<&Covariance>,
-    gauge: Option<&volver_solvers::gauge::Gauge>,
-    truth: Option<(&Model, &[f64])>,
-) -> Vec<FunctionPanel> {
-    let m = model.machine();
-    let mut out = Vec::new();
-    for t in model.terms() {
-        let ErrorId::Component { .. } = t.id else {
-            continue;
-        };
-        let ax = &m.axes()[t.axis];
-        let (scale, unit) = micro(t.id);
-        let n = 61;
-        let (mut x, mut value, mut sigma, mut tv) = (vec![], vec![], vec![], vec![]);
-        let mut g = vec![0.0; model.n_params()];
-        let mut gb = vec![0.0; t.params.len()];
-        // Where the held combinations' prior outweighs the data, the function is not measured.
-        let (mut data_sq, mut held_sq, mut worst) = (0.0, 0.0, None);
-        for i in 0..n {
-            let u = ax.min + (ax.max - ax.min) * i as f64 / (n - 1) as f64;
-            let arg = if t.basis.kind().is_periodic() {
-                u
-            } else {
-                ax.normalise(u)
-            };
-            let v = t.basis.eval(arg, &params[t.params.clone()], &mut gb);
-            g.fill(0.0);
-            g[t.params.clone()].copy_from_slice(&gb);
-            x.push(ax.to_file_units(u));
-            value.push(v * scale);
-            if let Some(c) = cov {
-                let (uh, w) = c.u_held(&g);
-                let ud = c.u_data(&g);
-                data_sq += ud * ud;
-                held_sq += uh * uh;
-                worst = worst.or(w);
-                sigma.push(ud.hypot(uh) * scale);
-            } else {
-                sigma.push(0.0);
-            }
-            if let Some((tm, tp)) = truth {
-                tv.push(tm.error_value(t.id, u, tp).map(|v| v * scale));
-            }
-        }
-        let truth_values = if tv.iter().all(Option::is_some) && !tv.is_empty() {
-            Some(tv.into_iter().flatten().collect())
-        } else {
-            None
-        };
-        let name = match (gauge, worst) {
-            (Some(g), Some(c)) if held_sq > data_sq => format!(
-                "{} — not determined by the data (held combination {})",
-                t.id,
-                crate::uncertainty::combination_text(model, g, c)
-            ),
-            _ => t.id.to_string(),
-        };
-        out.push(FunctionPanel {
-            name,
-            xlabel: format!("{} ({})", ax.axis, ax.file_unit()),
-            unit: unit.into(),
-            x,
-            value,
-            sigma,
-            truth: truth_values,
-        });
-    }
-    out
-}
-
-/// Scale from internal units (mm, rad) to µm or µrad, and the unit's name.
-fn micro(id: ErrorId) -> (f64, &'static str) {
-    id.unit().micro()
-}
-
-fn table(head: &[&str], rows: &[Vec<String>]) -> String {
-    let mut s = String::from("<table><tr>");
-    for h in head {
-        let _ = write!(s, "<th>{}</th>", escape(h));
-    }
-    s.push_str("</tr>\n");
-    for r in rows {
-        s.push_str("<tr>");
-        for c in r {
-            let _ = write!(s, "<td>{}</td>", escape(c));
-        }
-        s.push_str("</tr>\n");
-    }
-    s.push_str("</table>\n");
-    s
-}
-
 /// The HTML text.
 pub fn html(input: &ReportInput) -> Result<String> {
     let last = input
@@ -317,6 +151,55 @@ pub fn html(input: &ReportInput) -> Result<String> {
         volver_solvers::uncertainty::NoiseModel::Residual,
     );
     let mut s = String::new();
+    let page = Page {
+        input,
+        last,
+        model,
+        m,
+        problem,
+        params,
+        before,
+        after,
+        before_params,
+        ident,
+        cov,
+    };
+    head(&page, &mut s)?;
+    machine_and_model(&page, &mut s)?;
+    summary(&page, &mut s)?;
+    maps(&page, &mut s)?;
+    error_functions(&page, &mut s)?;
+    squareness(&page, &mut s)?;
+    diagnosis(&page, &mut s)?;
+    candidates(&page, &mut s)?;
+    identifiability(&page, &mut s)?;
+    cross_validation(&page, &mut s)?;
+    let _ = writeln!(
+        s,
+        "<p style=\"color:#777\">Written by volver {}. Units: mm and rad in the files, µm and µrad here.</p></body></html>",
+        env!("CARGO_PKG_VERSION")
+    );
+    Ok(s)
+}
+
+/// What every section of [`html`] reads.
+struct Page<'a> {
+    input: &'a ReportInput<'a>,
+    last: &'a Fit<'a>,
+    model: &'a Model,
+    m: &'a volver_core::machine::Machine,
+    problem: Problem<'a>,
+    params: &'a [f64],
+    before: Vec<[f64; 3]>,
+    after: Vec<[f64; 3]>,
+    before_params: Vec<f64>,
+    ident: Option<volver_solvers::identifiability::Identifiability>,
+    cov: Option<Covariance>,
+}
+
+/// The document head, the title and the notes.
+fn head(p: &Page, s: &mut String) -> Result<()> {
+    let Page { input, .. } = p;
     let _ = write!(
         s,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>\
@@ -331,6 +214,14 @@ pub fn html(input: &ReportInput) -> Result<String> {
     for n in &input.notes {
         let _ = writeln!(s, "<p class=\"note\">{}</p>", escape(n));
     }
+    Ok(())
+}
+
+/// The machine and the model.
+fn machine_and_model(p: &Page, s: &mut String) -> Result<()> {
+    let Page {
+        input, model, m, ..
+    } = p;
     // Machine and model.
     let _ = writeln!(
         s,
@@ -375,6 +266,12 @@ pub fn html(input: &ReportInput) -> Result<String> {
         ],
         &axis_rows,
     ));
+    Ok(())
+}
+
+/// The summary: each fit's EMM before and after, with U, the noise, the engines.
+fn summary(p: &Page, s: &mut String) -> Result<()> {
+    let Page { input, .. } = p;
     // Summary.
     let _ = writeln!(s, "<h2>Summary</h2>");
     let rows: Vec<Vec<String>> = input
@@ -447,14 +344,32 @@ pub fn html(input: &ReportInput) -> Result<String> {
             &rows,
         ));
     }
+    Ok(())
+}
+
+/// Colour maps and vector diagrams of the error over the measured volume, before and after, and the tool point's U.
+fn maps(p: &Page, s: &mut String) -> Result<()> {
+    let Page {
+        input,
+        last,
+        model,
+        m,
+        problem,
+        params,
+        before,
+        after,
+        before_params,
+        cov,
+        ..
+    } = p;
     // Maps and vectors.
-    if let Some((ka, kb)) = plotted_axes(&problem) {
+    if let Some((ka, kb)) = plotted_axes(problem) {
         let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
         let dirs = (la.direction(), lb.direction());
-        let mb = diagnose::to_machine_frame(&problem, &before_params, &before);
-        let ma = diagnose::to_machine_frame(&problem, params, &after);
-        let (map_b, vec_b) = cells(&problem, (ka, kb), &mb, dirs);
-        let (map_a, vec_a) = cells(&problem, (ka, kb), &ma, dirs);
+        let mb = diagnose::to_machine_frame(problem, before_params, before);
+        let ma = diagnose::to_machine_frame(problem, params, after);
+        let (map_b, vec_b) = cells(problem, (ka, kb), &mb, dirs);
+        let (map_a, vec_a) = cells(problem, (ka, kb), &ma, dirs);
         let _ = writeln!(
             s,
             "<h2>Error over the measured volume</h2><p>Mean error module per {la}–{lb} position (over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.</p>"
@@ -487,8 +402,21 @@ pub fn html(input: &ReportInput) -> Result<String> {
         ));
     }
     if let Some(cov) = &cov {
-        tool_point_uncertainty(&mut s, input, model, params, last.id.gauge.as_ref(), cov)?;
+        tool_point_uncertainty(s, input, model, params, last.id.gauge.as_ref(), cov)?;
     }
+    Ok(())
+}
+
+/// The identified error functions with their U bands, the constants and the implied squareness.
+fn error_functions(p: &Page, s: &mut String) -> Result<()> {
+    let Page {
+        input,
+        last,
+        model,
+        params,
+        cov,
+        ..
+    } = p;
     // Error functions.
     let _ = writeln!(
         s,
@@ -531,6 +459,14 @@ pub fn html(input: &ReportInput) -> Result<String> {
             &consts,
         ));
     }
+    Ok(())
+}
+
+/// The squareness the model implies, with U (k = 2).
+fn squareness(p: &Page, s: &mut String) -> Result<()> {
+    let Page {
+        model, params, cov, ..
+    } = p;
     // Each implied squareness is linear in the parameters: its standard uncertainty from the
     // gradient (one unit step per parameter) and the covariance.
     let implied = model.squareness(params);
@@ -567,10 +503,16 @@ pub fn html(input: &ReportInput) -> Result<String> {
         );
         s.push_str(&table(&["squareness", "value ± U (k = 2)"], &sq));
     }
+    Ok(())
+}
+
+/// The diagnosis: residual breakdowns, candidates, the model revisions.
+fn diagnosis(p: &Page, s: &mut String) -> Result<()> {
+    let Page { problem, after, .. } = p;
     // Diagnosis.
     let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");
-    let breakdowns = diagnose::breakdowns(&problem, &after);
-    let noise_ref = diagnose::repeat_noise(&problem).map(|(n, _)| n.emm_um);
+    let breakdowns = diagnose::breakdowns(problem, after);
+    let noise_ref = diagnose::repeat_noise(problem).map(|(n, _)| n.emm_um);
     for b in &breakdowns {
         let data: Vec<(String, f64)> = b
             .bins
@@ -589,6 +531,12 @@ pub fn html(input: &ReportInput) -> Result<String> {
             noise_ref.map(|n| ("repeat noise", n)),
         ));
     }
+    Ok(())
+}
+
+/// The candidate effects ranked for the first fit, and the model revisions.
+fn candidates(p: &Page, s: &mut String) -> Result<()> {
+    let Page { input, .. } = p;
     if !input.candidates.is_empty() {
         let _ = writeln!(
             s,
@@ -646,6 +594,12 @@ pub fn html(input: &ReportInput) -> Result<String> {
             input.noise_um.map(|n| ("noise error", n)),
         ));
     }
+    Ok(())
+}
+
+/// What the data identify: weak combinations and correlated pairs.
+fn identifiability(p: &Page, s: &mut String) -> Result<()> {
+    let Page { model, ident, .. } = p;
     // Identifiability.
     let _ = writeln!(s, "<h2>Identifiability</h2>");
     match &ident {
@@ -700,6 +654,12 @@ pub fn html(input: &ReportInput) -> Result<String> {
             let _ = writeln!(s, "<p>The analysis failed (non-finite Jacobian).</p>");
         }
     }
+    Ok(())
+}
+
+/// Cross-validation on a reference test.
+fn cross_validation(p: &Page, s: &mut String) -> Result<()> {
+    let Page { input, .. } = p;
     if !input.cross.is_empty() {
         let _ = writeln!(
             s,
@@ -733,118 +693,5 @@ pub fn html(input: &ReportInput) -> Result<String> {
             None,
         ));
     }
-    let _ = writeln!(
-        s,
-        "<p style=\"color:#777\">Written by volver {}. Units: mm and rad in the files, µm and µrad here.</p></body></html>",
-        env!("CARGO_PKG_VERSION")
-    );
-    Ok(s)
-}
-
-/// The section on the uncertainty of the compensated tool point: U (k = 2, the largest of its
-/// three coordinates) over the default grid of the volume (5 positions per axis), after the
-/// set-up's rigid transform and raw, as colour maps over the two most-measured linear axes
-/// (the largest U over the other axes' positions), with the worst held combination named.
-fn tool_point_uncertainty(
-    s: &mut String,
-    input: &ReportInput,
-    model: &Model,
-    params: &[f64],
-    gauge: Option<&volver_solvers::gauge::Gauge>,
-    cov: &Covariance,
-) -> Result<()> {
-    let m = model.machine();
-    let grid = crate::uncertainty::default_grid(m, 5)?;
-    let tg = volver_solvers::uncertainty::ToolGrid {
-        commands: grid.positions,
-        tool: input.tool,
-    };
-    let aligned = tg.uncertainty(model, params, cov, true);
-    let raw = tg.uncertainty(model, params, cov, false);
-    let umax = |v: &[volver_solvers::uncertainty::PointUncertainty]| {
-        v.iter()
-            .map(|p| p.u95_max_mm() * 1e3)
-            .fold(0.0_f64, f64::max)
-    };
-    let (ua, ur) = (umax(&aligned), umax(&raw));
-    let worst = aligned
-        .iter()
-        .max_by(|a, b| a.u95_max_mm().total_cmp(&b.u95_max_mm()))
-        .and_then(|p| {
-            let held: f64 = p.u95_held_mm.iter().fold(0.0, |m, v| m.max(*v));
-            let data: f64 = p.u95_data_mm.iter().fold(0.0, |m, v| m.max(*v));
-            (held > data).then_some(p.worst_held).flatten()
-        });
-    let verdict = if ua <= input.max_u_um {
-        format!(
-            "within the {:.0} µm that <code>compensate</code> and <code>tables</code> accept",
-            input.max_u_um
-        )
-    } else {
-        format!(
-            "above the {:.0} µm that <code>compensate</code> and <code>tables</code> accept: they \
-             refuse this tool offset unless <code>--force</code>{}",
-            input.max_u_um,
-            match (worst, gauge) {
-                (Some(c), Some(g)) => format!(
-                    "; most of it is the held combination {} (not determined by the data: a \
-                     third reflector off the line through the two, or one at the tool's length, \
-                     would determine it)",
-                    escape(&crate::uncertainty::combination_text(model, g, c))
-                ),
-                _ => String::new(),
-            }
-        )
-    };
-    let _ = writeln!(
-        s,
-        "<h2>Uncertainty of the compensated tool point</h2><p>Expanded uncertainty U (k = 2, the \
-         largest of the three coordinates) of the tool point at ({:.1}, {:.1}, {:.1}) mm from the \
-         last tool-side axis, over {} commands of the volume: the data's part (linearised, σ from the \
-         residuals) and the held combinations' prior. After the set-up's rigid transform (what a workpiece set-up \
-         absorbs anyway) U is at most <b>{ua:.1} µm</b>, {verdict}; raw, in the workpiece frame, \
-         at most {ur:.1} µm. <code>volver uncertainty --tool-offset x,y,z</code> lists every point; \
-         <code>--monte-carlo N</code> checks the linearisation.</p>",
-        input.tool[0],
-        input.tool[1],
-        input.tool[2],
-        tg.commands.len()
-    );
-    let Some((ka, kb)) = (0..m.axes().len())
-        .filter(|&k| !m.axes()[k].axis.is_rotary() && m.axes()[k].max > m.axes()[k].min)
-        .collect::<Vec<_>>()
-        .get(..2)
-        .map(|v| (v[0], v[1]))
-    else {
-        return Ok(());
-    };
-    let cells = |v: &[volver_solvers::uncertainty::PointUncertainty]| {
-        let mut out: Vec<Cell> = Vec::new();
-        for (c, p) in tg.commands.iter().zip(v) {
-            let (x, y) = (
-                m.axes()[ka].to_file_units(c.0[ka]),
-                m.axes()[kb].to_file_units(c.0[kb]),
-            );
-            let u = p.u95_max_mm() * 1e3;
-            match out
-                .iter_mut()
-                .find(|q| (q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9)
-            {
-                Some(q) => q.a = q.a.max(u),
-                None => out.push(Cell { x, y, a: u, b: 0.0 }),
-            }
-        }
-        out
-    };
-    let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
-    s.push_str(&plot::colour_maps(
-        "U (k = 2) of the compensated tool point, largest over the other axes (µm)",
-        &format!("{la} (mm)"),
-        &format!("{lb} (mm)"),
-        &[
-            ("after the set-up's rigid transform", cells(&aligned)),
-            ("raw, workpiece frame", cells(&raw)),
-        ],
-    ));
     Ok(())
 }
