@@ -156,22 +156,62 @@ fn scaled_to(truth: &Truth, model: &Model, plan: &str, target_um: f64, seed: u64
 
 /// Runs the seven studies with true errors drawn from `seed` (see the module documentation).
 pub fn paper(seed: u64) -> Result<Vec<Table>> {
-    let m = Machine::default_xcfz();
-    let magnitudes = Magnitudes {
-        tracker_mm: 0.0,
-        ..Magnitudes::default()
-    };
-    let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &magnitudes, seed)?;
-    // 5000 iterations: the noise-free fits of table 8 (cubics and a quartic against cubic truths
-    // plus constants the model lacks) creep for hundreds of steps before their parameter change
-    // settles.
-    let options = Options {
-        max_iterations: 5000,
-        max_evaluations: 20_000,
-        ..Options::default()
-    };
-    let lm = LevenbergMarquardt;
-    let run = |model: &Model, set: &MeasurementSet, errors, phasing| -> Result<Identification> {
+    let st = Study::new(seed)?;
+    let mut tables = Vec::new();
+    table5(&st, &mut tables)?;
+    table6(&st, &mut tables)?;
+    let linear = table8(&st, &mut tables)?;
+    table9(&st, &mut tables)?;
+    table10(&st, &mut tables, &linear)?;
+    tables11_12(&st, &mut tables)?;
+    Ok(tables)
+}
+
+/// What every study shares: the machine, the true errors drawn from the seed, the engine and its
+/// options, the paper's noise.
+struct Study {
+    m: Machine,
+    truth: Truth,
+    options: Options,
+    lm: LevenbergMarquardt,
+    noise: TrackerNoise,
+    seed: u64,
+}
+
+impl Study {
+    fn new(seed: u64) -> Result<Study> {
+        let m = Machine::default_xcfz();
+        let magnitudes = Magnitudes {
+            tracker_mm: 0.0,
+            ..Magnitudes::default()
+        };
+        let truth = Truth::random(&m, &ErrorModelSpec::complete(&m), &magnitudes, seed)?;
+        // 5000 iterations: the noise-free fits of table 8 (cubics and a quartic against cubic
+        // truths plus constants the model lacks) creep for hundreds of steps before their
+        // parameter change settles.
+        let options = Options {
+            max_iterations: 5000,
+            max_evaluations: 20_000,
+            ..Options::default()
+        };
+        Ok(Study {
+            m,
+            truth,
+            options,
+            lm: LevenbergMarquardt,
+            noise: TrackerNoise::PAPER,
+            seed,
+        })
+    }
+
+    /// One identification as the paper makes it.
+    fn run(
+        &self,
+        model: &Model,
+        set: &MeasurementSet,
+        errors: Errors,
+        phasing: Phasing,
+    ) -> Result<Identification> {
         let problem = Problem::new(model, set)?;
         // The paper's method has no gauge: on its noise-free meshes the data determine even
         // the nearly flat combinations (curvature 1e-12 of the largest) that the gauge holds
@@ -182,28 +222,42 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
             ..Strategy::default()
         };
         Ok(identify_errors(
-            &lm,
+            &self.lm,
             problem,
             &model.initial_params(),
             errors,
             &strategy,
-            &options,
+            &self.options,
             &mut Silent,
         ))
-    };
-    let noise = TrackerNoise::PAPER;
-    let mut tables = Vec::new();
+    }
+}
 
+/// The rotary-axis model of tables 5, 6 and 9 in `basis` (first harmonics).
+fn rotary_model(m: &Machine, basis: &str) -> Result<Model> {
+    model(m, &format!("{ROTARY}basis = \"{basis}\"\norder = 1\n"))
+}
+
+/// Table 5: Fourier against sine series on the table-4 mesh.
+fn table5(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
+    let Study {
+        m,
+        truth,
+        options,
+        lm,
+        ..
+    } = st;
+    let seed = st.seed;
     // Table 5: Fourier against sine series on the table-4 mesh.
-    let fourier = model(&m, &format!("{ROTARY}basis = \"fourier\"\norder = 1\n"))?;
-    let sine = model(&m, &format!("{ROTARY}basis = \"sine\"\norder = 1\n"))?;
+    let fourier = rotary_model(m, "fourier")?;
+    let sine = rotary_model(m, "sine")?;
     let t5 = measure(
-        &scaled_to(&truth, &fourier, "table4", 181.15, seed)?,
+        &scaled_to(truth, &fourier, "table4", 181.15, seed)?,
         "table4",
         TrackerNoise::NONE,
         seed,
     )?;
-    let f = run(&fourier, &t5, Errors::All, Phasing::One)?;
+    let f = st.run(&fourier, &t5, Errors::All, Phasing::One)?;
     // The sine series starts from the Fourier solution (a zero amplitude has no phase gradient).
     let mut start = sine.initial_params();
     for (j, info) in sine.params().iter().enumerate() {
@@ -217,7 +271,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         };
     }
     let s = identify_errors(
-        &lm,
+        lm,
         Problem::new(&sine, &t5)?,
         &start,
         Errors::All,
@@ -226,7 +280,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
             gauge: false,
             ..Strategy::default()
         },
-        &options,
+        options,
         &mut Silent,
     );
     let mut s_row = row(
@@ -254,10 +308,17 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                stopped early. Our EMax₀ differs: the paper's truth is unknown."
             .into(),
     });
+    Ok(())
+}
 
+/// Table 6: one phase against TR and RT, rotary axis.
+fn table6(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
+    let Study { m, truth, .. } = st;
+    let seed = st.seed;
+    let fourier = rotary_model(m, "fourier")?;
     // Table 6: one phase against TR and RT, rotary axis.
     let t6 = measure(
-        &scaled_to(&truth, &fourier, "table4", 194.9, seed)?,
+        &scaled_to(truth, &fourier, "table4", 194.9, seed)?,
         "table4",
         TrackerNoise::NONE,
         seed,
@@ -283,7 +344,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
         rows.push(row(
             label,
             Some(paper),
-            &run(&fourier, &t6, Errors::All, phasing)?,
+            &st.run(&fourier, &t6, Errors::All, phasing)?,
         ));
     }
     tables.push(Table {
@@ -296,16 +357,22 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                runs end higher because a group held at zero is absorbed by the others."
             .into(),
     });
+    Ok(())
+}
 
+/// Table 8: linear axes on the table-7 mesh, three bases, three phasings; also the monomial model, its scaled truth and noise-free mesh, which table 10 reuses.
+fn table8(st: &Study, tables: &mut Vec<Table>) -> Result<(Model, Truth, MeasurementSet)> {
+    let Study { m, truth, .. } = st;
+    let seed = st.seed;
     // Table 8: linear axes on the table-7 mesh, three bases, three phasings.
     let linear = |basis: &str| {
         model(
-            &m,
+            m,
             &format!("{LINEAR}{basis}[[error]]\nname = [\"A0Z\", \"B0Z\"]\n"),
         )
     };
     let monomial = linear("basis = \"monomial\"\ndegree = 3\n")?;
-    let truth7 = scaled_to(&truth, &monomial, "table7", 737.1, seed)?;
+    let truth7 = scaled_to(truth, &monomial, "table7", 737.1, seed)?;
     let t7 = measure(&truth7, "table7", TrackerNoise::NONE, seed)?;
     let mut rows = Vec::new();
     let i8 = |emm, emax, res| figures(737.1, 2010.6, emm, emax, res);
@@ -347,7 +414,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
             rows.push(row(
                 &format!("{name}, {label}"),
                 Some(p),
-                &run(&lin, &t7, Errors::All, phasing)?,
+                &st.run(&lin, &t7, Errors::All, phasing)?,
             ));
         }
     }
@@ -364,16 +431,24 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                Chebyshev with 5 nodes is a quartic."
             .into(),
     });
+    Ok((monomial, truth7, t7))
+}
 
+/// Table 9: the rotary axis with and without the paper's noise, table-4 mesh.
+fn table9(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
+    let Study { m, truth, .. } = st;
+    let noise = st.noise;
+    let seed = st.seed;
+    let fourier = rotary_model(m, "fourier")?;
     // Table 9: the rotary axis with and without the paper's noise, table-4 mesh.
-    let truth9 = scaled_to(&truth, &fourier, "table4", 227.0, seed)?;
-    let with = run(
+    let truth9 = scaled_to(truth, &fourier, "table4", 227.0, seed)?;
+    let with = st.run(
         &fourier,
         &measure(&truth9, "table4", noise, seed)?,
         Errors::All,
         Phasing::One,
     )?;
-    let without = run(
+    let without = st.run(
         &fourier,
         &measure(&truth9, "table4", TrackerNoise::NONE, seed)?,
         Errors::All,
@@ -399,15 +474,25 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                zero, where the paper's stopped at 7 % (its table 5's sine-series figure)."
             .into(),
     });
+    Ok(())
+}
 
+/// Table 10: the linear axes with and without the paper's noise, table-7 mesh.
+fn table10(
+    st: &Study,
+    tables: &mut Vec<Table>,
+    (monomial, truth7, t7): &(Model, Truth, MeasurementSet),
+) -> Result<()> {
+    let noise = st.noise;
+    let seed = st.seed;
     // Table 10: the linear axes with and without the paper's noise, table-7 mesh.
-    let with = run(
-        &monomial,
-        &measure(&truth7, "table7", noise, seed)?,
+    let with = st.run(
+        monomial,
+        &measure(truth7, "table7", noise, seed)?,
         Errors::All,
         Phasing::One,
     )?;
-    let without = run(&monomial, &t7, Errors::All, Phasing::One)?;
+    let without = st.run(monomial, t7, Errors::All, Phasing::One)?;
     tables.push(Table {
         title: "Table 10: linear axes with and without noise, table-7 mesh, monomial, 1 phase"
             .into(),
@@ -423,103 +508,124 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                 &without,
             ),
         ],
-        noise: Some(((46.8, 104.8), noise_error(&truth7, "table7", noise, seed)?)),
+        noise: Some(((46.8, 104.8), noise_error(truth7, "table7", noise, seed)?)),
         note: "With noise, both final EMMs sit at their noise errors. Without noise, ours ends \
                at the C errors that act as constants at C = 0, which this model lacks (table 8's \
                note)."
             .into(),
     });
+    Ok(())
+}
 
-    // Tables 11 and 12: the five tests with the paper's noise, and compensation of test 4. One
-    // truth for all, scaled on the reference test 4.
+/// Tables 11 and 12: the five tests with the paper's noise, and compensation of test 4 by each
+/// method's errors. One truth for all, scaled on the reference test 4.
+fn tables11_12(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
     let full = Model::default_xcfz();
-    let truth4 = scaled_to(&truth, &full, "test4", 628.69, seed)?;
+    let truth4 = scaled_to(&st.truth, &full, "test4", 628.69, st.seed)?;
     let sets: Vec<MeasurementSet> = ["test1", "test2", "test3", "test4", "test5"]
         .iter()
-        .map(|p| measure(&truth4, p, noise, seed))
+        .map(|p| measure(&truth4, p, st.noise, st.seed))
         .collect::<Result<_>>()?;
-    let p0 = full.initial_params();
-    let st = Strategy {
-        gauge: false,
-        ..Strategy::default()
-    };
     let pr: Vec<Problem> = sets
         .iter()
         .map(|s| Problem::new(&full, s))
         .collect::<volver_core::Result<_>>()?;
+    let t = five_tests(st, &pr, &full.initial_params());
+    tables.push(table11(&t));
+    tables.push(table12(st, &pr, &full.initial_params(), &t));
+    Ok(())
+}
+
+/// The paper's strategy for tables 11 and 12: one phase, no gauge.
+fn paper_strategy() -> Strategy {
+    Strategy {
+        gauge: false,
+        ..Strategy::default()
+    }
+}
+
+/// Tests 1–5 of section 6.2, each identified on its own data (`pr`, tests 1–5) from `p0`.
+fn five_tests(st: &Study, pr: &[Problem], p0: &[f64]) -> [Identification; 5] {
+    let strategy = paper_strategy();
+    let p0 = p0.to_vec();
     let t1 = identify_errors(
-        &lm,
+        &st.lm,
         pr[0].clone(),
         &p0,
         Errors::Linear,
-        &st,
-        &options,
+        &strategy,
+        &st.options,
         &mut Silent,
     );
     let t2 = identify_errors(
-        &lm,
+        &st.lm,
         pr[1].clone(),
         &p0,
         Errors::Rotary,
-        &st,
-        &options,
+        &strategy,
+        &st.options,
         &mut Silent,
     );
     let t3 = identify_errors(
-        &lm,
+        &st.lm,
         pr[2].clone(),
         &p0,
         Errors::All,
-        &st,
-        &options,
+        &strategy,
+        &st.options,
         &mut Silent,
     );
     let t4 = identify_errors(
-        &lm,
+        &st.lm,
         pr[3].clone(),
         &p0,
         Errors::All,
-        &st,
-        &options,
+        &strategy,
+        &st.options,
         &mut Silent,
     );
     let (_, t5) = combined(
-        &lm,
+        &st.lm,
         pr[0].clone(),
         pr[4].clone(),
         &p0,
-        &st,
-        &options,
+        &strategy,
+        &st.options,
         &mut Silent,
     );
-    tables.push(Table {
+    [t1, t2, t3, t4, t5]
+}
+
+/// Table 11: the five tests' own fits.
+fn table11(t: &[Identification; 5]) -> Table {
+    Table {
         title: "Table 11: the tests of section 6.2, each identified on its own data, paper's noise"
             .into(),
         rows: vec![
             row(
                 "test 1 (linear axes, XZ at C = 0)",
                 Some(figures(582.48, 1654.03, 26.02, 87.59, 4.47)),
-                &t1,
+                &t[0],
             ),
             row(
                 "test 2 (rotary axis, C only)",
                 Some(figures(194.91, 213.46, 15.1, 65.06, 7.75)),
-                &t2,
+                &t[1],
             ),
             row(
                 "test 3 (joint, coarse XZC mesh)",
                 Some(figures(555.84, 1523.42, 51.76, 191.13, 9.31)),
-                &t3,
+                &t[2],
             ),
             row(
                 "test 4 (joint, reference mesh)",
                 Some(figures(628.69, 1893.27, 36.64, 104.81, 5.83)),
-                &t4,
+                &t[3],
             ),
             row(
                 "test 5 (rotary on test 3, linear from test 1)",
                 Some(figures(555.84, 1523.42, 30.24, 75.06, 5.44)),
-                &t5,
+                &t[4],
             ),
         ],
         noise: None,
@@ -528,38 +634,48 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                their EMM₀ differ from the paper's as our random truth differs from its unknown \
                one; test 2's final EMM is the noise of a single position seen from 1.2 m."
             .into(),
-    });
+    }
+}
+
+/// Table 12: the reference test 4 compensated by each method's errors.
+fn table12(st: &Study, pr: &[Problem], p0: &[f64], t: &[Identification; 5]) -> Table {
+    let p0 = p0.to_vec();
     let (ind, _, _) = independent(
-        &lm,
+        &st.lm,
         pr[0].clone(),
         pr[1].clone(),
         &p0,
-        &st,
-        &options,
+        &paper_strategy(),
+        &st.options,
         &mut Silent,
     );
-    let cv = |params: &[f64]| cross_validate(&lm, pr[3].clone(), params, &options, &mut Silent);
+    let cv =
+        |params: &[f64]| cross_validate(&st.lm, pr[3].clone(), params, &st.options, &mut Silent);
     let i12 = |emm, emax, res| figures(628.69, 1893.27, emm, emax, res);
-    tables.push(Table {
+    Table {
         title: "Table 12: compensation of the reference test 4 by each method's errors".into(),
         rows: vec![
-            row("test 1", Some(i12(224.54, 662.32, 35.72)), &cv(&t1.params)),
+            row(
+                "test 1",
+                Some(i12(224.54, 662.32, 35.72)),
+                &cv(&t[0].params),
+            ),
             row(
                 "test 2",
                 Some(i12(58000.0, 141000.0, 9225.53)),
-                &cv(&t2.params),
+                &cv(&t[1].params),
             ),
             row(
                 "tests 1 + 2 (independent)",
                 Some(i12(58000.0, 141000.0, 9225.53)),
                 &cv(&ind),
             ),
-            row("test 3", Some(i12(69.04, 278.31, 10.98)), &cv(&t3.params)),
-            row("test 4", Some(i12(36.64, 104.81, 5.83)), &cv(&t4.params)),
+            row("test 3", Some(i12(69.04, 278.31, 10.98)), &cv(&t[2].params)),
+            row("test 4", Some(i12(36.64, 104.81, 5.83)), &cv(&t[3].params)),
             row(
                 "test 5 (combined)",
                 Some(i12(43.41, 149.84, 6.90)),
-                &cv(&t5.params),
+                &cv(&t[4].params),
             ),
         ],
         noise: None,
@@ -569,8 +685,7 @@ pub fn paper(seed: u64) -> Result<Vec<Table>> {
                make the reference far worse than uncompensated: at one position their tilts \
                trade against the tracker pose and extrapolate wildly over X and Z."
             .into(),
-    });
-    Ok(tables)
+    }
 }
 
 /// Table 12 as a bar chart: residual % on the reference per method, ours and the paper's side by
