@@ -4,22 +4,25 @@
 //! tables.
 
 use anyhow::{Context, Result};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use volver::compensation::{reflector_centroid, write_tables};
 use volver::core::compensate::Compensator;
 use volver::core::machine::Commands;
+use volver::core::measure::MeasurementSet;
 use volver::core::metrics::ErrorStats;
 use volver::core::model::Model;
 use volver::core::plan::Plan;
 use volver::core::problem::Problem;
 use volver::core::results::ResultsFile;
-use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
+use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 use volver::core::tables::ErrorTables;
 use volver::inputs::{DEMO_DIR, DEMO_EFFECT, DEMO_SEED};
 use volver::report::{self, Fit, ReportInput};
 use volver::solvers::Options;
-use volver::solvers::candidates::{library, rank};
+use volver::solvers::candidates::{Score, library, rank};
+use volver::solvers::strategy::Identification;
 use volver::solvers::strategy::{cross_validate, fit};
+use volver::solvers::uncertainty::Covariance;
 
 /// Options of `volver demo`.
 #[derive(clap::Args)]
@@ -33,17 +36,46 @@ fn um(v: f64) -> String {
     format!("{v:.2}")
 }
 
-/// Runs the demo.
+/// Runs the demo: seven steps, each printing its paragraph.
 pub fn run(a: DemoArgs) -> Result<()> {
     let out_dir = a.out.as_path();
     let model = Model::default_xcfz();
-    let m = model.machine();
     println!(
         "volver demo — the XCFZ grinder of Aguado et al. (2014), chain {}, and the paper's error model ({} parameters)\n",
-        m.chain(),
+        model.machine().chain(),
         model.n_params()
     );
-    // 1. A verification with something the model lacks.
+    let out = simulate(&model, out_dir)?;
+    let data = &out.measurements;
+    let id1 = identify_first(&model, data)?;
+    let (ranked, best, model2) = diagnose(&model, data, &id1)?;
+    let id2 = identify_with(&model2, data, &best.id, out.record.noise_error.emm_um)?;
+    let first = (&model, &id1);
+    let second = (&model2, &id2);
+    let cross = cross_validation(first, second, &best.id, &out)?;
+    let check = compensation(&model2, &id2, &out)?;
+    let cov = vouch(&model2, data, &id2, &check)?;
+    let table_paths = write_results(out_dir, &model2, &id2, &cov)?;
+    let fits = vec![
+        Fit {
+            label: "paper model".into(),
+            model: &model,
+            id: &id1,
+        },
+        Fit {
+            label: format!("+ {}", best.id),
+            model: &model2,
+            id: &id2,
+        },
+    ];
+    write_report(out_dir, &out, fits, ranked, cross, &check)?;
+    where_you_are(out_dir, &table_paths, &best.id);
+    Ok(())
+}
+
+/// Step 1: A verification with something the model lacks, written under `out_dir/test4`.
+fn simulate(model: &Model, out_dir: &Path) -> Result<Synthetic> {
+    let m = model.machine();
     let truth = Truth::random(m, model.spec(), &Magnitudes::default(), DEMO_SEED)?;
     let mut sim = Simulation::new(Plan::preset(m, "test4")?, truth, DEMO_SEED);
     sim.effects = vec![Effect::parse(DEMO_EFFECT)?];
@@ -64,9 +96,12 @@ pub fn run(a: DemoArgs) -> Result<()> {
         um(r.machine_error.emm_um),
         um(noise)
     );
-    let data = &out.measurements;
-    // 2. Identify with the starting model.
-    let p1 = Problem::new(&model, data)?;
+    Ok(out)
+}
+
+/// Step 2: Identification with the starting model.
+fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification> {
+    let p1 = Problem::new(model, data)?;
     let id1 = fit(p1.clone());
     if id1.termination.failed() {
         anyhow::bail!("identification failed: {}", id1.termination);
@@ -86,7 +121,18 @@ pub fn run(a: DemoArgs) -> Result<()> {
             id1.final_.stats.emm_um / n.emm_um
         );
     }
-    // 3. Where it fails and what is missing.
+    Ok(id1)
+}
+
+/// Step 3: Where it fails and what is missing: the candidates ranked, the best, and the model with
+/// it.
+fn diagnose(
+    model: &Model,
+    data: &MeasurementSet,
+    id1: &Identification,
+) -> Result<(Vec<Score>, Score, Model)> {
+    let m = model.machine();
+    let p1 = Problem::new(model, data)?;
     let rm = volver::core::diagnose::to_machine_frame(&p1, &id1.params, &p1.residuals(&id1.params));
     let (kc, _) = m
         .axis(volver::core::iso::Axis::C)
@@ -115,7 +161,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let best = ranked
         .first()
         .ok_or_else(|| anyhow::anyhow!("no candidate to rank"))?;
-    let candidate = library(&model)
+    let candidate = library(model)
         .into_iter()
         .find(|c| c.id == best.id)
         .ok_or_else(|| anyhow::anyhow!("candidate {} not in the library", best.id))?;
@@ -123,28 +169,49 @@ pub fn run(a: DemoArgs) -> Result<()> {
         "   → the missing effect: {} ({})",
         best.id, best.description
     );
-    // 4. Add it and refit.
+    let best = best.clone();
     let model2 = Model::new(m.clone(), candidate.spec.clone())?;
-    let p2 = Problem::new(&model2, data)?;
+    Ok((ranked, best, model2))
+}
+
+/// Step 4: The model with the missing effect, identified.
+fn identify_with(
+    model2: &Model,
+    data: &MeasurementSet,
+    added: &str,
+    noise: f64,
+) -> Result<Identification> {
+    let p2 = Problem::new(model2, data)?;
     let id2 = fit(p2.clone());
     if id2.termination.failed() {
         anyhow::bail!("identification failed: {}", id2.termination);
     }
     println!(
         "\n4. Identification with {}: EMM {} µm ({} parameters) — {:.3} × the noise error: the model explains everything but the noise",
-        best.id,
+        added,
         um(id2.final_.stats.emm_um),
         model2.n_params(),
         id2.final_.stats.emm_um / noise
     );
-    // 5. Cross-validation on an independent reference test.
+    Ok(id2)
+}
+
+/// Step 5: Cross-validation of both fits on an independent reference test.
+fn cross_validation(
+    (model, id1): (&Model, &Identification),
+    (model2, id2): (&Model, &Identification),
+    added: &str,
+    out: &Synthetic,
+) -> Result<Vec<report::CrossRow>> {
+    let m = model.machine();
+    let options = Options::default();
     let reference =
         Simulation::new(Plan::preset(m, "test4")?, out.truth.clone(), DEMO_SEED + 1).run()?;
     let lm = volver::solvers::lm::LevenbergMarquardt;
     let mut cross = Vec::new();
     for (label, mdl, params) in [
-        ("paper model", &model, &id1.params),
-        (best.id.as_str(), &model2, &id2.params),
+        ("paper model", model, &id1.params),
+        (added, model2, &id2.params),
     ] {
         let problem = Problem::new(mdl, &reference.measurements)?;
         let cv = cross_validate(
@@ -169,9 +236,26 @@ pub fn run(a: DemoArgs) -> Result<()> {
             c.residual_percent
         );
     }
-    // 6. Compensation, checked on the true machine (known here).
-    let tool = reflector_centroid(&model2);
-    let comp = Compensator::new(&model2, &id2.params, tool)?;
+    Ok(cross)
+}
+
+/// What compensation does to the true machine over a grid of the work volume.
+struct Check {
+    /// The programmed commands.
+    grid: Vec<Commands>,
+    /// The tool point.
+    tool: [f64; 3],
+    /// True tool-point error before and after compensation, and after the best rigid transform.
+    before: ErrorStats,
+    after: ErrorStats,
+    rigid: ErrorStats,
+}
+
+/// Step 6: Compensation, checked on the true machine (known here).
+fn compensation(model2: &Model, id2: &Identification, out: &Synthetic) -> Result<Check> {
+    let m = model2.machine();
+    let tool = reflector_centroid(model2);
+    let comp = Compensator::new(model2, &id2.params, tool)?;
     let (mut before, mut after) = (Vec::new(), Vec::new());
     let mut programmed_grid = Vec::new();
     let (mut worst, mut outside) = (0.0_f64, 0usize);
@@ -222,8 +306,25 @@ pub fn run(a: DemoArgs) -> Result<()> {
             String::new()
         }
     );
-    // What the data vouch for: the U of the identified tool point over the same grid (the
-    // tracker's noise as simulated), after the set-up's transform and raw.
+    Ok(Check {
+        grid: programmed_grid,
+        tool,
+        before: sb,
+        after: sa,
+        rigid,
+    })
+}
+
+/// Step 6, continued: What the data vouch for: the U of the identified tool point over the same grid
+/// (the tracker's noise as simulated), after the set-up's transform and raw.
+fn vouch(
+    model2: &Model,
+    data: &MeasurementSet,
+    id2: &Identification,
+    check: &Check,
+) -> Result<Covariance> {
+    let p2 = Problem::new(model2, data)?;
+    let options = Options::default();
     let cov = volver::solvers::uncertainty::linear(
         &p2,
         id2.gauge.as_ref(),
@@ -233,11 +334,11 @@ pub fn run(a: DemoArgs) -> Result<()> {
     )
     .ok_or_else(|| anyhow::anyhow!("the uncertainty of the fit could not be computed"))?;
     let grid = volver::solvers::uncertainty::ToolGrid {
-        commands: programmed_grid,
-        tool,
+        commands: check.grid.clone(),
+        tool: check.tool,
     };
     let largest = |aligned: bool| {
-        grid.uncertainty(&model2, &id2.params, &cov, aligned)
+        grid.uncertainty(model2, &id2.params, &cov, aligned)
             .iter()
             .map(|u| u.u95_max_mm())
             .fold(0.0_f64, f64::max)
@@ -246,91 +347,110 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let (u_rigid, u_raw) = (largest(true), largest(false));
     // The held combination that dominates the raw U, by name.
     let raw_worst = grid
-        .uncertainty(&model2, &id2.params, &cov, false)
+        .uncertainty(model2, &id2.params, &cov, false)
         .iter()
         .max_by(|a, b| a.u95_max_mm().total_cmp(&b.u95_max_mm()))
         .and_then(|u| u.worst_held)
         .zip(id2.gauge.as_ref())
-        .map(|(c, g)| volver::uncertainty::combination_text(&model2, g, c))
+        .map(|(c, g)| volver::uncertainty::combination_text(model2, g, c))
         .unwrap_or_else(|| "none".into());
     println!(
         "   after the best rigid transform (what the workpiece set-up takes up): EMM {} µm, EMax {} µm; U of the identified tool point there (k = 2) up to {} µm",
-        um(rigid.emm_um),
-        um(rigid.emax_um),
+        um(check.rigid.emm_um),
+        um(check.rigid.emax_um),
         um(u_rigid),
     );
     println!(
         "   raw, U reaches {} µm, mostly from a combination the data cannot identify ({raw_worst}): a constant shift of the tool that the set-up takes up",
         um(u_raw)
     );
-    // 7. Files.
-    let mut results = ResultsFile::from_model(&model2, &id2.params)?;
+    Ok(cov)
+}
+
+/// Step 7: The results file and the controller tables (with their U); returns the tables' paths.
+fn write_results(
+    out_dir: &Path,
+    model2: &Model,
+    id2: &Identification,
+    cov: &Covariance,
+) -> Result<Vec<PathBuf>> {
+    let mut results = ResultsFile::from_model(model2, &id2.params)?;
     let held = id2
         .gauge
         .as_ref()
         .map(|g| {
             (0..g.held.len())
-                .map(|c| volver::uncertainty::combination_text(&model2, g, c))
+                .map(|c| volver::uncertainty::combination_text(model2, g, c))
                 .collect()
         })
         .unwrap_or_default();
     results.uncertainty = Some(cov.to_record(volver::solvers::gauge::RULE, held));
     let fit_path = out_dir.join("fit.json");
     results.save(&fit_path)?;
-    let tables = ErrorTables::from_model(&model2, &id2.params, 10.0, 5.0)?;
+    let tables = ErrorTables::from_model(model2, &id2.params, 10.0, 5.0)?;
     let mut table_paths = write_tables(&tables, &out_dir.join("tables"))?;
     if let Some(r) = &results.uncertainty {
         let u =
-            volver::compensation::table_uncertainty(&model2, &id2.params, r, &tables, 10.0, 5.0)?;
+            volver::compensation::table_uncertainty(model2, &id2.params, r, &tables, 10.0, 5.0)?;
         let p = out_dir.join("tables").join("errors-u95.csv");
         volver::core::fsio::write_atomic(&p, u.to_plain_csv())
             .with_context(|| format!("writing {}", p.display()))?;
         table_paths.push(p);
     }
+    Ok(table_paths)
+}
+
+/// Step 7, continued: The HTML report of both fits.
+fn write_report(
+    out_dir: &Path,
+    out: &Synthetic,
+    fits: Vec<Fit>,
+    ranked: Vec<Score>,
+    cross: Vec<report::CrossRow>,
+    check: &Check,
+) -> Result<()> {
+    let noise = out.record.noise_error.emm_um;
+    let (id1, id2) = (fits[0].id, fits[1].id);
+    let added = fits[1].label.trim_start_matches("+ ").to_string();
+    let tool = reflector_centroid(fits[1].model);
     let input = ReportInput {
         title: "volver demo — XCFZ grinder, synthetic test 4".into(),
         data_label: out_dir.join("test4/measurements.csv").display().to_string(),
-        data,
-        fits: vec![
-            Fit {
-                label: "paper model".into(),
-                model: &model,
-                id: &id1,
-            },
-            Fit {
-                label: format!("+ {}", best.id),
-                model: &model2,
-                id: &id2,
-            },
-        ],
+        data: &out.measurements,
+        fits,
         truth: Some((&out.truth.model, &out.truth.params)),
         noise_um: Some(noise),
-        candidates: ranked.clone(),
+        candidates: ranked,
         engines: Vec::new(),
         cross,
         notes: vec![format!(
             "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm in the workpiece frame, and to {} µm after the best rigid transform (which a workpiece set-up takes up).",
             um(id1.final_.stats.emm_um),
-            best.id,
+            added,
             um(id2.final_.stats.emm_um),
             um(noise),
-            um(sb.emm_um),
-            um(sa.emm_um),
-            um(rigid.emm_um)
+            um(check.before.emm_um),
+            um(check.after.emm_um),
+            um(check.rigid.emm_um)
         )],
-        tool: volver::compensation::reflector_centroid(&model2),
+        tool,
         max_u_um: 25.0,
     };
     let html = report::html(&input)?;
     let report_path = out_dir.join("report.html");
     volver::core::fsio::write_atomic(&report_path, html)
         .with_context(|| format!("writing {}", report_path.display()))?;
+    Ok(())
+}
+
+/// Step 7, continued: What was written and what to do next.
+fn where_you_are(out_dir: &Path, table_paths: &[PathBuf], added: &str) {
     println!("\n7. Written in {}/:", out_dir.display());
     println!(
         "   report.html              the HTML report (maps, vectors, error functions, diagnosis, identifiability)"
     );
     println!("   fit.json                 the identified errors (results file)");
-    for p in &table_paths {
+    for p in table_paths {
         println!(
             "   {:<24} controller table",
             p.strip_prefix(out_dir).unwrap_or(p).display()
@@ -351,7 +471,6 @@ pub fn run(a: DemoArgs) -> Result<()> {
     println!(
         "   volver report --data {0}/test4/measurements.csv --add {1} --truth {0}/test4/truth.json --out report.html",
         out_dir.display(),
-        best.id
+        added
     );
-    Ok(())
 }
