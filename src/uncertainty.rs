@@ -65,3 +65,350 @@ pub fn combination_text(model: &Model, gauge: &Gauge, c: usize) -> String {
         .collect();
     parts.join(", ")
 }
+
+/// What an uncertainty assessment is asked (the options of `volver uncertainty`).
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct Request {
+    /// The engine's name.
+    pub engine: String,
+    /// The tracker's noise (or the residuals').
+    pub noise: NoiseModel,
+    /// Prior magnitudes: the maximum a posteriori solution and its posterior U.
+    pub priors: Option<volver_solvers::prior::Priors>,
+    /// The commands whose tool points are judged.
+    pub grid: Plan,
+    /// The tool point (mm, in the frame of the last tool-side axis).
+    pub tool: [f64; 3],
+    /// Monte Carlo replicas besides the linearised uncertainty, and their seed.
+    pub monte_carlo: Option<(usize, u64)>,
+}
+
+impl Request {
+    /// The default request on `model`: the native engine, σ from the residuals, no priors, 5
+    /// positions over each axis, the tool point at the reflectors' centroid, no Monte Carlo.
+    pub fn new(model: &Model) -> Result<Request> {
+        Ok(Request {
+            engine: "lm".into(),
+            noise: NoiseModel::Residual,
+            priors: None,
+            grid: default_grid(model.machine(), 5)?,
+            tool: crate::compensation::reflector_centroid(model),
+            monte_carlo: None,
+        })
+    }
+}
+
+/// The fit with its gauge stated and the expanded uncertainty of every parameter and of the
+/// tool point over a grid, linearised and by Monte Carlo (see [`assess`]).
+#[derive(Debug)]
+#[non_exhaustive]
+pub struct Assessment {
+    /// The fit (the maximum a posteriori solution with priors).
+    pub id: volver_solvers::strategy::Identification,
+    /// Its covariance (the posterior's with priors).
+    pub covariance: volver_solvers::uncertainty::Covariance,
+    /// The tool point's U at each grid command, after the set-up's rigid transform and raw.
+    pub aligned: Vec<volver_solvers::uncertainty::PointUncertainty>,
+    /// Raw, in the workpiece frame.
+    pub raw: Vec<volver_solvers::uncertainty::PointUncertainty>,
+    /// The Monte Carlo run, and its U95 per grid coordinate (after the transform, raw; mm).
+    pub monte_carlo: Option<(volver_solvers::uncertainty::MonteCarlo, Vec<f64>, Vec<f64>)>,
+    /// The rule of the values the data do not determine; `None` without a gauge or priors.
+    pub rule: Option<String>,
+    /// Whether priors decided them.
+    pub with_priors: bool,
+}
+
+/// Fits `model` to `data` with the gauge stated, and assesses the uncertainty `request` asks
+/// for; `progress` hears the Monte Carlo replicas done.
+///
+/// ```
+/// let model = volver::core::model::Model::default_xcfz();
+/// let data = volver::inputs::demo_test4(&model).unwrap().measurements;
+/// let request = volver::uncertainty::Request::new(&model).unwrap();
+/// let a = volver::uncertainty::assess(&model, &data, &request, &|_| {}).unwrap();
+/// assert_eq!(a.aligned.len(), request.grid.positions.len());
+/// assert!(a.aligned.iter().all(|u| u.u95_max_mm() > 0.0));
+/// ```
+pub fn assess(
+    model: &Model,
+    data: &volver_core::measure::MeasurementSet,
+    request: &Request,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<Assessment> {
+    use anyhow::Context;
+    use volver_solvers::uncertainty::{ToolGrid, linear, monte_carlo};
+    let solver = volver_solvers::engine(&request.engine)?;
+    let problem = volver_core::problem::Problem::new(model, data)?;
+    let options = volver_solvers::Options::default();
+    if request.priors.is_some() && request.monte_carlo.is_some() {
+        bail!(
+            "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
+             the posterior of the priors is stated linearised only (run them apart)"
+        );
+    }
+    let mut id = volver_solvers::strategy::identify(
+        solver.as_ref(),
+        problem.clone(),
+        &model.initial_params(),
+        &volver_solvers::strategy::Strategy::default(),
+        &options,
+        &mut volver_solvers::Silent,
+    );
+    if id.termination.failed() {
+        bail!("identification {}", id.termination);
+    }
+    let cov = linear(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        options.objective,
+        request.noise,
+    )
+    .context("the Jacobian at the solution is not finite or a decomposition failed")?;
+    let covariance = match &request.priors {
+        Some(p) => {
+            let post = volver_solvers::prior::maximum_a_posteriori(
+                model,
+                id.gauge.as_ref(),
+                &id.params,
+                &cov,
+                p,
+            )
+            .context("the maximum a posteriori solution (a decomposition failed)")?;
+            id.params = post.params;
+            id.final_ = volver_solvers::evaluate(&problem, &id.params);
+            post.covariance
+        }
+        None => cov,
+    };
+    let grid = ToolGrid {
+        commands: request.grid.positions.clone(),
+        tool: request.tool,
+    };
+    let aligned = grid.uncertainty(model, &id.params, &covariance, true);
+    let raw = grid.uncertainty(model, &id.params, &covariance, false);
+    let base = grid.points(model, &id.params);
+    let mc = match request.monte_carlo {
+        Some((0, _)) => bail!("--monte-carlo 0: give at least 2 replicas"),
+        Some((n, seed)) => {
+            let mc = monte_carlo(
+                &request.engine,
+                model,
+                data,
+                &id.params,
+                request.noise,
+                covariance.sigma_mm,
+                id.gauge.as_ref(),
+                &options,
+                n,
+                seed,
+                progress,
+            )?;
+            if mc.samples.len() < 2 {
+                bail!("Monte Carlo: {} of {n} replicas failed to solve", mc.failed);
+            }
+            let a = grid.monte_carlo_u95(model, &mc, &base, true);
+            let r = grid.monte_carlo_u95(model, &mc, &base, false);
+            Some((mc, a, r))
+        }
+        None => None,
+    };
+    let rule = match &request.priors {
+        Some(p) => Some(p.rule()),
+        None => id
+            .gauge
+            .as_ref()
+            .map(|_| volver_solvers::gauge::RULE.to_string()),
+    };
+    Ok(Assessment {
+        id,
+        covariance,
+        aligned,
+        raw,
+        monte_carlo: mc,
+        rule,
+        with_priors: request.priors.is_some(),
+    })
+}
+
+/// The serde form of an [`Assessment`] (`volver uncertainty --json`).
+#[derive(Clone, Debug, serde::Serialize)]
+#[non_exhaustive]
+pub struct Report {
+    /// The rule of the values the data do not determine.
+    pub gauge: Option<String>,
+    /// The prior (mm RMS) on each held combination; `None` with priors.
+    pub held_prior_mm: Option<f64>,
+    /// The noise model, in words.
+    pub noise: String,
+    /// σ per coordinate (mm).
+    pub sigma_mm: f64,
+    /// The coverage factor k of every U.
+    pub coverage_factor: f64,
+    /// EMM of the fit (µm).
+    pub emm_um: f64,
+    /// The tool point (mm).
+    pub tool_offset_mm: [f64; 3],
+    /// Every parameter with its standard uncertainties.
+    pub parameters: Vec<ParameterU>,
+    /// The combinations the data do not determine.
+    pub combinations: Vec<Combination>,
+    /// The tool point at every grid command.
+    pub points: Vec<PointU>,
+    /// The Monte Carlo run.
+    pub monte_carlo: Option<MonteCarloRun>,
+}
+
+/// A parameter's value and standard uncertainties.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ParameterU {
+    /// Its name.
+    pub name: String,
+    /// Its unit.
+    pub unit: String,
+    /// Its value.
+    pub value: f64,
+    /// Standard uncertainty: data and held parts together.
+    pub u: f64,
+    /// The data's part.
+    pub u_data: f64,
+    /// The Monte Carlo replicas' standard deviation.
+    pub u_monte_carlo: Option<f64>,
+}
+
+/// A combination the data do not determine.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Combination {
+    /// Held by the gauge (else decided by the priors).
+    pub held: bool,
+    /// Its relative curvature.
+    pub relative_curvature: f64,
+    /// The parameters it moves.
+    pub parameters: Vec<crate::identification::Share>,
+}
+
+/// The tool point's expanded uncertainty (k = 2) at one grid command (µm).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PointU {
+    /// The commands, file units.
+    pub commands: Vec<f64>,
+    /// The identified tool point (mm).
+    pub tool_point_mm: [f64; 3],
+    /// U per coordinate after the set-up's rigid transform.
+    pub u95_um: [f64; 3],
+    /// Its data part.
+    pub u95_data_um: [f64; 3],
+    /// Its held part.
+    pub u95_held_um: [f64; 3],
+    /// U raw, in the workpiece frame.
+    pub u95_raw_um: [f64; 3],
+    /// U by Monte Carlo, after the transform.
+    pub u95_monte_carlo_um: Option<[f64; 3]>,
+}
+
+/// What the Monte Carlo run was.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MonteCarloRun {
+    /// Replicas solved.
+    pub replicas: usize,
+    /// Replicas that failed.
+    pub failed: usize,
+    /// Wall time (s).
+    pub time_s: f64,
+    /// Their seed.
+    pub seed: u64,
+}
+
+impl Assessment {
+    /// The commands of grid point `k` in file units.
+    pub fn commands(model: &Model, grid: &Plan, k: usize) -> Vec<f64> {
+        model
+            .machine()
+            .axes()
+            .iter()
+            .enumerate()
+            .map(|(i, ax)| ax.to_file_units(grid.positions[k].0[i]))
+            .collect()
+    }
+
+    /// Each parameter's standard uncertainty from the Monte Carlo replicas.
+    pub fn parameters_monte_carlo(&self, model: &Model) -> Option<Vec<f64>> {
+        self.monte_carlo
+            .as_ref()
+            .map(|(mc, _, _)| (0..model.n_params()).map(|j| mc.std_of(|p| p[j])).collect())
+    }
+
+    /// The serde form (`volver uncertainty --json`).
+    pub fn report(&self, model: &Model, request: &Request) -> Report {
+        use volver_solvers::uncertainty::{HELD_PRIOR_MM, K};
+        let um3 = |v: [f64; 3]| v.map(|x| x * 1e3);
+        let parts = self.covariance.parameter_parts();
+        let u_mc = self.parameters_monte_carlo(model);
+        let mc_aligned = self.monte_carlo.as_ref().map(|(_, a, _)| a);
+        Report {
+            gauge: self.rule.clone(),
+            held_prior_mm: (!self.with_priors).then_some(HELD_PRIOR_MM),
+            noise: request.noise.to_string(),
+            sigma_mm: self.covariance.sigma_mm,
+            coverage_factor: K,
+            emm_um: self.id.final_.stats.emm_um,
+            tool_offset_mm: request.tool,
+            parameters: model
+                .params()
+                .iter()
+                .enumerate()
+                .map(|(j, info)| ParameterU {
+                    name: info.name.clone(),
+                    unit: info.unit.to_string(),
+                    value: self.id.params[j],
+                    u: parts[j].0.hypot(parts[j].1),
+                    u_data: parts[j].0,
+                    u_monte_carlo: u_mc.as_ref().map(|u| u[j]),
+                })
+                .collect(),
+            combinations: self.id.gauge.as_ref().map_or_else(Vec::new, |g| {
+                g.held
+                    .iter()
+                    .map(|h| Combination {
+                        held: !self.with_priors,
+                        relative_curvature: h.relative_curvature,
+                        parameters: h
+                            .parameters
+                            .iter()
+                            .map(|&(j, share)| crate::identification::Share {
+                                name: model.params()[j].name.clone(),
+                                share,
+                            })
+                            .collect(),
+                    })
+                    .collect()
+            }),
+            points: self
+                .aligned
+                .iter()
+                .zip(&self.raw)
+                .enumerate()
+                .map(|(k, (u, r))| PointU {
+                    commands: Self::commands(model, &request.grid, k),
+                    tool_point_mm: u.tool_point_mm,
+                    u95_um: um3(u.u95_mm()),
+                    u95_data_um: um3(u.u95_data_mm),
+                    u95_held_um: um3(u.u95_held_mm),
+                    u95_raw_um: um3(r.u95_mm()),
+                    u95_monte_carlo_um: mc_aligned
+                        .map(|m| [m[3 * k] * 1e3, m[3 * k + 1] * 1e3, m[3 * k + 2] * 1e3]),
+                })
+                .collect(),
+            monte_carlo: self.monte_carlo.as_ref().zip(request.monte_carlo).map(
+                |((mc, _, _), (_, seed))| MonteCarloRun {
+                    replicas: mc.samples.len(),
+                    failed: mc.failed,
+                    time_s: mc.time_s,
+                    seed,
+                },
+            ),
+        }
+    }
+}
