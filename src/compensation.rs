@@ -203,3 +203,195 @@ pub fn write_tables(tables: &ErrorTables, dir: &Path) -> Result<Vec<PathBuf>> {
     }
     Ok(out)
 }
+
+/// A point list (CSV of `read_points`) compensated: the output CSV and the verification's
+/// figures.
+#[derive(Clone, Debug)]
+pub struct Compensated {
+    /// The output text (CSV of the corrected commands, or the corrected program).
+    pub text: String,
+    /// Points (or program points) corrected.
+    pub points: usize,
+    /// The largest uncompensated error (mm).
+    pub max_error_mm: f64,
+    /// The largest deviation of a corrected command from its target through the model, as
+    /// solved and as written with the output's decimals (mm).
+    pub worst_solved_mm: f64,
+    /// As written.
+    pub worst_written_mm: f64,
+    /// Corrected commands that leave an axis' travel.
+    pub outside: usize,
+}
+
+/// Compensates the point list `text` (read from `label`) with `comp`; each corrected command is
+/// written with `decimals` and checked through the forward model as written.
+pub fn compensate_points(
+    comp: &volver_core::compensate::Compensator,
+    m: &volver_core::machine::Machine,
+    text: &str,
+    label: &str,
+    decimals: usize,
+) -> Result<Compensated> {
+    use volver_core::compensate::{read_points, written};
+    let pts = read_points(text, label, m)?;
+    let axes = m.axes();
+    let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
+    let mut out = format!(
+        "line,id,{},{},error_um,deviation_um,outside_travel\n",
+        letters.join(","),
+        letters
+            .iter()
+            .map(|l| format!("{l}_programmed"))
+            .collect::<Vec<_>>()
+            .join(",")
+    );
+    let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
+    for p in &pts {
+        let c = comp
+            .compensate(&p.commands)
+            .with_context(|| format!("{label}:{}", p.line))?;
+        let (cells, written) = written(m, &c.commands, decimals);
+        let prog: Vec<String> = axes
+            .iter()
+            .enumerate()
+            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
+            .collect();
+        let wd = comp.deviation_mm(&written, c.target);
+        ws = ws.max(c.deviation_mm);
+        ww = ww.max(wd);
+        largest = largest.max(c.error_mm);
+        let off: String = c
+            .outside_travel
+            .iter()
+            .map(|&k| axes[k].axis.letter())
+            .collect();
+        outside += usize::from(!off.is_empty());
+        out.push_str(&format!(
+            "{},{},{},{},{:.4},{:.6},{off}\n",
+            p.line,
+            p.id.clone().unwrap_or_default(),
+            cells.join(","),
+            prog.join(","),
+            c.error_mm * 1e3,
+            wd * 1e3
+        ));
+    }
+    Ok(Compensated {
+        text: out,
+        points: pts.len(),
+        max_error_mm: largest,
+        worst_solved_mm: ws,
+        worst_written_mm: ww,
+        outside,
+    })
+}
+
+/// The compensator of `model` at `params` for `tool`, solving for every axis but those of
+/// `hold` (axis letters, e.g. `"C"`: they keep their programmed positions).
+pub fn compensator<'m>(
+    model: &'m Model,
+    params: &'m [f64],
+    tool: [f64; 3],
+    hold: Option<&str>,
+) -> Result<volver_core::compensate::Compensator<'m>> {
+    Ok(match hold {
+        Some(h) => {
+            let held: Vec<volver_core::iso::Axis> = h
+                .chars()
+                .filter(|c| !c.is_whitespace() && *c != ',')
+                .map(|c| {
+                    volver_core::iso::Axis::from_letter(c)
+                        .ok_or_else(|| anyhow::anyhow!("--hold {h}: '{c}' is not an axis letter"))
+                })
+                .collect::<Result<_>>()?;
+            volver_core::compensate::Compensator::holding(model, params, tool, &held)?
+        }
+        None => volver_core::compensate::Compensator::new(model, params, tool)?,
+    })
+}
+
+/// The expanded uncertainty (k = 2) of a compensated tool point over the machine's travel (5
+/// positions per axis), from a results file's record.
+#[derive(Clone, Debug)]
+#[non_exhaustive]
+pub struct ToolPointU {
+    /// The largest U after the set-up's rigid transform (mm).
+    pub aligned_mm: f64,
+    /// The largest U raw, in the workpiece frame (mm).
+    pub raw_mm: f64,
+    /// The record's rule for what the data do not determine, in words.
+    pub gauge: String,
+    /// Why U is large, and what measurement would reduce it.
+    pub why: String,
+}
+
+/// The U of the compensated tool point `tool` of `model` at `params` (see [`ToolPointU`]).
+pub fn tool_point_u(
+    model: &Model,
+    params: &[f64],
+    record: &UncertaintyRecord,
+    tool: [f64; 3],
+) -> Result<ToolPointU> {
+    use volver_solvers::uncertainty::{Covariance, ToolGrid};
+    let cov = Covariance::from_record(record, model.n_params());
+    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
+    let grid = ToolGrid {
+        commands: plan.positions,
+        tool,
+    };
+    let aligned = grid.uncertainty(model, params, &cov, true);
+    let raw = grid.uncertainty(model, params, &cov, false);
+    let worst = |us: &[volver_solvers::uncertainty::PointUncertainty]| {
+        us.iter()
+            .enumerate()
+            .map(|(i, u)| (u.u95_max_mm(), i))
+            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let (ua, ia) = worst(&aligned);
+    let (ur, _) = worst(&raw);
+    let gauge = if record.gauge == "none" {
+        "none".to_string()
+    } else if record.held_factor.is_empty() {
+        // A rule that leaves no combination to a separate prior: the priors of
+        // `identify --prior` (maximum a posteriori), stated as recorded.
+        record.gauge.split(':').next().unwrap_or("").to_string()
+    } else {
+        format!(
+            "held combinations at the reference, a prior of {:.0} µm RMS each",
+            record.held_prior_mm * 1e3
+        )
+    };
+    let held = aligned[ia]
+        .worst_held
+        .and_then(|c| record.held.get(c))
+        .filter(|_| {
+            let h = aligned[ia].u95_held_mm.iter().copied().fold(0.0, f64::max);
+            h > 0.5 * ua
+        });
+    let off_line = distance_from_reflector_line(model, tool).filter(|d| *d > 1.0);
+    let why = match (held, off_line) {
+        (Some(h), Some(d)) => format!(
+            "it comes from a combination the data cannot identify ({h}); the tool point is \
+             {d:.0} mm off the line through the reflectors, whose turn about that line the \
+             tracker does not see: measure a reflector at the tool's position, or a third \
+             reflector off the line"
+        ),
+        (Some(h), None) => format!(
+            "it comes from a combination the data cannot identify ({h}): measure a plan \
+             that moves it (more positions of the axes it involves, a reflector elsewhere)"
+        ),
+        (None, Some(d)) => format!(
+            "the tool point is {d:.0} mm off the line through the reflectors: measure a \
+             reflector at the tool's position, or a third reflector off the line"
+        ),
+        (None, None) => "the data determine it poorly: measure more positions, or with \
+             less noise"
+            .to_string(),
+    };
+    Ok(ToolPointU {
+        aligned_mm: ua,
+        raw_mm: ur,
+        gauge,
+        why,
+    })
+}

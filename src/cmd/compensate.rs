@@ -3,18 +3,16 @@
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 use volver::compensation::{
-    check_max_u, distance_from_reflector_line, load_results, point_mm, table_uncertainty,
-    tool_point_of, write_tables,
+    Compensated, check_max_u, compensate_points, compensator, distance_from_reflector_line,
+    load_results, point_mm, table_uncertainty, tool_point_of, tool_point_u, write_tables,
 };
-use volver::core::compensate::{Compensator, read_points, written};
+use volver::core::compensate::Compensator;
 use volver::core::fsio::write_atomic;
 use volver::core::gcode::{Linearise, Program};
-use volver::core::iso::Axis;
 use volver::core::model::Model;
 use volver::core::results::ResultsFile;
 use volver::core::results::UncertaintyRecord;
 use volver::core::tables::ErrorTables;
-use volver::solvers::uncertainty::{Covariance, ToolGrid};
 
 /// Options of `volver compensate`.
 #[derive(clap::Args)]
@@ -92,69 +90,18 @@ pub fn vouch(
         );
         return Ok(None);
     };
-    let cov = Covariance::from_record(record, model.n_params());
-    let plan = volver::uncertainty::default_grid(model.machine(), 5)?;
-    let grid = ToolGrid {
-        commands: plan.positions,
-        tool,
-    };
-    let aligned = grid.uncertainty(model, params, &cov, true);
-    let raw = grid.uncertainty(model, params, &cov, false);
-    let worst = |us: &[volver::solvers::uncertainty::PointUncertainty]| {
-        us.iter()
-            .enumerate()
-            .map(|(i, u)| (u.u95_max_mm(), i))
-            .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
-    };
-    let (ua, ia) = worst(&aligned);
-    let (ur, _) = worst(&raw);
+    let u = tool_point_u(model, params, record, tool)?;
+    let (ua, ur) = (u.aligned_mm, u.raw_mm);
     println!(
         "  U (k = 2) of the compensated tool point {} mm over the travel: up to {:.2} µm after \
          the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {})",
         point_mm(tool),
         ua * 1e3,
         ur * 1e3,
-        if record.gauge == "none" {
-            "none".to_string()
-        } else if record.held_factor.is_empty() {
-            // A rule that leaves no combination to a separate prior: the priors of
-            // `identify --prior` (maximum a posteriori), stated as recorded.
-            record.gauge.split(':').next().unwrap_or("").to_string()
-        } else {
-            format!(
-                "held combinations at the reference, a prior of {:.0} µm RMS each",
-                record.held_prior_mm * 1e3
-            )
-        }
+        u.gauge
     );
     if ua * 1e3 > max_u_um {
-        let held = aligned[ia]
-            .worst_held
-            .and_then(|c| record.held.get(c))
-            .filter(|_| {
-                let h = aligned[ia].u95_held_mm.iter().copied().fold(0.0, f64::max);
-                h > 0.5 * ua
-            });
-        let off_line = distance_from_reflector_line(model, tool).filter(|d| *d > 1.0);
-        let why = match (held, off_line) {
-            (Some(h), Some(d)) => format!(
-                "it comes from a combination the data cannot identify ({h}); the tool point is \
-                 {d:.0} mm off the line through the reflectors, whose turn about that line the \
-                 tracker does not see: measure a reflector at the tool's position, or a third \
-                 reflector off the line"
-            ),
-            (Some(h), None) => format!(
-                "it comes from a combination the data cannot identify ({h}): measure a plan \
-                 that moves it (more positions of the axes it involves, a reflector elsewhere)"
-            ),
-            (None, Some(d)) => format!(
-                "the tool point is {d:.0} mm off the line through the reflectors: measure a \
-                 reflector at the tool's position, or a third reflector off the line"
-            ),
-            (None, None) => "the data determine it poorly: measure more positions, or with \
-                 less noise"
-                .to_string(),
-        };
+        let why = &u.why;
         let msg = format!(
             "U of the compensated tool point reaches {:.1} µm (limit --max-u-um {max_u_um}): \
              {why}",
@@ -260,20 +207,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     let (model, params, record) = load_results(&a.results, a.accept)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
-    let comp = match &a.hold {
-        Some(h) => {
-            let held: Vec<Axis> = h
-                .chars()
-                .filter(|c| !c.is_whitespace() && *c != ',')
-                .map(|c| {
-                    Axis::from_letter(c)
-                        .ok_or_else(|| anyhow::anyhow!("--hold {h}: '{c}' is not an axis letter"))
-                })
-                .collect::<Result<_>>()?;
-            Compensator::holding(&model, &params, tool, &held)?
-        }
-        None => Compensator::new(&model, &params, tool)?,
-    };
+    let comp = compensator(&model, &params, tool, a.hold.as_deref())?;
     if let Some(d) = distance_from_reflector_line(&model, tool)
         && d > 1.0
     {
@@ -301,95 +235,24 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             a.tolerance
         );
     }
-    let (text, worst_solved, worst_written, outside) = if let Some(path) = &a.points {
+    let done = if let Some(path) = &a.points {
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-        let pts = read_points(&text, &label, m)?;
-        let axes = m.axes();
-        let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
-        let mut out = format!(
-            "line,id,{},{},error_um,deviation_um,outside_travel\n",
-            letters.join(","),
-            letters
-                .iter()
-                .map(|l| format!("{l}_programmed"))
-                .collect::<Vec<_>>()
-                .join(",")
-        );
-        let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
-        for p in &pts {
-            let c = comp
-                .compensate(&p.commands)
-                .with_context(|| format!("{label}:{}", p.line))?;
-            let (cells, written) = written(m, &c.commands, usize::from(a.decimals));
-            let prog: Vec<String> = axes
-                .iter()
-                .enumerate()
-                .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
-                .collect();
-            let wd = comp.deviation_mm(&written, c.target);
-            ws = ws.max(c.deviation_mm);
-            ww = ww.max(wd);
-            largest = largest.max(c.error_mm);
-            let off: String = c
-                .outside_travel
-                .iter()
-                .map(|&k| axes[k].axis.letter())
-                .collect();
-            outside += usize::from(!off.is_empty());
-            out.push_str(&format!(
-                "{},{},{},{},{:.4},{:.6},{off}\n",
-                p.line,
-                p.id.clone().unwrap_or_default(),
-                cells.join(","),
-                prog.join(","),
-                c.error_mm * 1e3,
-                wd * 1e3
-            ));
-        }
+        let done = compensate_points(&comp, m, &text, &label, usize::from(a.decimals))?;
         println!(
             "  {} points from {label}: uncompensated error up to {:.4} µm",
-            pts.len(),
-            largest * 1e3
+            done.points,
+            done.max_error_mm * 1e3
         );
-        (out, ws, ww, outside)
+        done
     } else {
-        let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
-        let label = path.display().to_string();
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-        let lin = Linearise {
-            chord_tolerance_mm: a.chord_tolerance,
-            max_segment_mm: a.max_segment,
-        };
-        let prog = Program::parse(&text, &label, m, &lin)?;
-        let header = format!(
-            "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm; errors of model {}",
-            env!("CARGO_PKG_VERSION"),
-            a.results.display(),
-            a.chord_tolerance,
-            point_mm(tool),
-            model.spec().name
-        );
-        let (out, rep) = prog.compensate(&comp, m, usize::from(a.decimals), &header)?;
-        println!(
-            "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
-            rep.moves,
-            rep.arcs,
-            a.chord_tolerance,
-            rep.points,
-            rep.max_error_mm * 1e3
-        );
-        (
-            out,
-            rep.max_deviation_mm,
-            rep.max_written_deviation_mm,
-            rep.outside_travel.len(),
-        )
+        compensate_gcode(&a, &comp, &model, tool)?
     };
     println!(
         "  verified through the forward model: largest deviation {:.3e} mm as solved, {:.3e} mm as written ({} decimals)",
-        worst_solved, worst_written, a.decimals
+        done.worst_solved_mm, done.worst_written_mm, a.decimals
     );
+    let (outside, worst_solved) = (done.outside, done.worst_solved_mm);
     if outside > 0 {
         println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
     }
@@ -401,9 +264,52 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             a.tolerance
         );
     }
-    write_atomic(&a.out, text).with_context(|| format!("writing {}", a.out.display()))?;
+    write_atomic(&a.out, done.text).with_context(|| format!("writing {}", a.out.display()))?;
     println!("  written to {}", a.out.display());
     Ok(())
+}
+
+/// The G-code program of `--gcode`, linearised and compensated.
+fn compensate_gcode(
+    a: &CompensateArgs,
+    comp: &Compensator,
+    model: &Model,
+    tool: [f64; 3],
+) -> Result<Compensated> {
+    let m = model.machine();
+    let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
+    let label = path.display().to_string();
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
+    let lin = Linearise {
+        chord_tolerance_mm: a.chord_tolerance,
+        max_segment_mm: a.max_segment,
+    };
+    let prog = Program::parse(&text, &label, m, &lin)?;
+    let header = format!(
+        "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm; errors of model {}",
+        env!("CARGO_PKG_VERSION"),
+        a.results.display(),
+        a.chord_tolerance,
+        point_mm(tool),
+        model.spec().name
+    );
+    let (out, rep) = prog.compensate(comp, m, usize::from(a.decimals), &header)?;
+    println!(
+        "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
+        rep.moves,
+        rep.arcs,
+        a.chord_tolerance,
+        rep.points,
+        rep.max_error_mm * 1e3
+    );
+    Ok(Compensated {
+        text: out,
+        points: rep.points,
+        max_error_mm: rep.max_error_mm,
+        worst_solved_mm: rep.max_deviation_mm,
+        worst_written_mm: rep.max_written_deviation_mm,
+        outside: rep.outside_travel.len(),
+    })
 }
 
 /// Options of `volver tables`.
