@@ -79,6 +79,29 @@ pub struct SimulateArgs {
 
 /// Runs `volver simulate`.
 pub fn run(a: SimulateArgs) -> Result<()> {
+    let (truth, source) = truth_of(&a)?;
+    let machine = truth.model.machine().clone();
+    let plan = plan_of(&a, &machine)?;
+    let mut sim = Simulation::new(plan, truth, a.seed);
+    sim.truth_source = source;
+    sim.noise = TrackerNoise::from_text(&a.noise)?;
+    sim.effects = a
+        .effect
+        .iter()
+        .map(|t| Effect::parse(t))
+        .collect::<volver::core::Result<_>>()?;
+    if let Some(h) = a.duration_h {
+        sim.duration_s = Some(h * 3600.0);
+    }
+    let out = sim.run()?;
+    let files = out.write(&a.out)?;
+    print_record(&out, &machine, &files);
+    Ok(())
+}
+
+/// The true errors: from `--truth`, or drawn at random in `--truth-model`'s structure (every
+/// error of the machine by default) at the `--magnitude`s; and where they come from.
+fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
     let given_machine = match &a.machine {
         Some(p) => Some(Machine::load(p).context("reading the machine file")?),
         None => None,
@@ -123,11 +146,15 @@ pub fn run(a: SimulateArgs) -> Result<()> {
             (truth, source)
         }
     };
-    let machine = truth.model.machine().clone();
+    Ok((truth, source))
+}
+
+/// The plan of `--plan` on `machine`, measuring the reflectors of `--reflectors`.
+fn plan_of(a: &SimulateArgs, machine: &Machine) -> Result<Plan> {
     let mut plan = if a.plan.contains('=') {
-        Plan::parse_grid(&machine, &a.plan)?
+        Plan::parse_grid(machine, &a.plan)?
     } else {
-        Plan::preset(&machine, &a.plan)? // an unknown name gets the list of presets
+        Plan::preset(machine, &a.plan)? // an unknown name gets the list of presets
     };
     if let Some(list) = &a.reflectors {
         plan.reflectors = list
@@ -148,19 +175,11 @@ pub fn run(a: SimulateArgs) -> Result<()> {
             })
             .collect::<Result<_>>()?;
     }
-    let mut sim = Simulation::new(plan, truth, a.seed);
-    sim.truth_source = source;
-    sim.noise = TrackerNoise::from_text(&a.noise)?;
-    sim.effects = a
-        .effect
-        .iter()
-        .map(|t| Effect::parse(t))
-        .collect::<volver::core::Result<_>>()?;
-    if let Some(h) = a.duration_h {
-        sim.duration_s = Some(h * 3600.0);
-    }
-    let out = sim.run()?;
-    let files = out.write(&a.out)?;
+    Ok(plan)
+}
+
+/// What was simulated and written.
+fn print_record(out: &volver::core::simulate::Synthetic, machine: &Machine, files: &[PathBuf]) {
     let r = &out.record;
     println!(
         "volver simulate — plan {} ({} positions × {} reflectors = {} points), seed {}",
@@ -220,7 +239,6 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     for (path, what) in files.iter().zip(what) {
         println!("  {}  ({what})", path.display());
     }
-    Ok(())
 }
 
 #[cfg(test)]
