@@ -17,6 +17,7 @@
 pub use volver_core as core;
 pub use volver_solvers as solvers;
 
+pub mod comparison;
 pub mod compensation;
 pub mod diagnosis;
 pub mod history;

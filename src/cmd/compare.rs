@@ -1,16 +1,12 @@
 //! `volver compare`: every engine of this build on one problem, side by side.
 
 use super::Inputs;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
-use serde::Serialize;
 use std::path::PathBuf;
+use volver::comparison::{Comparison, compare};
 use volver::core::model::Model;
-use volver::core::problem::Problem;
-use volver::solvers::identifiability::hold_weak;
-use volver::solvers::init::init_tracker;
-use volver::solvers::lm::LevenbergMarquardt;
-use volver::solvers::{Objective, Options, Silent, Solver, Task, Termination};
+use volver::solvers::{Objective, Options, Solver};
 
 /// Options of `volver compare`.
 #[derive(Args, Debug)]
@@ -81,22 +77,6 @@ impl CompareArgs {
     }
 }
 
-/// One engine's result.
-#[derive(Serialize)]
-struct Row {
-    engine: String,
-    phi_mm: f64,
-    ve_mm2: f64,
-    emm_um: f64,
-    emax_um: f64,
-    iterations: usize,
-    evaluations: usize,
-    jacobian_evaluations: usize,
-    time_s: f64,
-    termination: String,
-    reason: Termination,
-}
-
 /// Runs `volver compare`.
 pub fn compare_command(a: CompareArgs) -> Result<()> {
     if let Some(suite) = &a.suite {
@@ -139,55 +119,25 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         ..Options::default()
     })?;
     let engines = a.engines(&[])?;
-    let problem = Problem::new(&model, &data)?;
-    let start =
-        init_tracker(&problem, &model.initial_params()).context("fitting the tracker pose")?;
-    let task = Task::new(problem.clone());
-    let (task, held) = if a.gauge {
-        let lm = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
-        let t = hold_weak(&task, &lm.params, 100.0 * options.rank_tolerance)
-            .context("the identifiability analysis failed")?;
-        let held = t.constraints.rows.len() - task.constraints.rows.len();
-        (t, held)
-    } else {
-        (task, 0)
-    };
-    let rows: Vec<Row> = engines
-        .iter()
-        .map(|e| {
-            let s = e.solve(&task, &start, &options, &mut Silent).summary;
-            Row {
-                engine: e.name().to_string(),
-                phi_mm: s.final_.phi_mm,
-                ve_mm2: s.final_.ve_mm2,
-                emm_um: s.final_.stats.emm_um,
-                emax_um: s.final_.stats.emax_um,
-                iterations: s.iterations,
-                evaluations: s.evaluations,
-                jacobian_evaluations: s.jacobian_evaluations,
-                time_s: s.time_s,
-                termination: s.termination.to_string(),
-                reason: s.termination,
-            }
-        })
-        .collect();
+    let c = compare(&model, &data, &source, &engines, &options, a.gauge)?;
     if a.json {
-        let v = serde_json::json!({
-            "data": source,
-            "points": problem.n_points(),
-            "parameters": model.n_params(),
-            "objective": objective,
-            "gauge_directions_held": held,
-            "engines": rows,
-        });
+        let v = serde_json::to_value(&c)?;
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
+    print_table(&c, a.gauge);
+    Ok(())
+}
+
+/// The comparison as a table.
+fn print_table(c: &Comparison, gauge: bool) {
+    let (objective, held, rows) = (c.objective, c.gauge_directions_held, &c.engines);
+    let source = &c.data;
     println!(
         "volver compare — {source}: {} points, {} parameters, objective {objective}{}",
-        problem.n_points(),
-        model.n_params(),
-        if a.gauge {
+        c.points,
+        c.parameters,
+        if gauge {
             format!(", {held} unidentifiable direction(s) held")
         } else {
             String::new()
@@ -204,7 +154,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
             Objective::Ve => r.ve_mm2,
         })
         .fold(f64::INFINITY, f64::min);
-    for r in &rows {
+    for r in rows {
         println!(
             "  {:<12} {:>17.12} {:>17.14} {:>10.4} {:>6} {:>6} {:>9.3}  {}",
             r.engine,
@@ -220,7 +170,6 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
     println!(
         "\n  best {objective}: {best:.12e}; NLopt counts objective calls as iterations; lm+clarabel adds both runs."
     );
-    Ok(())
 }
 
 /// `volver compare --suite nist`.
