@@ -46,10 +46,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
     volver::compensation::check_max_u(a.max_u_um)?;
     let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let problem = Problem::new(&model, &data)?;
-    let id1 = volver::solvers::strategy::fit(problem.clone());
-    if id1.termination.failed() {
-        anyhow::bail!("the fit failed: {}", id1.termination);
-    }
+    let id1 = fitted(&model, &data, "the fit")?;
     let options = Options::default();
     let candidates =
         volver::solvers::candidates::rank(&problem, &id1.params, options.rank_tolerance);
@@ -57,15 +54,8 @@ pub fn run(a: ReportArgs) -> Result<()> {
     let id2 = if a.add.is_empty() {
         None
     } else {
-        let id = volver::solvers::strategy::fit(Problem::new(&extended, &data)?);
-        if id.termination.failed() {
-            anyhow::bail!(
-                "the fit with {} failed: {}",
-                a.add.join(", "),
-                id.termination
-            );
-        }
-        Some(id)
+        let what = format!("the fit with {}", a.add.join(", "));
+        Some(fitted(&extended, &data, &what)?)
     };
     let truth = match &a.truth {
         Some(p) => Some(
@@ -79,31 +69,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         Some(id) => (&extended, &id.params),
         None => (&model, &id1.params),
     };
-    let mut cross = Vec::new();
-    if let Some(path) = &a.reference {
-        let set =
-            MeasurementSet::load(&machine, path).context("reading the reference measurements")?;
-        Problem::new(&model, &set)?.check_scale(&path.display().to_string())?;
-        let lm = volver::solvers::lm::LevenbergMarquardt;
-        let reference = Problem::new(last_model, &set)?;
-        let cv = volver::solvers::strategy::cross_validate(
-            &lm,
-            reference.clone(),
-            last_params,
-            &options,
-            &mut volver::solvers::Silent,
-        );
-        let model_label = if a.add.is_empty() {
-            format!("model \"{}\"", model.spec().name)
-        } else {
-            format!("model \"{}\" + {}", model.spec().name, a.add.join(" + "))
-        };
-        cross.push(volver::report::CrossRow::new(
-            format!("{} ({model_label})", a.inputs.data.display()),
-            &reference,
-            &cv,
-        ));
-    }
+    let cross = cross_validation(&a, &machine, &model, last_model, last_params)?;
     let mut fits = vec![volver::report::Fit {
         label: model.spec().name.clone(),
         model: &model,
@@ -132,6 +98,66 @@ pub fn run(a: ReportArgs) -> Result<()> {
         max_u_um: a.max_u_um,
     };
     let html = volver::report::html(&input)?;
+    write_outputs(&a, html, &last_model, &last_params)
+}
+
+/// `model` fitted to `data` with the native engine; `Err` naming `what` when the fit fails.
+fn fitted(
+    model: &volver::core::model::Model,
+    data: &MeasurementSet,
+    what: &str,
+) -> Result<volver::solvers::strategy::Identification> {
+    let id = volver::solvers::strategy::fit(Problem::new(model, data)?);
+    if id.termination.failed() {
+        anyhow::bail!("{what} failed: {}", id.termination);
+    }
+    Ok(id)
+}
+
+/// The cross-validation row of `--reference`: the final fit's errors compensating it.
+fn cross_validation(
+    a: &ReportArgs,
+    machine: &volver::core::machine::Machine,
+    model: &volver::core::model::Model,
+    last_model: &volver::core::model::Model,
+    last_params: &[f64],
+) -> Result<Vec<volver::report::CrossRow>> {
+    let Some(path) = &a.reference else {
+        return Ok(Vec::new());
+    };
+    {
+        let set =
+            MeasurementSet::load(machine, path).context("reading the reference measurements")?;
+        Problem::new(model, &set)?.check_scale(&path.display().to_string())?;
+        let lm = volver::solvers::lm::LevenbergMarquardt;
+        let reference = Problem::new(last_model, &set)?;
+        let cv = volver::solvers::strategy::cross_validate(
+            &lm,
+            reference.clone(),
+            last_params,
+            &Options::default(),
+            &mut volver::solvers::Silent,
+        );
+        let model_label = if a.add.is_empty() {
+            format!("model \"{}\"", model.spec().name)
+        } else {
+            format!("model \"{}\" + {}", model.spec().name, a.add.join(" + "))
+        };
+        Ok(vec![volver::report::CrossRow::new(
+            format!("{} ({model_label})", a.inputs.data.display()),
+            &reference,
+            &cv,
+        )])
+    }
+}
+
+/// Writes the report and the final fit's results file.
+fn write_outputs(
+    a: &ReportArgs,
+    html: String,
+    last_model: &volver::core::model::Model,
+    last_params: &[f64],
+) -> Result<()> {
     let results_path = a
         .results
         .clone()
@@ -144,7 +170,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
     }
     volver::core::fsio::write_atomic(&a.out, html)
         .with_context(|| format!("writing {}", a.out.display()))?;
-    ResultsFile::from_model(&last_model, &last_params)?
+    ResultsFile::from_model(last_model, last_params)?
         .save(&results_path)
         .context("writing the results file")?;
     println!(
