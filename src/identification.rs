@@ -317,25 +317,34 @@ fn uncertainty_of(
         (None, None) => "none".to_string(),
     };
     match (&settings.priors, covariance) {
-        (Some(p), Some(cov)) => {
-            let post = volver_solvers::prior::maximum_a_posteriori(
-                problem.model(),
-                id.gauge.as_ref(),
-                &id.params,
-                &cov,
-                p,
-            )
-            .context("the maximum a posteriori solution (a decomposition failed)")?;
-            id.params = post.params;
-            id.final_ = volver_solvers::evaluate(problem, &id.params);
-            Ok((Some(post.covariance), rule))
-        }
+        (Some(p), Some(cov)) => Ok((Some(with_priors(problem, id, &cov, p)?), rule)),
         (Some(_), None) => bail!(
             "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
             id.termination
         ),
         (None, cov) => Ok((cov, rule)),
     }
+}
+
+/// Moves the fit `id` on `problem` with covariance `cov` to the maximum a posteriori solution
+/// under `priors`; returns the posterior covariance.
+pub(crate) fn with_priors(
+    problem: &Problem,
+    id: &mut Identification,
+    cov: &Covariance,
+    priors: &Priors,
+) -> Result<Covariance> {
+    let post = volver_solvers::prior::maximum_a_posteriori(
+        problem.model(),
+        id.gauge.as_ref(),
+        &id.params,
+        cov,
+        priors,
+    )
+    .context("the maximum a posteriori solution (a decomposition failed)")?;
+    id.params = post.params;
+    id.final_ = volver_solvers::evaluate(problem, &id.params);
+    Ok(post.covariance)
 }
 
 /// Plausibility of what the data determine: the fit on the gauge (values along the

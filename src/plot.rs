@@ -476,6 +476,26 @@ pub fn bars(
         f.y0 + f.h / 2.0,
         escape(unit)
     );
+    draw_bars(&mut s, &f, bw, data);
+    if let Some((label, v)) = reference {
+        let y = f.y(v);
+        let _ = writeln!(
+            s,
+            "<line class=\"reference\" x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#c0392b\" stroke-dasharray=\"6 4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\" fill=\"#c0392b\">{} {v:.2}</text>",
+            f.x0,
+            f.x0 + f.w,
+            f.x0 + f.w,
+            y - 4.0,
+            escape(label)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The bars of [`bars`] in frame `f`, each `bw` wide, with their labels (at 45° when narrow)
+/// and values.
+fn draw_bars(s: &mut String, f: &Frame, bw: f64, data: &[(String, f64)]) {
     let rotate = bw < 50.0;
     for (i, (label, v)) in data.iter().enumerate() {
         let x = f.x(i as f64 + 0.15);
@@ -506,20 +526,6 @@ pub fn bars(
             );
         }
     }
-    if let Some((label, v)) = reference {
-        let y = f.y(v);
-        let _ = writeln!(
-            s,
-            "<line class=\"reference\" x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#c0392b\" stroke-dasharray=\"6 4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\" fill=\"#c0392b\">{} {v:.2}</text>",
-            f.x0,
-            f.x0 + f.w,
-            f.x0 + f.w,
-            y - 4.0,
-            escape(label)
-        );
-    }
-    s.push_str("</svg>\n");
-    s
 }
 
 #[cfg(test)]

@@ -138,7 +138,7 @@ pub fn assess(
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Assessment> {
     use anyhow::Context;
-    use volver_solvers::uncertainty::{ToolGrid, linear, monte_carlo};
+    use volver_solvers::uncertainty::{ToolGrid, linear};
     let solver = volver_solvers::engine(&request.engine)?;
     let problem = volver_core::problem::Problem::new(model, data)?;
     let options = volver_solvers::Options::default();
@@ -168,19 +168,7 @@ pub fn assess(
     )
     .context("the Jacobian at the solution is not finite or a decomposition failed")?;
     let covariance = match &request.priors {
-        Some(p) => {
-            let post = volver_solvers::prior::maximum_a_posteriori(
-                model,
-                id.gauge.as_ref(),
-                &id.params,
-                &cov,
-                p,
-            )
-            .context("the maximum a posteriori solution (a decomposition failed)")?;
-            id.params = post.params;
-            id.final_ = volver_solvers::evaluate(&problem, &id.params);
-            post.covariance
-        }
+        Some(p) => crate::identification::with_priors(&problem, &mut id, &cov, p)?,
         None => cov,
     };
     let grid = ToolGrid {
@@ -189,30 +177,16 @@ pub fn assess(
     };
     let aligned = grid.uncertainty(model, &id.params, &covariance, true);
     let raw = grid.uncertainty(model, &id.params, &covariance, false);
-    let base = grid.points(model, &id.params);
     let mc = match request.monte_carlo {
-        Some((0, _)) => bail!("--monte-carlo 0: give at least 2 replicas"),
-        Some((n, seed)) => {
-            let mc = monte_carlo(
-                &request.engine,
-                model,
-                data,
-                &id.params,
-                request.noise,
-                covariance.sigma_mm,
-                id.gauge.as_ref(),
-                &options,
-                n,
-                seed,
-                progress,
-            )?;
-            if mc.samples.len() < 2 {
-                bail!("Monte Carlo: {} of {n} replicas failed to solve", mc.failed);
-            }
-            let a = grid.monte_carlo_u95(model, &mc, &base, true);
-            let r = grid.monte_carlo_u95(model, &mc, &base, false);
-            Some((mc, a, r))
-        }
+        Some((n, seed)) => Some(monte_carlo_run(
+            model,
+            data,
+            request,
+            &id,
+            &covariance,
+            (n, seed),
+            progress,
+        )?),
         None => None,
     };
     let rule = match &request.priors {
@@ -411,4 +385,46 @@ impl Assessment {
             ),
         }
     }
+}
+
+/// The Monte Carlo replicas of an assessment and their U95 per grid coordinate (after the
+/// transform, raw; mm).
+fn monte_carlo_run(
+    model: &Model,
+    data: &volver_core::measure::MeasurementSet,
+    request: &Request,
+    id: &volver_solvers::strategy::Identification,
+    covariance: &volver_solvers::uncertainty::Covariance,
+    (n, seed): (usize, u64),
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<(volver_solvers::uncertainty::MonteCarlo, Vec<f64>, Vec<f64>)> {
+    use volver_solvers::uncertainty::{ToolGrid, monte_carlo};
+    if n == 0 {
+        bail!("--monte-carlo 0: give at least 2 replicas");
+    }
+    let options = volver_solvers::Options::default();
+    let grid = ToolGrid {
+        commands: request.grid.positions.clone(),
+        tool: request.tool,
+    };
+    let base = grid.points(model, &id.params);
+    let mc = monte_carlo(
+        &request.engine,
+        model,
+        data,
+        &id.params,
+        request.noise,
+        covariance.sigma_mm,
+        id.gauge.as_ref(),
+        &options,
+        n,
+        seed,
+        progress,
+    )?;
+    if mc.samples.len() < 2 {
+        bail!("Monte Carlo: {} of {n} replicas failed to solve", mc.failed);
+    }
+    let a = grid.monte_carlo_u95(model, &mc, &base, true);
+    let r = grid.monte_carlo_u95(model, &mc, &base, false);
+    Ok((mc, a, r))
 }

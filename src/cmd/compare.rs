@@ -207,11 +207,24 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&v)?);
         return Ok(());
     }
+    print_suite(&runs, &names, &options)
+}
+
+/// The suite's table: each problem and start, then the means.
+fn print_suite(
+    runs: &[volver::solvers::strd::StrdRun],
+    names: &[&str],
+    options: &volver::solvers::Options,
+) -> Result<()> {
+    let mean = |engine: &str, f: fn(&volver::solvers::strd::StrdRun) -> f64| {
+        let v: Vec<f64> = runs.iter().filter(|r| r.engine == engine).map(f).collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
     println!(
         "volver compare --suite nist — NIST StRD nonlinear regression, 27 problems × 2 starts; LRE = correct digits (0–11) of the worst parameter and of the residual sum of squares\n"
     );
     print!("  {:<9} {:<8} st", "problem", "level");
-    for n in &names {
+    for n in names {
         print!("  {:>17}", n);
     }
     println!(
@@ -220,7 +233,7 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
         "",
         "   LRE b/RSS   it".repeat(names.len())
     );
-    for (k, chunk) in runs.chunks(engines.len()).enumerate() {
+    for (k, chunk) in runs.chunks(names.len()).enumerate() {
         let r0 = &chunk[0];
         let level = format!("{:?}", r0.difficulty).to_lowercase();
         print!("  {:<9} {:<8} {:>2}", r0.problem, level, k % 2 + 1);
@@ -234,7 +247,7 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
         println!();
     }
     print!("\n  {:<9} {:<8}   ", "mean", "");
-    for n in &names {
+    for n in names {
         print!(
             "  {:>4.2}/{:>5.2}       ",
             mean(n, |r| r.lre_params),

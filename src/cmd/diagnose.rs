@@ -78,6 +78,11 @@ fn print_diagnosis(d: &Diagnosis) {
             .collect();
         println!("  {}: {}", p.axis, cells.join("  "));
     }
+    print_candidates(d);
+}
+
+/// What the data cannot separate, the verdict and the candidates.
+fn print_candidates(d: &Diagnosis) {
     if let Some(a) = &d.identifiability {
         println!(
             "\nIdentifiability: {} of {} free directions identified, condition {:.2e}",

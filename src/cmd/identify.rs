@@ -198,8 +198,6 @@ fn history_record(
 /// The summary table of an identification.
 fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
     let id = &outcome.id;
-    let weak = &outcome.unidentified;
-    let held = weak.len();
     println!(
         "\n  {:<32} {:>12} {:>12} {:>10} {:>6} {:>6}  termination",
         "phase", "EMM µm", "EMax µm", "residual", "iter", "eval"
@@ -234,6 +232,14 @@ fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
             id.final_.stats.emm_um / n.emm_um
         );
     }
+    print_verdict(outcome, out);
+}
+
+/// The run's counts, what the data do not determine, implausible sizes and what was written.
+fn print_verdict(outcome: &Outcome, out: Option<&std::path::Path>) {
+    let id = &outcome.id;
+    let weak = &outcome.unidentified;
+    let held = weak.len();
     println!(
         "  {} iterations, {} evaluations, {:.2} s; {}{}",
         id.iterations(),

@@ -92,6 +92,11 @@ fn print_layout(model: &Model) -> Result<()> {
         t.position[2]
     );
 
+    print_model(model)
+}
+
+/// The error model: terms and bases, parameter layout, constraints and free parameters.
+fn print_model(model: &Model) -> Result<()> {
     let spec = model.spec();
     println!(
         "\nError model: {} (squareness rule: {})",
