@@ -46,6 +46,8 @@ pub mod compensate;
 pub mod diagnose;
 pub mod error;
 pub mod fsio;
+// Hidden: the fuzzing harnesses are public for the fuzz targets and tests/fuzz_seeds.rs, not as API.
+#[doc(hidden)]
 pub mod fuzz;
 pub mod gcode;
 pub mod iso;

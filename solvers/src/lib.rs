@@ -26,6 +26,8 @@ mod error;
 pub mod gauge;
 pub mod identifiability;
 pub mod init;
+// Hidden: the normal-equation kernels are public for the bench binary and the tests (kernel timings, block sizes), not as API.
+#[doc(hidden)]
 pub mod kernels;
 pub mod lm;
 mod loss;
