@@ -97,7 +97,7 @@ fn main() -> Result<()> {
     input.candidates = volver::solvers::candidates::rank(
         &volver::core::problem::Problem::new(&model, &data)?,
         &first.id.params,
-        volver::solvers::Options::default().rank_tolerance,
+        volver::solvers::identifiability::RANK_TOLERANCE,
     );
     let html = volver::report::html(&input)?;
     volver::core::fsio::write_atomic(&out.join("report.html"), html)?;

@@ -84,9 +84,13 @@ pub fn compare(
         init_tracker(&problem, &model.initial_params()).context("fitting the tracker pose")?;
     let task = Task::new(problem.clone());
     let (task, held) = if gauge {
-        let lm = LevenbergMarquardt.solve(&task, &start, options, &mut Silent);
-        let t = hold_weak(&task, &lm.params, 100.0 * options.rank_tolerance)
-            .context("the identifiability analysis failed")?;
+        let lm = LevenbergMarquardt::default().solve(&task, &start, options, &mut Silent);
+        let t = hold_weak(
+            &task,
+            &lm.params,
+            100.0 * volver_solvers::identifiability::RANK_TOLERANCE,
+        )
+        .context("the identifiability analysis failed")?;
         let held = t.constraints.rows.len() - task.constraints.rows.len();
         (t, held)
     } else {

@@ -19,7 +19,6 @@ use volver_core::diagnose;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::problem::Problem;
-use volver_solvers::Options;
 use volver_solvers::candidates::{Score, rank, verdict};
 use volver_solvers::identifiability::{Identifiability, analyse};
 
@@ -196,16 +195,19 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
     if id.termination.failed() {
         bail!("the fit failed: {}", id.termination);
     }
-    let options = Options::default();
     let r = problem.residuals(&id.params);
     let repeat = diagnose::repeat_noise(&problem);
     let ident = analyse(
         &volver_solvers::Task::new(problem.clone()),
         &id.params,
-        options.rank_tolerance,
+        volver_solvers::identifiability::RANK_TOLERANCE,
         CORRELATION_LISTED,
     );
-    let ranked = rank(&problem, &id.params, options.rank_tolerance);
+    let ranked = rank(
+        &problem,
+        &id.params,
+        volver_solvers::identifiability::RANK_TOLERANCE,
+    );
     Ok(Diagnosis {
         points: data.points.len(),
         model: model.spec().name.clone(),

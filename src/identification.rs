@@ -37,8 +37,10 @@ use volver_solvers::{Objective, Observer, Options};
 pub struct Settings {
     /// The engine's name ([`volver_solvers::engine_names`]).
     pub engine: String,
-    /// The engines' options (objective, limits, the LM's settings).
+    /// The engines' options (objective, limits).
     pub options: Options,
+    /// The native engine's own settings, when [`Settings::engine`] is `lm`.
+    pub lm: volver_solvers::lm::LevenbergMarquardt,
     /// The phases and sub-loops.
     pub phasing: Phasing,
     /// How many times the phase sequence may run (fig. 14 of the paper).
@@ -56,6 +58,7 @@ impl Default for Settings {
         Settings {
             engine: "lm".into(),
             options: Options::default(),
+            lm: volver_solvers::lm::LevenbergMarquardt::default(),
             phasing: Phasing::One,
             subloops: 1,
             noise: NoiseModel::Residual,
@@ -236,7 +239,11 @@ pub fn identify(
     if settings.subloops == 0 {
         bail!("--subloops must be at least 1");
     }
-    let solver = volver_solvers::engine(&settings.engine)?;
+    let solver: Box<dyn volver_solvers::Solver> = if settings.engine == "lm" {
+        Box::new(settings.lm)
+    } else {
+        volver_solvers::engine(&settings.engine)?
+    };
     let options = &settings.options;
     options.validate()?;
     let problem = Problem::new(model, data)?;
@@ -271,7 +278,7 @@ pub fn identify(
             .unwrap_or_default();
         results.uncertainty = Some(cov.to_record(&rule, held));
     }
-    let implausible = implausible_sizes(&problem, &id, covariance.as_ref(), options);
+    let implausible = implausible_sizes(&problem, &id, covariance.as_ref());
     let refusal = refusal(&id, &implausible, settings.accept);
     let unidentified = unidentified(model, &id);
     Ok(Outcome {
@@ -354,14 +361,13 @@ fn implausible_sizes(
     problem: &Problem,
     id: &Identification,
     covariance: Option<&Covariance>,
-    options: &Options,
 ) -> Vec<Implausible> {
     let model = problem.model();
     let tracker_start = volver_solvers::init::init_tracker(problem, &model.initial_params()).ok();
     let determined = volver_solvers::identifiability::analyse(
         &volver_solvers::Task::new(problem.clone()),
         &id.params,
-        options.rank_tolerance,
+        volver_solvers::identifiability::RANK_TOLERANCE,
         1.0,
     );
     // Each value is allowed its uncertainty from the data: the fit's covariance (the gauge's,

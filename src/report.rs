@@ -138,7 +138,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let ident = analyse(
         &task,
         params,
-        options.rank_tolerance,
+        volver_solvers::identifiability::RANK_TOLERANCE,
         crate::diagnosis::CORRELATION_LISTED,
     );
     // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held

@@ -198,7 +198,7 @@ impl Study {
             m,
             truth,
             options,
-            lm: LevenbergMarquardt,
+            lm: LevenbergMarquardt::default(),
             noise: TrackerNoise::PAPER,
             seed,
         })

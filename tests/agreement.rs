@@ -144,8 +144,13 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
             ..Options::default()
         };
         let task = Task::new(problem.clone());
-        let first = LevenbergMarquardt.solve(&task, &start, &options, &mut Silent);
-        let gauge = hold_weak(&task, &first.params, 100.0 * options.rank_tolerance).unwrap();
+        let first = LevenbergMarquardt::default().solve(&task, &start, &options, &mut Silent);
+        let gauge = hold_weak(
+            &task,
+            &first.params,
+            100.0 * volver::solvers::identifiability::RANK_TOLERANCE,
+        )
+        .unwrap();
         let held = gauge.constraints.rows.len() - task.constraints.rows.len();
         let initial = objective_of_initial(&first, objective);
         println!(

@@ -12,7 +12,6 @@ use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
 use volver::core::problem::Problem;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
-use volver::solvers::Options;
 use volver::solvers::candidates::{Score, rank};
 use volver::solvers::strategy::fit;
 
@@ -27,7 +26,11 @@ fn ranked(model: &Model, truth: Truth, effects: Vec<Effect>) -> Vec<Score> {
     let problem = Problem::new(model, &data).unwrap();
     let id = fit(problem.clone());
     assert!(id.termination.converged(), "{}", id.termination);
-    rank(&problem, &id.params, Options::default().rank_tolerance)
+    rank(
+        &problem,
+        &id.params,
+        volver::solvers::identifiability::RANK_TOLERANCE,
+    )
 }
 
 /// A random truth inside the paper's model (default magnitudes).

@@ -74,7 +74,11 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
     let model = Model::new(m.clone(), spec).unwrap();
     let problem = Problem::new(&model, &sim.measurements).unwrap();
     let before = fit(problem.clone());
-    let ranked = rank(&problem, &before.params, Options::default().rank_tolerance);
+    let ranked = rank(
+        &problem,
+        &before.params,
+        volver::solvers::identifiability::RANK_TOLERANCE,
+    );
     let noise = sim.record.noise_error.emm_um;
     println!(
         "{want}: EMM {:.3} µm, noise error {noise:.3} µm",
@@ -106,7 +110,7 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
     let ext_problem = Problem::new(&extended, &sim.measurements).unwrap();
     let start = carry_over(&model, &before.params, &extended);
     let after = identify(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         ext_problem,
         &start,
         &Strategy::default(),

@@ -49,7 +49,7 @@ fn fit_with(
     options: &Options,
 ) -> volver::solvers::strategy::Identification {
     identify(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         Problem::new(model, data).unwrap(),
         &model.initial_params(),
         &Strategy::default(),
@@ -200,7 +200,7 @@ fn fourier_and_sine_series_of_equal_order_reach_the_same_phi() {
         ..Strategy::default()
     };
     let f = identify(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         Problem::new(&fourier, &sim.measurements).unwrap(),
         &fourier.initial_params(),
         &ungauged,
@@ -224,7 +224,7 @@ fn fourier_and_sine_series_of_equal_order_reach_the_same_phi() {
     }
     let problem = Problem::new(&sine, &sim.measurements).unwrap();
     let s = identify(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         problem,
         &start,
         &Strategy {
@@ -346,7 +346,7 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
         &start,
         "translation",
     );
-    let sol = LevenbergMarquardt.solve(&task, &start, &Options::default(), &mut Silent);
+    let sol = LevenbergMarquardt::default().solve(&task, &start, &Options::default(), &mut Silent);
     for (j, info) in model.params().iter().enumerate() {
         if info.group == Group::Rotation {
             assert_eq!(sol.params[j], start[j], "{}", info.name);
@@ -362,7 +362,7 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
             ..Strategy::default()
         };
         identify_errors(
-            &LevenbergMarquardt,
+            &LevenbergMarquardt::default(),
             problem.clone(),
             &start,
             Errors::All,
@@ -424,10 +424,23 @@ fn combined_independent_and_cross_validation_methods() {
         model.initial_params(),
     );
     let reference = |params: &[f64]| {
-        cross_validate(&LevenbergMarquardt, pr[3].clone(), params, &o, &mut Silent)
+        cross_validate(
+            &LevenbergMarquardt::default(),
+            pr[3].clone(),
+            params,
+            &o,
+            &mut Silent,
+        )
     };
     // Joint on the reference itself: cross-validation reproduces its own fit.
-    let joint = identify(&LevenbergMarquardt, pr[3].clone(), &p0, &s, &o, &mut Silent);
+    let joint = identify(
+        &LevenbergMarquardt::default(),
+        pr[3].clone(),
+        &p0,
+        &s,
+        &o,
+        &mut Silent,
+    );
     let cv = reference(&joint.params);
     // The data are noise-free: both EMMs are ~6.6e-5 µm, where each residual's own rounding is
     // ~4e-10 µm (ε × 2 m from the tracker): up to 1e-9 µm of difference is rounding (measured
@@ -440,7 +453,7 @@ fn combined_independent_and_cross_validation_methods() {
     );
     // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
     let (lin, rot) = combined(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         pr[0].clone(),
         pr[2].clone(),
         &p0,
@@ -462,7 +475,7 @@ fn combined_independent_and_cross_validation_methods() {
     let c = reference(&rot.params);
     // Tests 1 + 2: each group alone.
     let (ind, _, _) = independent(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         pr[0].clone(),
         pr[1].clone(),
         &p0,
@@ -545,10 +558,16 @@ fn geodesic_acceleration_reaches_the_same_fit_on_the_machine() {
         let fit = |geodesic_acceleration| {
             let options = Options {
                 objective,
-                geodesic_acceleration,
                 ..Options::default()
             };
-            fit_with(&model, &sim.measurements, &options)
+            identify(
+                &LevenbergMarquardt::with_geodesic_acceleration(geodesic_acceleration),
+                problem.clone(),
+                &model.initial_params(),
+                &Strategy::default(),
+                &options,
+                &mut Silent,
+            )
         };
         let (plain, bent) = (fit(false), fit(true));
         assert!(bent.termination.converged(), "{:?}", bent.termination);

@@ -10,7 +10,7 @@ use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::nist::{self, Dataset};
 use volver::core::problem::Problem;
-use volver::solvers::{Silent, Solution, Task, Termination, engine, engine_names, strd};
+use volver::solvers::{Silent, Solution, Task, Termination, engine_names, strd};
 
 /// Every engine of the build on `problem` from `start`.
 fn every_engine(problem: Problem, start: &[f64]) -> Vec<(&'static str, Solution)> {
@@ -19,7 +19,7 @@ fn every_engine(problem: Problem, start: &[f64]) -> Vec<(&'static str, Solution)
         .into_iter()
         .map(|name| {
             let options = strd::options();
-            let s = engine(name)
+            let s = strd::engine(name)
                 .unwrap()
                 .solve(&task, start, &options, &mut Silent);
             (name, s)
@@ -133,7 +133,7 @@ fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
         let task = Task::new(problem.clone());
         for start in &ds.starts {
             for name in engine_names() {
-                let s = engine(name)
+                let s = strd::engine(name)
                     .unwrap()
                     .solve(&task, start, &options, &mut Silent);
                 let t = &s.summary.termination;

@@ -37,7 +37,7 @@ fn replica(seed: u64, magnitudes: &Magnitudes) -> (Truth, MeasurementSet) {
 
 fn fit(problem: Problem, objective: Objective) -> Identification {
     let id = identify(
-        &LevenbergMarquardt,
+        &LevenbergMarquardt::default(),
         problem.clone(),
         &problem.model().initial_params(),
         &Strategy::default(),

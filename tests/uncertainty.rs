@@ -78,7 +78,7 @@ fn intervals_of_the_tool_point_cover_the_truth_on_100_replicas_of_test_4() {
         let problem = Problem::new(&model, &data).unwrap();
         // The native LM needs more than its default 200 steps on a few of these (issue 18).
         let id: Identification = identify(
-            &LevenbergMarquardt,
+            &LevenbergMarquardt::default(),
             problem.clone(),
             &model.initial_params(),
             &Strategy::default(),
@@ -219,7 +219,11 @@ fn intervals_from_a_misspecified_model_are_not_honest_and_the_diagnosis_flags_it
         let (truth, data) = (out.truth, out.measurements);
         let problem = Problem::new(&model, &data).unwrap();
         let id = fit(problem.clone());
-        let top = &rank(&problem, &id.params, Options::default().rank_tolerance)[0];
+        let top = &rank(
+            &problem,
+            &id.params,
+            volver::solvers::identifiability::RANK_TOLERANCE,
+        )[0];
         assert!(
             top.strong(),
             "seed {seed}: top candidate {} (ΔBIC {})",

@@ -50,7 +50,7 @@ fn kernels(c: &mut Criterion) {
     group.bench_function("identify phi (lm)", |b| {
         b.iter(|| {
             black_box(identify(
-                &LevenbergMarquardt,
+                &LevenbergMarquardt::default(),
                 problem.clone(),
                 &p,
                 &Strategy::default(),

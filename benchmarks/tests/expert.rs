@@ -84,7 +84,7 @@ fn the_program_and_the_native_engine_meet() {
             fit.trace.len() >= 2 && fit.iterations > 0,
             "{plan}: {fit:?}"
         );
-        let from_theirs = volver_solvers::lm::LevenbergMarquardt.solve(
+        let from_theirs = volver_solvers::lm::LevenbergMarquardt::default().solve(
             &Task::new(problem.clone()),
             &fit.params,
             &phi_options(),
@@ -101,7 +101,7 @@ fn the_program_and_the_native_engine_meet() {
         );
         if plan == "test4" {
             let id = identify(
-                &volver_solvers::lm::LevenbergMarquardt,
+                &volver_solvers::lm::LevenbergMarquardt::default(),
                 problem,
                 &model.initial_params(),
                 &Strategy::default(),

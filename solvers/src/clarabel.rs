@@ -418,7 +418,7 @@ impl Solver for Polished {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let first = LevenbergMarquardt.solve(task, start, options, observer);
+        let first = LevenbergMarquardt::default().solve(task, start, options, observer);
         if first.summary.termination.failed() {
             let mut s = first;
             s.summary.solver = self.name().to_string();

@@ -83,9 +83,14 @@ impl Identifiability {
     }
 }
 
+/// The relative curvature of the scaled design below which a direction counts as not
+/// identified by the data: the analyses' default, and the native LM's
+/// ([`crate::lm::LevenbergMarquardt::rank_tolerance`]).
+pub const RANK_TOLERANCE: f64 = 1e-10;
+
 /// Analyses `task` (its problem and constraints) at `params`. `tolerance` is the relative
-/// curvature below which a direction counts as not identified (the engine's
-/// `Options::rank_tolerance`, 1e-10 by default); correlations above `correlation` in absolute
+/// curvature below which a direction counts as not identified ([`RANK_TOLERANCE`] by
+/// default); correlations above `correlation` in absolute
 /// value are listed. `None` when the Jacobian is not finite or a decomposition fails.
 pub fn analyse(
     task: &Task,

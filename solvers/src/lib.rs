@@ -231,7 +231,7 @@ pub const ENGINES: &[EngineInfo] = &[
         name: "lm",
         feature: None,
         description: "native Levenberg–Marquardt on faer",
-        make: Some(|| -> Box<dyn Solver> { Box::new(lm::LevenbergMarquardt) }),
+        make: Some(|| -> Box<dyn Solver> { Box::new(lm::LevenbergMarquardt::default()) }),
     },
     EngineInfo {
         name: "lm+clarabel",

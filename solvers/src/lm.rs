@@ -25,10 +25,10 @@
 //!   for Φ; for least squares as `min ‖R δ + c‖² + λ‖M^½ δ‖²` by QR, which keeps the Jacobian's
 //!   condition number instead of its square. The damping follows Nielsen's rule on the gain
 //!   ratio.
-//! * **Geodesic acceleration** ([`Options::geodesic_acceleration`], off by default): the step
+//! * **Geodesic acceleration** ([`LevenbergMarquardt::geodesic_acceleration`], off by default): the step
 //!   `δ + a/2` with `a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ)`, the exact second directional derivative of
 //!   the residuals by second-order duals; a step whose correction is too large is refused.
-//! * **Unidentifiable directions** (curvature below [`Options::rank_tolerance`] of the largest)
+//! * **Unidentifiable directions** (curvature below [`LevenbergMarquardt::rank_tolerance`] of the largest)
 //!   are read from the design, the unweighted normal matrix (current for ve; refreshed at each
 //!   IRLS stage for Φ), and steps stay in the span of the others. A zero tolerance holds
 //!   nothing.
@@ -106,9 +106,53 @@ const MAJORISING_GAIN: f64 = 1e-6;
 /// Gauss–Newton refinements of a converged least-squares fit, at most.
 const REFINEMENTS: usize = 100;
 
-/// The native engine (always available).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct LevenbergMarquardt;
+/// The native engine (always available), with the settings only it reads; the criteria every
+/// engine shares are in [`Options`].
+///
+/// ```
+/// use volver_solvers::lm::LevenbergMarquardt;
+/// let lm = LevenbergMarquardt { geodesic_acceleration: true, ..LevenbergMarquardt::default() };
+/// assert_eq!(lm.rank_tolerance, volver_solvers::identifiability::RANK_TOLERANCE);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
+pub struct LevenbergMarquardt {
+    /// Directions of the scaled, unweighted normal matrix (the design; not the IRLS-weighted
+    /// one) whose curvature is below this fraction of the largest are not identifiable from the
+    /// data and are held (no step along them), so that nearly redundant parameters do not
+    /// drift to meaningless values while Φ creeps down by fractions of a nanometre. Once Φ
+    /// falls below 1e-4 of its start (a nearly exact fit, where the Gauss–Newton model is exact
+    /// too) the fraction shrinks in proportion, so an exact fit may use every direction.
+    /// Default [`crate::identifiability::RANK_TOLERANCE`], 1e-10 (a condition number of 10⁵ on
+    /// the scaled Jacobian); zero holds nothing.
+    pub rank_tolerance: f64,
+    /// Correct each step by geodesic acceleration (Transtrum & Sethna 2012): the exact second
+    /// directional derivative of the residuals along the step bends it along the curved valleys
+    /// of strongly nonlinear models, and a step whose correction exceeds
+    /// [`crate::options::ACCELERATION_RATIO`] of it (in the damping norm) is refused. It costs
+    /// one Jacobian and one second-derivative pass per step tried. Default false: the machine
+    /// models are mildly nonlinear; the NIST suite ([`crate::strd::lm`]) turns it on.
+    pub geodesic_acceleration: bool,
+}
+
+impl Default for LevenbergMarquardt {
+    fn default() -> Self {
+        LevenbergMarquardt {
+            rank_tolerance: crate::identifiability::RANK_TOLERANCE,
+            geodesic_acceleration: false,
+        }
+    }
+}
+
+impl LevenbergMarquardt {
+    /// The engine with geodesic acceleration on or off (the rest default).
+    pub fn with_geodesic_acceleration(geodesic_acceleration: bool) -> Self {
+        LevenbergMarquardt {
+            geodesic_acceleration,
+            ..LevenbergMarquardt::default()
+        }
+    }
+}
 
 /// Geodesic acceleration's right-hand side in the free coordinates z: `Nᵀ D Σ J_iᵀ W_i r_i''`,
 /// where `r_i''` is the exact second derivative of residual i along the step `delta` (z) and
@@ -216,6 +260,7 @@ struct Lm<'t, 'a, 'o> {
     run: crate::run::Run<'t, 'a>,
     problem: &'t Problem<'a>,
     options: &'o Options,
+    settings: LevenbergMarquardt,
     objective: Objective,
     free: Free,
     /// Whether some constraint rows are dense (a gauge): steps then always go in the design's
@@ -256,6 +301,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         begun: Begun<'t, 'a>,
         task: &'t Task<'a>,
         options: &'o Options,
+        settings: LevenbergMarquardt,
     ) -> Result<Self, Box<Solution>> {
         let Begun {
             run,
@@ -296,6 +342,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             problem: &task.problem,
             run,
             options,
+            settings,
             objective,
             z: vec![0.0; free.n_free()],
             free,
@@ -455,7 +502,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         // Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once Φ is
         // below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
         // tolerance relaxes in proportion, so such a fit may use every direction.
-        let tolerance = self.options.rank_tolerance * (1e4 * self.phi() / self.phi0).min(1.0);
+        let tolerance = self.settings.rank_tolerance * (1e4 * self.phi() / self.phi0).min(1.0);
         if self.objective == Objective::Ve {
             // Uniform weights: the current matrix is the design.
             self.design = design_from_reduced(&hz).ok_or_else(|| {
@@ -568,7 +615,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
         // refused (as a failed step) when 2‖a‖ > α‖δ‖ in the damping norm.
         let mut total = delta.clone();
-        if self.options.geodesic_acceleration {
+        if self.settings.geodesic_acceleration {
             let ynorm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
             let accel = (ynorm > 0.0)
                 .then(|| {
@@ -844,7 +891,16 @@ impl Solver for LevenbergMarquardt {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let mut lm = match Lm::new(begun, task, options) {
+        if !(self.rank_tolerance.is_finite() && self.rank_tolerance >= 0.0) {
+            return begun.run.finish(
+                begun.p0,
+                Termination::InvalidInput(format!(
+                    "lm.rank_tolerance = {}: expected a finite number ≥ 0",
+                    self.rank_tolerance
+                )),
+            );
+        }
+        let mut lm = match Lm::new(begun, task, options, *self) {
             Ok(lm) => lm,
             Err(solution) => return *solution,
         };

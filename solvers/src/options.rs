@@ -66,15 +66,6 @@ pub struct Options {
     /// Starting Levenberg–Marquardt damping λ, relative to the damping scale (the diagonal of
     /// the normal matrix). Default 1e-4.
     pub initial_damping: f64,
-    /// Directions of the scaled, unweighted normal matrix (the design; not the IRLS-weighted
-    /// one) whose curvature is below this fraction of the
-    /// largest are not identifiable from the data and are held (no step along them), so that
-    /// nearly redundant parameters do not drift to meaningless values while Φ creeps down by
-    /// fractions of a nanometre. Once Φ falls below 1e-4 of its start (a nearly exact fit, where
-    /// the Gauss–Newton model is exact too) the fraction shrinks in proportion, so an exact fit
-    /// may use every direction. Default 1e-10 (a condition number of 10⁵ on the scaled
-    /// Jacobian).
-    pub rank_tolerance: f64,
     /// Φ only: the smoothing ε of the IRLS weights `1/√(‖r‖² + ε²)` starts at this fraction of
     /// Φ: in the native LM's majorising stage it stays at this fraction of the current Φ; NLopt
     /// and Ceres shrink it tenfold each time the smoothed problem converges. Default 0.1.
@@ -82,13 +73,6 @@ pub struct Options {
     /// Φ only: the final IRLS ε as a fraction of Φ (the native LM's Newton stage, the others'
     /// last solve). Default 1e-9.
     pub irls_final_epsilon: f64,
-    /// Native LM: correct each step by geodesic acceleration (Transtrum & Sethna 2012): the
-    /// exact second directional derivative of the residuals along the step bends it along the
-    /// curved valleys of strongly nonlinear models, and a step whose correction exceeds
-    /// [`ACCELERATION_RATIO`] of it (in the damping norm) is refused. It costs one Jacobian and
-    /// one second-derivative pass per step tried. Default false: the machine models are mildly
-    /// nonlinear; the NIST suite ([`crate::strd::options`]) turns it on.
-    pub geodesic_acceleration: bool,
     /// Native LM, Φ: polish a converged fit with nothing held by Newton steps judged by the
     /// exact gradient ([`crate::polish::settle`]), so that where the damped steps stopped along
     /// weakly identified directions does not show in the result (engines and starts then agree
@@ -112,10 +96,8 @@ impl Default for Options {
             max_evaluations: 2000,
             gradient_tolerance: 1e-13,
             initial_damping: 1e-4,
-            rank_tolerance: 1e-10,
             irls_initial_epsilon: 0.1,
             irls_final_epsilon: 1e-9,
-            geodesic_acceleration: false,
             polish: true,
         }
     }
@@ -128,7 +110,6 @@ impl Options {
             ("parameter_tolerance", self.parameter_tolerance),
             ("objective_tolerance", self.objective_tolerance),
             ("gradient_tolerance", self.gradient_tolerance),
-            ("rank_tolerance", self.rank_tolerance),
         ];
         for (name, v) in nonneg {
             if !(v.is_finite() && v >= 0.0) {

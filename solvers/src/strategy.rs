@@ -454,7 +454,7 @@ pub fn identify(
 pub fn fit(problem: Problem) -> Identification {
     let start = problem.model().initial_params();
     identify(
-        &crate::lm::LevenbergMarquardt,
+        &crate::lm::LevenbergMarquardt::default(),
         problem,
         &start,
         &Strategy::default(),

@@ -4,9 +4,9 @@
 //!
 //! ```
 //! use volver_core::nist;
-//! use volver_solvers::{lm::LevenbergMarquardt, strd};
+//! use volver_solvers::strd;
 //! let ds = nist::dataset("Misra1a").unwrap();
-//! let run = strd::run(&ds, 0, &LevenbergMarquardt, &strd::options());
+//! let run = strd::run(&ds, 0, &strd::lm(), &strd::options());
 //! assert!(run.lre_rss >= 4.0, "{run:?}");
 //! ```
 
@@ -15,10 +15,26 @@ use serde::Serialize;
 use volver_core::nist::{Dataset, Difficulty, lre};
 use volver_core::problem::Problem;
 
+/// The native LM as the suite runs it: no direction held as unidentifiable (the suite's
+/// problems are ill-conditioned on purpose: that is what it tests), and geodesic acceleration.
+pub fn lm() -> crate::lm::LevenbergMarquardt {
+    crate::lm::LevenbergMarquardt {
+        rank_tolerance: 0.0,
+        geodesic_acceleration: true,
+    }
+}
+
+/// The engine `name` as the suite runs it: the native LM of [`lm`], the others as built.
+pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
+    if name == "lm" {
+        Ok(Box::new(lm()))
+    } else {
+        crate::engine(name)
+    }
+}
+
 /// The options of the suite: least squares (ve), tolerances at the limit of double precision,
-/// generous limits (MGH10 from start 1 takes the native LM about 1800 steps along its valley),
-/// no direction held as unidentifiable (the suite's problems are ill-conditioned on purpose:
-/// that is what it tests), and the native LM's geodesic acceleration.
+/// generous limits (MGH10 from start 1 takes the native LM about 1800 steps along its valley).
 pub fn options() -> Options {
     Options {
         objective: Objective::Ve,
@@ -27,8 +43,6 @@ pub fn options() -> Options {
         gradient_tolerance: 0.0,
         max_iterations: 10_000,
         max_evaluations: 50_000,
-        rank_tolerance: 0.0,
-        geodesic_acceleration: true,
         ..Options::default()
     }
 }

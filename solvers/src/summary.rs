@@ -96,7 +96,7 @@ pub struct Summary {
     /// Parameters free in this solve (after constraints and held groups).
     pub free_parameters: usize,
     /// Free directions the data could not identify at the last iteration (held by the
-    /// engine's rank-revealing step; see `Options::rank_tolerance`).
+    /// engine's rank-revealing step; see `LevenbergMarquardt::rank_tolerance`).
     pub unidentifiable: usize,
     /// Measured points.
     pub points: usize,

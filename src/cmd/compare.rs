@@ -59,8 +59,13 @@ impl CompareArgs {
         Ok(options)
     }
 
-    /// The engines asked for (every engine of the build but `skip` when none is named).
-    fn engines(&self, skip: &[&str]) -> Result<Vec<Box<dyn Solver>>> {
+    /// The engines asked for (every engine of the build but `skip` when none is named), each
+    /// made by `make`.
+    fn engines(
+        &self,
+        skip: &[&str],
+        make: fn(&str) -> Result<Box<dyn Solver>, volver::solvers::Error>,
+    ) -> Result<Vec<Box<dyn Solver>>> {
         let names: Vec<String> = if self.engines.is_empty() {
             volver::solvers::engine_names()
                 .into_iter()
@@ -72,7 +77,7 @@ impl CompareArgs {
         };
         names
             .iter()
-            .map(|n| volver::solvers::engine(n).map_err(anyhow::Error::from))
+            .map(|n| make(n).map_err(anyhow::Error::from))
             .collect()
     }
 }
@@ -118,7 +123,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         objective,
         ..Options::default()
     })?;
-    let engines = a.engines(&[])?;
+    let engines = a.engines(&[], volver::solvers::engine)?;
     let c = compare(&model, &data, &source, &engines, &options, a.gauge)?;
     if a.json {
         let v = serde_json::to_value(&c)?;
@@ -177,7 +182,7 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
     use volver::solvers::strd;
     let options = a.limits(strd::options())?;
     // Every engine that minimises a sum of squares; BOBYQA (derivative-free) is left out.
-    let engines = a.engines(&["nlopt-bobyqa"])?;
+    let engines = a.engines(&["nlopt-bobyqa"], strd::engine)?;
     let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
     let datasets = volver::core::nist::all()?;
     let mut runs = Vec::new();
@@ -262,7 +267,7 @@ fn print_suite(
         "\n  Options: objective ve, tolerances 1e-15, {} iterations, {} evaluations, nothing held as unidentifiable{}.",
         options.max_iterations,
         options.max_evaluations,
-        if options.geodesic_acceleration {
+        if volver::solvers::strd::lm().geodesic_acceleration {
             "; the native LM with geodesic acceleration"
         } else {
             ""

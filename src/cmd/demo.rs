@@ -146,8 +146,11 @@ fn diagnose(
         "\n3. Diagnosis: periodogram of the residuals over C — {}",
         cells.join(", ")
     );
-    let options = Options::default();
-    let ranked = rank(&p1, &id1.params, options.rank_tolerance);
+    let ranked = rank(
+        &p1,
+        &id1.params,
+        volver::solvers::identifiability::RANK_TOLERANCE,
+    );
     for (i, s) in ranked.iter().take(3).enumerate() {
         println!(
             "   {}. {:<14} ΔBIC {:>8.1}  EMM {:>7} µm  {}",
@@ -207,7 +210,7 @@ fn cross_validation(
     let options = Options::default();
     let reference =
         Simulation::new(Plan::preset(m, "test4")?, out.truth.clone(), DEMO_SEED + 1).run()?;
-    let lm = volver::solvers::lm::LevenbergMarquardt;
+    let lm = volver::solvers::lm::LevenbergMarquardt::default();
     let mut cross = Vec::new();
     for (label, mdl, params) in [
         ("paper model", model, &id1.params),

@@ -145,7 +145,6 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     let objective: Objective = a.objective.parse()?;
     let mut options = Options {
         objective,
-        geodesic_acceleration: a.geodesic_acceleration,
         ..Options::default()
     };
     if let Some(v) = a.max_iterations {
@@ -157,6 +156,9 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     let mut settings = Settings::default();
     settings.engine.clone_from(&a.solver);
     settings.options = options;
+    settings.lm = volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(
+        a.geodesic_acceleration,
+    );
     // The noise model of the uncertainty the results file records.
     settings.noise = volver::uncertainty::noise_of(a.noise.as_deref())?;
     settings.priors = (!a.prior.is_empty())

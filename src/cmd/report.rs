@@ -47,9 +47,11 @@ pub fn run(a: ReportArgs) -> Result<()> {
     let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let problem = Problem::new(&model, &data)?;
     let id1 = fitted(&model, &data, "the fit")?;
-    let options = Options::default();
-    let candidates =
-        volver::solvers::candidates::rank(&problem, &id1.params, options.rank_tolerance);
+    let candidates = volver::solvers::candidates::rank(
+        &problem,
+        &id1.params,
+        volver::solvers::identifiability::RANK_TOLERANCE,
+    );
     let extended = volver::inputs::with_candidates(&machine, model.clone(), &a.add)?;
     let id2 = if a.add.is_empty() {
         None
@@ -129,7 +131,7 @@ fn cross_validation(
         let set =
             MeasurementSet::load(machine, path).context("reading the reference measurements")?;
         Problem::new(model, &set)?.check_scale(&path.display().to_string())?;
-        let lm = volver::solvers::lm::LevenbergMarquardt;
+        let lm = volver::solvers::lm::LevenbergMarquardt::default();
         let reference = Problem::new(last_model, &set)?;
         let cv = volver::solvers::strategy::cross_validate(
             &lm,
