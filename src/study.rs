@@ -18,7 +18,7 @@ use volver_core::problem::Problem;
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
 use volver_solvers::lm::LevenbergMarquardt;
 use volver_solvers::strategy::{
-    Errors, Identification, Phasing, Strategy, combined, cross_validate, identify_errors,
+    ErrorScope, Identification, Phasing, Strategy, combined, cross_validate, identify_errors,
     independent,
 };
 use volver_solvers::{Options, Silent};
@@ -209,7 +209,7 @@ impl Study {
         &self,
         model: &Model,
         set: &MeasurementSet,
-        errors: Errors,
+        errors: ErrorScope,
         phasing: Phasing,
     ) -> Result<Identification> {
         let problem = Problem::new(model, set)?;
@@ -257,7 +257,7 @@ fn table5(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
         TrackerNoise::NONE,
         seed,
     )?;
-    let f = st.run(&fourier, &t5, Errors::All, Phasing::One)?;
+    let f = st.run(&fourier, &t5, ErrorScope::All, Phasing::One)?;
     // The sine series starts from the Fourier solution (a zero amplitude has no phase gradient).
     let mut start = sine.initial_params();
     for (j, info) in sine.params().iter().enumerate() {
@@ -274,7 +274,7 @@ fn table5(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
         lm,
         Problem::new(&sine, &t5)?,
         &start,
-        Errors::All,
+        ErrorScope::All,
         &Strategy {
             init_tracker: false,
             gauge: false,
@@ -344,7 +344,7 @@ fn table6(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
         rows.push(row(
             label,
             Some(paper),
-            &st.run(&fourier, &t6, Errors::All, phasing)?,
+            &st.run(&fourier, &t6, ErrorScope::All, phasing)?,
         ));
     }
     tables.push(Table {
@@ -414,7 +414,7 @@ fn table8(st: &Study, tables: &mut Vec<Table>) -> Result<(Model, Truth, Measurem
             rows.push(row(
                 &format!("{name}, {label}"),
                 Some(p),
-                &st.run(&lin, &t7, Errors::All, phasing)?,
+                &st.run(&lin, &t7, ErrorScope::All, phasing)?,
             ));
         }
     }
@@ -445,13 +445,13 @@ fn table9(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
     let with = st.run(
         &fourier,
         &measure(&truth9, "table4", noise, seed)?,
-        Errors::All,
+        ErrorScope::All,
         Phasing::One,
     )?;
     let without = st.run(
         &fourier,
         &measure(&truth9, "table4", TrackerNoise::NONE, seed)?,
-        Errors::All,
+        ErrorScope::All,
         Phasing::One,
     )?;
     tables.push(Table {
@@ -489,10 +489,10 @@ fn table10(
     let with = st.run(
         monomial,
         &measure(truth7, "table7", noise, seed)?,
-        Errors::All,
+        ErrorScope::All,
         Phasing::One,
     )?;
-    let without = st.run(monomial, t7, Errors::All, Phasing::One)?;
+    let without = st.run(monomial, t7, ErrorScope::All, Phasing::One)?;
     tables.push(Table {
         title: "Table 10: linear axes with and without noise, table-7 mesh, monomial, 1 phase"
             .into(),
@@ -552,7 +552,7 @@ fn five_tests(st: &Study, pr: &[Problem], p0: &[f64]) -> [Identification; 5] {
         &st.lm,
         pr[0].clone(),
         &p0,
-        Errors::Linear,
+        ErrorScope::Linear,
         &strategy,
         &st.options,
         &mut Silent,
@@ -561,7 +561,7 @@ fn five_tests(st: &Study, pr: &[Problem], p0: &[f64]) -> [Identification; 5] {
         &st.lm,
         pr[1].clone(),
         &p0,
-        Errors::Rotary,
+        ErrorScope::Rotary,
         &strategy,
         &st.options,
         &mut Silent,
@@ -570,7 +570,7 @@ fn five_tests(st: &Study, pr: &[Problem], p0: &[f64]) -> [Identification; 5] {
         &st.lm,
         pr[2].clone(),
         &p0,
-        Errors::All,
+        ErrorScope::All,
         &strategy,
         &st.options,
         &mut Silent,
@@ -579,7 +579,7 @@ fn five_tests(st: &Study, pr: &[Problem], p0: &[f64]) -> [Identification; 5] {
         &st.lm,
         pr[3].clone(),
         &p0,
-        Errors::All,
+        ErrorScope::All,
         &strategy,
         &st.options,
         &mut Silent,

@@ -333,7 +333,7 @@ fn volver_identify_prints_json_writes_results_and_rejects_bad_options() {
 #[test]
 fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
     use volver::core::iso::Group;
-    use volver::solvers::strategy::{Errors, Phasing, identify_errors};
+    use volver::solvers::strategy::{ErrorScope, Phasing, identify_errors};
     use volver::solvers::{Solver, Task};
     let sim = simulate("test4", TrackerNoise::NONE, 12);
     let model = Model::default_xcfz();
@@ -365,7 +365,7 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
             &LevenbergMarquardt::default(),
             problem.clone(),
             &start,
-            Errors::All,
+            ErrorScope::All,
             &s,
             &Options::default(),
             &mut Silent,

@@ -164,11 +164,11 @@ fn bad_files_are_refused_with_the_place_named() {
 
 #[test]
 fn the_native_lm_reaches_four_digits_of_the_certified_rss() {
-    use volver::solvers::strd;
+    use volver::solvers::nist_suite;
     let mut short = Vec::new();
     for ds in nist::all().unwrap() {
         for start in 0..2 {
-            let r = strd::run(&ds, start, &strd::lm(), &strd::options());
+            let r = nist_suite::run(&ds, start, &nist_suite::lm(), &nist_suite::options());
             println!(
                 "{:<9} start {}  LRE params {:>4.1}  RSS {:>4.1}  {} it  {}",
                 r.problem, r.start, r.lre_params, r.lre_rss, r.iterations, r.termination
@@ -196,13 +196,13 @@ fn the_native_lm_reaches_four_digits_of_the_certified_rss() {
 #[cfg(feature = "ceres")]
 #[test]
 fn the_native_lm_is_at_least_as_accurate_as_ceres() {
-    use volver::solvers::{ceres::Ceres, strd};
+    use volver::solvers::{ceres::Ceres, nist_suite};
     let (mut sum_lm, mut sum_ceres) = (0.0, 0.0);
     let mut behind = Vec::new();
     for ds in nist::all().unwrap() {
         for start in 0..2 {
-            let lm = strd::run(&ds, start, &strd::lm(), &strd::options());
-            let ceres = strd::run(&ds, start, &Ceres::default(), &strd::options());
+            let lm = nist_suite::run(&ds, start, &nist_suite::lm(), &nist_suite::options());
+            let ceres = nist_suite::run(&ds, start, &Ceres::default(), &nist_suite::options());
             sum_lm += lm.lre_params + lm.lre_rss;
             sum_ceres += ceres.lre_params + ceres.lre_rss;
             for (what, a, b) in [

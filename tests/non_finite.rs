@@ -10,7 +10,7 @@ use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::nist::{self, Dataset};
 use volver::core::problem::Problem;
-use volver::solvers::{Silent, Solution, Task, Termination, engine_names, strd};
+use volver::solvers::{Silent, Solution, Task, Termination, engine_names, nist_suite};
 
 /// Every engine of the build on `problem` from `start`.
 fn every_engine(problem: Problem, start: &[f64]) -> Vec<(&'static str, Solution)> {
@@ -18,8 +18,8 @@ fn every_engine(problem: Problem, start: &[f64]) -> Vec<(&'static str, Solution)
     engine_names()
         .into_iter()
         .map(|name| {
-            let options = strd::options();
-            let s = strd::engine(name)
+            let options = nist_suite::options();
+            let s = nist_suite::engine(name)
                 .unwrap()
                 .solve(&task, start, &options, &mut Silent);
             (name, s)
@@ -124,7 +124,7 @@ fn a_stop_at_the_edge_of_the_finite_region_is_not_reported_as_convergence() {
 /// finite parameters whose recomputed Φ is the one reported.
 #[test]
 fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
-    let mut options = strd::options();
+    let mut options = nist_suite::options();
     options.max_evaluations = 5000;
     options.max_iterations = 2000;
     let mut claims = 0;
@@ -133,9 +133,10 @@ fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
         let task = Task::new(problem.clone());
         for start in &ds.starts {
             for name in engine_names() {
-                let s = strd::engine(name)
-                    .unwrap()
-                    .solve(&task, start, &options, &mut Silent);
+                let s =
+                    nist_suite::engine(name)
+                        .unwrap()
+                        .solve(&task, start, &options, &mut Silent);
                 let t = &s.summary.termination;
                 if t.failed() {
                     continue;

@@ -43,7 +43,7 @@
 
 use crate::coordinates::held_values;
 use crate::options::{Objective, Options};
-use crate::run::{Begun, begin};
+use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -156,7 +156,7 @@ impl Solver for Ceres {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let Begun {
+        let Started {
             mut run,
             free,
             p0,

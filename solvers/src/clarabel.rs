@@ -45,7 +45,7 @@
 
 use crate::lm::LevenbergMarquardt;
 use crate::options::{Objective, Options};
-use crate::run::{Begun, begin};
+use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::clarabel::algebra::CscMatrix;
@@ -270,7 +270,7 @@ impl Solver for ProxLinear {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let Begun {
+        let Started {
             mut run,
             free,
             p0: mut p,

@@ -13,7 +13,7 @@
 //! - [`identifiability`]: rank, condition, uncertainties, correlations, inseparable parameters;
 //! - [`init`]: the tracker pose's starting value by a rigid best fit (Kabsch);
 //! - [`nullspace`]: constraint elimination, `p = p₀ + N z`;
-//! - [`strd`]: NIST's StRD nonlinear-regression suite, scored by the log relative error.
+//! - [`nist_suite`]: NIST's StRD nonlinear-regression suite, scored by the log relative error.
 #![deny(missing_docs)]
 
 pub mod candidates;
@@ -31,6 +31,7 @@ pub mod init;
 pub mod kernels;
 pub mod lm;
 mod loss;
+pub mod nist_suite;
 #[cfg(feature = "nlopt")]
 pub mod nlopt;
 pub mod nullspace;
@@ -40,7 +41,6 @@ pub mod polish;
 pub mod prior;
 mod run;
 pub mod strategy;
-pub mod strd;
 pub mod summary;
 pub mod uncertainty;
 

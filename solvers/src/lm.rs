@@ -81,7 +81,7 @@ use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
 use crate::kernels::{accumulate, damped_lstsq, normal_solve, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
-use crate::run::{Begun, begin};
+use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use faer::Mat;
@@ -131,7 +131,7 @@ pub struct LevenbergMarquardt {
     /// of strongly nonlinear models, and a step whose correction exceeds
     /// [`crate::options::ACCELERATION_RATIO`] of it (in the damping norm) is refused. It costs
     /// one Jacobian and one second-derivative pass per step tried. Default false: the machine
-    /// models are mildly nonlinear; the NIST suite ([`crate::strd::lm`]) turns it on.
+    /// models are mildly nonlinear; the NIST suite ([`crate::nist_suite::lm`]) turns it on.
     pub geodesic_acceleration: bool,
 }
 
@@ -298,15 +298,15 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// The state at the start; `Err` is the finished solution when the design cannot be
     /// decomposed.
     fn new(
-        begun: Begun<'t, 'a>,
+        begun: Started<'t, 'a>,
         task: &'t Task<'a>,
         options: &'o Options,
         settings: LevenbergMarquardt,
     ) -> Result<Self, Box<Solution>> {
-        let Begun {
+        let Started {
             run,
             free,
-            first,
+            start_normal,
             p0,
             norms0,
         } = begun;
@@ -316,7 +316,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         // would hide identifiable directions near its end. For ve the current matrix is the
         // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
         // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
-        let Some(design) = design_of(&free, &first.h) else {
+        let Some(design) = design_of(&free, &start_normal.h) else {
             return Err(Box::new(run.finish(
                 p0,
                 Termination::NumericalFailure(

@@ -42,7 +42,7 @@
 
 use crate::loss::{cost_and_gradient, cost_of, norms};
 use crate::options::{Objective, Options};
-use crate::run::{Begun, begin};
+use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::nlopt as nl;
@@ -86,8 +86,8 @@ struct State<'o> {
     gradients: usize,
     best: f64,
     nonfinite: Option<String>,
-    /// Non-finite objective calls, by call number, for [`crate::run::Edge`].
-    edge: crate::run::Edge,
+    /// Non-finite objective calls, by call number, for [`crate::run::FiniteEdge`].
+    edge: crate::run::FiniteEdge,
     observer: &'o mut dyn Observer,
 }
 
@@ -130,7 +130,7 @@ impl Solver for Nlopt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let Begun {
+        let Started {
             mut run,
             free,
             p0,

@@ -22,7 +22,7 @@ use volver_core::problem::Problem;
 /// no improvement since the last non-finite trial, or with at least [`EDGE_RECENT`] non-finite
 /// trials among the last [`EDGE_WINDOW`] evaluations, is the edge's, not a minimum's.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct Edge {
+pub(crate) struct FiniteEdge {
     /// Non-finite trial evaluations.
     pub(crate) count: usize,
     /// The last [`EDGE_WINDOW`] of them, oldest first.
@@ -31,12 +31,12 @@ pub(crate) struct Edge {
     pub(crate) improved: usize,
 }
 
-/// See [`Edge`].
+/// See [`FiniteEdge`].
 const EDGE_WINDOW: usize = 20;
-/// See [`Edge`].
+/// See [`FiniteEdge`].
 const EDGE_RECENT: usize = 5;
 
-impl Edge {
+impl FiniteEdge {
     /// Records a non-finite trial at evaluation `k`.
     pub(crate) fn nonfinite_at(&mut self, k: usize) {
         self.count += 1;
@@ -49,8 +49,8 @@ impl Edge {
     /// The same record with every evaluation number moved by `base` (an engine that counts
     /// its own calls from zero).
     #[cfg(feature = "nlopt")]
-    pub(crate) fn shifted(&self, base: usize) -> Edge {
-        Edge {
+    pub(crate) fn shifted(&self, base: usize) -> FiniteEdge {
+        FiniteEdge {
             count: self.count,
             recent: self.recent.iter().map(|k| k + base).collect(),
             improved: self.improved + base,
@@ -87,7 +87,7 @@ pub(crate) struct Run<'t, 'a> {
     pub(crate) problem: &'t Problem<'a>,
     pub(crate) summary: Summary,
     /// Non-finite trial points met on the way.
-    pub(crate) edge: Edge,
+    pub(crate) edge: FiniteEdge,
     t0: Instant,
 }
 
@@ -130,7 +130,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 termination: Termination::NoFreeParameters,
                 polished: false,
             },
-            edge: Edge::default(),
+            edge: FiniteEdge::default(),
             t0: Instant::now(),
         };
         if let Err(e) = options.validate() {
@@ -228,10 +228,11 @@ impl<'t, 'a> Run<'t, 'a> {
 /// Where every engine starts: the run, the scaled free coordinates, the unweighted normal
 /// equations at `start`, the start projected onto the constraints (held values exact) and its
 /// residual modules.
-pub(crate) struct Begun<'t, 'a> {
+pub(crate) struct Started<'t, 'a> {
     pub(crate) run: Run<'t, 'a>,
     pub(crate) free: Free,
-    pub(crate) first: Normal,
+    /// The unweighted normal equations at the start.
+    pub(crate) start_normal: Normal,
     pub(crate) p0: Vec<f64>,
     pub(crate) norms0: Vec<f64>,
 }
@@ -244,9 +245,9 @@ pub(crate) fn begin<'t, 'a>(
     task: &'t Task<'a>,
     start: &[f64],
     options: &Options,
-) -> Result<Begun<'t, 'a>, Box<Solution>> {
+) -> Result<Started<'t, 'a>, Box<Solution>> {
     let run = Run::start(solver, task, start, options)?;
-    let (mut run, free, first) = run.free_and_normal(task, start)?;
+    let (mut run, free, start_normal) = run.free_and_normal(task, start)?;
     let p0 = free.params(&vec![0.0; free.n_free()]);
     if free.n_free() == 0 {
         return Err(Box::new(run.finish(p0, Termination::NoFreeParameters)));
@@ -256,10 +257,10 @@ pub(crate) fn begin<'t, 'a>(
         return Err(Box::new(run.finish(p0, t)));
     };
     run.summary.evaluations += 1;
-    Ok(Begun {
+    Ok(Started {
         run,
         free,
-        first,
+        start_normal,
         p0,
         norms0,
     })

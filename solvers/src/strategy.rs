@@ -159,7 +159,7 @@ impl Identification {
 
 /// Which axes' errors a method may identify.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Errors {
+pub enum ErrorScope {
     /// Every modelled error.
     All,
     /// Errors of linear axes (squareness included).
@@ -172,7 +172,7 @@ pub enum Errors {
 
 /// Whether parameter `info` of `model` is an error of the given kind of axis; the tracker and
 /// `other` parameters are always eligible.
-fn eligible(model: &Model, info: &ParamInfo, errors: Errors) -> bool {
+fn eligible(model: &Model, info: &ParamInfo, errors: ErrorScope) -> bool {
     if matches!(info.group, Group::Tracker | Group::Other) {
         return true;
     }
@@ -181,10 +181,10 @@ fn eligible(model: &Model, info: &ParamInfo, errors: Errors) -> bool {
         Owner::Tracker(_) | Owner::Effect(_) => return true,
     };
     match errors {
-        Errors::All => true,
-        Errors::Linear => !rotary,
-        Errors::Rotary => rotary,
-        Errors::None => false,
+        ErrorScope::All => true,
+        ErrorScope::Linear => !rotary,
+        ErrorScope::Rotary => rotary,
+        ErrorScope::None => false,
     }
 }
 
@@ -194,7 +194,7 @@ pub fn identify_errors(
     solver: &dyn Solver,
     problem: Problem,
     start: &[f64],
-    errors: Errors,
+    errors: ErrorScope,
     strategy: &Strategy,
     options: &Options,
     observer: &mut dyn Observer,
@@ -431,7 +431,7 @@ pub fn identify(
         solver,
         problem,
         start,
-        Errors::All,
+        ErrorScope::All,
         strategy,
         options,
         observer,
@@ -480,7 +480,7 @@ pub fn independent(
         solver,
         linear,
         start,
-        Errors::Linear,
+        ErrorScope::Linear,
         strategy,
         options,
         observer,
@@ -489,7 +489,7 @@ pub fn independent(
         solver,
         rotary,
         start,
-        Errors::Rotary,
+        ErrorScope::Rotary,
         strategy,
         options,
         observer,
@@ -499,7 +499,9 @@ pub fn independent(
         .iter()
         .enumerate()
         .map(|(j, info)| {
-            if eligible(model, info, Errors::Linear) && !eligible(model, info, Errors::Rotary) {
+            if eligible(model, info, ErrorScope::Linear)
+                && !eligible(model, info, ErrorScope::Rotary)
+            {
                 a.params[j]
             } else {
                 b.params[j]
@@ -524,7 +526,7 @@ pub fn combined(
         solver,
         linear,
         start,
-        Errors::Linear,
+        ErrorScope::Linear,
         strategy,
         options,
         observer,
@@ -533,7 +535,7 @@ pub fn combined(
         solver,
         rotary,
         &a.params,
-        Errors::Rotary,
+        ErrorScope::Rotary,
         strategy,
         options,
         observer,
@@ -559,7 +561,7 @@ pub fn cross_validate(
         solver,
         reference.clone(),
         &uncompensated,
-        Errors::None,
+        ErrorScope::None,
         &strategy,
         options,
         observer,
@@ -568,7 +570,7 @@ pub fn cross_validate(
         solver,
         reference,
         params,
-        Errors::None,
+        ErrorScope::None,
         &strategy,
         options,
         observer,

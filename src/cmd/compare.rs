@@ -179,21 +179,21 @@ fn print_table(c: &Comparison, gauge: bool) {
 
 /// `volver compare --suite nist`.
 fn nist_suite(a: &CompareArgs) -> Result<()> {
-    use volver::solvers::strd;
-    let options = a.limits(strd::options())?;
+    use volver::solvers::nist_suite;
+    let options = a.limits(nist_suite::options())?;
     // Every engine that minimises a sum of squares; BOBYQA (derivative-free) is left out.
-    let engines = a.engines(&["nlopt-bobyqa"], strd::engine)?;
+    let engines = a.engines(&["nlopt-bobyqa"], nist_suite::engine)?;
     let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
     let datasets = volver::core::nist::all()?;
     let mut runs = Vec::new();
     for ds in &datasets {
         for start in 0..2 {
             for e in &engines {
-                runs.push(strd::run(ds, start, e.as_ref(), &options));
+                runs.push(nist_suite::run(ds, start, e.as_ref(), &options));
             }
         }
     }
-    let mean = |engine: &str, f: fn(&strd::StrdRun) -> f64| {
+    let mean = |engine: &str, f: fn(&nist_suite::StrdRun) -> f64| {
         let v: Vec<f64> = runs.iter().filter(|r| r.engine == engine).map(f).collect();
         v.iter().sum::<f64>() / v.len().max(1) as f64
     };
@@ -217,11 +217,11 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
 
 /// The suite's table: each problem and start, then the means.
 fn print_suite(
-    runs: &[volver::solvers::strd::StrdRun],
+    runs: &[volver::solvers::nist_suite::StrdRun],
     names: &[&str],
     options: &volver::solvers::Options,
 ) -> Result<()> {
-    let mean = |engine: &str, f: fn(&volver::solvers::strd::StrdRun) -> f64| {
+    let mean = |engine: &str, f: fn(&volver::solvers::nist_suite::StrdRun) -> f64| {
         let v: Vec<f64> = runs.iter().filter(|r| r.engine == engine).map(f).collect();
         v.iter().sum::<f64>() / v.len().max(1) as f64
     };
@@ -267,7 +267,7 @@ fn print_suite(
         "\n  Options: objective ve, tolerances 1e-15, {} iterations, {} evaluations, nothing held as unidentifiable{}.",
         options.max_iterations,
         options.max_evaluations,
-        if volver::solvers::strd::lm().geodesic_acceleration {
+        if volver::solvers::nist_suite::lm().geodesic_acceleration {
             "; the native LM with geodesic acceleration"
         } else {
             ""

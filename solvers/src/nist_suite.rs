@@ -4,9 +4,9 @@
 //!
 //! ```
 //! use volver_core::nist;
-//! use volver_solvers::strd;
+//! use volver_solvers::nist_suite;
 //! let ds = nist::dataset("Misra1a").unwrap();
-//! let run = strd::run(&ds, 0, &strd::lm(), &strd::options());
+//! let run = nist_suite::run(&ds, 0, &nist_suite::lm(), &nist_suite::options());
 //! assert!(run.lre_rss >= 4.0, "{run:?}");
 //! ```
 
