@@ -77,6 +77,9 @@
 //! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
+mod finish;
+mod geodesic;
+
 use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
 use crate::kernels::{accumulate, damped_lstsq, normal_solve, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
@@ -85,6 +88,7 @@ use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use faer::Mat;
+use geodesic::curvature_gradient;
 use volver_core::problem::{Problem, norm};
 
 /// The majorising stage of a Φ fit first hands over to Newton once a step gains less than this
@@ -152,46 +156,6 @@ impl LevenbergMarquardt {
             ..LevenbergMarquardt::default()
         }
     }
-}
-
-/// Geodesic acceleration's right-hand side in the free coordinates z: `Nᵀ D Σ J_iᵀ W_i r_i''`,
-/// where `r_i''` is the exact second derivative of residual i along the step `delta` (z) and
-/// `W_i` its Gauss–Newton weight (as in [`accumulate`]). One Jacobian and one second-derivative
-/// pass; `None` when a value is not finite.
-fn curvature_gradient(
-    problem: &Problem,
-    free: &Free,
-    p: &[f64],
-    delta: &[f64],
-    objective: Objective,
-    eps: f64,
-) -> Option<Vec<f64>> {
-    let n = p.len();
-    let np = problem.n_points();
-    let basis = free.ns.basis();
-    let nf = basis.ncols();
-    let dir = free.direction(delta);
-    let mut b = vec![0.0; n];
-    let mut row = vec![0.0; 3 * n];
-    for i in 0..np {
-        let r = problem.residual_and_jacobian(i, p, &mut row);
-        let rvv = problem.residual_second_directional(i, p, &dir);
-        let nr = norm(r);
-        let (w, c) = weight_of(objective, nr, eps, np);
-        let radial = if nr > 0.0 {
-            (r[0] * rvv[0] + r[1] * rvv[1] + r[2] * rvv[2]) / (nr * nr)
-        } else {
-            0.0
-        };
-        let wr: [f64; 3] = std::array::from_fn(|c3| w * (rvv[c3] - c * radial * r[c3]));
-        for j in 0..n {
-            b[j] += row[j] * wr[0] + row[n + j] * wr[1] + row[2 * n + j] * wr[2];
-        }
-    }
-    let bz: Vec<f64> = (0..nf)
-        .map(|k| (0..n).map(|i| basis[(i, k)] * free.d[i] * b[i]).sum())
-        .collect();
-    bz.iter().all(|v| v.is_finite()).then_some(bz)
 }
 
 /// The model of the cost a step uses (see the module documentation).
@@ -791,87 +755,6 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         self.reset_scale = true;
         self.lambda = self.options.initial_damping;
         self.nu = 2.0;
-    }
-
-    /// Least squares: Gauss–Newton refinement of the converged point. The damped steps stop
-    /// once the cost can no longer tell better from worse (steps refused at rounding raise λ
-    /// until the step is negligible); the undamped steps from the QR factor go on to the
-    /// minimum (to the Jacobian's condition, not its square) while they contract and the cost
-    /// is no worse than its own rounding. Skipped when directions are held as unidentifiable.
-    fn refine(&mut self, observer: &mut dyn Observer) {
-        let problem = self.problem;
-        let np = self.np();
-        let n = problem.n_params();
-        // The cost's rounding: each residual is rounded to a few ε of its observation.
-        let rounding = 8.0 * f64::EPSILON * 2.0 / np as f64
-            * (0..np)
-                .map(|i| self.norms[i] * (self.norms[i] + problem.observation_scale(i)))
-                .sum::<f64>();
-        let mut last_step = f64::INFINITY;
-        for _ in 0..REFINEMENTS {
-            let summary = &self.run.summary;
-            if summary.iterations >= self.options.max_iterations
-                || summary.evaluations + 2 > self.options.max_evaluations
-            {
-                break;
-            }
-            let (objective, eps) = (self.objective, self.eps);
-            let Some(f) = accumulate(problem, &self.p, |r| weight_of(objective, r, eps, np), true)
-                .and_then(|normal| normal.factor)
-            else {
-                break;
-            };
-            self.run.summary.evaluations += 1;
-            self.run.summary.jacobian_evaluations += 1;
-            self.run.summary.iterations += 1;
-            let rz =
-                &Mat::from_fn(n, n, |i, j| f.r[(i, j)] * self.free.d[j]) * self.free.ns.basis();
-            let Some((dz, _)) = damped_lstsq(&rz, &f.c, 0.0) else {
-                break;
-            };
-            // Gauss–Newton converges linearly on a problem with residuals: go on while the
-            // steps contract and are not negligible.
-            let step = dz.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let contracting = step < last_step;
-            if !contracting || self.small_step(step) {
-                break;
-            }
-            last_step = step;
-            let p_new = self.free.step(&self.p, &dz);
-            let norms_new = norms_of(problem, &p_new);
-            self.run.summary.evaluations += 1;
-            let cost_new = cost_of(self.objective, &norms_new, self.eps);
-            let accepted = cost_new <= self.cost + rounding;
-            if accepted {
-                self.z.iter_mut().zip(&dz).for_each(|(a, b)| *a += b);
-                self.p = p_new;
-                self.norms = norms_new;
-                self.cost = cost_new;
-            }
-            self.report(observer, 0.0, step, accepted);
-            if !accepted {
-                break;
-            }
-        }
-    }
-}
-
-impl Lm<'_, '_, '_> {
-    /// Φ: Newton polish of the converged point ([`crate::polish::settle`]).
-    fn polish(&mut self, task: &Task) {
-        if let Some((q, report)) = crate::polish::settle_scaled(
-            task,
-            &self.p,
-            Some(&self.free.d),
-            self.objective,
-            self.options.irls_final_epsilon,
-        ) {
-            self.run.summary.iterations += report.steps;
-            self.run.summary.jacobian_evaluations += report.jacobian_evaluations;
-            self.run.summary.evaluations += report.evaluations + report.jacobian_evaluations;
-            self.run.summary.polished = true;
-            self.p = q;
-        }
     }
 }
 
