@@ -44,7 +44,10 @@ fn a_jacobian_that_is_not_finite_stops_every_engine_with_a_status_naming_it() {
     for (name, s) in every_engine(problem, &start) {
         let t = &s.summary.termination;
         assert!(
-            matches!(t, Termination::NumericalFailure(m) if m.contains("Jacobian is not finite")),
+            matches!(
+                t,
+                Termination::NumericalFailure(volver::solvers::Failure::JacobianNotFinite(_))
+            ),
             "{name}: {t}"
         );
         assert!(s.params.iter().all(|v| v.is_finite()), "{name}");

@@ -138,9 +138,14 @@ fn termination_of(s: &cs::Summary, evaluation_limit: bool) -> Termination {
         cs::Termination::NoConvergence => Termination::IterationLimit,
         cs::Termination::UserSuccess if evaluation_limit => Termination::EvaluationLimit,
         cs::Termination::UserSuccess | cs::Termination::UserFailure => {
-            Termination::NumericalFailure(format!("Ceres stopped by its callback: {}", s.message))
+            Termination::NumericalFailure(crate::Failure::Reported(format!(
+                "Ceres stopped by its callback: {}",
+                s.message
+            )))
         }
-        cs::Termination::Failure => Termination::NumericalFailure(format!("Ceres: {}", s.message)),
+        cs::Termination::Failure => {
+            Termination::NumericalFailure(crate::Failure::Reported(format!("Ceres: {}", s.message)))
+        }
     }
 }
 
@@ -274,7 +279,9 @@ impl Solver for Ceres {
             };
             let summary = match cp.solve(&ceres_options, &mut on_iteration) {
                 Ok(s) => s,
-                Err(e) => break Termination::NumericalFailure(e.to_string()),
+                Err(e) => {
+                    break Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
+                }
             };
             run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
             run.summary.jacobian_evaluations += summary.jacobian_evaluations;
@@ -286,7 +293,7 @@ impl Solver for Ceres {
             let phi = summary.final_cost / np as f64;
             eps = (eps / 10.0).max(eps_final(phi));
             if let Err(e) = cp.set_loss_epsilon(eps) {
-                break Termination::NumericalFailure(e.to_string());
+                break Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
             }
         };
         run.summary.evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
@@ -301,9 +308,11 @@ impl Solver for Ceres {
         run.edge.improved = base_evaluations + improved_pass;
         let termination = if nonfinite > 0 && !termination.converged() {
             match termination {
-                Termination::NumericalFailure(s) => Termination::NumericalFailure(format!(
-                    "{s} (a residual or Jacobian entry was not finite)"
-                )),
+                Termination::NumericalFailure(s) => {
+                    Termination::NumericalFailure(crate::Failure::Reported(format!(
+                        "{s} (a residual or Jacobian entry was not finite)"
+                    )))
+                }
                 t => t,
             }
         } else {

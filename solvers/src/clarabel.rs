@@ -35,7 +35,7 @@
 //! let model = Model::default_xcfz();
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let task = Task::new(problem);
-//! let lm = LevenbergMarquardt.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
+//! let lm = LevenbergMarquardt::default().solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! let socp = ProxLinear.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! assert!(!socp.summary.termination.failed(), "{}", socp.summary.termination);
 //! // The SOCP reaches Φ's optimum exactly; the LM's IRLS stops at or above it.
@@ -301,9 +301,8 @@ impl Solver for ProxLinear {
                 break Termination::EvaluationLimit;
             }
             let Some(lin) = linearise(task, &p, &tangent) else {
-                break Termination::NumericalFailure(format!(
-                    "the Jacobian is not finite at iteration {}",
-                    run.summary.iterations
+                break Termination::NumericalFailure(crate::Failure::JacobianNotFinite(
+                    crate::At::Iteration(run.summary.iterations),
                 ));
             };
             run.summary.evaluations += 1;
@@ -322,7 +321,9 @@ impl Solver for ProxLinear {
                     Err(e) => {
                         // A sub-problem Clarabel cannot solve: shrink the region and retry.
                         if mu > 1e20 || radius < 1e-300 {
-                            break 'outer Termination::NumericalFailure(e);
+                            break 'outer Termination::NumericalFailure(crate::Failure::Reported(
+                                e,
+                            ));
                         }
                         mu = (mu * 10.0).max(1e-6);
                         radius /= 4.0;

@@ -71,7 +71,7 @@
 //! let data = sim.run().unwrap().measurements;
 //! let model = volver_core::model::Model::default_xcfz();
 //! let problem = Problem::new(&model, &data).unwrap();
-//! let sol = LevenbergMarquardt.solve(&Task::new(problem), &model.initial_params(),
+//! let sol = LevenbergMarquardt::default().solve(&Task::new(problem), &model.initial_params(),
 //!                                    &Options::default(), &mut Silent);
 //! assert!(sol.summary.termination.converged());
 //! assert!(sol.summary.final_.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
@@ -85,7 +85,7 @@ use crate::kernels::{accumulate, damped_lstsq, normal_solve, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
 use crate::run::{Started, begin};
-use crate::summary::Termination;
+use crate::summary::{At, Failure, Termination};
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use faer::Mat;
 use geodesic::curvature_gradient;
@@ -115,8 +115,10 @@ const REFINEMENTS: usize = 100;
 ///
 /// ```
 /// use volver_solvers::lm::LevenbergMarquardt;
-/// let lm = LevenbergMarquardt { geodesic_acceleration: true, ..LevenbergMarquardt::default() };
+/// let mut lm = LevenbergMarquardt::default();
 /// assert_eq!(lm.rank_tolerance, volver_solvers::identifiability::RANK_TOLERANCE);
+/// lm.geodesic_acceleration = true;
+/// assert_eq!(lm, LevenbergMarquardt::with_geodesic_acceleration(true));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
@@ -283,9 +285,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         let Some(design) = design_of(&free, &start_normal.h) else {
             return Err(Box::new(run.finish(
                 p0,
-                Termination::NumericalFailure(
-                    "the eigen-decomposition of the design's normal matrix failed".into(),
-                ),
+                Termination::NumericalFailure(Failure::Decomposition {
+                    matrix: "the design's normal matrix",
+                    at: At::Start,
+                }),
             )));
         };
         let objective = options.objective;
@@ -420,9 +423,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             self.run.summary.evaluations += 1;
             self.run.summary.jacobian_evaluations += 1;
             let Some(d) = refreshed else {
-                return Err(Termination::NumericalFailure(format!(
-                    "the design's normal matrix failed at iteration {iterations}"
-                )));
+                return Err(Termination::NumericalFailure(Failure::Decomposition {
+                    matrix: "the design's normal matrix",
+                    at: At::Iteration(iterations),
+                }));
             };
             self.design = d;
             self.design_generation += 1;
@@ -437,10 +441,8 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             |r| self.weight(r),
             self.objective == Objective::Ve,
         )
-        .ok_or_else(|| {
-            Termination::NumericalFailure(format!(
-                "the Jacobian is not finite at iteration {iterations}"
-            ))
+        .ok_or({
+            Termination::NumericalFailure(Failure::JacobianNotFinite(At::Iteration(iterations)))
         })?;
         self.run.summary.evaluations += 1;
         self.run.summary.jacobian_evaluations += 1;
@@ -469,10 +471,11 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         let tolerance = self.settings.rank_tolerance * (1e4 * self.phi() / self.phi0).min(1.0);
         if self.objective == Objective::Ve {
             // Uniform weights: the current matrix is the design.
-            self.design = design_from_reduced(&hz).ok_or_else(|| {
-                Termination::NumericalFailure(format!(
-                    "the eigen-decomposition of the normal matrix failed at iteration {iterations}"
-                ))
+            self.design = design_from_reduced(&hz).ok_or({
+                Termination::NumericalFailure(Failure::Decomposition {
+                    matrix: "the normal matrix",
+                    at: At::Iteration(iterations),
+                })
             })?;
             self.design_generation += 1;
         }
@@ -572,8 +575,8 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         };
         let delta = r.to_z(&y);
         if delta.iter().any(|v| !v.is_finite()) {
-            return Err(Termination::NumericalFailure(format!(
-                "the step is not finite at iteration {iterations}"
+            return Err(Termination::NumericalFailure(Failure::StepNotFinite(
+                At::Iteration(iterations),
             )));
         }
         // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
@@ -596,9 +599,9 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             self.run.summary.evaluations += 1;
             self.run.summary.jacobian_evaluations += 1;
             let Some(bz) = accel else {
-                return Err(Termination::NumericalFailure(format!(
-                    "the second derivative along the step is not finite at iteration {iterations}"
-                )));
+                return Err(Termination::NumericalFailure(
+                    Failure::SecondDerivativeNotFinite(At::Iteration(iterations)),
+                ));
             };
             let nf = self.free.n_free();
             let bq: Vec<f64> = match &r.q {
@@ -622,10 +625,9 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
                 self.lambda *= self.nu;
                 self.nu *= 2.0;
                 if self.damping_exhausted() {
-                    return Err(Termination::NumericalFailure(format!(
-                        "geodesic acceleration refused every step up to damping 1e30 at \
-                         iteration {iterations}"
-                    )));
+                    return Err(Termination::NumericalFailure(
+                        Failure::AccelerationRefusedEveryStep(At::Iteration(iterations)),
+                    ));
                 }
                 return Ok(None);
             }

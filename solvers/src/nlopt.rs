@@ -33,7 +33,7 @@
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let options = Options { objective: Objective::Ve, ..Options::default() };
 //! let task = Task::new(problem);
-//! let lm = LevenbergMarquardt.solve(&task, &model.initial_params(), &options, &mut Silent);
+//! let lm = LevenbergMarquardt::default().solve(&task, &model.initial_params(), &options, &mut Silent);
 //! let sq = Nlopt::new(Algorithm::Slsqp).solve(&task, &model.initial_params(), &options, &mut Silent);
 //! assert!(!sq.summary.termination.failed(), "{}", sq.summary.termination);
 //! assert!(sq.summary.final_.ve_mm2 < lm.summary.final_.ve_mm2 * (1.0 + 1e-6));
@@ -105,8 +105,12 @@ fn termination_of(result: &Result<(nl::SuccessState, f64), (nl::FailState, f64)>
         Err((F::InvalidArgs, _)) => {
             Termination::InvalidInput("NLopt: invalid arguments".to_string())
         }
-        Err((F::ForcedStop, _)) => Termination::NumericalFailure("NLopt: forced stop".into()),
-        Err((F::OutOfMemory, _)) => Termination::NumericalFailure("NLopt: out of memory".into()),
+        Err((F::ForcedStop, _)) => {
+            Termination::NumericalFailure(crate::Failure::Reported("NLopt: forced stop".into()))
+        }
+        Err((F::OutOfMemory, _)) => {
+            Termination::NumericalFailure(crate::Failure::Reported("NLopt: out of memory".into()))
+        }
         Err((F::Failure, _)) => {
             Termination::Stalled("NLopt: generic failure, usually its line search".into())
         }

@@ -7,7 +7,7 @@ use crate::coordinates::{Free, scaled_null_space};
 use crate::kernels::{Normal, accumulate};
 use crate::loss::norms;
 use crate::options::Options;
-use crate::summary::{Summary, Termination};
+use crate::summary::{At, Failure, Summary, Termination};
 use crate::{Solution, Task, evaluate};
 use std::time::Instant;
 use volver_core::problem::Problem;
@@ -176,9 +176,7 @@ impl<'t, 'a> Run<'t, 'a> {
             Some(normal) => normal,
             None => {
                 let Some(first) = accumulate(run.problem, start, |_| (1.0, 0.0), false) else {
-                    let t = Termination::NumericalFailure(
-                        "the Jacobian is not finite at the start".into(),
-                    );
+                    let t = Termination::NumericalFailure(Failure::JacobianNotFinite(At::Start));
                     return Err(Box::new(run.finish(start.to_vec(), t)));
                 };
                 run.summary.evaluations += 1;
@@ -212,7 +210,7 @@ impl<'t, 'a> Run<'t, 'a> {
         // Never report success with a non-finite result, nor a stop at the edge of the finite
         // region as convergence.
         let termination = if !self.summary.final_.phi_mm.is_finite() && !termination.failed() {
-            Termination::NumericalFailure("the objective is not finite at the end".into())
+            Termination::NumericalFailure(Failure::ObjectiveNotFinite(At::End))
         } else {
             self.edge.verdict(termination, self.summary.evaluations)
         };
@@ -253,7 +251,7 @@ pub(crate) fn begin<'t, 'a>(
         return Err(Box::new(run.finish(p0, Termination::NoFreeParameters)));
     }
     let Some(norms0) = norms(run.problem, &p0) else {
-        let t = Termination::NumericalFailure("the residuals are not finite at the start".into());
+        let t = Termination::NumericalFailure(Failure::ResidualsNotFinite(At::Start));
         return Err(Box::new(run.finish(p0, t)));
     };
     run.summary.evaluations += 1;

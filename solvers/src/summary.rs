@@ -28,9 +28,9 @@ pub enum Termination {
     Stalled(String),
     /// Nothing to identify: no free parameter.
     NoFreeParameters,
-    /// The objective or a step became non-finite, or a factorisation failed; the text says
-    /// where. The last finite parameters are kept.
-    NumericalFailure(String),
+    /// The objective or a step became non-finite, or a factorisation failed (which, and
+    /// where, in [`Failure`]). The last finite parameters are kept.
+    NumericalFailure(Failure),
     /// The input cannot be solved (inconsistent constraints, bad options); the text says why.
     InvalidInput(String),
 }
@@ -70,6 +70,96 @@ impl fmt::Display for Termination {
             Termination::NumericalFailure(s) => write!(f, "failed: numerical failure ({s})"),
             Termination::InvalidInput(s) => write!(f, "failed: invalid input ({s})"),
         }
+    }
+}
+
+/// Where in a run something happened.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum At {
+    /// At the start.
+    Start,
+    /// At this iteration.
+    Iteration(usize),
+    /// At the end.
+    End,
+}
+
+impl fmt::Display for At {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            At::Start => f.write_str("at the start"),
+            At::Iteration(i) => write!(f, "at iteration {i}"),
+            At::End => f.write_str("at the end"),
+        }
+    }
+}
+
+/// A numerical failure, by kind: what became non-finite or which decomposition failed, and
+/// where. Serialized as its text (the `detail` of [`Termination`]); read back as
+/// [`Failure::Reported`].
+///
+/// ```
+/// use volver_solvers::summary::{At, Failure};
+/// let f = Failure::JacobianNotFinite(At::Iteration(3));
+/// assert_eq!(f.to_string(), "the Jacobian is not finite at iteration 3");
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Failure {
+    /// The Jacobian is not finite.
+    JacobianNotFinite(At),
+    /// The residuals are not finite.
+    ResidualsNotFinite(At),
+    /// The objective is not finite.
+    ObjectiveNotFinite(At),
+    /// The step is not finite.
+    StepNotFinite(At),
+    /// The second derivative along the step (geodesic acceleration) is not finite.
+    SecondDerivativeNotFinite(At),
+    /// Geodesic acceleration refused every step up to a damping of 1e30.
+    AccelerationRefusedEveryStep(At),
+    /// The eigen-decomposition of a matrix failed.
+    Decomposition {
+        /// Which matrix ("the design's normal matrix" …).
+        matrix: &'static str,
+        /// Where.
+        at: At,
+    },
+    /// What an external engine (Ceres, Clarabel) or an earlier run reported, in its words.
+    Reported(String),
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Failure::JacobianNotFinite(at) => write!(f, "the Jacobian is not finite {at}"),
+            Failure::ResidualsNotFinite(at) => write!(f, "the residuals are not finite {at}"),
+            Failure::ObjectiveNotFinite(at) => write!(f, "the objective is not finite {at}"),
+            Failure::StepNotFinite(at) => write!(f, "the step is not finite {at}"),
+            Failure::SecondDerivativeNotFinite(at) => {
+                write!(f, "the second derivative along the step is not finite {at}")
+            }
+            Failure::AccelerationRefusedEveryStep(at) => write!(
+                f,
+                "geodesic acceleration refused every step up to damping 1e30 {at}"
+            ),
+            Failure::Decomposition { matrix, at } => {
+                write!(f, "the eigen-decomposition of {matrix} failed {at}")
+            }
+            Failure::Reported(s) => f.write_str(s),
+        }
+    }
+}
+
+impl Serialize for Failure {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
+    }
+}
+
+impl<'de> Deserialize<'de> for Failure {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        String::deserialize(d).map(Failure::Reported)
     }
 }
 
