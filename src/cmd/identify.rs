@@ -106,13 +106,19 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             settings.phasing.name()
         );
     }
+    // What these positions can measure with this layout, before anything is fitted (the
+    // outcome carries the same findings).
+    if !a.json {
+        let findings =
+            volver::solvers::observability::observe(&model, &data, &model.initial_params());
+        if !findings.is_empty() {
+            println!("\nWhat these positions can and cannot measure with this layout:");
+            print_observability(&findings);
+            println!();
+        }
+    }
     let mut outcome = identify(&model, &data, &settings, &mut Progress { quiet: a.json })?;
     outcome.noise_error = noise;
-    if !a.json && !outcome.observability.is_empty() {
-        println!("\nWhat these positions can and cannot measure with this layout:");
-        print_observability(&outcome.observability);
-        println!();
-    }
     if !a.no_history {
         let path = a
             .history
