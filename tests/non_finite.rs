@@ -104,7 +104,8 @@ fn a_stop_at_the_edge_of_the_finite_region_is_not_reported_as_convergence() {
         );
         assert!(phi <= problem.phi(&start), "{name}: Φ rose to {phi}");
         if let Termination::Stalled(m) = t
-            && m.contains("edge of the region where the model is finite")
+            && m.to_string()
+                .contains("edge of the region where the model is finite")
         {
             edge += 1;
         }

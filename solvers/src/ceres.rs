@@ -210,7 +210,12 @@ impl Solver for Ceres {
             .and_then(|mut cp| cp.set_space(&space).map(|_| cp))
         {
             Ok(cp) => cp,
-            Err(e) => return run.finish(p0, Termination::InvalidInput(e.to_string())),
+            Err(e) => {
+                return run.finish(
+                    p0,
+                    Termination::InvalidInput(crate::Invalid::Reported(e.to_string())),
+                );
+            }
         };
         let wants = observer.wants_metrics();
         let base_evaluations = run.summary.evaluations;

@@ -36,6 +36,18 @@ pub enum Error {
         /// The range, in words (`≥ 0`, `> 0`).
         expected: &'static str,
     },
+    /// An engine's own setting outside its range.
+    #[error("{engine}.{field} = {value}: expected a finite number {expected}")]
+    SettingOutOfRange {
+        /// The engine (`lm`, …).
+        engine: &'static str,
+        /// The setting's field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// The range, in words.
+        expected: &'static str,
+    },
     /// The final IRLS ε above the initial one.
     #[error(
         "options.irls_final_epsilon = {final_epsilon} exceeds irls_initial_epsilon = {initial_epsilon}"

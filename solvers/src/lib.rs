@@ -46,7 +46,7 @@ pub mod uncertainty;
 
 pub use error::Error;
 pub use options::{Objective, Options};
-pub use summary::{At, Evaluation, Failure, Summary, Termination};
+pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};
 
 use volver_core::model::{Constraint, ConstraintKind, Constraints, ParamInfo};
 use volver_core::problem::Problem;

@@ -779,9 +779,13 @@ impl Solver for LevenbergMarquardt {
         if !(self.rank_tolerance.is_finite() && self.rank_tolerance >= 0.0) {
             return begun.run.finish(
                 begun.p0,
-                Termination::InvalidInput(format!(
-                    "lm.rank_tolerance = {}: expected a finite number ≥ 0",
-                    self.rank_tolerance
+                Termination::InvalidInput(crate::Invalid::Refused(
+                    crate::Error::SettingOutOfRange {
+                        engine: "lm",
+                        field: "rank_tolerance",
+                        value: self.rank_tolerance,
+                        expected: "≥ 0",
+                    },
                 )),
             );
         }

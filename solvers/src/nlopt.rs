@@ -99,11 +99,11 @@ fn termination_of(result: &Result<(nl::SuccessState, f64), (nl::FailState, f64)>
         Ok((S::MaxEvalReached, _)) => Termination::EvaluationLimit,
         Ok((S::MaxTimeReached, _)) => Termination::IterationLimit,
         Ok((S::Success, _)) | Ok((S::StopValReached, _)) => Termination::Gradient,
-        Err((F::RoundoffLimited, _)) => {
-            Termination::Stalled("NLopt: rounding errors limited progress".into())
-        }
+        Err((F::RoundoffLimited, _)) => Termination::Stalled(crate::Stall::Reported(
+            "NLopt: rounding errors limited progress".into(),
+        )),
         Err((F::InvalidArgs, _)) => {
-            Termination::InvalidInput("NLopt: invalid arguments".to_string())
+            Termination::InvalidInput(crate::Invalid::Reported("NLopt: invalid arguments".into()))
         }
         Err((F::ForcedStop, _)) => {
             Termination::NumericalFailure(crate::Failure::Reported("NLopt: forced stop".into()))
@@ -111,9 +111,9 @@ fn termination_of(result: &Result<(nl::SuccessState, f64), (nl::FailState, f64)>
         Err((F::OutOfMemory, _)) => {
             Termination::NumericalFailure(crate::Failure::Reported("NLopt: out of memory".into()))
         }
-        Err((F::Failure, _)) => {
-            Termination::Stalled("NLopt: generic failure, usually its line search".into())
-        }
+        Err((F::Failure, _)) => Termination::Stalled(crate::Stall::Reported(
+            "NLopt: generic failure, usually its line search".into(),
+        )),
     }
 }
 
@@ -323,7 +323,9 @@ impl Solver for Nlopt {
                 Ok(nl::SuccessState::Success)
             };
             if let Err(e) = setup() {
-                break Termination::InvalidInput(format!("NLopt refused its settings: {e:?}"));
+                break Termination::InvalidInput(crate::Invalid::Reported(format!(
+                    "NLopt refused its settings: {e:?}"
+                )));
             }
             let result = opt.optimize(&mut x);
             drop(opt);
@@ -332,7 +334,9 @@ impl Solver for Nlopt {
             // only if NLopt itself gives up on it (its result is then kept only if finite).
             let nonfinite = state.borrow_mut().nonfinite.take();
             let t = match (t, nonfinite) {
-                (Termination::Stalled(s), Some(why)) => Termination::Stalled(format!("{s}; {why}")),
+                (Termination::Stalled(s), Some(why)) => {
+                    Termination::Stalled(crate::Stall::Reported(format!("{s}; {why}")))
+                }
                 (t, _) => t,
             };
             let settled = t.converged() || matches!(t, Termination::Stalled(_));

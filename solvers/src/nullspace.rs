@@ -20,7 +20,7 @@ use faer::Mat;
 use volver_core::model::{Constraints, Model};
 
 /// Why a constraint set cannot be eliminated.
-#[derive(Debug, thiserror::Error, PartialEq)]
+#[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum ConstraintError {
     /// No parameter vector satisfies every constraint.
     #[error("the constraints contradict each other: the closest point misses them by {residual:e}")]

@@ -7,7 +7,7 @@ use crate::coordinates::{Free, scaled_null_space};
 use crate::kernels::{Normal, accumulate};
 use crate::loss::norms;
 use crate::options::Options;
-use crate::summary::{At, Failure, Summary, Termination};
+use crate::summary::{At, Failure, Invalid, Summary, Termination};
 use crate::{Solution, Task, evaluate};
 use std::time::Instant;
 use volver_core::problem::Problem;
@@ -70,12 +70,12 @@ impl FiniteEdge {
             .count();
         let at_edge = last >= self.improved || window >= EDGE_RECENT;
         if at_edge && termination.converged() && termination != Termination::NoFreeParameters {
-            Termination::Stalled(format!(
-                "stopped at the edge of the region where the model is finite, not at a \
-                 minimum: trial evaluation {last} was not finite ({} such, {window} of the \
-                 last {EDGE_WINDOW})",
-                self.count
-            ))
+            Termination::Stalled(crate::Stall::AtFiniteEdge {
+                last,
+                count: self.count,
+                window,
+                of: EDGE_WINDOW,
+            })
         } else {
             termination
         }
@@ -134,16 +134,17 @@ impl<'t, 'a> Run<'t, 'a> {
             t0: Instant::now(),
         };
         if let Err(e) = options.validate() {
-            return Err(Box::new(
-                run.finish(start.to_vec(), Termination::InvalidInput(e.to_string())),
-            ));
+            return Err(Box::new(run.finish(
+                start.to_vec(),
+                Termination::InvalidInput(Invalid::Refused(e)),
+            )));
         }
         if start.len() != n || start.iter().any(|v| !v.is_finite()) {
-            let t = Termination::InvalidInput(format!(
-                "the start has {} values (finite: {}), the model {n} parameters",
-                start.len(),
-                start.iter().all(|v| v.is_finite())
-            ));
+            let t = Termination::InvalidInput(Invalid::Start {
+                values: start.len(),
+                finite: start.iter().all(|v| v.is_finite()),
+                params: n,
+            });
             return Err(Box::new(run.finish(start.to_vec(), t)));
         }
         run.summary.initial = evaluate(problem, start);
@@ -191,9 +192,10 @@ impl<'t, 'a> Run<'t, 'a> {
                 run.summary.free_parameters = free.n_free();
                 Ok((run, free, first))
             }
-            Err(e) => Err(Box::new(
-                run.finish(start.to_vec(), Termination::InvalidInput(e.to_string())),
-            )),
+            Err(e) => Err(Box::new(run.finish(
+                start.to_vec(),
+                Termination::InvalidInput(Invalid::Constraints(e)),
+            ))),
         }
     }
 

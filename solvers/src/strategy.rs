@@ -218,7 +218,7 @@ pub fn identify_errors(
             p,
             vec![],
             initial,
-            Termination::InvalidInput("the strategy needs at least one sub-loop".into()),
+            Termination::InvalidInput(crate::Invalid::NoSubloop),
             None,
         );
     }
@@ -231,7 +231,7 @@ pub fn identify_errors(
                     p,
                     vec![],
                     initial,
-                    Termination::InvalidInput(e.to_string()),
+                    Termination::InvalidInput(crate::Invalid::Refused(e)),
                     None,
                 );
             }
@@ -254,15 +254,12 @@ pub fn identify_errors(
             p,
             vec![],
             initial,
-            Termination::InvalidInput(format!(
-                "{} distinct poses ({} points) give {equations} equations for at least {free} \
-                 free parameters: the mesh is too small for this model (at least \
-                 {MIN_EQUATIONS_PER_PARAMETER} equations per free parameter, {} distinct poses; \
-                 many more in practice)",
+            Termination::InvalidInput(crate::Invalid::MeshTooSmall {
                 distinct,
-                problem.n_points(),
-                (MIN_EQUATIONS_PER_PARAMETER * free).div_ceil(3)
-            )),
+                points: problem.n_points(),
+                free,
+                per_parameter: MIN_EQUATIONS_PER_PARAMETER,
+            }),
             None,
         );
     }

@@ -22,17 +22,18 @@ pub enum Termination {
     /// The gradient vanished (a stationary point).
     Gradient,
     /// The engine stopped without meeting a tolerance or a limit, at a finite point it did not
-    /// reject: NLopt's `ROUNDOFF_LIMITED` or generic `FAILURE` (typically its line search near
-    /// the optimum, where rounding dominates). The result is usually near the optimum but not
-    /// certified; the text says what the engine reported.
-    Stalled(String),
+    /// reject: pressed against the edge of the region where the model is finite, or NLopt's
+    /// `ROUNDOFF_LIMITED` or generic `FAILURE` (typically its line search near the optimum,
+    /// where rounding dominates). The result is usually near the optimum but not certified.
+    Stalled(Stall),
     /// Nothing to identify: no free parameter.
     NoFreeParameters,
     /// The objective or a step became non-finite, or a factorisation failed (which, and
     /// where, in [`Failure`]). The last finite parameters are kept.
     NumericalFailure(Failure),
-    /// The input cannot be solved (inconsistent constraints, bad options); the text says why.
-    InvalidInput(String),
+    /// The input cannot be solved (inconsistent constraints, bad options, a start of the wrong
+    /// length, a mesh too small); [`Invalid`] says which.
+    InvalidInput(Invalid),
 }
 
 impl Termination {
@@ -151,17 +152,143 @@ impl fmt::Display for Failure {
     }
 }
 
-impl Serialize for Failure {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.collect_str(self)
+/// Why a run stalled.
+///
+/// ```
+/// use volver_solvers::{Stall, Termination};
+/// let t = Termination::Stalled(Stall::AtFiniteEdge { last: 7, count: 3, window: 2, of: 20 });
+/// // Serialized as before the reasons were typed: the text as `detail`, read back as its words.
+/// let json = serde_json::to_string(&t).unwrap();
+/// assert!(json.starts_with(r#"{"reason":"stalled","detail":"stopped at the edge"#), "{json}");
+/// let back: Termination = serde_json::from_str(&json).unwrap();
+/// assert_eq!(back.to_string(), t.to_string());
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Stall {
+    /// It claimed convergence at the edge of the region where the model is finite: `last`
+    /// was the last non-finite trial evaluation, `count` of them in all, `window` among the
+    /// last `of` evaluations.
+    AtFiniteEdge {
+        /// The last non-finite trial evaluation.
+        last: usize,
+        /// Non-finite trials in all.
+        count: usize,
+        /// Non-finite trials among the last `of` evaluations.
+        window: usize,
+        /// The window's length.
+        of: usize,
+    },
+    /// What an external engine reported, in its words.
+    Reported(String),
+}
+
+impl fmt::Display for Stall {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Stall::AtFiniteEdge {
+                last,
+                count,
+                window,
+                of,
+            } => write!(
+                f,
+                "stopped at the edge of the region where the model is finite, not at a \
+                 minimum: trial evaluation {last} was not finite ({count} such, {window} of the \
+                 last {of})"
+            ),
+            Stall::Reported(s) => f.write_str(s),
+        }
     }
 }
 
-impl<'de> Deserialize<'de> for Failure {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        String::deserialize(d).map(Failure::Reported)
+/// Why a run could not start.
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Invalid {
+    /// An option or setting out of its range, or a rigid fit of the tracker that cannot be made.
+    Refused(crate::Error),
+    /// The start has the wrong length or values that are not finite.
+    Start {
+        /// Its length.
+        values: usize,
+        /// Whether every value is finite.
+        finite: bool,
+        /// The model's parameters.
+        params: usize,
+    },
+    /// The constraints cannot be eliminated.
+    Constraints(crate::nullspace::ConstraintError),
+    /// A strategy with no sub-loop.
+    NoSubloop,
+    /// Too few distinct poses for the model: fewer than `per_parameter` equations per free
+    /// parameter.
+    MeshTooSmall {
+        /// Distinct poses.
+        distinct: usize,
+        /// Measured points.
+        points: usize,
+        /// At least this many free parameters.
+        free: usize,
+        /// The equations per free parameter required.
+        per_parameter: usize,
+    },
+    /// What an external engine refused, in its words.
+    Reported(String),
+}
+
+impl fmt::Display for Invalid {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Invalid::Refused(e) => write!(f, "{e}"),
+            Invalid::Start {
+                values,
+                finite,
+                params,
+            } => write!(
+                f,
+                "the start has {values} values (finite: {finite}), the model {params} parameters"
+            ),
+            Invalid::Constraints(e) => write!(f, "{e}"),
+            Invalid::NoSubloop => f.write_str("the strategy needs at least one sub-loop"),
+            Invalid::MeshTooSmall {
+                distinct,
+                points,
+                free,
+                per_parameter,
+            } => write!(
+                f,
+                "{distinct} distinct poses ({points} points) give {} equations for at least \
+                 {free} free parameters: the mesh is too small for this model (at least \
+                 {per_parameter} equations per free parameter, {} distinct poses; many more in \
+                 practice)",
+                3 * distinct,
+                (per_parameter * free).div_ceil(3)
+            ),
+            Invalid::Reported(s) => f.write_str(s),
+        }
     }
 }
+
+/// The three reasons that carry a detail serialize it as its text and read it back as their
+/// `Reported` variant.
+macro_rules! as_text {
+    ($t:ty) => {
+        impl Serialize for $t {
+            fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                s.collect_str(self)
+            }
+        }
+        impl<'de> Deserialize<'de> for $t {
+            fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+                String::deserialize(d).map(<$t>::Reported)
+            }
+        }
+    };
+}
+as_text!(Failure);
+as_text!(Stall);
+as_text!(Invalid);
 
 /// Objective values and error metrics at one parameter vector.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
