@@ -99,6 +99,10 @@ impl Request {
     }
 }
 
+/// A Monte Carlo run and its U95 per grid coordinate, after the set-up's rigid transform and
+/// raw (mm).
+pub type MonteCarloU95 = (volver_solvers::uncertainty::MonteCarlo, Vec<f64>, Vec<f64>);
+
 /// The fit with its gauge stated and the expanded uncertainty of every parameter and of the
 /// tool point over a grid, linearised and by Monte Carlo (see [`assess`]).
 #[derive(Debug)]
@@ -113,7 +117,7 @@ pub struct Assessment {
     /// Raw, in the workpiece frame.
     pub raw: Vec<volver_solvers::uncertainty::PointUncertainty>,
     /// The Monte Carlo run, and its U95 per grid coordinate (after the transform, raw; mm).
-    pub monte_carlo: Option<(volver_solvers::uncertainty::MonteCarlo, Vec<f64>, Vec<f64>)>,
+    pub monte_carlo: Option<MonteCarloU95>,
     /// The rule of the values the data do not determine; `None` without a gauge or priors.
     pub rule: Option<String>,
     /// Whether priors decided them.
@@ -177,18 +181,7 @@ pub fn assess(
     };
     let aligned = grid.uncertainty(model, &id.params, &covariance, true);
     let raw = grid.uncertainty(model, &id.params, &covariance, false);
-    let mc = match request.monte_carlo {
-        Some((n, seed)) => Some(monte_carlo_run(
-            model,
-            data,
-            request,
-            &id,
-            &covariance,
-            (n, seed),
-            progress,
-        )?),
-        None => None,
-    };
+    let mc = monte_carlo_run(model, data, request, &grid, &id, &covariance, progress)?;
     let rule = match &request.priors {
         Some(p) => Some(p.rule()),
         None => id
@@ -387,26 +380,25 @@ impl Assessment {
     }
 }
 
-/// The Monte Carlo replicas of an assessment and their U95 per grid coordinate (after the
-/// transform, raw; mm).
+/// The Monte Carlo replicas an assessment asks for and their U95 per grid coordinate (after
+/// the transform, raw; mm); `None` when it asks for none.
 fn monte_carlo_run(
     model: &Model,
     data: &volver_core::measure::MeasurementSet,
     request: &Request,
+    grid: &volver_solvers::uncertainty::ToolGrid,
     id: &volver_solvers::strategy::Identification,
     covariance: &volver_solvers::uncertainty::Covariance,
-    (n, seed): (usize, u64),
     progress: &(dyn Fn(usize) + Sync),
-) -> Result<(volver_solvers::uncertainty::MonteCarlo, Vec<f64>, Vec<f64>)> {
-    use volver_solvers::uncertainty::{ToolGrid, monte_carlo};
+) -> Result<Option<MonteCarloU95>> {
+    use volver_solvers::uncertainty::monte_carlo;
+    let Some((n, seed)) = request.monte_carlo else {
+        return Ok(None);
+    };
     if n == 0 {
         bail!("--monte-carlo 0: give at least 2 replicas");
     }
     let options = volver_solvers::Options::default();
-    let grid = ToolGrid {
-        commands: request.grid.positions.clone(),
-        tool: request.tool,
-    };
     let base = grid.points(model, &id.params);
     let mc = monte_carlo(
         &request.engine,
@@ -426,5 +418,5 @@ fn monte_carlo_run(
     }
     let a = grid.monte_carlo_u95(model, &mc, &base, true);
     let r = grid.monte_carlo_u95(model, &mc, &base, false);
-    Ok((mc, a, r))
+    Ok(Some((mc, a, r)))
 }
