@@ -239,11 +239,7 @@ pub fn identify(
     if settings.subloops == 0 {
         bail!("--subloops must be at least 1");
     }
-    let solver: Box<dyn volver_solvers::Solver> = if settings.engine == "lm" {
-        Box::new(settings.lm)
-    } else {
-        volver_solvers::engine(&settings.engine)?
-    };
+    let solver = volver_solvers::engine_with(&settings.engine, settings.lm)?;
     let options = &settings.options;
     options.validate()?;
     let problem = Problem::new(model, data)?;

@@ -297,6 +297,23 @@ pub fn engine_names() -> Vec<&'static str> {
         .collect()
 }
 
+/// [`engine`], with the native LM configured as `lm` when `name` is `lm` (an engine's own
+/// settings; the others are built with their defaults).
+///
+/// ```
+/// use volver_solvers::{engine_with, lm::LevenbergMarquardt};
+/// let lm = LevenbergMarquardt::with_geodesic_acceleration(true);
+/// assert_eq!(engine_with("lm", lm).unwrap().name(), "lm");
+/// assert!(engine_with("simplex", lm).is_err());
+/// ```
+pub fn engine_with(name: &str, lm: lm::LevenbergMarquardt) -> Result<Box<dyn Solver>, Error> {
+    if name == "lm" {
+        Ok(Box::new(lm))
+    } else {
+        engine(name)
+    }
+}
+
 /// The engine called `name`, or an error listing the engines of this build (and the Cargo
 /// feature that brings a known engine this build lacks).
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, Error> {

@@ -26,11 +26,7 @@ pub fn lm() -> crate::lm::LevenbergMarquardt {
 
 /// The engine `name` as the suite runs it: the native LM of [`lm`], the others as built.
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
-    if name == "lm" {
-        Ok(Box::new(lm()))
-    } else {
-        crate::engine(name)
-    }
+    crate::engine_with(name, lm())
 }
 
 /// The options of the suite: least squares (ve), tolerances at the limit of double precision,
