@@ -58,7 +58,7 @@ fn main() -> Result<()> {
         data.points.len(),
         first.engine,
         first.id.initial.stats.emm_um,
-        first.id.final_.stats.emm_um,
+        first.id.reached.stats.emm_um,
         first.id.termination
     );
     // 3. Diagnosis: where the fit fails and what it most likely misses.
@@ -76,7 +76,7 @@ fn main() -> Result<()> {
         "with {}: {} parameters, EMM {:.2} µm",
         top.id,
         extended.n_params(),
-        second.id.final_.stats.emm_um
+        second.id.reached.stats.emm_um
     );
     // 5. The report and the results file (what `volver compensate` and `tables` read).
     let out = std::env::temp_dir().join("volver-whole-path");

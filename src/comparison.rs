@@ -15,7 +15,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_solvers::identifiability::hold_weak;
 use volver_solvers::init::init_tracker;
 use volver_solvers::lm::LevenbergMarquardt;
@@ -102,10 +102,10 @@ pub fn compare(
             let s = e.solve(&task, &start, options, &mut Silent).summary;
             Row {
                 engine: e.name().to_string(),
-                phi_mm: s.final_.phi_mm,
-                ve_mm2: s.final_.ve_mm2,
-                emm_um: s.final_.stats.emm_um,
-                emax_um: s.final_.stats.emax_um,
+                phi_mm: s.reached.phi_mm,
+                ve_mm2: s.reached.ve_mm2,
+                emm_um: s.reached.stats.emm_um,
+                emax_um: s.reached.stats.emax_um,
                 iterations: s.iterations,
                 evaluations: s.evaluations,
                 jacobian_evaluations: s.jacobian_evaluations,

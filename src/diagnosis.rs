@@ -18,7 +18,7 @@ use serde::Serialize;
 use volver_core::diagnose;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_solvers::candidates::{Score, rank, verdict};
 use volver_solvers::identifiability::{Identifiability, analyse};
 
@@ -211,8 +211,8 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
     Ok(Diagnosis {
         points: data.points.len(),
         model: model.spec().name.clone(),
-        emm_um: id.final_.stats.emm_um,
-        emax_um: id.final_.stats.emax_um,
+        emm_um: id.reached.stats.emm_um,
+        emax_um: id.reached.stats.emax_um,
         termination: id.termination.to_string(),
         noise_estimate_um: repeat.map(|(s, _)| s.emm_um),
         repeat_pairs: repeat.map(|(_, n)| n),
@@ -230,7 +230,7 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
             })
             .collect(),
         identifiability: ident.as_ref().map(|a| identifiability(model, a)),
-        verdict: verdict(&ranked, id.final_.stats.emm_um),
+        verdict: verdict(&ranked, id.reached.stats.emm_um),
         candidates: ranked.iter().map(Candidate::of).collect(),
     })
 }

@@ -9,7 +9,7 @@
 //! let data = volver::inputs::demo_test4(&model).unwrap().measurements;
 //! let outcome = identify(&model, &data, &Settings::default(), &mut volver::solvers::Silent).unwrap();
 //! assert!(outcome.refusal.is_none());
-//! assert!(outcome.id.final_.stats.emm_um < outcome.id.initial.stats.emm_um);
+//! assert!(outcome.id.reached.stats.emm_um < outcome.id.initial.stats.emm_um);
 //! assert_eq!(outcome.results.parameters.len(), model.n_params());
 //! ```
 
@@ -21,7 +21,7 @@ use volver_core::measure::MeasurementSet;
 use volver_core::metrics::ErrorStats;
 use volver_core::model::Model;
 use volver_core::plausibility::{self, Implausible};
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::results::ResultsFile;
 use volver_core::simulate::{SimulationRecord, Truth};
 use volver_solvers::observability::Finding;
@@ -346,7 +346,7 @@ pub(crate) fn with_priors(
     )
     .context("the maximum a posteriori solution (a decomposition failed)")?;
     id.params = post.params;
-    id.final_ = volver_solvers::evaluate(problem, &id.params);
+    id.reached = volver_solvers::evaluate(problem, &id.params);
     Ok(post.covariance)
 }
 
@@ -386,7 +386,7 @@ fn implausible_sizes(
             covariance_factor: data_columns
                 .as_deref()
                 .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
-            emm_um: Some(id.final_.stats.emm_um),
+            emm_um: Some(id.reached.stats.emm_um),
             relaxed: false,
         },
     )
@@ -455,11 +455,11 @@ impl Outcome {
             subloops: self.subloops,
             points: self.points,
             emm_initial_um: id.initial.stats.emm_um,
-            emm_final_um: id.final_.stats.emm_um,
+            emm_final_um: id.reached.stats.emm_um,
             emax_initial_um: id.initial.stats.emax_um,
-            emax_final_um: id.final_.stats.emax_um,
-            phi_final_mm: id.final_.phi_mm,
-            ve_final_mm2: id.final_.ve_mm2,
+            emax_final_um: id.reached.stats.emax_um,
+            phi_final_mm: id.reached.phi_mm,
+            ve_final_mm2: id.reached.ve_mm2,
             residual_percent: id.residual_percent(),
             noise_error_um: self.noise_error.map(|s| s.emm_um),
             noise_emax_um: self.noise_error.map(|s| s.emax_um),

@@ -12,7 +12,7 @@ use volver_core::diagnose;
 use volver_core::iso::ErrorId;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
-use volver_core::problem::{Problem, norm};
+use volver_core::problem::{Problem, Residuals, norm};
 use volver_solvers::Options;
 use volver_solvers::candidates::Score;
 use volver_solvers::identifiability::analyse;
@@ -50,7 +50,7 @@ impl CrossRow {
         CrossRow {
             label,
             emm_before_um: cv.initial.stats.emm_um,
-            emm_after_um: cv.final_.stats.emm_um,
+            emm_after_um: cv.reached.stats.emm_um,
             emm_after_u95_um: reference.emm_u95_um(&cv.params),
             residual_percent: cv.residual_percent(),
         }
@@ -291,11 +291,11 @@ fn summary(p: &Page, s: &mut String) -> Result<()> {
                 f.label.clone(),
                 f.model.n_params().to_string(),
                 format!("{:.3} ± {u0:.3}", f.id.initial.stats.emm_um),
-                format!("{:.3} ± {u1:.3}", f.id.final_.stats.emm_um),
-                format!("{:.3}", f.id.final_.stats.emax_um),
+                format!("{:.3} ± {u1:.3}", f.id.reached.stats.emm_um),
+                format!("{:.3}", f.id.reached.stats.emax_um),
                 format!("{:.2} %", f.id.residual_percent()),
                 input.noise_um.map_or("–".into(), |n| {
-                    format!("{:.3} ± {:.3}", f.id.final_.stats.emm_um / n, u1 / n)
+                    format!("{:.3} ± {:.3}", f.id.reached.stats.emm_um / n, u1 / n)
                 }),
                 f.id.termination.to_string(),
             ])
@@ -548,7 +548,7 @@ fn candidates(p: &Page, s: &mut String) -> Result<()> {
                 "<p><b>Verdict:</b> {}</p>",
                 crate::plot::escape(&volver_solvers::candidates::verdict(
                     &input.candidates,
-                    first.id.final_.stats.emm_um
+                    first.id.reached.stats.emm_um
                 ))
             );
         }
@@ -585,7 +585,7 @@ fn candidates(p: &Page, s: &mut String) -> Result<()> {
         let data: Vec<(String, f64)> = input
             .fits
             .iter()
-            .map(|f| (f.label.clone(), f.id.final_.stats.emm_um))
+            .map(|f| (f.label.clone(), f.id.reached.stats.emm_um))
             .collect();
         s.push_str(&plot::bars(
             "EMM per model revision",

@@ -14,7 +14,7 @@ use volver_core::measure::MeasurementSet;
 use volver_core::model::{ErrorModelSpec, Model};
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::Plan;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
 use volver_solvers::lm::LevenbergMarquardt;
 use volver_solvers::strategy::{
@@ -98,8 +98,8 @@ fn row(label: &str, paper: Option<Figures>, id: &Identification) -> Row {
         ours: Figures {
             emm0_um: id.initial.stats.emm_um,
             emax0_um: id.initial.stats.emax_um,
-            emm_um: id.final_.stats.emm_um,
-            emax_um: id.final_.stats.emax_um,
+            emm_um: id.reached.stats.emm_um,
+            emax_um: id.reached.stats.emax_um,
             residual_percent: id.residual_percent(),
         },
         converged: id.termination.converged(),
@@ -290,7 +290,7 @@ fn table5(st: &Study, tables: &mut Vec<Table>) -> Result<()> {
     );
     s_row.ours.emm0_um = f.initial.stats.emm_um;
     s_row.ours.emax0_um = f.initial.stats.emax_um;
-    s_row.ours.residual_percent = 100.0 * s.final_.stats.emm_um / f.initial.stats.emm_um;
+    s_row.ours.residual_percent = 100.0 * s.reached.stats.emm_um / f.initial.stats.emm_um;
     tables.push(Table {
         title: "Table 5: Fourier against sine series, rotary axis, table-4 mesh, no noise".into(),
         rows: vec![

@@ -320,7 +320,7 @@ impl Assessment {
             noise: request.noise.to_string(),
             sigma_mm: self.covariance.sigma_mm,
             coverage_factor: K,
-            emm_um: self.id.final_.stats.emm_um,
+            emm_um: self.id.reached.stats.emm_um,
             tool_offset_mm: request.tool,
             parameters: model
                 .params()

@@ -53,6 +53,7 @@ use volver::solvers::nullspace::NullSpace;
 use volver::solvers::{
     Objective, Options, Silent, Solution, Solver, Task, Termination, engine, engine_names,
 };
+use volver_core::problem::Residuals;
 
 /// Records a failed check (every engine and case is run and printed before the test fails).
 macro_rules! check {
@@ -101,8 +102,8 @@ const LEGENDRE: &str = "basis = \"legendre\"\ndegree = 3";
 
 fn objective_of(s: &Solution, objective: Objective) -> f64 {
     match objective {
-        Objective::Phi => s.summary.final_.phi_mm,
-        Objective::Ve => s.summary.final_.ve_mm2,
+        Objective::Phi => s.summary.reached.phi_mm,
+        Objective::Ve => s.summary.reached.ve_mm2,
     }
 }
 
@@ -127,7 +128,7 @@ fn check_honest(errors: &mut Vec<String>, name: &str, s: &Solution, options: &Op
     }
     check!(
         errors,
-        s.summary.final_.phi_mm.is_finite() && s.params.iter().all(|v| v.is_finite()),
+        s.summary.reached.phi_mm.is_finite() && s.params.iter().all(|v| v.is_finite()),
         "{name}: non-finite result"
     );
 }

@@ -9,6 +9,7 @@ use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
 use volver::core::problem::Problem;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
+use volver_core::problem::Residuals;
 
 fn truth(seed: u64) -> Truth {
     let m = Machine::default_xcfz();

@@ -106,15 +106,15 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
     let id = fit(Problem::new(&model, &data).unwrap());
     println!(
         "EMM {} → {} µm ({:?})",
-        id.initial.stats.emm_um, id.final_.stats.emm_um, id.termination
+        id.initial.stats.emm_um, id.reached.stats.emm_um, id.termination
     );
-    assert!(id.final_.stats.emm_um < 1e-5 * id.initial.stats.emm_um);
+    assert!(id.reached.stats.emm_um < 1e-5 * id.initial.stats.emm_um);
     // The paper's model alone cannot.
     let plain = fit(Problem::new(&Model::default_xcfz(), &data).unwrap());
     assert!(
-        plain.final_.stats.emm_um > 1.0,
+        plain.reached.stats.emm_um > 1.0,
         "{}",
-        plain.final_.stats.emm_um
+        plain.reached.stats.emm_um
     );
     // Thermal drift needs time stamps.
     let mut no_time = data.clone();

@@ -137,7 +137,7 @@ fn agree(plan: &str, seed: u64, all_engines: bool) {
             "{name}: {:.1} s, {} iterations, Φ {:.12} mm, {}",
             t0.elapsed().as_secs_f64(),
             id.iterations(),
-            id.final_.phi_mm,
+            id.reached.phi_mm,
             id.termination
         );
         id
@@ -177,7 +177,7 @@ fn agree(plan: &str, seed: u64, all_engines: bool) {
         let f = functions(&legendre, model, &id.params);
         let diff: Vec<f64> = f.iter().zip(&reference).map(|(a, b)| a - b).collect();
         let rel = rms(&diff) / size;
-        let dphi = (id.final_.phi_mm - base.final_.phi_mm) / base.final_.phi_mm;
+        let dphi = (id.reached.phi_mm - base.reached.phi_mm) / base.reached.phi_mm;
         let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
         println!("{name}: functions differ by {rel:.2e} relative, Φ by {dphi:.2e}, {held} held");
         if rel > 1e-9 {

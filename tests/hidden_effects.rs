@@ -82,7 +82,7 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
     let noise = sim.record.noise_error.emm_um;
     println!(
         "{want}: EMM {:.3} µm, noise error {noise:.3} µm",
-        before.final_.stats.emm_um
+        before.reached.stats.emm_um
     );
     for s in ranked.iter().take(4) {
         println!(
@@ -117,10 +117,10 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
         &Options::default(),
         &mut Silent,
     );
-    let ratio = after.final_.stats.emm_um / noise;
+    let ratio = after.reached.stats.emm_um / noise;
     println!(
         "  after {want}: EMM {:.3} µm = {ratio:.4} × noise error ({:?})",
-        after.final_.stats.emm_um, after.termination
+        after.reached.stats.emm_um, after.termination
     );
     assert!(!after.termination.failed(), "{:?}", after.termination);
     assert!((ratio - 1.0).abs() <= 0.05, "final / noise = {ratio}");

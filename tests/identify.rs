@@ -9,7 +9,7 @@ use volver::core::measure::MeasurementSet;
 use volver::core::model::{ErrorModelSpec, Model};
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
-use volver::core::problem::Problem;
+use volver::core::problem::{Problem, Residuals};
 use volver::core::simulate::{Magnitudes, Simulation, Synthetic, Truth};
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::strategy::{Strategy, identify};
@@ -68,12 +68,12 @@ fn noise_free_test4_is_recovered_to_1e_6_of_the_initial_error() {
             "{objective}: {:?} EMM {} → {} µm, {} iterations, {} evaluations",
             id.termination,
             id.initial.stats.emm_um,
-            id.final_.stats.emm_um,
+            id.reached.stats.emm_um,
             id.iterations(),
             id.evaluations()
         );
         assert!(id.termination.converged(), "{:?}", id.termination);
-        assert!(id.final_.stats.emm_um <= 1e-6 * id.initial.stats.emm_um);
+        assert!(id.reached.stats.emm_um <= 1e-6 * id.initial.stats.emm_um);
         assert!(model.constraints().max_violation(&id.params) < 1e-12);
     }
 }
@@ -84,12 +84,12 @@ fn with_the_papers_noise_the_fit_reaches_the_noise_error() {
     let model = Model::default_xcfz();
     let id = fit(&model, &sim.measurements, Objective::Phi);
     let noise = sim.record.noise_error.emm_um;
-    let ratio = id.final_.stats.emm_um / noise;
+    let ratio = id.reached.stats.emm_um / noise;
     println!(
         "{:?} EMM {} → {} µm, noise {noise} µm, ratio {ratio}, {} iterations",
         id.termination,
         id.initial.stats.emm_um,
-        id.final_.stats.emm_um,
+        id.reached.stats.emm_um,
         id.iterations()
     );
     assert!(id.termination.converged(), "{:?}", id.termination);
@@ -166,13 +166,13 @@ fn equivalent_polynomial_bases_reach_the_same_phi() {
         println!(
             "{linear:?}: {:?} Φ {:.15e} mm, {} iterations, {} held",
             id.termination,
-            id.final_.phi_mm,
+            id.reached.phi_mm,
             id.iterations(),
             id.phases[0].unidentifiable
         );
         assert!(id.termination.converged());
         assert!(model.constraints().max_violation(&id.params) < 1e-12);
-        phis.push(id.final_.phi_mm);
+        phis.push(id.reached.phi_mm);
     }
     let tolerance = if held > 0 { 1e-5 } else { 1e-9 };
     for phi in &phis {
@@ -236,10 +236,10 @@ fn fourier_and_sine_series_of_equal_order_reach_the_same_phi() {
     );
     println!(
         "fourier {:?} Φ {:.15e}; sine {:?} Φ {:.15e}",
-        f.termination, f.final_.phi_mm, s.termination, s.final_.phi_mm
+        f.termination, f.reached.phi_mm, s.termination, s.reached.phi_mm
     );
     assert!(f.termination.converged() && s.termination.converged());
-    assert!((s.final_.phi_mm / f.final_.phi_mm - 1.0).abs() < 1e-9);
+    assert!((s.reached.phi_mm / f.reached.phi_mm - 1.0).abs() < 1e-9);
 }
 
 #[test]
@@ -385,11 +385,11 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
             "{phasing:?}: {:?}",
             id.termination
         );
-        assert!(id.final_.stats.emm_um < id.initial.stats.emm_um);
+        assert!(id.reached.stats.emm_um < id.initial.stats.emm_um);
     }
-    let one = run(Phasing::Tr, 1).final_.stats.emm_um;
-    let many = run(Phasing::Tr, 8).final_.stats.emm_um;
-    let joint = run(Phasing::One, 1).final_.stats.emm_um;
+    let one = run(Phasing::Tr, 1).reached.stats.emm_um;
+    let many = run(Phasing::Tr, 8).reached.stats.emm_um;
+    let joint = run(Phasing::One, 1).reached.stats.emm_um;
     println!("TR ×1 {one} µm, TR ×8 {many} µm, joint {joint} µm");
     assert!(many < one && joint <= many);
 }
@@ -446,10 +446,10 @@ fn combined_independent_and_cross_validation_methods() {
     // ~4e-10 µm (ε × 2 m from the tracker): up to 1e-9 µm of difference is rounding (measured
     // 6e-12 µm).
     assert!(
-        cv.final_.stats.emm_um <= joint.final_.stats.emm_um * (1.0 + 1e-9) + 1e-9,
+        cv.reached.stats.emm_um <= joint.reached.stats.emm_um * (1.0 + 1e-9) + 1e-9,
         "cross-validation {} µm against its own fit {} µm",
-        cv.final_.stats.emm_um,
-        joint.final_.stats.emm_um
+        cv.reached.stats.emm_um,
+        joint.reached.stats.emm_um
     );
     // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
     let (lin, rot) = combined(
@@ -487,14 +487,14 @@ fn combined_independent_and_cross_validation_methods() {
     println!(
         "reference test 4: uncompensated {} µm; joint {} µm; combined {} µm ({:.2} %); independent {} µm ({:.2} %)",
         c.initial.stats.emm_um,
-        cv.final_.stats.emm_um,
-        c.final_.stats.emm_um,
+        cv.reached.stats.emm_um,
+        c.reached.stats.emm_um,
         c.residual_percent(),
-        i.final_.stats.emm_um,
+        i.reached.stats.emm_um,
         i.residual_percent()
     );
-    assert!(c.final_.stats.emm_um < 0.5 * c.initial.stats.emm_um);
-    assert!(cv.final_.stats.emm_um < c.final_.stats.emm_um);
+    assert!(c.reached.stats.emm_um < 0.5 * c.initial.stats.emm_um);
+    assert!(cv.reached.stats.emm_um < c.reached.stats.emm_um);
 }
 
 #[test]

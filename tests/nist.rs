@@ -5,7 +5,7 @@
 
 use num_dual::Dual64;
 use volver::core::nist::{self, Difficulty, NAMES, lre};
-use volver::core::problem::Problem;
+use volver::core::problem::{CurveFit, Residuals};
 
 #[test]
 fn every_file_reads_and_counts_agree_with_its_header() {
@@ -95,7 +95,7 @@ fn the_dual_number_jacobian_matches_finite_differences() {
 #[test]
 fn the_second_directional_derivative_matches_finite_differences() {
     for ds in nist::all().unwrap() {
-        let problem = Problem::curve(&ds);
+        let problem = CurveFit::new(&ds);
         let n = ds.n_params();
         for start in &ds.starts {
             // A direction mixing every parameter at its own scale.

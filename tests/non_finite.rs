@@ -9,11 +9,11 @@
 use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::nist::{self, Dataset};
-use volver::core::problem::Problem;
+use volver::core::problem::{CurveFit, Problem, Residuals};
 use volver::solvers::{Silent, Solution, Task, Termination, engine_names, nist_suite};
 
 /// Every engine of the build on `problem` from `start`.
-fn every_engine(problem: Problem, start: &[f64]) -> Vec<(&'static str, Solution)> {
+fn every_engine<'a>(problem: impl Residuals + 'a, start: &[f64]) -> Vec<(&'static str, Solution)> {
     let task = Task::new(problem);
     engine_names()
         .into_iter()
@@ -39,7 +39,7 @@ fn a_jacobian_that_is_not_finite_stops_every_engine_with_a_status_naming_it() {
     let (ds, x0) = bennett5();
     // b3 = −2: f = b1 √(b2 + x), finite at b2 = −x0, its derivative in b2 is not.
     let start = [-2000.0, -x0, -2.0];
-    let problem = Problem::curve(&ds);
+    let problem = CurveFit::new(&ds);
     assert!(problem.phi(&start).is_finite());
     for (name, s) in every_engine(problem, &start) {
         let t = &s.summary.termination;
@@ -72,7 +72,7 @@ fn a_residual_that_is_not_finite_stops_every_engine_with_a_status_naming_it() {
     let (mut ds, _) = bennett5();
     ds.y[3] = f64::NAN;
     let start = ds.starts[1].clone();
-    for (name, s) in every_engine(Problem::curve(&ds), &start) {
+    for (name, s) in every_engine(CurveFit::new(&ds), &start) {
         let t = &s.summary.termination;
         assert!(
             t.failed() && t.to_string().contains("not finite"),
@@ -88,16 +88,16 @@ fn a_residual_that_is_not_finite_stops_every_engine_with_a_status_naming_it() {
 fn a_stop_at_the_edge_of_the_finite_region_is_not_reported_as_convergence() {
     let (ds, x0) = bennett5();
     let start = [-2000.0, -x0 + 0.5, -1.0];
-    let problem = Problem::curve(&ds);
-    let runs = every_engine(problem.clone(), &start);
+    let problem = CurveFit::new(&ds);
+    let runs = every_engine(problem, &start);
     let best = runs
         .iter()
-        .map(|(_, s)| s.summary.final_.phi_mm)
+        .map(|(_, s)| s.summary.reached.phi_mm)
         .fold(f64::INFINITY, f64::min);
     let mut edge = 0;
     for (name, s) in &runs {
         let t = &s.summary.termination;
-        let phi = s.summary.final_.phi_mm;
+        let phi = s.summary.reached.phi_mm;
         assert!(
             phi.is_finite() && s.params.iter().all(|v| v.is_finite()),
             "{name}: {t}"
@@ -133,8 +133,8 @@ fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
     options.max_iterations = 2000;
     let mut claims = 0;
     for ds in nist::all().unwrap() {
-        let problem = Problem::curve(&ds);
-        let task = Task::new(problem.clone());
+        let problem = CurveFit::new(&ds);
+        let task = Task::new(problem);
         for start in &ds.starts {
             for name in engine_names() {
                 let s =
@@ -153,7 +153,7 @@ fn no_engine_reports_success_with_a_non_finite_value_on_the_nist_suite() {
                     s.params
                 );
                 assert_eq!(
-                    s.summary.final_.phi_mm.to_bits(),
+                    s.summary.reached.phi_mm.to_bits(),
                     phi.to_bits(),
                     "{} {name}: the reported Φ is not the result's",
                     ds.name

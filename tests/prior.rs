@@ -13,7 +13,7 @@ use volver::core::measure::MeasurementSet;
 use volver::core::model::Model;
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
-use volver::core::problem::Problem;
+use volver::core::problem::{Problem, Residuals};
 use volver::core::simulate::{Magnitudes, Simulation, Truth};
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::nullspace::NullSpace;

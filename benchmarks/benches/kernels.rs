@@ -8,7 +8,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use volver_core::model::Model;
 use volver_core::plan::Plan;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
 use volver_solvers::kernels::normal_equations;
 use volver_solvers::lm::LevenbergMarquardt;

@@ -13,7 +13,7 @@ use std::time::Instant;
 use volver_core::iso::ErrorId;
 use volver_core::kinematics::TRACKER_DOF;
 use volver_core::machine::TrackerMount;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
 /// Error values of the paper's XCFZ model (the program is written for that machine and model).
 const ERRORS: usize = 20;
@@ -125,9 +125,7 @@ impl Expert {
     /// cannot identify to the damping (volver holds them by its gauge).
     pub fn new(problem: &Problem, p: &[f64]) -> Result<Expert, String> {
         let t0 = Instant::now();
-        let (model, data) = problem
-            .machine()
-            .ok_or("the expert program fits a machine")?;
+        let (model, data) = (problem.model(), problem.data());
         let machine = model.machine();
         let chain: String = machine.axes().iter().map(|a| a.axis.letter()).collect();
         if chain != "XCZ" || machine.tracker().mount != TrackerMount::Workpiece {

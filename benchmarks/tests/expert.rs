@@ -8,7 +8,7 @@ use volver_core::machine::Machine;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::plan::Plan;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::random::Rng;
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
 use volver_solvers::strategy::{Strategy, identify};
@@ -108,7 +108,7 @@ fn the_program_and_the_native_engine_meet() {
                 &phi_options(),
                 &mut Silent,
             );
-            let ours = id.final_.phi_mm;
+            let ours = id.reached.phi_mm;
             assert!(
                 (theirs - ours).abs() <= 1e-5,
                 "{plan}: volver {ours} mm, expert {theirs} mm"

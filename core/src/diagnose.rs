@@ -8,7 +8,7 @@
 //! use volver_core::machine::Machine;
 //! use volver_core::measure::MeasurementSet;
 //! use volver_core::model::Model;
-//! use volver_core::problem::Problem;
+//! use volver_core::problem::{Problem, Residuals};
 //! let model = Model::default_xcfz();
 //! let p0 = model.initial_params();
 //! let at = |x: f64| model.machine().commands_from_file_units(&[x, 0.0, 0.0]);

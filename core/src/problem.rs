@@ -1,7 +1,11 @@
-//! An identification problem: a model and the measurements it must explain. Residuals are
-//! `r_i = predicted_i − measured_i` (mm, tracker frame), one 3-vector per measured point.
+//! What the engines minimise: residuals, one 3-vector per point, behind the [`Residuals`] trait.
+//! Two kinds implement it:
+//! * [`Problem`], an identification problem: a model and the measurements it must explain, with
+//!   residuals `r_i = predicted_i − measured_i` (mm, tracker frame), one per measured point;
+//! * [`CurveFit`], one of NIST's StRD curve fits, so that the engines can be judged on the public
+//!   reference suite.
 //!
-//! The two objectives of the paper:
+//! The two objectives of the paper, provided by the trait for either:
 //! * **Φ** (eq. 12): the mean error module, `Φ = (1/n) Σ ‖r_i‖` (mm) — the EMM;
 //! * **ve** (eq. 1): the mean squared error module, `ve = (1/n) Σ ‖r_i‖²` (mm²).
 //!
@@ -9,7 +13,7 @@
 //! use volver_core::machine::Machine;
 //! use volver_core::measure::MeasurementSet;
 //! use volver_core::model::Model;
-//! use volver_core::problem::Problem;
+//! use volver_core::problem::{Problem, Residuals};
 //! let model = Model::default_xcfz();
 //! let csv = "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.003,75.004,1450\n";
 //! let data = MeasurementSet::from_csv_str(model.machine(), csv, "inline.csv").unwrap();
@@ -22,32 +26,109 @@
 use crate::error::{Error, Result};
 use crate::measure::MeasurementSet;
 use crate::metrics::ErrorStats;
-use crate::model::{Model, Regressors};
+use crate::model::{Constraints, Model, Regressors};
+use std::borrow::Cow;
+
+/// Residuals an engine can minimise: `n_points` 3-vectors that depend on `n_params`
+/// parameters, with their exact Jacobian and curvature, under linear equality constraints.
+///
+/// The engines of `volver-solvers` take any implementation (`&dyn Residuals`); volver's own are
+/// [`Problem`] (a machine and its measurements) and [`CurveFit`] (a NIST StRD curve). The
+/// objectives Φ and ve and the error statistics are provided from [`Residuals::residual`].
+///
+/// ```
+/// use volver_core::{nist, problem::{CurveFit, Residuals}};
+/// let ds = nist::dataset("Misra1a").unwrap();
+/// let fit = CurveFit::new(&ds);
+/// // A curve fit's residuals are (f(x_i; b) − y_i, 0, 0): n·ve is the residual sum of squares.
+/// let rss = fit.ve(&ds.certified) * fit.n_points() as f64;
+/// assert!((rss / ds.certified_rss - 1.0).abs() < 1e-9);
+/// assert!(fit.machine().is_none() && fit.constraints().rows.is_empty());
+/// ```
+pub trait Residuals: Send + Sync + std::fmt::Debug {
+    /// Number of parameters.
+    fn n_params(&self) -> usize;
+
+    /// Number of points (observations of a curve fit).
+    fn n_points(&self) -> usize;
+
+    /// Names of the parameters, for reports.
+    fn param_names(&self) -> Vec<String>;
+
+    /// The linear equality constraints the parameters must satisfy.
+    fn constraints(&self) -> Cow<'_, Constraints>;
+
+    /// Residual of point `i` (mm for a machine).
+    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3];
+
+    /// Residual of point `i` and its exact Jacobian (row-major 3 × n_params) in `jac`.
+    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3];
+
+    /// Second derivative of the residual of point `i` along the parameter direction `dir`,
+    /// `d²/dt² r_i(params + t·dir)` at t = 0, exact (second-order dual numbers): the curvature
+    /// that geodesic acceleration corrects a Gauss–Newton step by.
+    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3];
+
+    /// The magnitude of what point `i` measured (mm; for a curve fit, the observation): a
+    /// residual is rounded relative to it, not to itself, so a cost computed from residuals much
+    /// smaller than their observations carries a rounding of about
+    /// `ε · observation_scale / ‖r‖` relative.
+    fn observation_scale(&self, i: usize) -> f64;
+
+    /// The machine problem these residuals are, if they are one: what the engines read of the
+    /// machine (the tracker's pose, the model's parameters) goes through it. `None` by default.
+    fn machine(&self) -> Option<&Problem<'_>> {
+        None
+    }
+
+    /// Every residual.
+    fn residuals(&self, params: &[f64]) -> Vec<[f64; 3]> {
+        (0..self.n_points())
+            .map(|i| self.residual(i, params))
+            .collect()
+    }
+
+    /// Φ, the mean error module (mm).
+    fn phi(&self, params: &[f64]) -> f64 {
+        (0..self.n_points())
+            .map(|i| norm(self.residual(i, params)))
+            .sum::<f64>()
+            / self.n_points() as f64
+    }
+
+    /// ve, the mean squared error module (mm²).
+    fn ve(&self, params: &[f64]) -> f64 {
+        (0..self.n_points())
+            .map(|i| norm(self.residual(i, params)).powi(2))
+            .sum::<f64>()
+            / self.n_points() as f64
+    }
+
+    /// EMM and EMax of the residuals (µm).
+    fn stats(&self, params: &[f64]) -> ErrorStats {
+        ErrorStats::of_modules((0..self.n_points()).map(|i| norm(self.residual(i, params))))
+    }
+
+    /// The expanded uncertainty (k = 2, µm) of the residuals' EMM as a mean over the points
+    /// ([`crate::metrics::emm_u95_um`]).
+    fn emm_u95_um(&self, params: &[f64]) -> f64 {
+        let modules: Vec<f64> = (0..self.n_points())
+            .map(|i| norm(self.residual(i, params)))
+            .collect();
+        crate::metrics::emm_u95_um(&modules)
+    }
+}
 
 /// A model and measurements of the same machine.
 ///
-/// A problem may also be a plain curve fit ([`Problem::curve`], one of NIST's StRD problems),
-/// so that the engines can be judged on the public reference suite: each observation is then a
-/// "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`, Φ is the mean absolute residual and
-/// `n · ve` the residual sum of squares. [`Problem::model`] and [`Problem::data`] exist only for
-/// machine problems.
-///
-/// A machine problem computes the model's fixed regressors at its points once
+/// The problem computes the model's fixed regressors at its points once
 /// ([`crate::model::Regressors`]: basis values, the rotary axes' sines), shared by its clones,
 /// so that each evaluation is the chain and the dot products alone.
 #[derive(Clone, Debug)]
 pub struct Problem<'a> {
-    source: Source<'a>,
-}
-
-#[derive(Clone, Debug)]
-enum Source<'a> {
-    Machine {
-        model: &'a Model,
-        data: &'a MeasurementSet,
-        regressors: std::sync::Arc<Regressors>,
-    },
-    Curve(&'a crate::nist::Dataset),
+    model: &'a Model,
+    data: &'a MeasurementSet,
+    regressors: std::sync::Arc<Regressors>,
 }
 
 impl<'a> Problem<'a> {
@@ -75,28 +156,10 @@ impl<'a> Problem<'a> {
         let regressors =
             std::sync::Arc::new(model.regressors(data.points.iter().map(|p| &p.commands)));
         Ok(Problem {
-            source: Source::Machine {
-                model,
-                data,
-                regressors,
-            },
+            model,
+            data,
+            regressors,
         })
-    }
-
-    /// A curve fit: one of NIST's StRD problems (see the type's documentation).
-    ///
-    /// ```
-    /// use volver_core::{nist, problem::Problem};
-    /// let ds = nist::dataset("Misra1a").unwrap();
-    /// let p = Problem::curve(&ds);
-    /// let rss = p.ve(&ds.certified) * p.n_points() as f64;
-    /// assert!((rss / ds.certified_rss - 1.0).abs() < 1e-9);
-    /// assert!(p.machine().is_none() && p.constraints().rows.is_empty());
-    /// ```
-    pub fn curve(dataset: &'a crate::nist::Dataset) -> Problem<'a> {
-        Problem {
-            source: Source::Curve(dataset),
-        }
     }
 
     /// Checks that the measured points have the size the machine gives them, which catches a
@@ -105,8 +168,8 @@ impl<'a> Problem<'a> {
     /// measured. It compares the RMS distance of the measured points from their centroid with
     /// that of the points the model predicts at its start: a rigid motion (the tracker's pose)
     /// changes neither, and geometric errors change the ratio by parts per thousand at most.
-    /// A ratio outside [0.98, 1.02] is an error naming `file`. Curve fits, fewer than three
-    /// points, and meshes whose nominal points spread less than 10 mm pass unchecked.
+    /// A ratio outside [0.98, 1.02] is an error naming `file`. Fewer than three points, and
+    /// meshes whose nominal points spread less than 10 mm pass unchecked.
     ///
     /// ```
     /// use volver_core::measure::MeasurementSet;
@@ -131,9 +194,7 @@ impl<'a> Problem<'a> {
     /// assert!(err.to_string().starts_with("m.csv: ") && err.to_string().contains("metres"));
     /// ```
     pub fn check_scale(&self, file: &str) -> Result<()> {
-        let Source::Machine { model, data, .. } = self.source else {
-            return Ok(());
-        };
+        let (model, data) = (self.model, self.data);
         let n = data.points.len();
         if n < 3 {
             return Ok(());
@@ -189,207 +250,154 @@ impl<'a> Problem<'a> {
         ))
     }
 
-    /// The model and measurements of a machine problem; `None` for a curve fit.
-    pub fn machine(&self) -> Option<(&'a Model, &'a MeasurementSet)> {
-        match self.source {
-            Source::Machine { model, data, .. } => Some((model, data)),
-            Source::Curve(_) => None,
-        }
-    }
-
     /// The model.
-    ///
-    /// # Panics
-    /// For a curve fit ([`Problem::curve`]), which has none; see [`Problem::machine`].
     pub fn model(&self) -> &'a Model {
-        match self.source {
-            Source::Machine { model, .. } => model,
-            Source::Curve(d) => panic!("the curve fit {} has no machine model", d.name),
-        }
+        self.model
     }
 
     /// The measurements.
-    ///
-    /// # Panics
-    /// For a curve fit ([`Problem::curve`]); see [`Problem::machine`].
     pub fn data(&self) -> &'a MeasurementSet {
-        match self.source {
-            Source::Machine { data, .. } => data,
-            Source::Curve(d) => panic!("the curve fit {} has no measurement set", d.name),
-        }
+        self.data
+    }
+}
+
+impl Residuals for Problem<'_> {
+    fn n_params(&self) -> usize {
+        self.model.n_params()
     }
 
-    /// Number of parameters.
-    pub fn n_params(&self) -> usize {
-        match self.source {
-            Source::Machine { model, .. } => model.n_params(),
-            Source::Curve(d) => d.n_params(),
-        }
+    fn n_points(&self) -> usize {
+        self.data.points.len()
     }
 
-    /// The linear equality constraints: the model's; none for a curve fit.
-    pub fn constraints(&self) -> std::borrow::Cow<'a, crate::model::Constraints> {
-        match self.source {
-            Source::Machine { model, .. } => std::borrow::Cow::Borrowed(model.constraints()),
-            Source::Curve(_) => std::borrow::Cow::Owned(Default::default()),
-        }
+    fn param_names(&self) -> Vec<String> {
+        self.model.params().iter().map(|p| p.name.clone()).collect()
     }
 
-    /// Names of the parameters (the model's; `b1`, `b2`, … for a curve fit).
-    pub fn param_names(&self) -> Vec<String> {
-        match self.source {
-            Source::Machine { model, .. } => {
-                model.params().iter().map(|p| p.name.clone()).collect()
-            }
-            Source::Curve(d) => (1..=d.n_params()).map(|k| format!("b{k}")).collect(),
-        }
+    fn constraints(&self) -> Cow<'_, Constraints> {
+        Cow::Borrowed(self.model.constraints())
     }
 
-    /// Number of measured points (observations of a curve fit).
-    pub fn n_points(&self) -> usize {
-        match self.source {
-            Source::Machine { data, .. } => data.points.len(),
-            Source::Curve(d) => d.n_obs(),
-        }
+    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
+        let m = &self.data.points[i];
+        let x = self.model.predict_cached(
+            &self.regressors,
+            i,
+            &m.commands,
+            m.reflector,
+            m.t_s.unwrap_or(0.0),
+            params,
+        );
+        minus(x, m.measured)
     }
 
-    /// Residual of point `i`: predicted minus measured (mm).
-    pub fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
-        match self.source {
-            Source::Machine {
-                model,
-                data,
-                ref regressors,
-            } => {
-                let m = &data.points[i];
-                let x = model.predict_cached(
-                    regressors,
-                    i,
-                    &m.commands,
-                    m.reflector,
-                    m.t_s.unwrap_or(0.0),
-                    params,
-                );
-                minus(x, m.measured)
-            }
-            Source::Curve(d) => [d.residual(i, params), 0.0, 0.0],
-        }
+    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
+        let m = &self.data.points[i];
+        let x = self.model.predict_with_jacobian_cached(
+            &self.regressors,
+            i,
+            &m.commands,
+            m.reflector,
+            m.t_s.unwrap_or(0.0),
+            params,
+            jac,
+        );
+        minus(x, m.measured)
     }
 
-    /// The magnitude of what point `i` measured (mm; for a curve fit, the observation): a
-    /// residual is rounded relative to it, not to itself, so a cost computed from residuals much
-    /// smaller than their observations carries a rounding of about
-    /// `ε · observation_scale / ‖r‖` relative.
-    pub fn observation_scale(&self, i: usize) -> f64 {
-        match self.source {
-            Source::Machine { data, .. } => norm(data.points[i].measured),
-            Source::Curve(d) => d.observation(i).abs(),
-        }
+    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
+        let m = &self.data.points[i];
+        self.model.predict_second_directional_at(
+            &m.commands,
+            m.reflector,
+            m.t_s.unwrap_or(0.0),
+            params,
+            dir,
+        )
     }
 
-    /// Residual of point `i` and its Jacobian (row-major 3 × n_params) in `jac`.
-    pub fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
-        match self.source {
-            Source::Machine {
-                model,
-                data,
-                ref regressors,
-            } => {
-                let m = &data.points[i];
-                let x = model.predict_with_jacobian_cached(
-                    regressors,
-                    i,
-                    &m.commands,
-                    m.reflector,
-                    m.t_s.unwrap_or(0.0),
-                    params,
-                    jac,
-                );
-                minus(x, m.measured)
-            }
-            Source::Curve(d) => {
-                // Forward-mode dual numbers, one direction per parameter (NIST's problems have
-                // at most 9).
-                let n = params.len();
-                jac[n..3 * n].iter_mut().for_each(|v| *v = 0.0);
-                let mut b: Vec<num_dual::Dual64> = params
-                    .iter()
-                    .map(|&v| num_dual::Dual64::from_re(v))
-                    .collect();
-                let mut r = f64::NAN;
-                for k in 0..n {
-                    b[k].eps = 1.0;
-                    let v = d.residual(i, &b);
-                    b[k].eps = 0.0;
-                    jac[k] = v.eps;
-                    r = v.re;
-                }
-                [r, 0.0, 0.0]
-            }
-        }
+    fn observation_scale(&self, i: usize) -> f64 {
+        norm(self.data.points[i].measured)
     }
 
-    /// Second derivative of the residual of point `i` along the parameter direction `dir`,
-    /// `d²/dt² r_i(params + t·dir)` at t = 0, exact (second-order dual numbers): the curvature
-    /// that geodesic acceleration corrects a Gauss–Newton step by.
-    pub fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
-        match self.source {
-            Source::Machine { model, data, .. } => {
-                let m = &data.points[i];
-                model.predict_second_directional_at(
-                    &m.commands,
-                    m.reflector,
-                    m.t_s.unwrap_or(0.0),
-                    params,
-                    dir,
-                )
-            }
-            Source::Curve(d) => {
-                let b: Vec<num_dual::Dual2_64> = params
-                    .iter()
-                    .zip(dir)
-                    .map(|(&p, &v)| num_dual::Dual2_64::new(p, v, 0.0))
-                    .collect();
-                [d.residual(i, &b).v2, 0.0, 0.0]
-            }
-        }
+    fn machine(&self) -> Option<&Problem<'_>> {
+        Some(self)
+    }
+}
+
+/// A curve fit: one of NIST's StRD problems, so that the engines can be judged on the public
+/// reference suite. Each observation is a "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`,
+/// Φ is the mean absolute residual and `n · ve` the residual sum of squares; there are no
+/// constraints. Its parameters are named `b1`, `b2`, …
+#[derive(Clone, Copy, Debug)]
+pub struct CurveFit<'a> {
+    dataset: &'a crate::nist::Dataset,
+}
+
+impl<'a> CurveFit<'a> {
+    /// The curve fit of `dataset` (see the type's documentation).
+    pub fn new(dataset: &'a crate::nist::Dataset) -> CurveFit<'a> {
+        CurveFit { dataset }
     }
 
-    /// Every residual.
-    pub fn residuals(&self, params: &[f64]) -> Vec<[f64; 3]> {
-        (0..self.n_points())
-            .map(|i| self.residual(i, params))
-            .collect()
+    /// The dataset.
+    pub fn dataset(&self) -> &'a crate::nist::Dataset {
+        self.dataset
+    }
+}
+
+impl Residuals for CurveFit<'_> {
+    fn n_params(&self) -> usize {
+        self.dataset.n_params()
     }
 
-    /// Φ, the mean error module (mm).
-    pub fn phi(&self, params: &[f64]) -> f64 {
-        (0..self.n_points())
-            .map(|i| norm(self.residual(i, params)))
-            .sum::<f64>()
-            / self.n_points() as f64
+    fn n_points(&self) -> usize {
+        self.dataset.n_obs()
     }
 
-    /// ve, the mean squared error module (mm²).
-    pub fn ve(&self, params: &[f64]) -> f64 {
-        (0..self.n_points())
-            .map(|i| norm(self.residual(i, params)).powi(2))
-            .sum::<f64>()
-            / self.n_points() as f64
+    fn param_names(&self) -> Vec<String> {
+        (1..=self.n_params()).map(|k| format!("b{k}")).collect()
     }
 
-    /// EMM and EMax of the residuals (µm).
-    pub fn stats(&self, params: &[f64]) -> ErrorStats {
-        ErrorStats::of_modules((0..self.n_points()).map(|i| norm(self.residual(i, params))))
+    fn constraints(&self) -> Cow<'_, Constraints> {
+        Cow::Owned(Default::default())
     }
 
-    /// The expanded uncertainty (k = 2, µm) of the residuals' EMM as a mean over the points
-    /// ([`crate::metrics::emm_u95_um`]).
-    pub fn emm_u95_um(&self, params: &[f64]) -> f64 {
-        let modules: Vec<f64> = (0..self.n_points())
-            .map(|i| norm(self.residual(i, params)))
+    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
+        [self.dataset.residual(i, params), 0.0, 0.0]
+    }
+
+    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
+        // Forward-mode dual numbers, one direction per parameter (NIST's problems have at
+        // most 9).
+        let n = params.len();
+        jac[n..3 * n].iter_mut().for_each(|v| *v = 0.0);
+        let mut b: Vec<num_dual::Dual64> = params
+            .iter()
+            .map(|&v| num_dual::Dual64::from_re(v))
             .collect();
-        crate::metrics::emm_u95_um(&modules)
+        let mut r = f64::NAN;
+        for k in 0..n {
+            b[k].eps = 1.0;
+            let v = self.dataset.residual(i, &b);
+            b[k].eps = 0.0;
+            jac[k] = v.eps;
+            r = v.re;
+        }
+        [r, 0.0, 0.0]
+    }
+
+    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
+        let b: Vec<num_dual::Dual2_64> = params
+            .iter()
+            .zip(dir)
+            .map(|(&p, &v)| num_dual::Dual2_64::new(p, v, 0.0))
+            .collect();
+        [self.dataset.residual(i, &b).v2, 0.0, 0.0]
+    }
+
+    fn observation_scale(&self, i: usize) -> f64 {
+        self.dataset.observation(i).abs()
     }
 }
 

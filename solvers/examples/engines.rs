@@ -54,8 +54,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!(
             "{:<12} {:>14.6} {:>12.6}  {}",
             info.name,
-            id.final_.phi_mm * 1e3,
-            id.final_.stats.emax_um,
+            id.reached.phi_mm * 1e3,
+            id.reached.stats.emax_um,
             id.termination
         );
     }

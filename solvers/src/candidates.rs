@@ -31,7 +31,7 @@ use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, On
 
 /// Periodic positioning errors are tried with periods travel/2 … travel/SCREW_PERIODS.
 pub const SCREW_PERIODS: usize = 8;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
 /// A candidate: an extension of the error model.
 #[derive(Clone, Debug, PartialEq)]

@@ -37,7 +37,7 @@
 //! let sol = Ceres::default().solve(&Task::new(problem), &model.initial_params(),
 //!                                  &Options::default(), &mut Silent);
 //! assert!(!sol.summary.termination.failed(), "{}", sol.summary.termination);
-//! assert!(sol.summary.final_.stats.emm_um < 1e-5 * sol.summary.initial.stats.emm_um);
+//! assert!(sol.summary.reached.stats.emm_um < 1e-5 * sol.summary.initial.stats.emm_um);
 //! # }
 //! ```
 
@@ -48,12 +48,13 @@ use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use volver_ceres_sys as cs;
-use volver_core::problem::{Problem, norm};
+use volver_core::problem::{Residuals, norm};
 
 pub use cs::LinearSolver;
 
 /// The Ceres engine.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct Ceres {
     /// Linear solver of the trust-region step (default: dense QR, Ceres' default for dense
     /// problems).
@@ -73,7 +74,7 @@ impl Default for Ceres {
 
 /// The residual blocks: point i's residual and its dual-number Jacobian row.
 struct Cost<'t, 'a> {
-    problem: &'t Problem<'a>,
+    problem: &'t (dyn Residuals + 'a),
     /// Column scaling: p = s ∘ d.
     d: &'t [f64],
     /// Residual passes (block 0 is evaluated once per pass).
@@ -171,7 +172,7 @@ impl Solver for Ceres {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let problem = &task.problem;
+        let problem = &*task.problem;
         let n = start.len();
         let np = problem.n_points();
         let nf = free.n_free();

@@ -39,7 +39,7 @@
 //! let socp = ProxLinear.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! assert!(!socp.summary.termination.failed(), "{}", socp.summary.termination);
 //! // The SOCP reaches Φ's optimum exactly; the LM's IRLS stops at or above it.
-//! let (a, b) = (lm.summary.final_.phi_mm, socp.summary.final_.phi_mm);
+//! let (a, b) = (lm.summary.reached.phi_mm, socp.summary.reached.phi_mm);
 //! assert!(b <= a * (1.0 + 1e-9) && b > 0.99 * a, "Φ: LM {a}, SOCP {b}");
 //! ```
 
@@ -72,7 +72,7 @@ struct Linearisation {
 }
 
 fn linearise(task: &Task, p: &[f64], tangent: &Mat<f64>) -> Option<Linearisation> {
-    let problem = &task.problem;
+    let problem = &*task.problem;
     let (n, k) = (tangent.nrows(), tangent.ncols());
     let np = problem.n_points();
     let mut row = vec![0.0; 3 * n];
@@ -280,7 +280,7 @@ impl Solver for ProxLinear {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let problem = &task.problem;
+        let problem = &*task.problem;
         let np = problem.n_points();
         let k = free.n_free();
         let objective = options.objective;

@@ -165,7 +165,7 @@ pub(crate) fn reduce(
 /// [`Reduced`] normal equations; `None` when the Jacobian is not finite or the constraints
 /// cannot be eliminated.
 pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
-    let normal = accumulate(&task.problem, params, |_| (1.0, 0.0), false)?;
+    let normal = accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
     let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
     let ns = ns.ok()?;
     let (hz, gz) = reduce(&d, ns.basis(), &normal.h, Some(&normal.g));

@@ -39,7 +39,7 @@ use crate::Task;
 use faer::{Mat, Side};
 use volver_core::iso::Unit;
 use volver_core::model::{Constraint, ConstraintKind, Model};
-use volver_core::problem::Problem;
+use volver_core::problem::Residuals;
 
 /// The lever that turns an angle into a length in the metric (mm): 1 µrad weighs as 1 µm.
 pub const LEVER_MM: f64 = 1000.0;
@@ -213,7 +213,7 @@ impl Gauge {
 /// while its amplitude is zero) are left free. `None` when the Jacobian is not finite or a
 /// decomposition fails.
 pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
-    let problem: &Problem = &task.problem;
+    let problem: &dyn Residuals = &*task.problem;
     let n = reference.len();
     let normal = crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false)?;
     let h = normal.h.clone();
@@ -221,10 +221,9 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
         at: at.to_vec(),
         normal,
     }));
-    let metric = if problem.machine().is_some() {
-        function_metric(problem.model(), at)
-    } else {
-        Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 })
+    let metric = match problem.machine() {
+        Some(machine) => function_metric(machine.model(), at),
+        None => Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 }),
     };
     // Jacobi scaling by the metric's diagonal (by the Jacobian's where the metric sees nothing):
     // bases whose coefficients differ in scale by many orders (a monomial's x³ over 1 400 mm)

@@ -98,7 +98,7 @@ pub fn analyse(
     tolerance: f64,
     correlation: f64,
 ) -> Option<Identifiability> {
-    let problem = &task.problem;
+    let problem = &*task.problem;
     let n = params.len();
     let Reduced { d, ns, hz, .. } = reduced_normal(task, params)?;
     let nf = ns.n_free();

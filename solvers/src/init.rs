@@ -33,7 +33,7 @@
 
 use faer::Mat;
 use volver_core::model::{ConstraintKind, Owner};
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
 /// Which tracker pose values the model holds (Fixed constraints on a single parameter).
 pub fn held_tracker_values(problem: &Problem) -> [bool; 6] {

@@ -12,7 +12,7 @@ use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matm
 use faer::prelude::*;
 use faer::{Accum, Mat, Par, Side};
 use rayon::prelude::*;
-use volver_core::problem::{Problem, norm};
+use volver_core::problem::{Residuals, norm};
 
 /// Points per block of a pass: the unit of work given to a thread and of the reduction, which
 /// runs in block order (so the block size, not the number of threads, fixes the rounding).
@@ -59,7 +59,7 @@ pub(crate) struct Factor {
 /// the threads. `None` when a residual or Jacobian entry is not finite, or when `factor` is
 /// asked of a pass that is not plain least squares.
 pub(crate) fn accumulate(
-    problem: &Problem,
+    problem: &dyn Residuals,
     p: &[f64],
     weight: impl Fn(f64) -> (f64, f64) + Sync,
     factor: bool,
@@ -148,7 +148,7 @@ struct BlockPart {
 /// `J_bᵀ W_b J_b` is then the product of that (n × rows, column stride n+1) view with its
 /// transpose. The factor's QR works on columns: the rows are transposed into `tb` first.
 fn block_part(
-    problem: &Problem,
+    problem: &dyn Residuals,
     p: &[f64],
     weight: &impl Fn(f64) -> (f64, f64),
     factor: bool,
@@ -291,7 +291,7 @@ pub(crate) fn qr_update(r: &mut [f64], nc: usize, b: &mut [f64], rows: usize) {
 /// let (jtj, jtr) = volver_solvers::kernels::normal_equations(&problem, &model.initial_params()).unwrap();
 /// assert_eq!((jtj.nrows(), jtr.len()), (model.n_params(), model.n_params()));
 /// ```
-pub fn normal_equations(problem: &Problem, params: &[f64]) -> Option<(Mat<f64>, Vec<f64>)> {
+pub fn normal_equations(problem: &dyn Residuals, params: &[f64]) -> Option<(Mat<f64>, Vec<f64>)> {
     accumulate(problem, params, |_| (1.0, 0.0), false).map(|n| (n.h, n.g))
 }
 
@@ -364,6 +364,7 @@ mod tests {
     use volver_core::measure::MeasurementSet;
     use volver_core::model::Model;
     use volver_core::plan::Plan;
+    use volver_core::problem::Problem;
     use volver_core::simulate::{Magnitudes, Simulation, Truth};
 
     /// A seeded matrix of uniform entries in [−1, 1).

@@ -49,13 +49,14 @@ pub use options::{Objective, Options};
 pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};
 
 use volver_core::model::{Constraint, ConstraintKind, Constraints, ParamInfo};
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
-/// What to solve: a problem, the constraints to honour and a label.
+/// What to solve: residuals (a machine [`Problem`] or a NIST curve fit), the constraints to
+/// honour and a label.
 #[derive(Clone, Debug)]
 pub struct Task<'a> {
-    /// Model and measurements.
-    pub problem: Problem<'a>,
+    /// The residuals to minimise.
+    pub problem: std::sync::Arc<dyn Residuals + 'a>,
     /// Every constraint: the model's, plus held parameters.
     pub constraints: Constraints,
     /// Label of the phase, for reports.
@@ -74,11 +75,11 @@ pub(crate) struct PlainNormal {
 }
 
 impl<'a> Task<'a> {
-    /// The problem under the model's own constraints.
-    pub fn new(problem: Problem<'a>) -> Task<'a> {
+    /// The residuals under their own constraints (a machine problem's: its model's).
+    pub fn new(problem: impl Residuals + 'a) -> Task<'a> {
         Task {
             constraints: problem.constraints().into_owned(),
-            problem,
+            problem: std::sync::Arc::new(problem),
             phase: "all".to_string(),
             plain: None,
         }
@@ -329,7 +330,7 @@ pub fn engine(name: &str) -> Result<Box<dyn Solver>, Error> {
 }
 
 /// Φ, ve, EMM and EMax of a problem at `params`.
-pub fn evaluate(problem: &Problem, params: &[f64]) -> Evaluation {
+pub fn evaluate(problem: &dyn Residuals, params: &[f64]) -> Evaluation {
     // The modules on every core, summed in point order: the same bits as one thread.
     let norms = crate::loss::norms_of(problem, params);
     let n = norms.len() as f64;

@@ -4,7 +4,7 @@
 
 use crate::options::Objective;
 use rayon::prelude::*;
-use volver_core::problem::Problem;
+use volver_core::problem::Residuals;
 
 /// The smoothed objective from residual modules: ve, or `Φ_ε = (1/n) Σ √(‖r‖² + ε²)`.
 pub(crate) fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
@@ -36,7 +36,7 @@ pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f6
 
 /// Residual modules at `p`, point by point on every thread of rayon's pool (each module is
 /// computed alone, so the bits do not depend on the threads); a module may be non-finite.
-pub(crate) fn norms_of(problem: &Problem, p: &[f64]) -> Vec<f64> {
+pub(crate) fn norms_of(problem: &dyn Residuals, p: &[f64]) -> Vec<f64> {
     (0..problem.n_points())
         .into_par_iter()
         .with_min_len(64)
@@ -45,7 +45,7 @@ pub(crate) fn norms_of(problem: &Problem, p: &[f64]) -> Vec<f64> {
 }
 
 /// [`norms_of`]; `None` if one is not finite.
-pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
+pub(crate) fn norms(problem: &dyn Residuals, p: &[f64]) -> Option<Vec<f64>> {
     let v = norms_of(problem, p);
     v.iter().all(|x| x.is_finite()).then_some(v)
 }
@@ -54,7 +54,7 @@ pub(crate) fn norms(problem: &Problem, p: &[f64]) -> Option<Vec<f64>> {
 /// Jacobian pass, no normal matrix); `None` if a residual or Jacobian entry is not finite.
 #[cfg(feature = "nlopt")]
 pub(crate) fn cost_and_gradient(
-    problem: &Problem,
+    problem: &dyn Residuals,
     objective: Objective,
     eps: f64,
     p: &[f64],

@@ -13,7 +13,7 @@
 use crate::{Objective, Options, Silent, Solver, Task, Termination};
 use serde::Serialize;
 use volver_core::nist::{Dataset, Difficulty, lre};
-use volver_core::problem::Problem;
+use volver_core::problem::{CurveFit, Residuals};
 
 /// The native LM as the suite runs it: no direction held as unidentifiable (the suite's
 /// problems are ill-conditioned on purpose: that is what it tests), and geodesic acceleration.
@@ -21,6 +21,7 @@ pub fn lm() -> crate::lm::LevenbergMarquardt {
     crate::lm::LevenbergMarquardt {
         rank_tolerance: 0.0,
         geodesic_acceleration: true,
+        ..Default::default()
     }
 }
 
@@ -72,8 +73,8 @@ pub struct StrdRun {
 
 /// Runs `engine` on `dataset` from start `start` (0 or 1).
 pub fn run(dataset: &Dataset, start: usize, engine: &dyn Solver, options: &Options) -> StrdRun {
-    let problem = Problem::curve(dataset);
-    let task = Task::new(problem.clone());
+    let problem = CurveFit::new(dataset);
+    let task = Task::new(problem);
     let s = engine.solve(&task, &dataset.starts[start], options, &mut Silent);
     let rss = problem.ve(&s.params) * problem.n_points() as f64;
     let finite = s.params.iter().all(|v| v.is_finite()) && rss.is_finite();

@@ -36,7 +36,7 @@
 //! let lm = LevenbergMarquardt::default().solve(&task, &model.initial_params(), &options, &mut Silent);
 //! let sq = Nlopt::new(Algorithm::Slsqp).solve(&task, &model.initial_params(), &options, &mut Silent);
 //! assert!(!sq.summary.termination.failed(), "{}", sq.summary.termination);
-//! assert!(sq.summary.final_.ve_mm2 < lm.summary.final_.ve_mm2 * (1.0 + 1e-6));
+//! assert!(sq.summary.reached.ve_mm2 < lm.summary.reached.ve_mm2 * (1.0 + 1e-6));
 //! # }
 //! ```
 
@@ -64,6 +64,7 @@ pub enum Algorithm {
 
 /// The NLopt engine with one algorithm.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub struct Nlopt {
     /// The algorithm.
     pub algorithm: Algorithm,
@@ -144,7 +145,7 @@ impl Solver for Nlopt {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let problem = &task.problem;
+        let problem = &*task.problem;
         let n = start.len();
         let np = problem.n_points();
         let nf = free.n_free();

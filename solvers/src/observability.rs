@@ -28,7 +28,7 @@ use volver_core::machine::TrackerMount;
 use volver_core::measure::{Measurement, MeasurementSet};
 use volver_core::model::Model;
 use volver_core::plan::Plan;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
 /// Correlation above which two parameters are called interchangeable.
 pub const INTERCHANGEABLE: f64 = 0.99;

@@ -73,13 +73,6 @@ pub struct Options {
     /// Φ only: the final IRLS ε as a fraction of Φ (the native LM's Newton stage, the others'
     /// last solve). Default 1e-9.
     pub irls_final_epsilon: f64,
-    /// Native LM, Φ: polish a converged fit with nothing held by Newton steps judged by the
-    /// exact gradient ([`crate::polish::settle`]), so that where the damped steps stopped along
-    /// weakly identified directions does not show in the result (engines and starts then agree
-    /// on the error functions to ~1e-9). On test 4 it is about half of a fit's time. Default
-    /// true; Monte Carlo replicas ([`crate::uncertainty::monte_carlo`]) turn it off: their
-    /// spread is the noise's, a million times larger.
-    pub polish: bool,
 }
 
 /// The largest ratio `2‖a‖ / ‖v‖` of geodesic acceleration to step, in the damping norm, that
@@ -98,7 +91,6 @@ impl Default for Options {
             initial_damping: 1e-4,
             irls_initial_epsilon: 0.1,
             irls_final_epsilon: 1e-9,
-            polish: true,
         }
     }
 }

@@ -7,7 +7,7 @@
 
 use crate::Task;
 use faer::{Mat, Side};
-use volver_core::problem::Problem;
+use volver_core::problem::Residuals;
 
 /// What [`settle`] did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,7 +74,7 @@ pub(crate) fn settle_scaled(
     irls_final_epsilon: f64,
 ) -> Option<(Vec<f64>, Settled)> {
     use crate::loss::{cost_of, norms, weight_of};
-    let problem = &task.problem;
+    let problem = &*task.problem;
     let np = problem.n_points();
     let (d, ns) = match scale {
         Some(d) => (
@@ -278,13 +278,14 @@ const NEGLIGIBLE: f64 = 1e-10;
 /// `p_f` is `p` without the tracker pose; for a curve fit, `‖Δp‖ ≤ NEGLIGIBLE · ‖p‖`. Never
 /// when the size is zero.
 fn negligible_step<'f>(
-    problem: &Problem,
+    problem: &dyn Residuals,
     p: &[f64],
     free: &'f crate::coordinates::Free,
 ) -> impl Fn(&[f64]) -> bool + 'f {
     let n = p.len();
     let (metric, size) = match problem.machine() {
-        Some((model, _)) => {
+        Some(machine) => {
+            let model = machine.model();
             let m = crate::gauge::function_metric(model, p);
             let t = model.tracker_start();
             let pf: Vec<f64> = (0..n)
@@ -324,9 +325,9 @@ const MAX_WEAK: usize = 16;
 /// with the exact second-order term `Σ_i ψ_iᵀ ∂²r_i` added on the span of its weakest
 /// eigenvectors (curvature below [`WEAK`] of the largest, at most [`MAX_WEAK`]): each entry by
 /// polarisation of exact second directional derivatives of the residuals
-/// ([`Problem::residual_second_directional`]), `k (k + 1) / 2` passes for `k` directions.
+/// ([`Residuals::residual_second_directional`]), `k (k + 1) / 2` passes for `k` directions.
 fn weak_second_order(
-    problem: &Problem,
+    problem: &dyn Residuals,
     x: &[f64],
     d: &[f64],
     basis: faer::MatRef<'_, f64>,

@@ -136,7 +136,7 @@ pub struct Posterior {
 /// finite.
 ///
 /// ```
-/// use volver_core::{machine::Machine, model::Model, plan::Plan, problem::Problem};
+/// use volver_core::{machine::Machine, model::Model, plan::Plan, problem::{Problem, Residuals}};
 /// use volver_core::simulate::{Magnitudes, Simulation, Truth};
 /// use volver_core::noise::TrackerNoise;
 /// use volver_solvers::prior::{Priors, maximum_a_posteriori};

@@ -10,7 +10,7 @@ use crate::options::Options;
 use crate::summary::{At, Failure, Invalid, Summary, Termination};
 use crate::{Solution, Task, evaluate};
 use std::time::Instant;
-use volver_core::problem::Problem;
+use volver_core::problem::Residuals;
 
 /// Where a solve met trial points whose residuals or Jacobian are not finite (evaluation
 /// numbers as counted in the summary).
@@ -84,7 +84,7 @@ impl FiniteEdge {
 
 /// The bookkeeping of one solve: validation, the initial evaluation, the summary, the end.
 pub(crate) struct Run<'t, 'a> {
-    pub(crate) problem: &'t Problem<'a>,
+    pub(crate) problem: &'t (dyn Residuals + 'a),
     pub(crate) summary: Summary,
     /// Non-finite trial points met on the way.
     pub(crate) edge: FiniteEdge,
@@ -110,7 +110,7 @@ impl<'t, 'a> Run<'t, 'a> {
         start: &[f64],
         options: &Options,
     ) -> Result<Run<'t, 'a>, Box<Solution>> {
-        let problem = &task.problem;
+        let problem = &*task.problem;
         let n = problem.n_params();
         let mut run = Run {
             problem,
@@ -122,7 +122,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 unidentifiable: 0,
                 points: problem.n_points(),
                 initial: Default::default(),
-                final_: Default::default(),
+                reached: Default::default(),
                 iterations: 0,
                 evaluations: 0,
                 jacobian_evaluations: 0,
@@ -203,15 +203,15 @@ impl<'t, 'a> Run<'t, 'a> {
     pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
         // A start of the wrong length cannot be evaluated: it ends as invalid input.
         if params.len() == self.problem.n_params() {
-            self.summary.final_ = evaluate(self.problem, &params);
+            self.summary.reached = evaluate(self.problem, &params);
             self.summary.evaluations += 1;
         } else {
-            self.summary.final_.phi_mm = f64::NAN;
-            self.summary.final_.ve_mm2 = f64::NAN;
+            self.summary.reached.phi_mm = f64::NAN;
+            self.summary.reached.ve_mm2 = f64::NAN;
         }
         // Never report success with a non-finite result, nor a stop at the edge of the finite
         // region as convergence.
-        let termination = if !self.summary.final_.phi_mm.is_finite() && !termination.failed() {
+        let termination = if !self.summary.reached.phi_mm.is_finite() && !termination.failed() {
             Termination::NumericalFailure(Failure::ObjectiveNotFinite(At::End))
         } else {
             self.edge.verdict(termination, self.summary.evaluations)

@@ -31,7 +31,7 @@ use serde::Serialize;
 use std::time::Instant;
 use volver_core::iso::Group;
 use volver_core::model::{Model, Owner, ParamInfo};
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 
 /// The phase sequences of table 1 and tables 6 and 8.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -127,8 +127,8 @@ pub struct Identification {
     pub phases: Vec<Summary>,
     /// At the start, after the tracker's rigid fit: the uncompensated machine.
     pub initial: Evaluation,
-    /// At the end.
-    pub final_: Evaluation,
+    /// What the identification reached, at its end.
+    pub reached: Evaluation,
     /// How the last solve ended (or why the strategy could not start).
     pub termination: Termination,
     /// Wall time (s).
@@ -142,7 +142,7 @@ impl Identification {
     /// Final EMM as a percentage of the initial EMM.
     /// 0 when the initial EMM is already 0 (nothing to reduce), never NaN.
     pub fn residual_percent(&self) -> f64 {
-        let (a, b) = (self.final_.stats.emm_um, self.initial.stats.emm_um);
+        let (a, b) = (self.reached.stats.emm_um, self.initial.stats.emm_um);
         if b > 0.0 { 100.0 * a / b } else { 0.0 }
     }
 
@@ -204,7 +204,7 @@ pub fn identify_errors(
     let mut p = start.to_vec();
     let mut gauge: Option<Gauge> = None;
     let done = |p: Vec<f64>, phases: Vec<Summary>, initial, termination, gauge| Identification {
-        final_: evaluate(&problem, &p),
+        reached: evaluate(&problem, &p),
         params: p,
         phases,
         initial,
@@ -367,14 +367,14 @@ fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bo
 /// stopped along the weakly identified directions (not again when the engine polished it under
 /// them itself, [`Summary::polished`]). Its Newton steps and passes are added to the summary.
 fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solution {
-    let problem = &task.problem;
+    let problem = &*task.problem;
     let t0 = Instant::now();
     let mut out = sol;
     let projected = g.project(&out.params);
     if out.summary.polished {
         // The engine polished it under these very constraints.
         out.params = projected;
-        out.summary.final_ = evaluate(problem, &out.params);
+        out.summary.reached = evaluate(problem, &out.params);
         return out;
     }
     out.params = match crate::polish::settle(
@@ -391,7 +391,7 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
         }
         None => projected,
     };
-    out.summary.final_ = evaluate(problem, &out.params);
+    out.summary.reached = evaluate(problem, &out.params);
     out.summary.time_s += t0.elapsed().as_secs_f64();
     out
 }
@@ -402,9 +402,7 @@ pub const MIN_EQUATIONS_PER_PARAMETER: usize = 3;
 /// Distinct (commands, reflector) pairs of a problem's data (rotary positions a turn apart are
 /// one pose).
 fn distinct_poses(problem: &Problem) -> usize {
-    let Some((model, data)) = problem.machine() else {
-        return problem.n_points();
-    };
+    let (model, data) = (problem.model(), problem.data());
     let mut keys: Vec<Vec<i64>> = data
         .points
         .iter()
@@ -446,7 +444,7 @@ pub fn identify(
 /// let data = Simulation::new(Plan::preset(&m, "test3").unwrap(), truth, 2).run().unwrap().measurements;
 /// let model = Model::default_xcfz();
 /// let id = volver_solvers::strategy::fit(Problem::new(&model, &data).unwrap());
-/// assert!(id.termination.converged() && id.final_.stats.emm_um < id.initial.stats.emm_um);
+/// assert!(id.termination.converged() && id.reached.stats.emm_um < id.initial.stats.emm_um);
 /// ```
 pub fn fit(problem: Problem) -> Identification {
     let start = problem.model().initial_params();
@@ -572,6 +570,6 @@ pub fn cross_validate(
         options,
         observer,
     );
-    after.initial = before.final_;
+    after.initial = before.reached;
     after
 }

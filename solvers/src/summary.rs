@@ -9,6 +9,7 @@ use volver_core::metrics::ErrorStats;
 
 /// Why a solve stopped.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[non_exhaustive]
 #[serde(tag = "reason", content = "detail", rename_all = "kebab-case")]
 pub enum Termination {
     /// Criterion 1: the parameter change fell below its tolerance.
@@ -319,8 +320,10 @@ pub struct Summary {
     pub points: usize,
     /// At the start.
     pub initial: Evaluation,
-    /// At the end.
-    pub final_: Evaluation,
+    /// What the solve reached, at its end (serialized as `final_`, the key results files
+    /// have always used).
+    #[serde(rename = "final_")]
+    pub reached: Evaluation,
     /// Iterations (steps tried).
     pub iterations: usize,
     /// Objective evaluations (residual passes), Jacobian passes included.
@@ -342,15 +345,15 @@ impl Summary {
     /// The final objective value (Φ in mm or ve in mm²).
     pub fn final_cost(&self) -> f64 {
         match self.objective {
-            Objective::Phi => self.final_.phi_mm,
-            Objective::Ve => self.final_.ve_mm2,
+            Objective::Phi => self.reached.phi_mm,
+            Objective::Ve => self.reached.ve_mm2,
         }
     }
 
     /// Final EMM as a percentage of the initial EMM (the paper's residual error).
     /// 0 when the initial EMM is already 0 (nothing to reduce), never NaN.
     pub fn residual_percent(&self) -> f64 {
-        let (a, b) = (self.final_.stats.emm_um, self.initial.stats.emm_um);
+        let (a, b) = (self.reached.stats.emm_um, self.initial.stats.emm_um);
         if b > 0.0 { 100.0 * a / b } else { 0.0 }
     }
 
@@ -362,7 +365,7 @@ impl Summary {
             self.objective,
             self.phase,
             self.initial.stats.emm_um,
-            self.final_.stats.emm_um,
+            self.reached.stats.emm_um,
             self.residual_percent(),
             self.iterations,
             self.evaluations,
@@ -394,19 +397,19 @@ impl Summary {
         line(
             &mut s,
             "Φ initial / final (mm)",
-            format!("{:.6e} / {:.6e}", self.initial.phi_mm, self.final_.phi_mm),
+            format!("{:.6e} / {:.6e}", self.initial.phi_mm, self.reached.phi_mm),
         );
         line(
             &mut s,
             "ve initial / final (mm²)",
-            format!("{:.6e} / {:.6e}", self.initial.ve_mm2, self.final_.ve_mm2),
+            format!("{:.6e} / {:.6e}", self.initial.ve_mm2, self.reached.ve_mm2),
         );
         line(
             &mut s,
             "EMM initial / final (µm)",
             format!(
                 "{:.4} / {:.4}",
-                self.initial.stats.emm_um, self.final_.stats.emm_um
+                self.initial.stats.emm_um, self.reached.stats.emm_um
             ),
         );
         line(
@@ -414,7 +417,7 @@ impl Summary {
             "EMax initial / final (µm)",
             format!(
                 "{:.4} / {:.4}",
-                self.initial.stats.emax_um, self.final_.stats.emax_um
+                self.initial.stats.emax_um, self.reached.stats.emax_um
             ),
         );
         line(

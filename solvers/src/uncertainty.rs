@@ -32,7 +32,7 @@ use volver_core::machine::Commands;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::random::Rng;
 use volver_core::results::UncertaintyRecord;
 
@@ -250,10 +250,7 @@ pub fn linear(
         let jz = Mat::from_fn(3, nf, |c, k| {
             (0..n).map(|j| jac[c * n + j] * basis[(j, k)]).sum::<f64>()
         });
-        let x = match problem.machine() {
-            Some((_, data)) => data.points[i].measured,
-            None => [0.0; 3],
-        };
+        let x = problem.data().points[i].measured;
         let (ea, eb) = expectations(objective, noise, x, sigma_mm, &rule);
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
@@ -439,13 +436,13 @@ pub fn monte_carlo(
     seed: u64,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<MonteCarlo, crate::Error> {
-    crate::engine(engine)?;
     // No Newton polish of each replica: it moves a fit by ~1e-9 of its error functions, a
     // millionth of the spread measured here, and costs half of a replica's time.
-    let options = &Options {
+    let lm = crate::lm::LevenbergMarquardt {
         polish: false,
-        ..options.clone()
+        ..Default::default()
     };
+    crate::engine_with(engine, lm)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let predicted: Vec<[f64; 3]> = data
         .points
@@ -456,7 +453,7 @@ pub fn monte_carlo(
     let runs: Vec<Option<Vec<f64>>> = (0..n)
         .into_par_iter()
         .map(|r| {
-            let solver = crate::engine(engine).ok()?;
+            let solver = crate::engine_with(engine, lm).ok()?;
             let mut rng = Rng::new(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (r as u64 + 1));
             let mut set = data.clone();
             for (p, x) in set.points.iter_mut().zip(&predicted) {

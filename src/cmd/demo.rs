@@ -12,7 +12,7 @@ use volver::core::measure::MeasurementSet;
 use volver::core::metrics::ErrorStats;
 use volver::core::model::Model;
 use volver::core::plan::Plan;
-use volver::core::problem::Problem;
+use volver::core::problem::{Problem, Residuals};
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 use volver::core::tables::ErrorTables;
@@ -110,7 +110,7 @@ fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification
     println!(
         "\n2. Identification, paper model: EMM {} → {} µm in {} iterations ({:.2} s)",
         um(id1.initial.stats.emm_um),
-        um(id1.final_.stats.emm_um),
+        um(id1.reached.stats.emm_um),
         id1.iterations(),
         id1.time_s
     );
@@ -118,7 +118,7 @@ fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification
         println!(
             "   noise estimated from {pairs} repeated points: EMM {} µm — the fit is {:.2} × that: something is missing",
             um(n.emm_um),
-            id1.final_.stats.emm_um / n.emm_um
+            id1.reached.stats.emm_um / n.emm_um
         );
     }
     Ok(id1)
@@ -192,9 +192,9 @@ fn identify_with(
     println!(
         "\n4. Identification with {}: EMM {} µm ({} parameters) — {:.3} × the noise error: the model explains everything but the noise",
         added,
-        um(id2.final_.stats.emm_um),
+        um(id2.reached.stats.emm_um),
         model2.n_params(),
-        id2.final_.stats.emm_um / noise
+        id2.reached.stats.emm_um / noise
     );
     Ok(id2)
 }
@@ -428,9 +428,9 @@ fn write_report(
         cross,
         notes: vec![format!(
             "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm in the workpiece frame, and to {} µm after the best rigid transform (which a workpiece set-up takes up).",
-            um(id1.final_.stats.emm_um),
+            um(id1.reached.stats.emm_um),
             added,
-            um(id2.final_.stats.emm_um),
+            um(id2.reached.stats.emm_um),
             um(noise),
             um(check.before.emm_um),
             um(check.after.emm_um),

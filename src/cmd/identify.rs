@@ -195,9 +195,9 @@ fn history_record(
         parameters: model.n_params(),
         free: id.phases.last().map_or(0, |s| s.free_parameters),
         emm_initial_um: id.initial.stats.emm_um,
-        emm_final_um: id.final_.stats.emm_um,
-        emax_final_um: id.final_.stats.emax_um,
-        phi_mm: id.final_.phi_mm,
+        emm_final_um: id.reached.stats.emm_um,
+        emax_final_um: id.reached.stats.emax_um,
+        phi_mm: id.reached.phi_mm,
         noise_error_um: outcome.noise_error.map(|s| s.emm_um),
         termination: id.termination.to_string(),
     }
@@ -214,8 +214,8 @@ fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
         println!(
             "  {:<32} {:>12} {:>12} {:>9.3}% {:>6} {:>6}  {}",
             s.phase,
-            um(s.final_.stats.emm_um),
-            um(s.final_.stats.emax_um),
+            um(s.reached.stats.emm_um),
+            um(s.reached.stats.emax_um),
             s.residual_percent(),
             s.iterations,
             s.evaluations,
@@ -228,8 +228,8 @@ fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
     );
     println!(
         "  final:                                 EMM {:>10} µm   EMax {:>10} µm   residual {} %",
-        um(id.final_.stats.emm_um),
-        um(id.final_.stats.emax_um),
+        um(id.reached.stats.emm_um),
+        um(id.reached.stats.emax_um),
         um(id.residual_percent())
     );
     if let Some(n) = outcome.noise_error {
@@ -237,7 +237,7 @@ fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
             "  noise error (of the measurements):      EMM {:>10} µm   EMax {:>10} µm   final / noise {:.4}",
             um(n.emm_um),
             um(n.emax_um),
-            id.final_.stats.emm_um / n.emm_um
+            id.reached.stats.emm_um / n.emm_um
         );
     }
     print_verdict(outcome, out);

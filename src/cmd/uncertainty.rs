@@ -106,7 +106,7 @@ fn print_gauge(a: &Assessment, model: &Model, request: &Request, points: usize) 
          coordinate",
         points,
         model.spec().name,
-        a.id.final_.stats.emm_um,
+        a.id.reached.stats.emm_um,
         a.covariance.sigma_mm * 1e3
     );
     println!("  noise model: {noise}");

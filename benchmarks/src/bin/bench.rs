@@ -38,7 +38,7 @@ use volver_core::machine::{Commands, Machine};
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::plan::Plan;
-use volver_core::problem::Problem;
+use volver_core::problem::{Problem, Residuals};
 use volver_core::random::Rng;
 use volver_core::simulate::{Magnitudes, Simulation, Truth};
 use volver_solvers::strategy::{Strategy, identify};
@@ -319,7 +319,7 @@ fn run_engine(size: &Size, name: &str) -> serde_json::Value {
         _ => f64::NAN,
     };
     let mut trace = steps.trace;
-    trace.push((time_s, id.final_.stats.emm_um));
+    trace.push((time_s, id.reached.stats.emm_um));
     serde_json::json!({
         "engine": name,
         "trace": trace,

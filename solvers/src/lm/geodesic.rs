@@ -7,7 +7,7 @@ use super::*;
 /// `W_i` its Gauss–Newton weight (as in [`accumulate`]). One Jacobian and one second-derivative
 /// pass; `None` when a value is not finite.
 pub(super) fn curvature_gradient(
-    problem: &Problem,
+    problem: &dyn Residuals,
     free: &Free,
     p: &[f64],
     delta: &[f64],
