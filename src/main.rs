@@ -77,6 +77,8 @@ enum Command {
 
 fn main() -> Result<()> {
     quiet_on_broken_pipe();
+    // The passes of the engines start on this thread instead of being handed over.
+    volver::solvers::share_calling_thread();
     // An interrupted write leaves no hidden temporary file (a simulation's can be 100 MB).
     let _ = ctrlc::set_handler(|| {
         volver::core::fsio::remove_temporaries();

@@ -24,6 +24,9 @@ thread_local! {
     /// allocation, mapped and zeroed page by page at every pass).
     static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
+    /// The calling thread's buffers for the blocks' `J_bᵀ W_b J_b` of a wave (n² each, upper
+    /// triangles zero), kept between passes: fresh ones cost a zeroing of n² per block.
+    static PARTS: std::cell::RefCell<Vec<Vec<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 /// Normal equations of one pass at a point: `H` and `g`, and on request the triangular factor
@@ -75,12 +78,24 @@ pub(crate) fn accumulate(
     let mut rf: Option<Vec<f64>> = None;
     // Blocks are computed a wave at a time (bounded memory), each wave on every thread.
     let wave = 2 * rayon::current_num_threads().max(1);
+    // The waves' normal-matrix buffers (none for a factor, whose blocks start from zero).
+    let mut bufs = PARTS.with(|b| std::mem::take(&mut *b.borrow_mut()));
+    let (count, len) = if factor { (0, 0) } else { (wave, n * n) };
+    bufs.truncate(count);
+    bufs.retain(|b| b.len() == len);
+    bufs.resize_with(count, || vec![0.0; len]);
     let mut first = 0;
-    while first < blocks {
+    let mut failed = false;
+    while first < blocks && !failed {
         let last = (first + wave).min(blocks);
-        let parts: Vec<Option<BlockPart>> = (first..last)
+        let outs = bufs
+            .iter_mut()
+            .map(Some)
+            .chain(std::iter::repeat_with(|| None));
+        let jobs: Vec<(usize, Option<&mut Vec<f64>>)> = (first..last).zip(outs).collect();
+        let parts: Vec<Option<BlockPart>> = jobs
             .into_par_iter()
-            .map(|b| {
+            .map(|(b, out)| {
                 SCRATCH.with(|s| {
                     let (blk, row, tb) = &mut *s.borrow_mut();
                     // Every entry a block reads it writes first: no zeroing needed.
@@ -89,30 +104,34 @@ pub(crate) fn accumulate(
                     if factor {
                         tb.resize(3 * BLOCK * nc, 0.0);
                     }
-                    block_part(problem, p, &weight, factor, b, (blk, row, tb))
+                    block_part(problem, p, &weight, b, (blk, row, tb), out)
                 })
             })
             .collect();
-        for part in parts {
-            let part = part?;
+        for (k, part) in parts.into_iter().enumerate() {
+            let Some(part) = part else {
+                failed = true;
+                break;
+            };
             for (gj, pj) in g.iter_mut().zip(&part.g) {
                 *gj += pj;
             }
-            match (factor, rf.as_mut()) {
-                (true, None) => rf = Some(part.m),
-                (true, Some(r)) => {
-                    let mut rb = part.m;
-                    qr_update(r, nc, &mut rb, nc);
-                }
-                (false, _) => {
+            match (part.factor, rf.as_mut()) {
+                (Some(m), None) => rf = Some(m),
+                (Some(mut rb), Some(r)) => qr_update(r, nc, &mut rb, nc),
+                (None, _) => {
                     // The upper triangle of a part is zero: adding it whole changes nothing.
-                    for (hv, pv) in hl.iter_mut().zip(&part.m) {
+                    for (hv, pv) in hl.iter_mut().zip(&bufs[k]) {
                         *hv += pv;
                     }
                 }
             }
         }
         first = last;
+    }
+    PARTS.with(|b| *b.borrow_mut() = bufs);
+    if failed {
+        return None;
     }
     let mut h = Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]);
     let factor = factor.then(|| {
@@ -132,16 +151,18 @@ pub(crate) fn accumulate(
     Some(Normal { h, g, factor })
 }
 
-/// One block's share of a pass: its gradient and either the lower triangle of its
-/// `J_bᵀ W_b J_b` (n × n, column-major) or the triangular factor of its rows with the residual
-/// column ((n+1)², column-major).
+/// One block's share of a pass: its gradient and, for a factor, the triangular factor of its
+/// rows with the residual column ((n+1)², column-major); else the lower triangle of its
+/// `J_bᵀ W_b J_b` is in the buffer the block was given.
 struct BlockPart {
     g: Vec<f64>,
-    m: Vec<f64>,
+    factor: Option<Vec<f64>>,
 }
 
 /// [`accumulate`]'s work on block `b`, with the scratch `blk` (3 [`BLOCK`] (n+1)), `row` (3n)
-/// and, for a factor, `tb` (3 [`BLOCK`] (n+1)).
+/// and, for a factor, `tb` (3 [`BLOCK`] (n+1)); without `out` (n × n, column-major, upper
+/// triangle zero) the block forms the factor, else the lower triangle of `J_bᵀ W_b J_b` in
+/// `out`.
 ///
 /// The block's weighted rows are written one after another (row ρ = 3q + c of point q at
 /// `blk[ρ (n+1)..]`, its residual last), so that each point's writes are contiguous; the block's
@@ -151,10 +172,11 @@ fn block_part(
     problem: &dyn Residuals,
     p: &[f64],
     weight: &impl Fn(f64) -> (f64, f64),
-    factor: bool,
     b: usize,
     (blk, row, tb): (&mut [f64], &mut [f64], &mut [f64]),
+    out: Option<&mut Vec<f64>>,
 ) -> Option<BlockPart> {
+    let factor = out.is_none();
     let n = p.len();
     let nc = n + 1;
     let start = b * BLOCK;
@@ -198,7 +220,7 @@ fn block_part(
         o1[n] = sw * r[1];
         o2[n] = sw * r[2];
     }
-    let m = if factor {
+    let Some(hb) = out else {
         for rho in 0..rows {
             for j in 0..nc {
                 tb[j * rows + rho] = blk[rho * nc + j];
@@ -206,13 +228,16 @@ fn block_part(
         }
         let mut rb = vec![0.0; nc * nc];
         qr_update(&mut rb, nc, &mut tb[..rows * nc], rows);
-        rb
-    } else {
-        let mut hb = vec![0.0; n * n];
+        return Some(BlockPart {
+            g,
+            factor: Some(rb),
+        });
+    };
+    {
         // n × rows: column ρ is row ρ of the block.
         let jt = faer::MatRef::from_column_major_slice_with_stride(&blk[..rows * nc], n, rows, nc);
         triangular_matmul(
-            faer::MatMut::from_column_major_slice_mut(&mut hb, n, n),
+            faer::MatMut::from_column_major_slice_mut(hb, n, n),
             BlockStructure::TriangularLower,
             Accum::Replace,
             jt,
@@ -222,9 +247,8 @@ fn block_part(
             1.0,
             Par::Seq,
         );
-        hb
-    };
-    Some(BlockPart { g, m })
+    }
+    Some(BlockPart { g, factor: None })
 }
 
 /// `Σ aᵢ bᵢ` with four running sums (so that the loop vectorises).

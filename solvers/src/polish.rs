@@ -93,9 +93,9 @@ pub(crate) fn settle_scaled(
     let at = |z: &[f64]| free.params(z);
     let mut z = vec![0.0; nf];
     let mut x = at(&z);
-    let eps =
-        irls_final_epsilon * crate::loss::norms_of(problem, &x).iter().sum::<f64>() / np as f64;
-    let mut cost = cost_of(objective, &norms(problem, &x)?, eps);
+    let norms0 = norms(problem, &x)?;
+    let eps = irls_final_epsilon * norms0.iter().sum::<f64>() / np as f64;
+    let mut cost = cost_of(objective, &norms0, eps);
     let mut report = Settled {
         steps: 0,
         jacobian_evaluations: 0,

@@ -402,13 +402,14 @@ pub const MIN_EQUATIONS_PER_PARAMETER: usize = 3;
 /// Distinct (commands, reflector) pairs of a problem's data (rotary positions a turn apart are
 /// one pose).
 fn distinct_poses(problem: &Problem) -> usize {
+    use rayon::prelude::*;
     let (model, data) = (problem.model(), problem.data());
     let mut keys: Vec<Vec<i64>> = data
         .points
-        .iter()
+        .par_iter()
         .map(|p| volver_core::measure::pose_key(model.machine(), p))
         .collect();
-    keys.sort();
+    keys.par_sort_unstable();
     keys.dedup();
     keys.len()
 }

@@ -25,7 +25,10 @@
 //!   allocator). Test 4 runs to convergence (Clarabel to 30 steps); the larger problems get a
 //!   step budget per engine (their Φ creeps for hundreds of steps in every engine), so their
 //!   ratios are per step;
-//! * scaling of the native LM's identification time with points and with parameters.
+//!
+//! Then both cores: the native LM on the 10 000-point problem on one and two threads, best of 7
+//! runs each, and the ratio; last, the scaling of the native LM's identification time with
+//! points and with parameters.
 //!
 //! No figure here is a test threshold.
 
@@ -568,6 +571,32 @@ fn reference(reps: usize) {
     }
 }
 
+/// The native LM's identification of the 10 000-point size on one and two threads, best of
+/// `reps` runs each (each in its own process): how much of the second core it uses.
+fn threads(reps: usize) {
+    println!("\n## Both cores: the native LM on 10 000 points, one and two threads\n");
+    let best_of = |threads: usize| -> serde_json::Value {
+        (0..reps)
+            .map(|_| child_with_threads("lm", "10k", Some(threads)))
+            .min_by(|a, b| f(a, "time_s").total_cmp(&f(b, "time_s")))
+            .unwrap_or_default()
+    };
+    let (one, two) = (best_of(1), best_of(2));
+    if let Some(e) = [&one, &two].iter().find_map(|r| r["error"].as_str()) {
+        println!("Not measured: {e}.");
+        return;
+    }
+    println!(
+        "Best of {reps} runs each (Φ, to convergence, the problem's set-up included): {:.3} s on \
+         one thread, {:.3} s on two, {:.2}×; the same Φ on both ({:.12e} and {:.12e} mm).",
+        f(&one, "time_s"),
+        f(&two, "time_s"),
+        f(&one, "time_s") / f(&two, "time_s"),
+        f(&one, "phi_mm"),
+        f(&two, "phi_mm"),
+    );
+}
+
 fn scaling() {
     println!("\n## Scaling of the native LM (Φ, to convergence or 30 steps)\n");
     println!("| model | params | points | steps | time s | s/step |");
@@ -616,6 +645,8 @@ fn size_of(key: &str) -> Size {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() == 4 && args[1] == "child" {
+        // As the CLI does: the passes start on this thread.
+        volver_solvers::share_calling_thread();
         let size = size_of(&args[3]);
         let v = if args[2] == "kernels" {
             kernels(&size)
@@ -643,6 +674,7 @@ fn main() {
         }
         report(&size);
     }
+    threads(if quick { 3 } else { 7 });
     scaling();
     println!("\nTotal {:.0} s.", t.elapsed().as_secs_f64());
 }
