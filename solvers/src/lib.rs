@@ -332,8 +332,8 @@ pub fn engine(name: &str) -> Result<Box<dyn Solver>, Error> {
 /// Makes the calling thread one of the threads of rayon's global pool (whose size still comes
 /// from `RAYON_NUM_THREADS` or the number of cores), so that each parallel pass of an engine
 /// started from it runs on it too instead of being handed to a pool thread while it waits: with
-/// a pass every few milliseconds the hand-over shows (on the bench's 10 000 points, about 30 ms
-/// of 0.57 s on one thread, 25 ms of 0.36 s on two). Call it once, first thing in `main`, on
+/// a pass every few milliseconds the hand-over shows (on the bench's 10 000 points, 20–25 ms of
+/// 0.57 s on one thread, 15–25 ms of 0.36 s on two). Call it once, first thing in `main`, on
 /// the thread that will run the solves; `false` when the global pool already exists (then
 /// nothing changes). Results do not depend on it: the passes reduce in a fixed order.
 ///

@@ -283,7 +283,7 @@ pub fn identify_errors(
             // The phase's own gauge: its free errors' reference is zero (the held ones stay
             // where the phase holds them), the tracker's the rigid fit to that; the directions
             // are those the design cannot identify there.
-            let phase_gauge = if strategy.gauge && problem.machine().is_some() {
+            let phase_gauge = if strategy.gauge {
                 let reference = gauge_reference(&problem, &p, free);
                 // A start that is the reference but for the tracker's last bits (every free
                 // error at its initial value: the usual start) starts at the reference itself,
