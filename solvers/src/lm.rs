@@ -261,6 +261,9 @@ struct Lm<'t, 'a, 'o> {
     design: (Vec<f64>, Mat<f64>),
     design_generation: usize,
     refresh: bool,
+    /// The unweighted normal matrix whose design the next pass decomposes while it forms its
+    /// own equations (on the other threads): the start's, then a new IRLS stage's.
+    pending_design: Option<Mat<f64>>,
     /// Moré's scaling: the largest diagonal seen in the current coordinates, which ones, and
     /// whether the next pass starts it afresh.
     dmax: Vec<f64>,
@@ -269,14 +272,13 @@ struct Lm<'t, 'a, 'o> {
 }
 
 impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
-    /// The state at the start; `Err` is the finished solution when the design cannot be
-    /// decomposed.
+    /// The state at the start (its design is decomposed by the first pass).
     fn new(
         begun: Started<'t, 'a>,
         task: &'t Task<'a>,
         options: &'o Options,
         settings: LevenbergMarquardt,
-    ) -> Result<Self, Box<Solution>> {
+    ) -> Self {
         let Started {
             run,
             free,
@@ -290,15 +292,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         // would hide identifiable directions near its end. For ve the current matrix is the
         // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
         // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
-        let Some(design) = design_of(&free, &start_normal.h) else {
-            return Err(Box::new(run.finish(
-                p0,
-                Termination::NumericalFailure(Failure::Decomposition {
-                    matrix: "the design's normal matrix",
-                    at: At::Start,
-                }),
-            )));
-        };
+        // The first pass decomposes it.
         let objective = options.objective;
         let np = norms0.len();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
@@ -313,7 +307,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             .rows
             .iter()
             .any(|r| r.kind == volver_core::model::ConstraintKind::Gauge);
-        Ok(Lm {
+        Lm {
             problem: &*task.problem,
             run,
             options,
@@ -337,13 +331,14 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             nu: 2.0,
             gain: FIRST_GAIN,
             refused: 0,
-            design,
+            design: (Vec::new(), Mat::new()),
             design_generation: 0,
             refresh: false,
+            pending_design: Some(start_normal.h),
             dmax: Vec::new(),
             scale_coords: None,
             reset_scale: false,
-        })
+        }
     }
 
     fn np(&self) -> usize {
@@ -417,39 +412,59 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
 
     // The named steps.
 
-    /// One Jacobian pass at the current point: the design refreshed when a stage began, the
-    /// majorising stage's ε moved to the current Φ, the weighted normal equations.
+    /// One Jacobian pass at the current point: the design refreshed when a stage began (its
+    /// unweighted pass first; its decomposition beside this pass's own work, which does not
+    /// depend on it), the majorising stage's ε moved to the current Φ, the weighted normal
+    /// equations.
     fn jacobian_pass(&mut self) -> Result<crate::kernels::Normal, Termination> {
         let iterations = self.run.summary.iterations;
         if self.run.summary.evaluations >= self.options.max_evaluations {
             return Err(Termination::EvaluationLimit);
         }
+        let decomposition_failed = |at| {
+            Termination::NumericalFailure(Failure::Decomposition {
+                matrix: "the design's normal matrix",
+                at,
+            })
+        };
+        // The start's design fails at the start; a new stage's at this iteration.
+        let mut pending = self.pending_design.take();
+        let at = if pending.is_some() {
+            At::Start
+        } else {
+            At::Iteration(iterations)
+        };
         if self.refresh && self.objective == Objective::Phi {
             self.refresh = false;
-            let refreshed = accumulate(self.problem, &self.p, |_| (1.0, 0.0), false)
-                .and_then(|h| design_of(&self.free, &h.h));
+            let plain = accumulate(self.problem, &self.p, |_| (1.0, 0.0), false);
             self.run.summary.evaluations += 1;
             self.run.summary.jacobian_evaluations += 1;
-            let Some(d) = refreshed else {
-                return Err(Termination::NumericalFailure(Failure::Decomposition {
-                    matrix: "the design's normal matrix",
-                    at: At::Iteration(iterations),
-                }));
+            let Some(plain) = plain else {
+                return Err(decomposition_failed(At::Iteration(iterations)));
             };
-            self.design = d;
-            self.design_generation += 1;
+            pending = Some(plain.h);
         }
         if self.stage == Stage::Majorising {
             self.eps = (self.options.irls_initial_epsilon * self.phi()).max(1e-300);
             self.cost = cost_of(self.objective, &self.norms, self.eps);
         }
-        let normal = accumulate(
-            self.problem,
-            &self.p,
-            |r| self.weight(r),
-            self.objective == Objective::Ve,
-        )
-        .ok_or({
+        let this = &*self;
+        let (design, normal) = rayon::join(
+            || pending.as_ref().map(|h| design_of(&this.free, h)),
+            || {
+                accumulate(
+                    this.problem,
+                    &this.p,
+                    |r| this.weight(r),
+                    this.objective == Objective::Ve,
+                )
+            },
+        );
+        if let Some(design) = design {
+            self.design = design.ok_or(decomposition_failed(at))?;
+            self.design_generation += 1;
+        }
+        let normal = normal.ok_or({
             Termination::NumericalFailure(Failure::JacobianNotFinite(At::Iteration(iterations)))
         })?;
         self.run.summary.evaluations += 1;
@@ -797,10 +812,7 @@ impl Solver for LevenbergMarquardt {
                 )),
             );
         }
-        let mut lm = match Lm::new(begun, task, options, *self) {
-            Ok(lm) => lm,
-            Err(solution) => return *solution,
-        };
+        let mut lm = Lm::new(begun, task, options, *self);
         let termination = 'passes: loop {
             let restricted = match lm.jacobian_pass().and_then(|normal| lm.restrict(normal)) {
                 Ok(r) => r,
