@@ -251,6 +251,29 @@ fn block_part(
     Some(BlockPart { g, factor: None })
 }
 
+/// `a · b`, for products of at least [`SPLIT`] rows and columns with the columns of `b` in two
+/// fixed halves computed on either side of a `rayon::join` (a step's dense products would
+/// otherwise leave the other threads idle). The halves do not depend on the number of threads,
+/// so neither do the bits.
+pub(crate) fn product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
+    let (m, n) = (a.nrows(), b.ncols());
+    if m < SPLIT || n < SPLIT {
+        return a * b;
+    }
+    let half = n / 2;
+    let (left, right) = rayon::join(|| a * b.subcols(0, half), || a * b.subcols(half, n - half));
+    Mat::from_fn(m, n, |i, j| {
+        if j < half {
+            left[(i, j)]
+        } else {
+            right[(i, j - half)]
+        }
+    })
+}
+
+/// The smallest product [`product`] splits: below, one thread does it in a few microseconds.
+const SPLIT: usize = 32;
+
 /// `Σ aᵢ bᵢ` with four running sums (so that the loop vectorises).
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
@@ -428,6 +451,50 @@ mod tests {
             }
         }
         (model, all.unwrap())
+    }
+
+    /// The split product gives the same bits on one thread as on three, and faer's product to
+    /// rounding, for the shapes a step and the gauge multiply (square by tall, transposed by
+    /// square), an odd split, and products too small to split.
+    #[test]
+    fn product_has_the_same_bits_on_any_number_of_threads() {
+        let shapes = [
+            (206, 206, 190),
+            (190, 206, 190),
+            (74, 74, 73),
+            (40, 3, 33),
+            (5, 7, 1),
+            (3, 4, 2),
+        ];
+        for (m, k, n) in shapes {
+            let (a, at, b) = (random(m, k, 7), random(k, m, 9), random(k, n, 8));
+            // A plain left factor, and a transposed view (the sandwiches' Nᵀ).
+            for (left, what) in [(a.as_ref(), "A"), (at.transpose(), "Aᵀ")] {
+                let dense = left * &b;
+                let on = |threads| {
+                    let pool = rayon::ThreadPoolBuilder::new()
+                        .num_threads(threads)
+                        .build()
+                        .unwrap();
+                    pool.install(|| product(left, b.as_ref()))
+                };
+                let (one, three) = (on(1), on(3));
+                let scale = max_abs(&dense);
+                for j in 0..n {
+                    for i in 0..m {
+                        assert_eq!(
+                            one[(i, j)].to_bits(),
+                            three[(i, j)].to_bits(),
+                            "{what}: {m}×{k}·{k}×{n}, entry ({i}, {j}) on 1 and 3 threads"
+                        );
+                        assert!(
+                            (one[(i, j)] - dense[(i, j)]).abs() <= 1e-14 * scale,
+                            "{what}: {m}×{k}·{k}×{n}, entry ({i}, {j}) against faer's"
+                        );
+                    }
+                }
+            }
+        }
     }
 
     /// The sequential QR of row blocks gives the R of faer's dense QR of all the rows (up to the
