@@ -153,10 +153,7 @@ pub(crate) fn reduce(
 ) -> (Mat<f64>, Vec<f64>) {
     let (n, nf) = (d.len(), basis.ncols());
     let hs = Mat::from_fn(n, n, |i, j| d[i] * h[(i, j)] * d[j]);
-    let hz = crate::kernels::product(
-        basis.transpose(),
-        crate::kernels::product(hs.as_ref(), basis).as_ref(),
-    );
+    let hz = crate::kernels::sandwich(hs.as_ref(), basis);
     let gz = g.map_or_else(Vec::new, |g| {
         (0..nf)
             .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * g[i]).sum())

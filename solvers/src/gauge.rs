@@ -36,7 +36,7 @@
 //! ```
 
 use crate::Task;
-use crate::kernels::product;
+use crate::kernels::sandwich;
 use faer::{Mat, Side};
 use volver_core::iso::Unit;
 use volver_core::model::{Constraint, ConstraintKind, Model};
@@ -260,11 +260,8 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     }
     // The null space's basis in the parameters: p = D N_s z.
     let basis = Mat::from_fn(n, nf, |j, k| scale[j] * ns.basis()[(j, k)]);
-    let sandwich = |m: &Mat<f64>, b: &Mat<f64>| {
-        product(b.transpose(), product(m.as_ref(), b.as_ref()).as_ref())
-    };
-    let mz = sandwich(&metric, &basis);
-    let hz = sandwich(&h, &basis);
+    let mz = sandwich(metric.as_ref(), basis.as_ref());
+    let hz = sandwich(h.as_ref(), basis.as_ref());
     // The part of the free space the metric sees: M_z = Q diag(m) Qᵀ, kept where m > 1e-12 max.
     let evm = mz.self_adjoint_eigen(Side::Lower).ok()?;
     let (mv, q) = (evm.S().column_vector(), evm.U());
@@ -276,7 +273,7 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     let k = seen.len();
     // Whitened: W = Q_s diag(1/√m), C = Wᵀ H_z W; eigenvectors y give M-orthonormal d = W y.
     let w = Mat::from_fn(nf, k, |r, c| q[(r, seen[c])] / mv[seen[c]].sqrt());
-    let c = sandwich(&hz, &w);
+    let c = sandwich(hz.as_ref(), w.as_ref());
     let evc = c.self_adjoint_eigen(Side::Lower).ok()?;
     let (mu, y) = (evc.S().column_vector(), evc.U());
     let mu_max = mu[k - 1].max(f64::MIN_POSITIVE);

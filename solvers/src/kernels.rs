@@ -271,6 +271,11 @@ pub(crate) fn product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat
     })
 }
 
+/// `bᵀ m b` (the reduction of a symmetric matrix to the columns of `b`), by two [`product`]s.
+pub(crate) fn sandwich(m: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
+    product(b.transpose(), product(m, b).as_ref())
+}
+
 /// The smallest product [`product`] splits: below, one thread does it in a few microseconds.
 const SPLIT: usize = 32;
 

@@ -81,7 +81,7 @@ mod finish;
 mod geodesic;
 
 use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
-use crate::kernels::{accumulate, damped_lstsq, normal_solve, product, solve_spd};
+use crate::kernels::{accumulate, damped_lstsq, normal_solve, sandwich, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
 use crate::run::{Started, begin};
@@ -514,7 +514,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         let (hq, gq) = match &q {
             None => (hz.clone(), gz.clone()),
             Some(q) => {
-                let hq = product(q.transpose(), product(hz.as_ref(), q.as_ref()).as_ref());
+                let hq = sandwich(hz.as_ref(), q.as_ref());
                 let gq: Vec<f64> = (0..q.ncols())
                     .map(|c| (0..nf).map(|k| q[(k, c)] * gz[k]).sum())
                     .collect();
