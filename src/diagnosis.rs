@@ -18,8 +18,9 @@ use serde::Serialize;
 use volver_core::diagnose;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
+use volver_core::noise::TrackerNoise;
 use volver_core::problem::{Problem, Residuals};
-use volver_solvers::candidates::{Score, rank, verdict};
+use volver_solvers::candidates::{Score, rank, um, verdict};
 use volver_solvers::identifiability::{Identifiability, analyse};
 
 /// Parameter pairs correlated above this (absolute value) are listed by the identifiability
@@ -52,6 +53,9 @@ pub struct Diagnosis {
     pub noise_estimate_um: Option<f64>,
     /// The repeated points behind it.
     pub repeat_pairs: Option<usize>,
+    /// The fit against the tracker's noise specification; `None` when none is given (no
+    /// `[tracker] noise` in the machine file, no `--noise`).
+    pub noise: Option<NoiseVerdict>,
     /// The residuals' EMM per bin of each axis, reflector, time and tracker distance.
     pub breakdowns: Vec<Breakdown>,
     /// Per axis, the residuals' amplitude at orders 1 … [`PERIODOGRAM_ORDERS`] over its travel.
@@ -64,7 +68,159 @@ pub struct Diagnosis {
     pub verdict: String,
     /// The candidate effects, most likely first.
     pub candidates: Vec<Candidate>,
+    /// The fit diagnosed.
+    #[serde(skip)]
+    pub fit: volver_solvers::strategy::Identification,
 }
+
+impl Diagnosis {
+    /// The best candidate when it is a finding: seen, plausible, with strong evidence.
+    pub fn finding(&self) -> Option<&Candidate> {
+        self.candidates
+            .first()
+            .filter(|c| c.seen && c.flag.is_none() && c.delta_bic.is_some_and(|b| b < -10.0))
+    }
+
+    /// `true` when the loop has nothing left to add: the fit is at the noise (when its
+    /// specification is known) or no candidate is a finding.
+    pub fn done(&self) -> bool {
+        self.noise.as_ref().is_some_and(|n| n.at_noise) || self.finding().is_none()
+    }
+
+    /// The fit as a history record ([`crate::history`]) of the measurements `data` (as
+    /// given) with the candidates `added`.
+    pub fn history_record(
+        &self,
+        data: &str,
+        added: &[String],
+        parameters: usize,
+    ) -> crate::history::Record {
+        crate::history::Record {
+            data: data.to_string(),
+            model: self.model.clone(),
+            added: added.to_vec(),
+            parameters,
+            free: self.identifiability.as_ref().map_or(0, |a| a.free),
+            emm_initial_um: self.fit.initial.stats.emm_um,
+            emm_final_um: self.emm_um,
+            emax_final_um: self.emax_um,
+            phi_mm: self.fit.reached.phi_mm,
+            noise_error_um: self.noise.as_ref().map(|n| n.noise_error_um),
+            termination: self.termination.clone(),
+        }
+    }
+}
+
+/// One round of [`iterate`]: the model's additions so far and its diagnosis.
+#[derive(Clone, Debug)]
+pub struct Round {
+    /// Candidates added before this round's fit, in order.
+    pub added: Vec<String>,
+    /// The model's parameters.
+    pub parameters: usize,
+    /// The diagnosis of this round's fit.
+    pub diagnosis: Diagnosis,
+}
+
+/// The diagnosis loop run to the end: diagnose `model` on `data`; while something is missing
+/// ([`Diagnosis::done`] is false), add the finding, refit and diagnose again, at most
+/// `max_added` times. `each` sees every round as it ends. Returns the rounds (the last is the
+/// final model's) and the final model.
+pub fn iterate(
+    model: &Model,
+    data: &MeasurementSet,
+    noise: Option<&TrackerNoise>,
+    max_added: usize,
+    mut each: impl FnMut(&Round),
+) -> Result<(Vec<Round>, Model)> {
+    let mut model = model.clone();
+    let mut added: Vec<String> = Vec::new();
+    let mut rounds: Vec<Round> = Vec::new();
+    loop {
+        let diagnosis = diagnose_with(&model, data, noise)?;
+        let next = diagnosis.finding().map(|c| c.id.clone());
+        let round = Round {
+            added: added.clone(),
+            parameters: model.n_params(),
+            diagnosis,
+        };
+        each(&round);
+        let done = round.diagnosis.done() || added.len() >= max_added;
+        rounds.push(round);
+        match next {
+            Some(id) if !done => {
+                model = crate::inputs::with_candidates(
+                    model.machine(),
+                    model.clone(),
+                    std::slice::from_ref(&id),
+                )?;
+                added.push(id);
+            }
+            _ => return Ok((rounds, model)),
+        }
+    }
+}
+
+/// The fit against what the tracker's noise leaves ([`volver_core::diagnose::NoiseLevel`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct NoiseVerdict {
+    /// The noise model, as `--noise` reads it.
+    pub model: String,
+    /// The expected EMM of the noise itself at these points (µm): the noise error.
+    pub noise_error_um: f64,
+    /// The expected EMM of a complete model's fit (µm): the noise error less what the fit's
+    /// identified directions absorb.
+    pub expected_fit_um: f64,
+    /// Its expanded uncertainty (k = 2) over the noise (µm).
+    pub u95_um: f64,
+    /// The fit's EMM over the expected one.
+    pub ratio: f64,
+    /// `true` when the fit is within what the noise explains (less than [`ABOVE_NOISE_Z`]
+    /// standard deviations from it either way).
+    pub at_noise: bool,
+    /// `true` when the fit lies more than [`ABOVE_NOISE_Z`] standard deviations below what the
+    /// noise leaves: the specification overstates the noise of these data.
+    pub below: bool,
+    /// Bins of the breakdowns where the misfit exceeds the noise, worst first.
+    pub above: Vec<BinAbove>,
+    /// The repeated points against the specification, when the data have repeats.
+    pub repeats: Option<RepeatCheck>,
+}
+
+/// A bin whose misfit exceeds the noise.
+#[derive(Clone, Debug, Serialize)]
+pub struct BinAbove {
+    /// The breakdown (`X`, `t_s` …).
+    pub by: String,
+    /// The bin's label and unit.
+    pub bin: String,
+    /// Its EMM over what the noise leaves there.
+    pub ratio: f64,
+    /// Standard deviations above it.
+    pub z: f64,
+}
+
+/// The noise from repeated points against the tracker's specification at those points.
+#[derive(Clone, Debug, Serialize)]
+pub struct RepeatCheck {
+    /// Pairs of repeats.
+    pub pairs: usize,
+    /// The EMM of `(m₁ − m₂)/√2` (µm).
+    pub estimate_um: f64,
+    /// The specification's noise error at those points (µm).
+    pub specified_um: f64,
+    /// Its expanded uncertainty (k = 2) with this many pairs (µm).
+    pub u95_um: f64,
+    /// `true` when the two agree within it.
+    pub agree: bool,
+}
+
+/// How many standard deviations above what the noise leaves a fit's EMM must lie to be
+/// reported as off the noise, above or below (about 1.2 % of fits at the noise by chance).
+pub const ABOVE_NOISE_Z: f64 = 2.5;
+
+/// The same for one bin of a breakdown: with some sixty bins, each at about 2e-4 by chance.
+pub const BIN_ABOVE_NOISE_Z: f64 = 3.5;
 
 /// The residuals' EMM per bin of one quantity.
 #[derive(Clone, Debug, Serialize)]
@@ -92,6 +248,8 @@ pub struct Bin {
     pub emax_um: f64,
     /// Mean residual per component (µm).
     pub mean_um: [f64; 3],
+    /// What the tracker's noise leaves in this bin (µm), when its specification is given.
+    pub noise_um: Option<f64>,
 }
 
 /// One axis' periodogram.
@@ -169,6 +327,9 @@ pub struct Candidate {
     pub added: usize,
     /// Candidates these data cannot tell from it.
     pub equivalent: Vec<String>,
+    /// Why it is not a finding (a size beyond the physical bound, a nearly unidentifiable
+    /// direction); such a candidate is never ranked first.
+    pub flag: Option<String>,
 }
 
 impl Candidate {
@@ -183,13 +344,25 @@ impl Candidate {
             size_unit: s.size_unit,
             added: s.added,
             equivalent: s.equivalent.clone(),
+            flag: s.flag.clone(),
         }
     }
 }
 
-/// Fits `model` to `data` with the native engine (default strategy) and diagnoses the fit;
-/// `Err` when the fit fails.
+/// Fits `model` to `data` with the native engine (default strategy) and diagnoses the fit
+/// against the tracker noise the machine file states (if any); `Err` when the fit fails.
 pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
+    diagnose_with(model, data, model.machine().tracker().noise.as_ref())
+}
+
+/// [`diagnose`] against the tracker noise `noise` (`None`: no specification; the noise is then
+/// judged from repeated points alone, and candidates weigh every coordinate the same).
+pub fn diagnose_with(
+    model: &Model,
+    data: &MeasurementSet,
+    noise: Option<&TrackerNoise>,
+) -> Result<Diagnosis> {
+    let noise = noise.filter(|n| !n.is_none());
     let problem = Problem::new(model, data)?;
     let id = volver_solvers::strategy::fit(problem.clone());
     if id.termination.failed() {
@@ -207,19 +380,34 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
         &problem,
         &id.params,
         volver_solvers::identifiability::RANK_TOLERANCE,
+        noise,
     );
+    let emm = id.reached.stats.emm_um;
+    let breakdowns = diagnose::breakdowns(&problem, &r);
+    let levels = noise.map(|n| {
+        let moments = diagnose::noise_moments(&problem, n);
+        let rank = ident.as_ref().map_or(model.n_params(), |a| a.rank);
+        (n, moments, rank)
+    });
+    let level_of = |points: &[usize]| {
+        levels
+            .as_ref()
+            .map(|(_, mom, rank)| diagnose::noise_level(mom, points, *rank, 3 * r.len()))
+    };
+    let verdict_noise = levels.as_ref().map(|(n, moments, _)| {
+        let all: Vec<usize> = (0..r.len()).collect();
+        let level = level_of(&all).expect("a noise model");
+        noise_verdict(n, &level, emm, &breakdowns, &level_of, &problem, moments)
+    });
     Ok(Diagnosis {
         points: data.points.len(),
         model: model.spec().name.clone(),
-        emm_um: id.reached.stats.emm_um,
+        emm_um: emm,
         emax_um: id.reached.stats.emax_um,
         termination: id.termination.to_string(),
         noise_estimate_um: repeat.map(|(s, _)| s.emm_um),
         repeat_pairs: repeat.map(|(_, n)| n),
-        breakdowns: diagnose::breakdowns(&problem, &r)
-            .iter()
-            .map(breakdown)
-            .collect(),
+        breakdowns: breakdowns.iter().map(|b| breakdown(b, &level_of)).collect(),
         periodograms: periodograms(&problem, &id.params, &r),
         outliers: diagnose::largest(&r, OUTLIERS)
             .into_iter()
@@ -230,12 +418,112 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
             })
             .collect(),
         identifiability: ident.as_ref().map(|a| identifiability(model, a)),
-        verdict: verdict(&ranked, id.reached.stats.emm_um),
+        verdict: overall_verdict(&ranked, emm, verdict_noise.as_ref()),
+        noise: verdict_noise,
         candidates: ranked.iter().map(Candidate::of).collect(),
+        fit: id,
     })
 }
 
-fn breakdown(b: &diagnose::Breakdown) -> Breakdown {
+/// The fit against the noise: overall, per bin, and the repeats against the specification.
+fn noise_verdict(
+    noise: &TrackerNoise,
+    level: &diagnose::NoiseLevel,
+    emm: f64,
+    breakdowns: &[diagnose::Breakdown],
+    level_of: &dyn Fn(&[usize]) -> Option<diagnose::NoiseLevel>,
+    problem: &Problem,
+    moments: &[(f64, f64)],
+) -> NoiseVerdict {
+    let mut above: Vec<BinAbove> = breakdowns
+        .iter()
+        .flat_map(|b| {
+            b.bins.iter().filter_map(move |x| {
+                let l = level_of(&x.points)?;
+                let z = l.z(x.stats.emm_um);
+                (z > BIN_ABOVE_NOISE_Z).then(|| BinAbove {
+                    by: b.by.clone(),
+                    bin: format!("{} {}", x.label, b.unit).trim().to_string(),
+                    ratio: l.ratio(x.stats.emm_um),
+                    z,
+                })
+            })
+        })
+        .collect();
+    above.sort_by(|a, b| b.z.total_cmp(&a.z));
+    let pairs = diagnose::repeat_pairs(problem);
+    let repeats = (!pairs.is_empty()).then(|| {
+        let pts = &problem.data().points;
+        let modules: Vec<f64> = pairs
+            .iter()
+            .map(|&(a, b)| {
+                let (a, b) = (pts[a].measured, pts[b].measured);
+                volver_core::problem::norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) / 2f64.sqrt()
+            })
+            .collect();
+        let estimate_um = modules.iter().sum::<f64>() / modules.len() as f64 * 1e3;
+        let firsts: Vec<usize> = pairs.iter().map(|p| p.0).collect();
+        // The noise itself (no fit absorbs any of it), at the repeated points.
+        let spec = diagnose::noise_level(moments, &firsts, 0, 1);
+        let u95_um = 2.0 * spec.sd_um;
+        RepeatCheck {
+            pairs: pairs.len(),
+            estimate_um,
+            specified_um: spec.noise_emm_um,
+            u95_um,
+            agree: (estimate_um - spec.noise_emm_um).abs() <= 1.5 * u95_um,
+        }
+    });
+    NoiseVerdict {
+        model: noise.to_string(),
+        noise_error_um: level.noise_emm_um,
+        expected_fit_um: level.fit_emm_um,
+        u95_um: 2.0 * level.sd_um,
+        ratio: level.ratio(emm),
+        at_noise: level.z(emm).abs() <= ABOVE_NOISE_Z,
+        below: level.z(emm) < -ABOVE_NOISE_Z,
+        above,
+        repeats,
+    }
+}
+
+/// The verdict in words: at the noise, that nothing is missing; otherwise the candidates'
+/// verdict, then where the fit stands against the noise.
+fn overall_verdict(ranked: &[Score], emm: f64, noise: Option<&NoiseVerdict>) -> String {
+    let candidates = verdict(ranked, emm);
+    let Some(n) = noise else {
+        return candidates;
+    };
+    let against = format!(
+        "{:.2} × what the tracker's noise leaves ({} ± {} µm)",
+        n.ratio,
+        um(n.expected_fit_um),
+        um(n.u95_um)
+    );
+    if n.at_noise {
+        let aside = match ranked.first() {
+            Some(s) if s.strong() => format!(
+                " that matters ({} has strong evidence but would lower the EMM only to {} µm)",
+                s.id,
+                um(s.emm_um)
+            ),
+            _ => String::new(),
+        };
+        format!("the fit is at the noise, {against}: nothing is missing{aside}")
+    } else if n.below {
+        format!(
+            "{candidates}. The fit is {against}: far below it, so the specification overstates \
+             the noise of these data (or they were averaged); judge by the candidates alone"
+        )
+    } else {
+        format!("{candidates}. The fit is {against}: something is missing")
+    }
+}
+
+fn breakdown(
+    b: &diagnose::Breakdown,
+    level_of: &dyn Fn(&[usize]) -> Option<diagnose::NoiseLevel>,
+) -> Breakdown {
     Breakdown {
         by: b.by.clone(),
         unit: b.unit.clone(),
@@ -249,6 +537,7 @@ fn breakdown(b: &diagnose::Breakdown) -> Breakdown {
                 emm_um: x.stats.emm_um,
                 emax_um: x.stats.emax_um,
                 mean_um: x.mean_um,
+                noise_um: level_of(&x.points).map(|l| l.fit_emm_um),
             })
             .collect(),
     }

@@ -30,6 +30,7 @@ fn ranked(model: &Model, truth: Truth, effects: Vec<Effect>) -> Vec<Score> {
         &problem,
         &id.params,
         volver::solvers::identifiability::RANK_TOLERANCE,
+        None,
     )
 }
 

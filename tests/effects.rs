@@ -1,5 +1,7 @@
-//! Effects outside the ISO 230 model in the error model (`[effects]`): exact Jacobians, and a
-//! model that carries them recovers data the generator made with them.
+//! Effects outside the ISO 230 model in the error model (`[effects]`): exact Jacobians (every
+//! effect, the generic fields included, against central differences), and a model that carries
+//! them recovers data the generator made with them (the generator's own formulas: thermal
+//! drift, reflector offset, range scale, ball screw, scale growth, location drift).
 
 use volver::core::iso::Unit;
 use volver::core::machine::Machine;
@@ -17,6 +19,8 @@ const EFFECTS: &str = r#"
 thermal_drift = true
 reflector_offset = ["R1", "R2"]
 range_scale = true
+thermal_scale = ["X"]
+location_drift = ["C"]
 [[effects.ball_screw]]
 axis = "X"
 period_mm = 350.0
@@ -26,20 +30,36 @@ period_mm = 200.0
 "#;
 
 fn model_with_effects() -> Model {
+    model_with("")
+}
+
+/// The paper's model with [`EFFECTS`] and `more` lines of its `[effects]` table.
+fn model_with(more: &str) -> Model {
     let m = Machine::default_xcfz();
-    let text = format!("{}\n{EFFECTS}", volver::core::model::DEFAULT_MODEL_TOML);
+    let effects = EFFECTS.replacen("[effects]\n", &format!("[effects]\n{more}"), 1);
+    let text = format!("{}\n{effects}", volver::core::model::DEFAULT_MODEL_TOML);
     Model::from_toml_str(m, &text, "inline").unwrap()
 }
 
 #[test]
 fn effect_parameters_have_names_units_and_exact_jacobians() {
-    let model = model_with_effects();
+    let model = model_with("field = [\"X*Z\", \"C*t\", \"X\", \"t\"]\n");
     let name = |n: &str| model.param_index(n).unwrap_or_else(|| panic!("{n}"));
     assert_eq!(model.params()[name("drift.z")].unit, Unit::MmPerHour);
     assert_eq!(model.params()[name("range.scale")].unit, Unit::Ppm);
     assert_eq!(model.params()[name("reflector.R2.y")].unit, Unit::Mm);
     assert_eq!(model.params()[name("screw.Z.b")].unit, Unit::Mm);
-    assert_eq!(model.n_params(), 74 + 3 + 6 + 1 + 4);
+    assert_eq!(model.params()[name("thermal.X")].unit, Unit::PpmPerHour);
+    assert_eq!(model.params()[name("locdrift.C.y")].unit, Unit::MmPerHour);
+    assert_eq!(model.params()[name("field.X*Z.z_2_1")].unit, Unit::Mm);
+    assert_eq!(model.params()[name("field.C*t.x_s1_2")].unit, Unit::Mm);
+    assert_eq!(model.params()[name("field.X.y_3")].unit, Unit::Mm);
+    // drift 3, reflectors 6, range 1, screws 4, scale 1, location drift 2; fields: X*Z and
+    // C*t 4 products × 3 components each, X 3 × 3, t 2 × 3.
+    assert_eq!(
+        model.n_params(),
+        74 + 3 + 6 + 1 + 4 + 1 + 2 + 12 + 12 + 9 + 6
+    );
     let mut rng = Rng::new(5);
     let mut p = model.initial_params();
     for (j, info) in model.params().iter().enumerate() {
@@ -47,7 +67,7 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
             Unit::Mm => 0.02,
             Unit::Rad => 2e-5,
             Unit::MmPerHour => 0.01,
-            Unit::Ppm => 10.0,
+            Unit::Ppm | Unit::PpmPerHour => 10.0,
         };
         p[j] += scale * rng.normal();
     }
@@ -63,7 +83,7 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
         for j in 0..n {
             let h = match model.params()[j].unit {
                 Unit::Rad => 1e-6,
-                Unit::Ppm => 1e-1,
+                Unit::Ppm | Unit::PpmPerHour => 1e-1,
                 _ => 1e-4,
             };
             let (mut a, mut b) = (p.clone(), p.clone());
@@ -97,6 +117,8 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
         "reflector-offset=R1,30,-20,15",
         "range-scale=25",
         "ball-screw=X,350,4",
+        "thermal-scale=X,12",
+        "location-drift=C,20,-15",
     ]
     .iter()
     .map(|e| Effect::parse(e).unwrap())
@@ -141,6 +163,19 @@ fn bad_effects_in_a_model_file_are_named() {
     assert!(e.contains("'C' is not a linear axis of XCFZ"), "{e}");
     let e = err("[[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 0.0\n");
     assert!(e.contains("must be positive"), "{e}");
+    let e = err("[effects]\nthermal_scale = [\"C\"]\n");
+    assert!(e.contains("'C' is not a linear axis of XCFZ"), "{e}");
+    let e = err("[effects]\nlocation_drift = [\"X\"]\n");
+    assert!(e.contains("'X' is not a rotary axis of XCFZ"), "{e}");
+    for (bad, why) in [
+        ("X*X", "two distinct"),
+        ("X*Z*C", "two distinct"),
+        ("Y", "neither an axis of XCFZ nor t"),
+        ("X*s", "neither an axis"),
+    ] {
+        let e = err(&format!("[effects]\nfield = [\"{bad}\"]\n"));
+        assert!(e.contains("e.toml") && e.contains(why), "{bad}: {e}");
+    }
     let e = err("[effects]\ndrift = true\n");
     assert!(e.contains("e.toml") && e.contains("drift"), "{e}");
     // The effects survive a results file round trip.

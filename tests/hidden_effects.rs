@@ -78,6 +78,7 @@ fn diagnose_and_fix(spec: ErrorModelSpec, sim: &Synthetic, want: &str) {
         &problem,
         &before.params,
         volver::solvers::identifiability::RANK_TOLERANCE,
+        Some(&sim.record.noise),
     );
     let noise = sim.record.noise_error.emm_um;
     println!(

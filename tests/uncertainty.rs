@@ -223,6 +223,7 @@ fn intervals_from_a_misspecified_model_are_not_honest_and_the_diagnosis_flags_it
             &problem,
             &id.params,
             volver::solvers::identifiability::RANK_TOLERANCE,
+            None,
         )[0];
         assert!(
             top.strong(),

@@ -350,7 +350,13 @@ pub fn chebyshev_nodes(m: usize) -> Vec<f64> {
 }
 
 /// Gauss–Legendre nodes and weights on [−1, 1] (Newton on P_n), exact for degree 2n − 1.
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+///
+/// ```
+/// let rule = volver_core::basis::gauss_legendre(4);
+/// let integral: f64 = rule.iter().map(|(x, w)| w * x.powi(6)).sum();
+/// assert!((integral - 2.0 / 7.0).abs() < 1e-14);
+/// ```
+pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     let mut out = Vec::with_capacity(n);
     let mut p = vec![0.0; n + 1];
     for i in 1..=n {

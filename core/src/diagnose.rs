@@ -29,6 +29,7 @@
 
 use crate::kinematics::{PointErrors, predict_with_tool_shift};
 use crate::metrics::ErrorStats;
+use crate::noise::TrackerNoise;
 use crate::problem::{Problem, norm};
 use std::f64::consts::PI;
 
@@ -47,6 +48,8 @@ pub struct Bin {
     pub stats: ErrorStats,
     /// Mean residual vector (µm, tracker frame): a systematic offset the model misses.
     pub mean_um: [f64; 3],
+    /// The indices of its points.
+    pub points: Vec<usize>,
 }
 
 /// A breakdown of the residuals by one quantity.
@@ -69,16 +72,17 @@ impl Breakdown {
     }
 }
 
-fn bin_of(label: String, from: f64, to: f64, members: &[[f64; 3]]) -> Bin {
-    let n = members.len().max(1) as f64;
-    let mean_um = [0, 1, 2].map(|c| members.iter().map(|r| r[c]).sum::<f64>() / n * 1e3);
+fn bin_of(label: String, from: f64, to: f64, points: Vec<usize>, residuals: &[[f64; 3]]) -> Bin {
+    let n = points.len().max(1) as f64;
+    let mean_um = [0, 1, 2].map(|c| points.iter().map(|&i| residuals[i][c]).sum::<f64>() / n * 1e3);
     Bin {
         label,
         from,
         to,
-        count: members.len(),
-        stats: ErrorStats::of_modules(members.iter().map(|r| norm(*r))),
+        count: points.len(),
+        stats: ErrorStats::of_modules(points.iter().map(|&i| norm(residuals[i]))),
         mean_um,
+        points,
     }
 }
 
@@ -95,16 +99,14 @@ pub fn by_values(
     let mut distinct: Vec<f64> = values.to_vec();
     distinct.sort_by(f64::total_cmp);
     distinct.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * b.abs().max(1.0));
+    let members = |keep: &dyn Fn(f64) -> bool| -> Vec<usize> {
+        (0..values.len()).filter(|&i| keep(values[i])).collect()
+    };
     let mut bins = Vec::new();
     if distinct.len() <= max_bins.max(1) {
         for &v in &distinct {
-            let members: Vec<[f64; 3]> = values
-                .iter()
-                .zip(residuals)
-                .filter(|(x, _)| (**x - v).abs() <= 1e-9 * v.abs().max(1.0))
-                .map(|(_, r)| *r)
-                .collect();
-            bins.push(bin_of(label(v), v, v, &members));
+            let points = members(&|x| (x - v).abs() <= 1e-9 * v.abs().max(1.0));
+            bins.push(bin_of(label(v), v, v, points, residuals));
         }
     } else {
         let (lo, hi) = (distinct[0], distinct[distinct.len() - 1]);
@@ -112,18 +114,14 @@ pub fn by_values(
         for k in 0..max_bins {
             let (a, b) = (lo + k as f64 * width, lo + (k + 1) as f64 * width);
             let last = k + 1 == max_bins;
-            let members: Vec<[f64; 3]> = values
-                .iter()
-                .zip(residuals)
-                .filter(|(x, _)| **x >= a && (**x < b || (last && **x <= hi)))
-                .map(|(_, r)| *r)
-                .collect();
-            if !members.is_empty() {
+            let points = members(&|x| x >= a && (x < b || (last && x <= hi)));
+            if !points.is_empty() {
                 bins.push(bin_of(
                     format!("{} … {}", label(a), label(b)),
                     a,
                     b,
-                    &members,
+                    points,
+                    residuals,
                 ));
             }
         }
@@ -168,15 +166,11 @@ pub fn by_reflector(problem: &Problem, residuals: &[[f64; 3]]) -> Breakdown {
     let refl = problem.model().machine().reflectors();
     let bins = (0..refl.len())
         .filter_map(|r| {
-            let members: Vec<[f64; 3]> = problem
-                .data()
-                .points
-                .iter()
-                .zip(residuals)
-                .filter(|(p, _)| p.reflector == r)
-                .map(|(_, res)| *res)
+            let points: Vec<usize> = (0..residuals.len())
+                .filter(|&i| problem.data().points[i].reflector == r)
                 .collect();
-            (!members.is_empty()).then(|| bin_of(refl[r].id.clone(), r as f64, r as f64, &members))
+            (!points.is_empty())
+                .then(|| bin_of(refl[r].id.clone(), r as f64, r as f64, points, residuals))
         })
         .collect();
     Breakdown {
@@ -374,18 +368,96 @@ pub fn largest(residuals: &[[f64; 3]], k: usize) -> Vec<(usize, f64)> {
 /// distribution, so this estimates the noise error without knowing the truth. Drift between the
 /// readings counts as noise here.
 pub fn repeat_noise(problem: &Problem) -> Option<(ErrorStats, usize)> {
+    let pts = &problem.data().points;
+    let diffs: Vec<f64> = repeat_pairs(problem)
+        .into_iter()
+        .map(|(a, b)| {
+            let (a, b) = (pts[a].measured, pts[b].measured);
+            norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) / 2f64.sqrt()
+        })
+        .collect();
+    (!diffs.is_empty()).then(|| (ErrorStats::of_modules(diffs.iter().copied()), diffs.len()))
+}
+
+/// The pairs of points measured at the same pose with the same reflector (rotary positions a
+/// full turn apart are the same pose), each point with the next repeat of it.
+pub fn repeat_pairs(problem: &Problem) -> Vec<(usize, usize)> {
     let machine = problem.model().machine();
     let pts = &problem.data().points;
-    // Rotary positions a full turn apart are the same pose.
     let key = |i: usize| crate::measure::pose_key(machine, &pts[i]);
     let mut order: Vec<usize> = (0..pts.len()).collect();
     order.sort_by_key(|&i| (key(i), i));
-    let mut diffs = Vec::new();
-    for w in order.windows(2) {
-        if key(w[0]) == key(w[1]) {
-            let (a, b) = (pts[w[0]].measured, pts[w[1]].measured);
-            diffs.push(norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) / 2f64.sqrt());
-        }
+    order
+        .windows(2)
+        .filter(|w| key(w[0]) == key(w[1]))
+        .map(|w| (w[0], w[1]))
+        .collect()
+}
+
+/// What the tracker's noise alone leaves at a set of points, from its specification
+/// ([`TrackerNoise::module_moments`] at each measured point).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseLevel {
+    /// The expected EMM of the noise itself at these points (µm): the noise error.
+    pub noise_emm_um: f64,
+    /// The expected EMM a fit of a complete model leaves (µm): the noise error less what the
+    /// fit's identified directions absorb, `× √(1 − k/m)` for k directions and m residual
+    /// coordinates.
+    pub fit_emm_um: f64,
+    /// The standard deviation of that EMM over the noise (µm).
+    pub sd_um: f64,
+}
+
+impl NoiseLevel {
+    /// How many standard deviations `emm_um` lies above what the noise leaves.
+    pub fn z(&self, emm_um: f64) -> f64 {
+        (emm_um - self.fit_emm_um) / self.sd_um.max(1e-12)
     }
-    (!diffs.is_empty()).then(|| (ErrorStats::of_modules(diffs.iter().copied()), diffs.len()))
+
+    /// `emm_um` over what the noise leaves.
+    pub fn ratio(&self, emm_um: f64) -> f64 {
+        emm_um / self.fit_emm_um
+    }
+}
+
+/// The mean and variance of the noise's module at every measured point of `problem` (mm, mm²).
+pub fn noise_moments(problem: &Problem, noise: &TrackerNoise) -> Vec<(f64, f64)> {
+    problem
+        .data()
+        .points
+        .iter()
+        .map(|p| noise.module_moments(p.measured))
+        .collect()
+}
+
+/// The noise level over the points `points` (indices into `moments`, as [`noise_moments`]
+/// returns them), for a fit that identifies `rank` directions from `coordinates` residual
+/// coordinates (3 per point).
+///
+/// ```
+/// use volver_core::diagnose::noise_level;
+/// // Four points whose module has mean 10 µm and σ 4 µm; a fit of 3 directions from 12.
+/// let moments = vec![(0.010, 0.004f64.powi(2)); 4];
+/// let level = noise_level(&moments, &[0, 1, 2, 3], 3, 12);
+/// assert!((level.noise_emm_um - 10.0).abs() < 1e-9);
+/// assert!((level.fit_emm_um - 10.0 * 0.75f64.sqrt()).abs() < 1e-9);
+/// assert!((level.sd_um - 2.0 * 0.75f64.sqrt()).abs() < 1e-9);
+/// ```
+pub fn noise_level(
+    moments: &[(f64, f64)],
+    points: &[usize],
+    rank: usize,
+    coordinates: usize,
+) -> NoiseLevel {
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().map(|&i| moments[i].0).sum::<f64>() / n;
+    let var = points.iter().map(|&i| moments[i].1).sum::<f64>() / (n * n);
+    let keep = (1.0 - rank as f64 / coordinates.max(1) as f64)
+        .max(0.0)
+        .sqrt();
+    NoiseLevel {
+        noise_emm_um: mean * 1e3,
+        fit_emm_um: mean * keep * 1e3,
+        sd_um: var.sqrt() * keep * 1e3,
+    }
 }

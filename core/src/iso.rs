@@ -135,17 +135,21 @@ pub enum Unit {
     /// Parts per million (scale errors).
     #[serde(rename = "ppm")]
     Ppm,
+    /// Parts per million per hour (a scale growing with time).
+    #[serde(rename = "ppm/h")]
+    PpmPerHour,
 }
 
 impl Unit {
     /// The factor to the unit volver prints values of this unit in, and that unit: µm for mm,
-    /// µrad for rad, µm/h for mm/h, ppm for ppm.
+    /// µrad for rad, µm/h for mm/h, ppm for ppm, ppm/h for ppm/h.
     pub fn micro(self) -> (f64, &'static str) {
         match self {
             Unit::Mm => (1e3, "µm"),
             Unit::Rad => (1e6, "µrad"),
             Unit::MmPerHour => (1e3, "µm/h"),
             Unit::Ppm => (1.0, "ppm"),
+            Unit::PpmPerHour => (1.0, "ppm/h"),
         }
     }
 }
@@ -157,6 +161,7 @@ impl fmt::Display for Unit {
             Unit::Rad => "rad",
             Unit::MmPerHour => "mm/h",
             Unit::Ppm => "ppm",
+            Unit::PpmPerHour => "ppm/h",
         })
     }
 }

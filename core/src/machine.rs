@@ -25,6 +25,7 @@
 //! mount = "workpiece"             # on the workpiece end of the chain, or "frame"
 //! position = [0.0, 0.0, 0.0]      # mm: nominal T_LT, the start of its identification
 //! orientation_deg = [0.0, 0.0, 0.0] # base rotation R0 = Rz·Ry·Rx (degrees) under the small angles
+//! noise = "uniform:30,30,4,0.8"   # optional: the tracker's noise, as `--noise` reads it
 //! ```
 //!
 //! Internally every length is in mm and every angle in rad; degrees exist only in files.
@@ -97,6 +98,11 @@ pub struct TrackerSpec {
     /// small angles (eq. 9) act on top of it; the paper's set-up has it zero.
     #[serde(default)]
     pub orientation_deg: [f64; 3],
+    /// The tracker's noise as `--noise` reads it ([`crate::noise::TrackerNoise::from_text`]:
+    /// `uniform:30,30,4,0.8`, `normal:…`, `mpe:15,6` …): what `volver diagnose` compares the fit
+    /// with. Absent: the diagnosis can only estimate the noise from repeated points.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<String>,
 }
 
 /// A machine description as written in the TOML file.
@@ -188,6 +194,8 @@ pub struct TrackerSetup {
     pub position: [f64; 3],
     /// Base rotation R0 (row-major 3×3), applied as R0ᵀ before the small rotation of eq. 9.
     pub base_rotation: [[f64; 3]; 3],
+    /// Its noise, when the machine file states it.
+    pub noise: Option<crate::noise::TrackerNoise>,
 }
 
 /// A validated machine in internal units. Build it with [`Machine::from_toml_str`],
@@ -391,11 +399,25 @@ impl Machine {
                 ),
             ));
         }
+        let noise = match &t.noise {
+            Some(text) => Some(crate::noise::TrackerNoise::from_text(text).map_err(|_| {
+                Error::input(
+                    place("noise", "tracker.noise"),
+                    format!(
+                        "'{text}' is not a tracker noise: expected paper, none, \
+                         normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M, uniform:… or \
+                         mpe:A_UM,B_UM_PER_M"
+                    ),
+                )
+            })?),
+            None => None,
+        };
         let [rx, ry, rz] = t.orientation_deg.map(f64::to_radians);
         let tracker = TrackerSetup {
             mount: t.mount,
             position: t.position,
             base_rotation: base_rotation(rx, ry, rz),
+            noise,
         };
         Ok(Machine {
             spec,

@@ -50,11 +50,11 @@ mod regressors;
 mod spec;
 use regressors::PointRegressors;
 pub use regressors::Regressors;
-use spec::EffectSlot;
 pub use spec::{
     BallScrewSpec, EffectsSpec, ErrorModelSpec, ErrorTermSpec, OneOrMany, SquarenessRule,
     TrackerModelSpec,
 };
+use spec::{EffectSlot, FieldVar};
 
 /// The paper's error model for the embedded XCFZ machine.
 pub const DEFAULT_MODEL_TOML: &str = include_str!("../data/xcfz-paper-model.toml");

@@ -37,11 +37,34 @@ use std::fmt;
 
 /// Largest plausible translation error (mm).
 pub const MAX_TRANSLATION_MM: f64 = 1.0;
+/// Largest plausible growth of an axis' scale with time (ppm/h): steel (11.5 ppm/K) warming
+/// by 9 K an hour.
+pub const MAX_SCALE_GROWTH_PPM_PER_H: f64 = 100.0;
 /// Largest plausible rotation error (rad).
 pub const MAX_ANGLE_RAD: f64 = 1e-3;
 /// Largest plausible shift of the tracker from its rigid fit (mm); its angles: 5 mrad.
 pub const MAX_TRACKER_SHIFT_MM: f64 = 25.0;
 const MAX_TRACKER_TURN_RAD: f64 = 5e-3;
+
+/// The largest plausible size of a value in `unit` (in that unit): a translation
+/// [`MAX_TRANSLATION_MM`], an angle [`MAX_ANGLE_RAD`], a drift 1 mm/h, a scale 1 000 ppm, a scale
+/// growth [`MAX_SCALE_GROWTH_PPM_PER_H`].
+///
+/// ```
+/// use volver_core::iso::Unit;
+/// use volver_core::plausibility::limit;
+/// assert_eq!(limit(Unit::Mm), 1.0);
+/// assert_eq!(limit(Unit::Rad), 1e-3);
+/// ```
+pub fn limit(unit: Unit) -> f64 {
+    match unit {
+        Unit::Mm => MAX_TRANSLATION_MM,
+        Unit::MmPerHour => 1.0,
+        Unit::Ppm => 1e3,
+        Unit::PpmPerHour => MAX_SCALE_GROWTH_PPM_PER_H,
+        Unit::Rad => MAX_ANGLE_RAD,
+    }
+}
 
 /// An identified size beyond its limit.
 #[derive(Clone, Debug, PartialEq)]
@@ -160,12 +183,7 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
     }
     // Effect parameters, by group (screw.X.200.a/b, drift.x/y/z, reflector.R1.x/y/z, …).
     for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
-        let limit = k * match own {
-            Unit::Mm => MAX_TRANSLATION_MM * 1e3,
-            Unit::MmPerHour => 1e3,
-            Unit::Ppm => 1e3,
-            Unit::Rad => MAX_ANGLE_RAD * 1e6,
-        };
+        let limit = k * limit(own) * own.micro().0;
         if beyond(value, limit) {
             out.push(Implausible {
                 name,

@@ -325,6 +325,117 @@ impl Residuals for Problem<'_> {
     }
 }
 
+/// A machine problem's residuals in units of its tracker's noise: each residual and its
+/// Jacobian rows multiplied by the whitening of the noise at the measured point
+/// ([`crate::noise::TrackerNoise::whitening`]), so that a least-squares fit weighs every point and
+/// direction by its noise (angular noise grows with the distance). Φ and ve of these residuals
+/// are dimensionless.
+///
+/// ```
+/// use volver_core::model::Model;
+/// use volver_core::noise::TrackerNoise;
+/// use volver_core::problem::{Problem, Residuals, Whitened};
+/// let model = Model::default_xcfz();
+/// let data = volver_core::measure::MeasurementSet::from_csv_str(
+///     model.machine(),
+///     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.01,75,1450\n",
+///     "inline.csv",
+/// ).unwrap();
+/// let problem = Problem::new(&model, &data).unwrap();
+/// let noise = TrackerNoise::from_text("normal:10,10,2,0").unwrap();
+/// let w = Whitened::new(problem.clone(), &noise).unwrap();
+/// let (p, r) = (model.initial_params(), problem.residual(0, &model.initial_params()));
+/// let (rw, axes) = (w.residual(0, &p), noise.axes(data.points[0].measured));
+/// for k in 0..3 {
+///     let along = (0..3).map(|c| axes[k].0[c] * r[c]).sum::<f64>();
+///     assert!((rw[k] - along / axes[k].1).abs() < 1e-9);
+/// }
+/// ```
+#[derive(Clone, Debug)]
+pub struct Whitened<'a> {
+    problem: Problem<'a>,
+    noise: crate::noise::TrackerNoise,
+    rows: std::sync::Arc<Vec<[[f64; 3]; 3]>>,
+}
+
+impl<'a> Whitened<'a> {
+    /// The whitened residuals of `problem` under the tracker noise `noise`; `None` for a
+    /// noise-free tracker.
+    pub fn new(problem: Problem<'a>, noise: &crate::noise::TrackerNoise) -> Option<Whitened<'a>> {
+        let rows = problem
+            .data()
+            .points
+            .iter()
+            .map(|p| noise.whitening(p.measured))
+            .collect::<Option<Vec<_>>>()?;
+        Some(Whitened {
+            problem,
+            noise: *noise,
+            rows: std::sync::Arc::new(rows),
+        })
+    }
+
+    /// The problem whose residuals these are.
+    pub fn problem(&self) -> &Problem<'a> {
+        &self.problem
+    }
+
+    /// The noise they are whitened by.
+    pub fn noise(&self) -> &crate::noise::TrackerNoise {
+        &self.noise
+    }
+
+    /// `W_i v` for point `i`.
+    pub fn apply(&self, i: usize, v: [f64; 3]) -> [f64; 3] {
+        self.rows[i].map(|w| w[0] * v[0] + w[1] * v[1] + w[2] * v[2])
+    }
+}
+
+impl Residuals for Whitened<'_> {
+    fn n_params(&self) -> usize {
+        self.problem.n_params()
+    }
+
+    fn n_points(&self) -> usize {
+        self.problem.n_points()
+    }
+
+    fn param_names(&self) -> Vec<String> {
+        self.problem.param_names()
+    }
+
+    fn constraints(&self) -> Cow<'_, Constraints> {
+        self.problem.constraints()
+    }
+
+    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
+        self.apply(i, self.problem.residual(i, params))
+    }
+
+    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
+        let r = self.problem.residual_and_jacobian(i, params, jac);
+        let n = self.n_params();
+        let w = &self.rows[i];
+        for j in 0..n {
+            let col = [jac[j], jac[n + j], jac[2 * n + j]];
+            for (c, row) in w.iter().enumerate() {
+                jac[c * n + j] = row[0] * col[0] + row[1] * col[1] + row[2] * col[2];
+            }
+        }
+        self.apply(i, r)
+    }
+
+    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
+        self.apply(i, self.problem.residual_second_directional(i, params, dir))
+    }
+
+    fn observation_scale(&self, i: usize) -> f64 {
+        let w = &self.rows[i];
+        let gain = w.iter().map(|row| norm(*row)).fold(0.0, f64::max);
+        self.problem.observation_scale(i) * gain
+    }
+}
+
 /// A curve fit: one of NIST's StRD problems, so that the engines can be judged on the public
 /// reference suite. Each observation is a "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`,
 /// Φ is the mean absolute residual and `n · ve` the residual sum of squares; there are no

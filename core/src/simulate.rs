@@ -33,6 +33,9 @@
 //! | `ball-screw` | axis, period P mm, amplitude A µm | the positioning error of a linear axis gets `A·sin(2π·(u − u_ref)/P)` (a mesh whose step is a multiple of P sees it nowhere) |
 //! | `reflector-offset` | reflector id, δ µm | the reflector sits at its nominal offset + δ (frame of the last tool-side axis) |
 //! | `range-scale` | s ppm | every point is scaled about the tracker's centre by 1 + s·10⁻⁶ before the noise |
+//! | `thermal-scale` | axis, α ppm/h | the positioning error of a linear axis gets `α·10⁻⁶·u·t` (u its position in mm, t in h): its scale grows with time |
+//! | `location-drift` | rotary axis, v₁, v₂ µm/h | its two location translations (X0C, Y0C for C) grow by `v·t` |
+//! | `coupling` | axis, component, by, A µm | the error E{component}{axis} gets `A·sin(π·ξ)·η`, ξ and η the positions of the axis and of `by` over their travels, 0 … 1: a straightness bow that grows with another axis' position, which no rigid-body error expresses |
 //!
 //! Points are measured in plan order, each reflector in turn at every position, evenly over the
 //! test's duration: point i of n has `t_s = duration · i / (n − 1)`, rounded to the millisecond
@@ -354,7 +357,10 @@ impl Simulation {
                         ax.reference,
                     ));
                 }
-                Effect::ReflectorOffset { .. } => {}
+                Effect::ReflectorOffset { .. }
+                | Effect::ThermalScale { .. }
+                | Effect::LocationDrift { .. }
+                | Effect::Coupling { .. } => {}
             }
         }
         let machine = truth.model.machine().clone();
@@ -388,6 +394,7 @@ impl Simulation {
                 errors.component[k][dir] +=
                     amp * (2.0 * PI * (cmd.0[k] - reference) / period).sin();
             }
+            self.couple(&machine, cmd, &mut errors);
             for (ri, &r) in self.plan.reflectors.iter().enumerate() {
                 let i = j * self.plan.reflectors.len() + ri;
                 let t_s = if n > 1 {
@@ -396,6 +403,7 @@ impl Simulation {
                     0.0
                 };
                 let shift = has_drift.then(|| drift.map(|v| v * t_s));
+                let errors = self.age(&machine, cmd, t_s, &errors);
                 let clean = predict_with_tool_shift(&machine, cmd, &offsets[r], &errors, shift)
                     .map(|v| v * scale);
                 let measured = self.noise.apply(clean, &mut noise_rng);
@@ -452,6 +460,67 @@ impl Simulation {
     }
 }
 
+impl Simulation {
+    /// Adds the `coupling` effects to the errors at `cmd`.
+    fn couple(
+        &self,
+        machine: &Machine,
+        cmd: &crate::machine::Commands,
+        errors: &mut PointErrors<f64>,
+    ) {
+        for e in &self.effects {
+            if let Effect::Coupling {
+                axis,
+                component,
+                by,
+                amplitude_um,
+            } = e
+            {
+                let (k, ax) = machine.axis(*axis).expect("validated: the axis exists");
+                let (kb, bx) = machine.axis(*by).expect("validated: the axis exists");
+                let xi = (cmd.0[k] - ax.min) / (ax.max - ax.min);
+                let eta = (cmd.0[kb] - bx.min) / (bx.max - bx.min);
+                errors.component[k][component.direction()] +=
+                    amplitude_um * 1e-3 * (PI * xi).sin() * eta;
+            }
+        }
+    }
+
+    /// The errors at `cmd` at time `t_s` (s): `errors` with the effects that grow with time
+    /// (`thermal-scale`, `location-drift`).
+    fn age(
+        &self,
+        machine: &Machine,
+        cmd: &crate::machine::Commands,
+        t_s: f64,
+        errors: &PointErrors<f64>,
+    ) -> PointErrors<f64> {
+        let mut out = *errors;
+        let t_h = t_s / 3600.0;
+        for e in &self.effects {
+            match e {
+                Effect::ThermalScale { axis, ppm_per_h } => {
+                    let (k, _) = machine.axis(*axis).expect("validated: the axis exists");
+                    out.component[k][axis.direction()] += ppm_per_h * 1e-6 * cmd.0[k] * t_h;
+                }
+                Effect::LocationDrift {
+                    axis,
+                    rate_um_per_h,
+                } => {
+                    let (k, _) = machine.axis(*axis).expect("validated: the axis exists");
+                    out.has_location[k] = true;
+                    let across = (0..3).filter(|&c| c != axis.direction());
+                    for (c, v) in across.zip(rate_um_per_h) {
+                        out.location[k][c] += v * 1e-3 * t_h;
+                    }
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+}
+
 impl Synthetic {
     /// Writes the measurement file, the truth, the machine file and `simulation.json` into
     /// `dir` (created if missing; existing files of these names are replaced). Returns the
@@ -470,7 +539,10 @@ impl Synthetic {
         let truth = dir.join(&files.truth);
         self.truth.to_results()?.save(&truth)?;
         let machine_path = dir.join(&files.machine);
-        let toml_text = toml::to_string(machine.spec())
+        // The machine file states the tracker's noise the data were made with.
+        let mut spec = machine.spec().clone();
+        spec.tracker.noise = (!self.record.noise.is_none()).then(|| self.record.noise.to_string());
+        let toml_text = toml::to_string(&spec)
             .map_err(|e| Error::Model(format!("writing the machine file: {e}")))?;
         crate::fsio::write_atomic(
             &machine_path,

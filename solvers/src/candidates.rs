@@ -21,6 +21,9 @@
 //! | `reflector-offset:R1` | reflector R1 off its nominal offset |
 //! | `range-scale` | a scale error of the tracker's range |
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
+//! | `thermal-scale:X` | the scale of linear axis X growing with time: EXX += α·x·t (`[effects] thermal_scale`; needs `t_s`) |
+//! | `location-drift:C` | the line of rotary axis C drifting with time: X0C, Y0C += v·t (`[effects] location_drift`) |
+//! | `field:X`, `field:X*Z`, `field:X*t` | a generic displacement of the tool point over one variable or jointly over two (axes and time `t`; `[effects] field`): names what the misfit depends on when no physical candidate explains it |
 
 use crate::Task;
 use crate::coordinates::{Reduced, reduced_normal};
@@ -31,7 +34,10 @@ use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, On
 
 /// Periodic positioning errors are tried with periods travel/2 … travel/SCREW_PERIODS.
 pub const SCREW_PERIODS: usize = 8;
-use volver_core::problem::{Problem, Residuals};
+use volver_core::iso::Unit;
+use volver_core::noise::TrackerNoise;
+use volver_core::plausibility::limit;
+use volver_core::problem::{Problem, Residuals, Whitened};
 
 /// A candidate: an extension of the error model.
 #[derive(Clone, Debug, PartialEq)]
@@ -69,6 +75,10 @@ pub struct Score {
     /// tilt of the tracker standing on the table and a tilt motion of the table. Listed under
     /// the better of them.
     pub equivalent: Vec<String>,
+    /// Why it is not a finding, when it is not plausible: its size beyond the physical bound
+    /// of its kind, or evidence only along a nearly unidentifiable direction. A flagged
+    /// candidate is never ranked first.
+    pub flag: Option<String>,
 }
 
 fn polynomial_degree(spec: &ErrorModelSpec) -> usize {
@@ -263,6 +273,63 @@ pub fn library(model: &Model) -> Vec<Candidate> {
             });
         }
     }
+    // Thermal growth of each linear axis' scale, drift of each rotary axis' line.
+    for ax in machine.axes() {
+        let letter = ax.axis.to_string();
+        let mut s = spec.clone();
+        let (id, description) = if ax.axis.is_rotary() {
+            if fx.location_drift.contains(&letter) {
+                continue;
+            }
+            s.effects.location_drift.push(letter.clone());
+            (
+                format!("location-drift:{letter}"),
+                format!("the line of {letter} drifting with time (its location errors × t)"),
+            )
+        } else {
+            if fx.thermal_scale.contains(&letter) {
+                continue;
+            }
+            s.effects.thermal_scale.push(letter.clone());
+            (
+                format!("thermal-scale:{letter}"),
+                format!(
+                    "the scale of {letter} growing with time (E{letter}{letter} += α·{}·t)",
+                    letter.to_lowercase()
+                ),
+            )
+        };
+        out.push(Candidate {
+            id,
+            description,
+            spec: s,
+        });
+    }
+    // Generic fields over every variable and every pair.
+    for vars in field_variables(machine) {
+        let name = vars.join("*");
+        if fx.field.contains(&name) {
+            continue;
+        }
+        let mut s = spec.clone();
+        s.effects.field.push(name.clone());
+        let description = if vars.len() == 1 {
+            format!(
+                "a smooth displacement of the tool point that depends on {name} (a generic field)"
+            )
+        } else {
+            format!(
+                "a displacement of the tool point that depends jointly on {} and {} (a generic \
+                 field: a non-rigid effect)",
+                vars[0], vars[1]
+            )
+        };
+        out.push(Candidate {
+            id: format!("field:{name}"),
+            description,
+            spec: s,
+        });
+    }
     // The tracker's tilt.
     let identify = &spec.tracker.identify;
     if !identify.iter().any(|n| n == "rx") && !identify.iter().any(|n| n == "ry") {
@@ -275,6 +342,20 @@ pub fn library(model: &Model) -> Vec<Candidate> {
             description: "identify the tracker's tilt (rx, ry)".into(),
             spec: s,
         });
+    }
+    out
+}
+
+/// The variables of the generic fields, alone and in pairs: every axis in chain order, then the
+/// time `t`.
+fn field_variables(machine: &volver_core::machine::Machine) -> Vec<Vec<String>> {
+    let mut vars: Vec<String> = machine.axes().iter().map(|a| a.axis.to_string()).collect();
+    vars.push("t".into());
+    let mut out: Vec<Vec<String>> = vars.iter().map(|v| vec![v.clone()]).collect();
+    for (i, a) in vars.iter().enumerate() {
+        for b in &vars[i + 1..] {
+            out.push(vec![a.clone(), b.clone()]);
+        }
     }
     out
 }
@@ -306,10 +387,18 @@ pub fn carry_over(model: &Model, params: &[f64], extended: &Model) -> Vec<f64> {
     p
 }
 
-/// One Gauss–Newton step of least squares from `params` under the task's constraints, holding
-/// directions below `tolerance`: the parameters after it, RSS before the step, and the number of
-/// identified directions.
-fn gauss_newton_step(task: &Task, params: &[f64], tolerance: f64) -> Option<(Vec<f64>, usize)> {
+/// One Gauss–Newton step of least squares from `params` under the task's constraints: the
+/// parameters after it and the number of directions the data identify (relative curvature
+/// above `tolerance`). `ridge` (one weight per parameter, in the residuals' units squared per
+/// parameter unit squared) adds `Σ ridge_j δ_j²` to the least squares: a prior that holds a
+/// candidate's new parameters to plausible sizes along directions the data barely see. The
+/// identified directions are counted without it.
+fn gauss_newton_step(
+    task: &Task,
+    params: &[f64],
+    tolerance: f64,
+    ridge: Option<&[f64]>,
+) -> Option<(Vec<f64>, usize)> {
     let n = params.len();
     let Reduced { d, ns, hz, gz } = reduced_normal(task, params)?;
     let nf = ns.n_free();
@@ -318,13 +407,25 @@ fn gauss_newton_step(task: &Task, params: &[f64], tolerance: f64) -> Option<(Vec
     }
     let basis = ns.basis();
     let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
-    let (mu, v) = (evd.S().column_vector(), evd.U());
+    let mu = evd.S().column_vector();
     let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+    let rank = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).count();
+    let ridged;
+    let evd = match ridge {
+        Some(w) => {
+            let wm = faer::Mat::from_fn(n, n, |i, j| if i == j { w[i] } else { 0.0 });
+            let (extra, _) = crate::coordinates::reduce(&d, basis, &wm, None);
+            ridged = (&hz + &extra).self_adjoint_eigen(Side::Lower).ok()?;
+            &ridged
+        }
+        None => &evd,
+    };
+    // Directions are kept by the data's own curvature scale (the ridge can only raise a
+    // curvature, and must not push the data's directions below the tolerance).
+    let (mu, v) = (evd.S().column_vector(), evd.U());
     let mut zeta = vec![0.0; nf];
-    let mut rank = 0;
     for i in 0..nf {
         if mu[i] > tolerance * mu_max {
-            rank += 1;
             let c = -(0..nf).map(|k| v[(k, i)] * gz[k]).sum::<f64>() / mu[i];
             for (k, z) in zeta.iter_mut().enumerate() {
                 *z += v[(k, i)] * c;
@@ -337,23 +438,60 @@ fn gauss_newton_step(task: &Task, params: &[f64], tolerance: f64) -> Option<(Vec
     Some((p, rank))
 }
 
-/// The residuals' sum of squares and EMM predicted to first order after moving from `params`
-/// to `q`: `r_i + J_i (q − params)` (the score test is a linear prediction; a full nonlinear
-/// step could overshoot along nearly redundant directions).
-fn linear_prediction(problem: &Problem, params: &[f64], q: &[f64]) -> (f64, f64) {
-    let n = params.len();
-    let delta: Vec<f64> = q.iter().zip(params).map(|(a, b)| a - b).collect();
-    let mut jac = vec![0.0; 3 * n];
-    let (mut rss, mut sum) = (0.0, 0.0);
-    for i in 0..problem.n_points() {
-        let r = problem.residual_and_jacobian(i, params, &mut jac);
-        let lin: [f64; 3] =
-            std::array::from_fn(|c| r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>());
-        let s2 = lin[0] * lin[0] + lin[1] * lin[1] + lin[2] * lin[2];
-        rss += s2;
-        sum += s2.sqrt();
+/// What the candidates are scored on: the problem's residuals, whitened by the tracker's noise
+/// when it is known ([`Whitened`]: each point and direction weighed by its noise).
+#[derive(Clone, Debug)]
+enum Scored<'a> {
+    Plain(Problem<'a>),
+    Whitened(Whitened<'a>),
+}
+
+impl<'a> Scored<'a> {
+    fn new(problem: Problem<'a>, noise: Option<&TrackerNoise>) -> Scored<'a> {
+        match noise.and_then(|n| Whitened::new(problem.clone(), n)) {
+            Some(w) => Scored::Whitened(w),
+            None => Scored::Plain(problem),
+        }
     }
-    (rss, sum / problem.n_points() as f64 * 1e3)
+
+    fn task(&self) -> Task<'a> {
+        match self {
+            Scored::Plain(p) => Task::new(p.clone()),
+            Scored::Whitened(w) => Task::new(w.clone()),
+        }
+    }
+
+    fn problem(&self) -> &Problem<'a> {
+        match self {
+            Scored::Plain(p) => p,
+            Scored::Whitened(w) => w.problem(),
+        }
+    }
+
+    /// The residuals' sum of squares (in the scoring's units) and EMM (µm) predicted to first
+    /// order after moving from `params` to `q`: `r_i + J_i (q − params)` (the score test is a
+    /// linear prediction; a full nonlinear step could overshoot along nearly redundant
+    /// directions).
+    fn linear_prediction(&self, params: &[f64], q: &[f64]) -> (f64, f64) {
+        let problem = self.problem();
+        let n = params.len();
+        let delta: Vec<f64> = q.iter().zip(params).map(|(a, b)| a - b).collect();
+        let mut jac = vec![0.0; 3 * n];
+        let (mut rss, mut sum) = (0.0, 0.0);
+        for i in 0..problem.n_points() {
+            let r = problem.residual_and_jacobian(i, params, &mut jac);
+            let lin: [f64; 3] = std::array::from_fn(|c| {
+                r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>()
+            });
+            let scored = match self {
+                Scored::Plain(_) => lin,
+                Scored::Whitened(w) => w.apply(i, lin),
+            };
+            rss += scored.iter().map(|v| v * v).sum::<f64>();
+            sum += volver_core::problem::norm(lin);
+        }
+        (rss, sum / problem.n_points() as f64 * 1e3)
+    }
 }
 
 /// The size of what the candidate adds, by its kind: for a new effect (drift, periodic
@@ -368,22 +506,22 @@ fn implied_size(
     params: &[f64],
     extended: &Model,
     q: &[f64],
-) -> (f64, &'static str) {
+) -> (f64, Unit) {
     // New effect parameters: the norm of each group (drift.x/y/z, screw.X.a/b …).
     let groups = extended.effect_sizes(q, |j| {
         model.param_index(&extended.params()[j].name).is_none()
     });
     if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
-        return (g.1, g.2);
+        return (g.1, g.3);
     }
     if id == "tracker-tilt" {
         let (ts, te) = (model.tracker_start(), extended.tracker_start());
         let tilt = ((q[te + 3] - params[ts + 3]).powi(2) + (q[te + 4] - params[ts + 4]).powi(2))
             .sqrt()
             * 1e6;
-        return (tilt, "µrad");
+        return (tilt, Unit::Rad);
     }
-    let mut best: (f64, &'static str) = (0.0, "µm");
+    let mut best: (f64, Unit) = (0.0, Unit::Mm);
     for t in extended.terms() {
         if model.term(t.id).is_some_and(|old| old.basis == t.basis) {
             continue;
@@ -399,59 +537,108 @@ fn implied_size(
             })
             .fold(0.0, f64::max);
         if peak > best.0 {
-            best = (peak, scale.1);
+            best = (peak, t.id.unit());
         }
     }
     best
 }
 
 /// Scores every candidate of the library at the solution `params` of `problem`'s model and
-/// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's).
-pub fn rank(problem: &Problem, params: &[f64], tolerance: f64) -> Vec<Score> {
+/// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's). With the tracker's
+/// `noise`, the residuals are whitened by it (each point and direction weighed by its own
+/// noise: angular noise grows with the distance); without, every coordinate weighs the same.
+///
+/// Each candidate's new parameters are held to plausible sizes
+/// ([`volver_core::plausibility::limit`]) by a prior at that size, so a direction the data
+/// barely see cannot carry a step of metres. A candidate is flagged ([`Score::flag`]) and never
+/// ranked first when its size still exceeds the bound, or when its evidence needs a size beyond
+/// the bound (nearly unidentifiable: the bound costs more than 10 in ΔBIC).
+pub fn rank(
+    problem: &Problem,
+    params: &[f64],
+    tolerance: f64,
+    noise: Option<&TrackerNoise>,
+) -> Vec<Score> {
     let model = problem.model();
     let data = problem.data();
     let m = (3 * problem.n_points()) as f64;
-    let base_task = Task::new(problem.clone());
-    let Some((p0, rank0)) = gauss_newton_step(&base_task, params, tolerance) else {
+    let base = Scored::new(problem.clone(), noise);
+    let Some((p0, rank0)) = gauss_newton_step(&base.task(), params, tolerance, None) else {
         return Vec::new();
     };
-    let (rss0, _) = linear_prediction(problem, params, &p0);
+    let (rss0, _) = base.linear_prediction(params, &p0);
+    // The residuals' variance per coordinate in the scoring's units: the prior's scale.
+    let variance = rss0 / (m - rank0 as f64).max(1.0);
     let mut scores: Vec<Score> = library(model)
         .into_iter()
         .filter_map(|c| {
             let extended = Model::new(model.machine().clone(), c.spec.clone()).ok()?;
-            let ext_problem = Problem::new(&extended, data).ok()?;
+            let ext = Scored::new(Problem::new(&extended, data).ok()?, noise);
             let start = carry_over(model, params, &extended);
-            let (q, rank1) = gauss_newton_step(&Task::new(ext_problem.clone()), &start, tolerance)?;
-            let (rss1, emm_um) = linear_prediction(&ext_problem, &start, &q);
-            let (size, size_unit) = implied_size(&c.id, model, params, &extended, &q);
+            let ridge: Vec<f64> = extended
+                .params()
+                .iter()
+                .map(|info| match model.param_index(&info.name) {
+                    Some(_) => 0.0,
+                    None => variance / limit(info.unit).powi(2),
+                })
+                .collect();
+            let task = ext.task();
+            let (q, rank1) = gauss_newton_step(&task, &start, tolerance, Some(&ridge))?;
+            let (rss1, emm_um) = ext.linear_prediction(&start, &q);
+            let (size, unit) = implied_size(&c.id, model, params, &extended, &q);
             let added = rank1.saturating_sub(rank0);
+            let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
+            let delta_bic = bic(rss1);
+            let (scale, size_unit) = unit.micro();
+            let bound = limit(unit) * scale;
+            let flag = if size > bound {
+                Some(format!(
+                    "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
+                ))
+            } else {
+                let (qf, _) = gauss_newton_step(&task, &start, tolerance, None)?;
+                let (size_free, _) = implied_size(&c.id, model, params, &extended, &qf);
+                let bic_free = bic(ext.linear_prediction(&start, &qf).0);
+                (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
+                    format!(
+                        "nearly unidentifiable: the data support it only with a size of \
+                         {size_free:.0} {size_unit} (ΔBIC {bic_free:.0}), beyond the plausible \
+                         {bound:.0} {size_unit}"
+                    )
+                })
+            };
             Some(Score {
                 id: c.id,
                 description: c.description,
                 added,
                 emm_um,
-                delta_bic: m * (rss1 / rss0).ln() + added as f64 * m.ln(),
+                delta_bic,
                 size,
                 size_unit,
                 equivalent: Vec::new(),
+                flag,
             })
         })
         .collect();
     // Candidates that add no direction the data identify cannot be seen (a period equal to the
-    // mesh step, a squareness the model already carries): they go last, whatever their ΔBIC.
+    // mesh step, a squareness the model already carries): they go last, whatever their ΔBIC;
+    // flagged ones go after every plausible one that the data see.
     scores.sort_by(|a, b| {
         (a.added == 0)
             .cmp(&(b.added == 0))
+            .then(a.flag.is_some().cmp(&b.flag.is_some()))
             .then(a.delta_bic.total_cmp(&b.delta_bic))
     });
     // Merge candidates the data cannot tell apart: as many directions, ΔBIC within 2.
     let mut merged: Vec<Score> = Vec::new();
     for s in scores {
-        if let Some(prev) = merged
-            .iter_mut()
-            .find(|p| p.added == s.added && s.added > 0 && (p.delta_bic - s.delta_bic).abs() < 2.0)
-        {
+        if let Some(prev) = merged.iter_mut().find(|p| {
+            p.added == s.added
+                && s.added > 0
+                && p.flag.is_none() == s.flag.is_none()
+                && (p.delta_bic - s.delta_bic).abs() < 2.0
+        }) {
             prev.equivalent.push(s.id);
         } else {
             merged.push(s);
@@ -467,15 +654,47 @@ impl Score {
         self.added > 0
     }
 
-    /// Strong evidence on Kass and Raftery's scale: ΔBIC below −10, for a candidate the data see.
+    /// Strong evidence on Kass and Raftery's scale: ΔBIC below −10, for a plausible candidate
+    /// (not flagged) the data see.
     pub fn strong(&self) -> bool {
-        self.seen() && self.delta_bic < -10.0
+        self.seen() && self.flag.is_none() && self.delta_bic < -10.0
     }
 }
 
 /// A one-line verdict on a ranked list (as [`rank`] returns it) for a fit of EMM `emm_um`:
 /// the candidate to add, or that none is supported.
 pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
+    if let Some(s) = ranked.first().filter(|s| s.strong())
+        && let Some(vars) = s.id.strip_prefix("field:")
+    {
+        let depends = match vars.split_once('*') {
+            Some((a, b)) => format!(
+                "the misfit depends jointly on {a} and {b}: a non-rigid effect the rigid-body \
+                 model cannot express"
+            ),
+            None => {
+                format!("the misfit depends on {vars} in a way no physical candidate describes")
+            }
+        };
+        let physical = ranked
+            .iter()
+            .find(|p| !p.id.starts_with("field:") && p.seen() && p.flag.is_none())
+            .map_or(String::new(), |p| {
+                format!(
+                    " (the best physical candidate, {}, has ΔBIC {:.0})",
+                    p.id, p.delta_bic
+                )
+            });
+        return format!(
+            "{depends}{physical}. Add {} (ΔBIC {:.0}) to bring the EMM from {} to about {} µm \
+             while you look for the cause — `volver identify … --add {}`",
+            s.id,
+            s.delta_bic,
+            um(emm_um),
+            um(s.emm_um),
+            s.id
+        );
+    }
     match ranked.first() {
         Some(s) if s.strong() => format!(
             "add {} (ΔBIC {:.0}, strong evidence): {}; it would bring the EMM from {} to about \
@@ -504,7 +723,12 @@ pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
 }
 
 /// A length in µm with three significant figures (`0.178`, `1.86e-4`, `49.3`).
-fn um(v: f64) -> String {
+///
+/// ```
+/// use volver_solvers::candidates::um;
+/// assert_eq!((um(49.31), um(0.000186)), ("49.310".to_string(), "1.86e-4".to_string()));
+/// ```
+pub fn um(v: f64) -> String {
     if v != 0.0 && v.abs() < 0.01 {
         format!("{v:.2e}")
     } else {

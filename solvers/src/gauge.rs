@@ -61,7 +61,7 @@ pub const RULE: &str = "minimum norm in the function metric: the combinations th
 /// The function metric `M` (n × n) at `params`: `pᵀ M p` is the sum over the error functions of
 /// the mean square of their values at 65 evenly spaced positions of their travel (mm², angles
 /// times [`LEVER_MM`]), plus the squares of the tracker's pose and of the other effects'
-/// parameters in the same units (µm/h and ppm weigh as µm). The error functions are linear in
+/// parameters in the same units (µm/h, ppm and ppm/h weigh as µm). The error functions are linear in
 /// their coefficients except the sine series' phases, whose derivative is taken at `params`.
 pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
     weighted_metric(
@@ -72,7 +72,7 @@ pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
         },
         |info| match info.unit {
             Unit::Rad => LEVER_MM,
-            Unit::Ppm => 1e-3,
+            Unit::Ppm | Unit::PpmPerHour => 1e-3,
             Unit::Mm | Unit::MmPerHour => 1.0,
         },
     )

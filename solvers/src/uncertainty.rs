@@ -237,7 +237,7 @@ pub fn linear(
     let mut b = Mat::<f64>::zeros(nf, nf);
     // The Gauss rule over the tracker's deviates, once (the isotropic normal needs none).
     let rule = match noise {
-        NoiseModel::Tracker(t) => noise_rule(t.distribution),
+        NoiseModel::Tracker(t) => t.distribution.rule(),
         NoiseModel::Residual => Vec::new(),
     };
     let mut jac = vec![0.0; 3 * n];
@@ -290,63 +290,10 @@ pub fn linear(
     })
 }
 
-/// Nodes per deviate of the Gauss rules over the tracker's noise.
-const GAUSS_NODES: usize = 16;
-
-/// The `m`-node Gauss rule of a probability distribution (nodes, weights summing to 1), by
-/// Golub–Welsch: the eigenvalues of the Jacobi matrix of its orthogonal polynomials, the weights
-/// the squared first components of its eigenvectors. `uniform`: on [−1, 1] (Legendre);
-/// otherwise the standard normal (Hermite).
-fn gauss_rule(m: usize, uniform: bool) -> Vec<(f64, f64)> {
-    let jacobi = Mat::from_fn(m, m, |i, j| {
-        let k = i.max(j);
-        if i.abs_diff(j) != 1 {
-            0.0
-        } else if uniform {
-            k as f64 / ((4 * k * k - 1) as f64).sqrt()
-        } else {
-            (k as f64).sqrt()
-        }
-    });
-    let e = jacobi
-        .self_adjoint_eigen(Side::Lower)
-        .expect("a small symmetric tridiagonal matrix");
-    let (s, u) = (e.S().column_vector(), e.U());
-    (0..m).map(|i| (s[i], u[(0, i)] * u[(0, i)])).collect()
-}
-
-/// The rule over one deviate of the tracker's noise: Gauss–Legendre panels whose edges meet
-/// zero (where `Φ`'s integrand has its cusp), [−1, 0] and [0, 1] for the uniform distribution,
-/// [−6, −2], [−2, 0], [0, 2], [2, 6] weighted by the normal density for the normal one
-/// (renormalised: the tails beyond 6 σ hold 2e-9), [`GAUSS_NODES`] nodes in all.
-fn noise_rule(distribution: volver_core::noise::Distribution) -> Vec<(f64, f64)> {
-    let edges: &[f64] = match distribution {
-        volver_core::noise::Distribution::Uniform => &[-1.0, 0.0, 1.0],
-        volver_core::noise::Distribution::Normal => &[-6.0, -2.0, 0.0, 2.0, 6.0],
-    };
-    let panels = edges.len() - 1;
-    let base = gauss_rule(GAUSS_NODES / panels, true);
-    let mut rule: Vec<(f64, f64)> = Vec::with_capacity(GAUSS_NODES);
-    for p in edges.windows(2) {
-        let (mid, half) = (0.5 * (p[0] + p[1]), 0.5 * (p[1] - p[0]));
-        for &(z, w) in &base {
-            let x = mid + half * z;
-            let density = match distribution {
-                volver_core::noise::Distribution::Uniform => 0.5,
-                volver_core::noise::Distribution::Normal => (-0.5 * x * x).exp(),
-            };
-            // `w` sums to 1 over a panel: 2 × half is its length.
-            rule.push((x, 2.0 * half * w * density));
-        }
-    }
-    let total: f64 = rule.iter().map(|r| r.1).sum();
-    rule.iter().map(|&(x, w)| (x, w / total)).collect()
-}
-
 /// `E[∂ψ/∂r]` and `E[ψψᵀ]` at a point measured at `x` (the residual at the truth is minus the
 /// noise). For the isotropic normal, in closed form: `ve` gives `I` and `σ² I`; `Φ` gives
 /// `(2/3) E[1/‖r‖] I = (2/3) √(2/π)/σ I` and `I/3`. For the tracker's model, by a product Gauss
-/// rule over its three deviates ([`noise_rule`], [`GAUSS_NODES`]³ nodes; a deterministic
+/// rule over its three deviates ([`volver_core::noise::Distribution::rule`], 16³ nodes; a deterministic
 /// quadrature, within 1 % of sampled means in the tests). No random draws: noise in these expectations would not share the
 /// normal matrix' structure, and the information matrix `A B⁻¹ A` that the priors
 /// ([`crate::prior`]) combine with would carry it from the strong directions into the weak ones.
@@ -787,7 +734,7 @@ mod tests {
                 for x in [[900.0, -400.0, 300.0], [3500.0, 1200.0, -800.0]] {
                     let sigma = 0.02;
                     let rule = match noise {
-                        NoiseModel::Tracker(t) => noise_rule(t.distribution),
+                        NoiseModel::Tracker(t) => t.distribution.rule(),
                         NoiseModel::Residual => Vec::new(),
                     };
                     let (qa, qb) = expectations(objective, noise, x, sigma, &rule);

@@ -150,6 +150,7 @@ fn diagnose(
         &p1,
         &id1.params,
         volver::solvers::identifiability::RANK_TOLERANCE,
+        p1.model().machine().tracker().noise.as_ref(),
     );
     for (i, s) in ranked.iter().take(3).enumerate() {
         println!(

@@ -12,6 +12,25 @@ pub struct DiagnoseArgs {
     /// How many candidates to list.
     #[arg(long, default_value_t = 10)]
     top: usize,
+    /// The tracker's noise specification the fit is judged against: paper, none,
+    /// normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ), uniform:… (bounds) or
+    /// mpe:A_UM,B_UM_PER_M (±(a + b·L), k = 2). Default: the machine file's `[tracker] noise`.
+    #[arg(long)]
+    noise: Option<String>,
+    /// Run the loop to the end: add the best significant candidate, refit, diagnose again,
+    /// until the fit is at the noise or nothing significant is left.
+    #[arg(long)]
+    iterate: bool,
+    /// With --iterate: at most this many candidates are added.
+    #[arg(long, default_value_t = 5, requires = "iterate")]
+    max_added: usize,
+    /// With --iterate: append every round's fit to this history file (default:
+    /// volver-history.jsonl beside the data).
+    #[arg(long, requires = "iterate")]
+    history: Option<std::path::PathBuf>,
+    /// With --iterate: do not append the rounds to any history file.
+    #[arg(long, conflicts_with = "history")]
+    no_history: bool,
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
@@ -20,15 +39,109 @@ pub struct DiagnoseArgs {
 /// Runs `volver diagnose`.
 pub fn run(a: DiagnoseArgs) -> Result<()> {
     let (_, model, set) = a.inputs.load()?;
-    let mut d = volver::diagnosis::diagnose(&model, &set)?;
-    d.candidates.truncate(a.top);
+    let noise = match &a.noise {
+        Some(text) => Some(volver::core::noise::TrackerNoise::from_text(text)?),
+        None => model.machine().tracker().noise,
+    };
+    if !a.iterate {
+        let mut d = volver::diagnosis::diagnose_with(&model, &set, noise.as_ref())?;
+        d.candidates.truncate(a.top);
+        if a.json {
+            let value = serde_json::to_value(&d)?;
+            println!("{}", serde_json::to_string_pretty(&value)?);
+            return Ok(());
+        }
+        print_diagnosis(&d);
+        return Ok(());
+    }
+    let history = (!a.no_history).then(|| {
+        a.history
+            .clone()
+            .unwrap_or_else(|| volver::history::default_path(&a.inputs.data))
+    });
+    let data_name = a.inputs.data.display().to_string();
+    let mut records = Vec::new();
+    let (mut rounds, _) =
+        volver::diagnosis::iterate(&model, &set, noise.as_ref(), a.max_added, |r| {
+            records.push(
+                r.diagnosis
+                    .history_record(&data_name, &r.added, r.parameters),
+            );
+            if !a.json {
+                print_round(records.len(), r);
+            }
+        })?;
+    if let Some(path) = &history {
+        for record in &records {
+            volver::history::append(path, record)?;
+        }
+    }
+    if let Some(last) = rounds.last_mut() {
+        last.diagnosis.candidates.truncate(a.top);
+    }
+    let last = rounds.last().expect("one round at least");
     if a.json {
-        let value = serde_json::to_value(&d)?;
+        let value = serde_json::json!({
+            "rounds": rounds.iter().map(|r| serde_json::json!({
+                "added": r.added,
+                "parameters": r.parameters,
+                "emm_um": r.diagnosis.emm_um,
+                "noise_ratio": r.diagnosis.noise.as_ref().map(|n| n.ratio),
+                "verdict": r.diagnosis.verdict,
+            })).collect::<Vec<_>>(),
+            "final": serde_json::to_value(&last.diagnosis)?,
+        });
         println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
-    print_diagnosis(&d);
+    println!(
+        "\nThe final model{}:\n",
+        if last.added.is_empty() {
+            String::new()
+        } else {
+            format!(" (with {})", last.added.join(", "))
+        }
+    );
+    print_diagnosis(&last.diagnosis);
+    if let Some(path) = &history {
+        println!(
+            "\n{} rounds appended to {} (`volver history` shows them)",
+            records.len(),
+            path.display()
+        );
+    }
     Ok(())
+}
+
+/// One round of `diagnose --iterate`, in a line or two.
+fn print_round(k: usize, r: &volver::diagnosis::Round) {
+    let d = &r.diagnosis;
+    let noise = d.noise.as_ref().map_or(String::new(), |n| {
+        format!(
+            " = {:.3} × the noise's {} µm",
+            n.ratio,
+            um(n.expected_fit_um)
+        )
+    });
+    println!(
+        "round {k}: {}{} — EMM {} µm{noise}",
+        d.model,
+        if r.added.is_empty() {
+            String::new()
+        } else {
+            format!(" + {}", r.added.join(" + "))
+        },
+        um(d.emm_um)
+    );
+    match (d.done(), d.finding()) {
+        (false, Some(c)) => println!(
+            "  → add {} (ΔBIC {:.0}): {}",
+            c.id,
+            c.delta_bic.unwrap_or(0.0),
+            c.description
+        ),
+        _ => println!("  → stop: {}", d.verdict),
+    }
 }
 
 /// The diagnosis as tables.
@@ -41,20 +154,25 @@ fn print_diagnosis(d: &Diagnosis) {
         um(d.emax_um),
         d.termination
     );
-    match (d.noise_estimate_um, d.repeat_pairs) {
-        (Some(s), Some(n)) => println!(
-            "  noise estimated from {n} repeated points: EMM {} µm — the fit is {:.2} × that",
-            um(s),
-            d.emm_um / s
-        ),
-        _ => println!("  no repeated points: the noise cannot be estimated from these data"),
-    }
+    print_noise(d);
     println!("\nWhere it fails (EMM per bin, µm; spread = largest / smallest bin):");
     for b in &d.breakdowns {
         let cells: Vec<String> = b
             .bins
             .iter()
-            .map(|x| format!("{}:{:.1}", x.label, x.emm_um))
+            .map(|x| {
+                let above = d.noise.as_ref().is_some_and(|n| {
+                    n.above.iter().any(|a| {
+                        a.by == b.by && a.bin.split(' ').next() == x.label.split(' ').next()
+                    })
+                });
+                format!(
+                    "{}:{:.1}{}",
+                    x.label,
+                    x.emm_um,
+                    if above { "*" } else { "" }
+                )
+            })
             .collect();
         println!(
             "  {:<10} spread {:>5.2}  {}",
@@ -62,6 +180,9 @@ fn print_diagnosis(d: &Diagnosis) {
             b.spread,
             cells.join("  ")
         );
+    }
+    if d.noise.as_ref().is_some_and(|n| !n.above.is_empty()) {
+        println!("  (* the misfit there exceeds the tracker's noise)");
     }
     let worst: Vec<String> = d
         .outliers
@@ -79,6 +200,67 @@ fn print_diagnosis(d: &Diagnosis) {
         println!("  {}: {}", p.axis, cells.join("  "));
     }
     print_candidates(d);
+}
+
+/// The fit against the noise: the tracker's specification, repeated points, or neither.
+fn print_noise(d: &Diagnosis) {
+    let repeats = d.noise_estimate_um.zip(d.repeat_pairs);
+    match (&d.noise, repeats) {
+        (Some(n), _) => {
+            println!(
+                "  tracker noise {}: its noise error here is {} µm, a complete model's fit \
+                 leaves {} ± {} µm (k = 2); this fit is {:.3} × that — {}",
+                n.model,
+                um(n.noise_error_um),
+                um(n.expected_fit_um),
+                um(n.u95_um),
+                n.ratio,
+                if n.at_noise {
+                    "at the noise"
+                } else if n.below {
+                    "far below it: the specification overstates these data's noise"
+                } else {
+                    "above the noise"
+                }
+            );
+            if let Some(r) = &n.repeats {
+                println!(
+                    "  {} repeated points give {} µm, the specification {} ± {} µm there: {}",
+                    r.pairs,
+                    um(r.estimate_um),
+                    um(r.specified_um),
+                    um(r.u95_um),
+                    if r.agree {
+                        "they agree"
+                    } else {
+                        "they DISAGREE — the specification does not describe this tracker \
+                         here, or the machine moved between repeats"
+                    }
+                );
+            }
+            if !n.above.is_empty() {
+                let worst: Vec<String> = n
+                    .above
+                    .iter()
+                    .take(6)
+                    .map(|a| format!("{} {} ({:.2} ×)", a.by, a.bin, a.ratio))
+                    .collect();
+                println!(
+                    "  the misfit exceeds the noise most at: {}",
+                    worst.join(", ")
+                );
+            }
+        }
+        (None, Some((s, n))) => println!(
+            "  noise estimated from {n} repeated points: EMM {} µm — the fit is {:.2} × that",
+            um(s),
+            d.emm_um / s
+        ),
+        (None, None) => println!(
+            "  no repeated points and no tracker noise given (--noise or the machine file's \
+             [tracker] noise): the noise cannot be judged"
+        ),
+    }
 }
 
 /// What the data cannot separate, the verdict and the candidates.
@@ -120,10 +302,10 @@ fn print_candidates(d: &Diagnosis) {
             s.id,
             bic,
             emm,
-            if s.seen {
-                ""
-            } else {
-                "not seen in these data: "
+            match (&s.flag, s.seen) {
+                (Some(why), _) => format!("IMPLAUSIBLE ({why}): "),
+                (None, true) => String::new(),
+                (None, false) => "not seen in these data: ".into(),
             },
             s.description,
             if s.equivalent.is_empty() {

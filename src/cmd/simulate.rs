@@ -31,6 +31,11 @@ Effects (--effect, repeatable):
   ball-screw=AXIS,PERIOD_MM,AMP_UM    periodic positioning error A·sin(2π(u − u_ref)/P)
   reflector-offset=ID,DX,DY,DZ        reflector off its nominal offset, µm
   range-scale=PPM                     tracker range scale error
+  thermal-scale=AXIS,PPM_PER_H        scale of a linear axis growing with time: EXX += α·x·t
+  location-drift=AXIS,V1_UM_PER_H,V2_UM_PER_H
+                                      line of a rotary axis drifting (X0C, Y0C += v·t for C)
+  coupling=AXIS,COMPONENT,BY,AMP_UM   E{COMPONENT}{AXIS} += A·sin(πξ)·η: a straightness bow
+                                      growing with the position of BY (ξ, η over 0 … 1)
 
 Example:
   volver simulate --plan test4 --seed 7 --out sim --effect thermal-drift=0,0,15";

@@ -128,22 +128,23 @@ impl Model {
                     &mut params,
                 );
             }
-            for b in &fx.ball_screw {
-                let axis = b
-                    .axis
+            let linear_axis = |name: &str, field: &str| {
+                let axis = name
                     .chars()
                     .next()
-                    .filter(|_| b.axis.len() == 1)
+                    .filter(|_| name.len() == 1)
                     .and_then(crate::iso::Axis::from_letter);
-                let Some((k, ax)) = axis
-                    .and_then(|a| machine.axis(a))
+                axis.and_then(|a| machine.axis(a))
                     .filter(|(_, ax)| !ax.axis.is_rotary())
-                else {
-                    return Err(Error::input(
-                        place(&b.axis, "effects.ball_screw.axis"),
-                        format!("'{}' is not a linear axis of {}", b.axis, machine.chain()),
-                    ));
-                };
+                    .ok_or_else(|| {
+                        Error::input(
+                            place(name, field),
+                            format!("'{name}' is not a linear axis of {}", machine.chain()),
+                        )
+                    })
+            };
+            for b in &fx.ball_screw {
+                let (k, ax) = linear_axis(&b.axis, "effects.ball_screw.axis")?;
                 if !(b.period_mm.is_finite() && b.period_mm > 0.0) {
                     return Err(Error::input(
                         place(&b.axis, "effects.ball_screw.period_mm"),
@@ -163,6 +164,72 @@ impl Model {
                     ],
                     &mut params,
                 );
+            }
+            for name in &fx.thermal_scale {
+                let (k, ax) = linear_axis(name, "effects.thermal_scale")?;
+                push(
+                    EffectSlot::ThermalScale {
+                        k,
+                        dir: ax.axis.direction(),
+                    },
+                    &[(format!("thermal.{name}"), Unit::PpmPerHour)],
+                    &mut params,
+                );
+            }
+            for name in &fx.location_drift {
+                let axis = name
+                    .chars()
+                    .next()
+                    .filter(|_| name.len() == 1)
+                    .and_then(crate::iso::Axis::from_letter);
+                let Some((k, ax)) = axis
+                    .and_then(|a| machine.axis(a))
+                    .filter(|(_, ax)| ax.axis.is_rotary())
+                else {
+                    return Err(Error::input(
+                        place(name, "effects.location_drift"),
+                        format!("'{name}' is not a rotary axis of {}", machine.chain()),
+                    ));
+                };
+                // The two translations across the axis' line (X0C, Y0C for C).
+                for c in (0..3).filter(|&c| c != ax.axis.direction()) {
+                    let letter = ["x", "y", "z"][c];
+                    push(
+                        EffectSlot::LocationDrift { k, c },
+                        &[(format!("locdrift.{name}.{letter}"), Unit::MmPerHour)],
+                        &mut params,
+                    );
+                }
+            }
+            for id in &fx.field {
+                let vars = field_vars(&machine, id)
+                    .map_err(|why| Error::input(place(id, "effects.field"), why))?;
+                let pair = vars.len() == 2;
+                let (v0, v1) = (vars[0], vars[vars.len() - 1]);
+                let products: Vec<String> = if pair {
+                    (0..2)
+                        .flat_map(|a| (0..2).map(move |b| format!("{}_{}", v0.code(a), v1.code(b))))
+                        .collect()
+                } else {
+                    (0..v0.functions())
+                        .map(|q| v0.code(q).to_string())
+                        .collect()
+                };
+                for (c, letter) in ["x", "y", "z"].iter().enumerate() {
+                    let names: Vec<(String, Unit)> = products
+                        .iter()
+                        .map(|q| (format!("field.{id}.{letter}_{q}"), Unit::Mm))
+                        .collect();
+                    push(
+                        EffectSlot::Field {
+                            c,
+                            vars: [v0, v1],
+                            pair,
+                        },
+                        &names,
+                        &mut params,
+                    );
+                }
             }
         }
         if terms.len() + TRACKER_DOF + effects.len() > MAX_SLOTS {
@@ -185,6 +252,11 @@ impl Model {
         for t in &terms {
             if matches!(t.id, ErrorId::Location { .. }) {
                 has_location[t.axis] = true;
+            }
+        }
+        for (slot, _) in &effects {
+            if let EffectSlot::LocationDrift { k, .. } = *slot {
+                has_location[k] = true;
             }
         }
         let mut initial = vec![0.0; params.len()];
@@ -405,4 +477,44 @@ pub(super) fn term_basis(
             .ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?,
     };
     Basis::new(kind, degree).map_err(|m| format!("{id}: {m}"))
+}
+
+/// The variables of a field id (`X`, `X*Z`, `C*t`): one or two distinct axes of `machine` or
+/// `t`; the reason when it is not one.
+pub(super) fn field_vars(
+    machine: &Machine,
+    id: &str,
+) -> std::result::Result<Vec<FieldVar>, String> {
+    let parts: Vec<&str> = id.split('*').map(str::trim).collect();
+    if parts.is_empty() || parts.len() > 2 || (parts.len() == 2 && parts[0] == parts[1]) {
+        return Err(format!(
+            "'{id}' is not a field: expected one or two distinct variables joined by '*' (X, X*Z, C*t)"
+        ));
+    }
+    parts
+        .iter()
+        .map(|p| {
+            if *p == "t" {
+                return Ok(FieldVar::Time);
+            }
+            let axis = p
+                .chars()
+                .next()
+                .filter(|_| p.len() == 1)
+                .and_then(crate::iso::Axis::from_letter);
+            let Some((k, ax)) = axis.and_then(|a| machine.axis(a)) else {
+                return Err(format!(
+                    "'{p}' in field '{id}' is neither an axis of {} nor t",
+                    machine.chain()
+                ));
+            };
+            let full_turn =
+                ax.axis.is_rotary() && ax.max - ax.min >= 2.0 * std::f64::consts::PI - 1e-9;
+            Ok(if full_turn {
+                FieldVar::Periodic(k)
+            } else {
+                FieldVar::Linear(k)
+            })
+        })
+        .collect()
 }

@@ -131,17 +131,60 @@ impl Model {
         for (i, (slot, _)) in self.effects.iter().enumerate() {
             let v = value(i);
             match *slot {
-                EffectSlot::Drift(c) => e.tool_shift[c] = v,
+                EffectSlot::Drift(c) | EffectSlot::Field { c, .. } => e.tool_shift[c] += v,
                 EffectSlot::Reflector { c, .. } => e.reflector_delta[c] += v,
                 EffectSlot::RangeScale => e.range_scale = v,
-                EffectSlot::Screw { k, dir, .. } => e.component[k][dir] += v,
+                EffectSlot::Screw { k, dir, .. } | EffectSlot::ThermalScale { k, dir } => {
+                    e.component[k][dir] += v
+                }
+                EffectSlot::LocationDrift { k, c } => e.location[k][c] += v,
             }
         }
     }
 
-    /// Whether the model needs the measurements' time stamps (thermal drift).
+    /// Whether the model needs the measurements' time stamps (thermal drift, scale growth,
+    /// location drift, a field over `t`).
     pub fn needs_time(&self) -> bool {
-        self.spec.effects.thermal_drift
+        self.effects.iter().any(|(slot, _)| match slot {
+            EffectSlot::Drift(_) | EffectSlot::ThermalScale { .. } => true,
+            EffectSlot::LocationDrift { .. } => true,
+            EffectSlot::Field { vars, pair, .. } => {
+                vars[0] == FieldVar::Time || (*pair && vars[1] == FieldVar::Time)
+            }
+            _ => false,
+        })
+    }
+
+    /// The functions of a field variable at a point into `out` (its count returned).
+    #[inline]
+    fn field_functions<S: Real>(
+        &self,
+        var: FieldVar,
+        commands: &[S; MAX_AXES],
+        t_h: f64,
+        out: &mut [S; 4],
+    ) -> usize {
+        match var {
+            FieldVar::Linear(k) => {
+                let x = self.machine.axes()[k].normalise_at(commands[k]);
+                let x2 = x * x;
+                out[0] = x;
+                out[1] = (x2 * 3.0 - 1.0) * 0.5;
+                out[2] = (x2 * 5.0 - 3.0) * x * 0.5;
+                3
+            }
+            FieldVar::Periodic(k) => {
+                let (s1, c1) = commands[k].sin_cos();
+                let (s2, c2) = (commands[k] * 2.0).sin_cos();
+                *out = [c1, s1, c2, s2];
+                4
+            }
+            FieldVar::Time => {
+                out[0] = S::from(t_h);
+                out[1] = S::from(t_h * t_h);
+                2
+            }
+        }
     }
 
     /// Effect values at a point into `vals` (slots after the tracker's) and, when `jac` is
@@ -189,6 +232,38 @@ impl Model {
                     set(j, sn.re());
                     set(j + 1, cs.re());
                     sn * params[j] + cs * params[j + 1]
+                }
+                EffectSlot::ThermalScale { k, .. } => {
+                    let g = 1e-6 * t_s / 3600.0;
+                    set(j, commands[k].re() * g);
+                    commands[k] * (params[j] * g)
+                }
+                EffectSlot::LocationDrift { .. } => {
+                    let t_h = t_s / 3600.0;
+                    set(j, t_h);
+                    S::from(params[j] * t_h)
+                }
+                EffectSlot::Field { vars, pair, .. } => {
+                    let t_h = t_s / 3600.0;
+                    let mut a = [S::zero(); 4];
+                    let na = self.field_functions(vars[0], commands, t_h, &mut a);
+                    let mut v = S::zero();
+                    if pair {
+                        let mut b = [S::zero(); 4];
+                        self.field_functions(vars[1], commands, t_h, &mut b);
+                        for (q, (x, y)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate()
+                        {
+                            let phi = a[x] * b[y];
+                            set(j + q, phi.re());
+                            v += phi * params[j + q];
+                        }
+                    } else {
+                        for (q, phi) in a[..na].iter().enumerate() {
+                            set(j + q, phi.re());
+                            v += *phi * params[j + q];
+                        }
+                    }
+                    v
                 }
             };
         }
@@ -327,8 +402,9 @@ impl Model {
     /// Where the tool point `tool` (mm, in the frame of the last tool-side axis) sits relative
     /// to the workpiece at `commands` (any scalar, internal units) with the errors of `params`:
     /// [`crate::kinematics::tool_in_workpiece`] with the model's error values at those commands.
-    /// Effects that belong to the measurement (tracker pose, reflector offsets, range scale,
-    /// thermal drift over the test's time) are left out; ball-screw errors stay.
+    /// Effects that belong to the measurement (tracker pose, reflector offsets, range scale) are
+    /// left out; those that change with time (drift, scale growth, a field over `t`) take their
+    /// value at the test's start (zero); ball-screw errors and fields over axes stay.
     ///
     /// # Panics
     /// When `params.len() != n_params()`.
@@ -339,7 +415,6 @@ impl Model {
         params: &[f64],
     ) -> [S; 3] {
         let mut e = self.errors_with_commands(commands, usize::MAX, 0.0, params);
-        e.tool_shift = [S::zero(); 3];
         e.reflector_delta = [S::zero(); 3];
         e.range_scale = S::zero();
         crate::kinematics::tool_in_workpiece(&self.machine, commands, tool, &e)
@@ -572,10 +647,13 @@ impl Model {
             put(
                 base + i,
                 match *slot {
-                    EffectSlot::Drift(c) => de.tool_shift[c],
+                    EffectSlot::Drift(c) | EffectSlot::Field { c, .. } => de.tool_shift[c],
                     EffectSlot::Reflector { c, .. } => de.reflector_delta[c],
                     EffectSlot::RangeScale => de.range_scale,
-                    EffectSlot::Screw { k, dir, .. } => de.component[k][dir],
+                    EffectSlot::Screw { k, dir, .. } | EffectSlot::ThermalScale { k, dir } => {
+                        de.component[k][dir]
+                    }
+                    EffectSlot::LocationDrift { k, c } => de.location[k][c],
                 },
             );
         }

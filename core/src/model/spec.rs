@@ -128,10 +128,24 @@ pub struct BallScrewSpec {
 /// thermal_drift = true          # drift.x, drift.y, drift.z (mm/h): tool point, machine frame, × t_s
 /// reflector_offset = ["R1"]     # reflector.R1.x … (mm): the reflector off its nominal offset
 /// range_scale = true            # range.scale (ppm): points scaled about the tracker
+/// thermal_scale = ["X"]         # thermal.X (ppm/h): EXX += α·10⁻⁶·x·t, the scale of X growing with time
+/// location_drift = ["C"]        # locdrift.C.x, locdrift.C.y (mm/h): X0C, Y0C += v·t
+/// field = ["X*Z", "X*t"]        # field.X*Z.x_1_1 … (mm): a smooth displacement of the tool point
 /// [[effects.ball_screw]]
 /// axis = "X"
 /// period_mm = 700.0             # screw.X.a, screw.X.b (mm): a·sin φ + b·cos φ, φ = 2π(u − u_ref)/P
 /// ```
+///
+/// A **field** is a generic displacement of the tool point relative to the workpiece, in the
+/// machine frame, that depends on one variable or jointly on two: axis positions and the time
+/// `t` (h). Each variable has its functions: a linear axis (or a rotary one with less than a
+/// turn) the Legendre polynomials P₁, P₂, P₃ of its position normalised over the travel, a
+/// full-turn rotary axis cos θ, sin θ, cos 2θ, sin 2θ, the time t and t². A field over one
+/// variable uses all of them, one over two (`X*Z`) the products of the first two of each
+/// (P₁P₁, P₁P₂, P₂P₁, P₂P₂): what the rigid-body model cannot express. Each product has a
+/// coefficient per component x, y, z. It names what the misfit depends on when no physical
+/// effect explains it; the time's origin is the test's start, and [`super::Model::tool_point`]
+/// keeps a field's value there.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EffectsSpec {
@@ -147,6 +161,45 @@ pub struct EffectsSpec {
     /// Periodic positioning errors.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub ball_screw: Vec<BallScrewSpec>,
+    /// Linear axes whose scale grows with time (thermal expansion of the drive or the scale).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub thermal_scale: Vec<String>,
+    /// Rotary axes whose location (the position of their line) drifts with time.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub location_drift: Vec<String>,
+    /// Generic displacement fields, by their variables (`X`, `X*Z`, `C*t`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub field: Vec<String>,
+}
+
+/// A variable of a field ([`EffectsSpec::field`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum FieldVar {
+    /// The position of chain axis k, normalised over its travel (Legendre P₁, P₂, P₃).
+    Linear(usize),
+    /// The angle of full-turn rotary chain axis k (cos θ, sin θ, cos 2θ, sin 2θ).
+    Periodic(usize),
+    /// The time in hours (t, t²).
+    Time,
+}
+
+impl FieldVar {
+    /// How many functions the variable has alone.
+    pub(super) fn functions(self) -> usize {
+        match self {
+            FieldVar::Linear(_) => 3,
+            FieldVar::Periodic(_) => 4,
+            FieldVar::Time => 2,
+        }
+    }
+
+    /// The code of its function `q` in parameter names.
+    pub(super) fn code(self, q: usize) -> &'static str {
+        match self {
+            FieldVar::Linear(_) | FieldVar::Time => ["1", "2", "3"][q],
+            FieldVar::Periodic(_) => ["c1", "s1", "c2", "s2"][q],
+        }
+    }
 }
 
 pub(super) fn is_false(b: &bool) -> bool {
@@ -175,6 +228,17 @@ pub(super) enum EffectSlot {
         dir: usize,
         period_mm: f64,
         reference: f64,
+    },
+    /// Scale growth of linear chain axis k (direction `dir`): value = α × 10⁻⁶ × u × t (h).
+    ThermalScale { k: usize, dir: usize },
+    /// Location drift of chain axis k, component c: value = v × t (h).
+    LocationDrift { k: usize, c: usize },
+    /// Tool shift component c from a field over `vars` (the second unused when not `pair`):
+    /// value = Σ_q φ_q coefficient_q.
+    Field {
+        c: usize,
+        vars: [FieldVar; 2],
+        pair: bool,
     },
 }
 

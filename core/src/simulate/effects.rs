@@ -49,10 +49,37 @@ pub enum Effect {
         /// Scale error (parts per million).
         ppm: f64,
     },
+    /// The scale of a linear axis growing with time (thermal expansion of its drive).
+    ThermalScale {
+        /// The linear axis.
+        axis: Axis,
+        /// Growth rate (ppm per hour).
+        ppm_per_h: f64,
+    },
+    /// The line of a rotary axis drifting with time.
+    LocationDrift {
+        /// The rotary axis.
+        axis: Axis,
+        /// Drift rates of its two location translations (µm/h): X0C and Y0C for C, Y0A and
+        /// Z0A for A, X0B and Z0B for B.
+        rate_um_per_h: [f64; 2],
+    },
+    /// A non-rigid coupling: a component error of one axis that changes with the position of
+    /// another.
+    Coupling {
+        /// The axis whose error changes (linear).
+        axis: Axis,
+        /// The translation component of its error (X, Y or Z).
+        component: Axis,
+        /// The axis whose position it changes with.
+        by: Axis,
+        /// Amplitude (µm).
+        amplitude_um: f64,
+    },
 }
 
 /// The effects: id, CLI syntax and meaning, in the order `volver simulate --help` lists them.
-pub const EFFECTS: [(&str, &str, &str); 6] = [
+pub const EFFECTS: [(&str, &str, &str); 9] = [
     (
         "thermal-drift",
         "thermal-drift=VX,VY,VZ",
@@ -83,6 +110,21 @@ pub const EFFECTS: [(&str, &str, &str); 6] = [
         "range-scale=PPM",
         "tracker range scale error, ppm",
     ),
+    (
+        "thermal-scale",
+        "thermal-scale=AXIS,PPM_PER_H",
+        "scale of a linear axis growing with time: EXX += α·x·t",
+    ),
+    (
+        "location-drift",
+        "location-drift=AXIS,V1_UM_PER_H,V2_UM_PER_H",
+        "line of a rotary axis drifting with time (X0C, Y0C for C)",
+    ),
+    (
+        "coupling",
+        "coupling=AXIS,COMPONENT,BY,AMP_UM",
+        "error E{COMPONENT}{AXIS} changing with the position of BY: A·sin(πξ)·η",
+    ),
 ];
 
 impl Effect {
@@ -95,6 +137,9 @@ impl Effect {
             Effect::BallScrew { .. } => "ball-screw",
             Effect::ReflectorOffset { .. } => "reflector-offset",
             Effect::RangeScale { .. } => "range-scale",
+            Effect::ThermalScale { .. } => "thermal-scale",
+            Effect::LocationDrift { .. } => "location-drift",
+            Effect::Coupling { .. } => "coupling",
         }
     }
 
@@ -130,6 +175,13 @@ impl Effect {
                 .ok_or_else(|| bad(format!("'{s}' is not a finite number")))
         };
         let nums = |a: &[&str]| -> Result<Vec<f64>> { a.iter().map(|s| num(s)).collect() };
+        let letter = |s: &str| -> Result<Axis> {
+            let mut letters = s.chars();
+            match (letters.next().and_then(Axis::from_letter), letters.next()) {
+                (Some(a), None) => Ok(a),
+                _ => Err(bad(format!("'{s}' is not an axis letter"))),
+            }
+        };
         let count = |n: usize| -> Result<()> {
             if args.len() == n {
                 Ok(())
@@ -169,11 +221,7 @@ impl Effect {
             }
             "ball-screw" => {
                 count(3)?;
-                let mut letters = args[0].chars();
-                let axis = match (letters.next().and_then(Axis::from_letter), letters.next()) {
-                    (Some(a), None) => a,
-                    _ => return Err(bad(format!("'{}' is not an axis letter", args[0]))),
-                };
+                let axis = letter(args[0])?;
                 let v = nums(&args[1..])?;
                 Effect::BallScrew {
                     axis,
@@ -187,6 +235,30 @@ impl Effect {
                 Effect::ReflectorOffset {
                     reflector: args[0].to_string(),
                     delta_um: [v[0], v[1], v[2]],
+                }
+            }
+            "thermal-scale" => {
+                count(2)?;
+                Effect::ThermalScale {
+                    axis: letter(args[0])?,
+                    ppm_per_h: num(args[1])?,
+                }
+            }
+            "location-drift" => {
+                count(3)?;
+                let v = nums(&args[1..])?;
+                Effect::LocationDrift {
+                    axis: letter(args[0])?,
+                    rate_um_per_h: [v[0], v[1]],
+                }
+            }
+            "coupling" => {
+                count(4)?;
+                Effect::Coupling {
+                    axis: letter(args[0])?,
+                    component: letter(args[1])?,
+                    by: letter(args[2])?,
+                    amplitude_um: num(args[3])?,
                 }
             }
             _ => {
@@ -266,6 +338,56 @@ impl Effect {
             Effect::RangeScale { ppm } if !(ppm.is_finite() && *ppm > -1e6) => {
                 fail(format!("{ppm} ppm is not a finite scale above −10⁶ ppm"))
             }
+            Effect::ThermalScale { axis, ppm_per_h } => {
+                if axis.is_rotary() || machine.axis(*axis).is_none() {
+                    fail(format!(
+                        "{axis} is not a linear axis of {}",
+                        machine.chain()
+                    ))
+                } else if !ppm_per_h.is_finite() {
+                    fail("the growth rate must be finite".into())
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::LocationDrift {
+                axis,
+                rate_um_per_h,
+            } => {
+                if !axis.is_rotary() || machine.axis(*axis).is_none() {
+                    fail(format!(
+                        "{axis} is not a rotary axis of {}",
+                        machine.chain()
+                    ))
+                } else if !finite(rate_um_per_h) {
+                    fail("the drift rates must be finite".into())
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::Coupling {
+                axis,
+                component,
+                by,
+                amplitude_um,
+            } => {
+                if axis.is_rotary() || machine.axis(*axis).is_none() {
+                    fail(format!(
+                        "{axis} is not a linear axis of {}",
+                        machine.chain()
+                    ))
+                } else if component.is_rotary() {
+                    fail(format!(
+                        "{component} is not a translation component (X, Y or Z)"
+                    ))
+                } else if machine.axis(*by).is_none() || by == axis {
+                    fail(format!("{by} is not another axis of {}", machine.chain()))
+                } else if !amplitude_um.is_finite() {
+                    fail("the amplitude must be finite".into())
+                } else {
+                    Ok(())
+                }
+            }
             _ => Ok(()),
         }
     }
@@ -293,6 +415,17 @@ impl fmt::Display for Effect {
                 delta_um: d,
             } => write!(f, "{reflector},{},{},{}", d[0], d[1], d[2]),
             Effect::RangeScale { ppm } => write!(f, "{ppm}"),
+            Effect::ThermalScale { axis, ppm_per_h } => write!(f, "{axis},{ppm_per_h}"),
+            Effect::LocationDrift {
+                axis,
+                rate_um_per_h: v,
+            } => write!(f, "{axis},{},{}", v[0], v[1]),
+            Effect::Coupling {
+                axis,
+                component,
+                by,
+                amplitude_um,
+            } => write!(f, "{axis},{component},{by},{amplitude_um}"),
         }
     }
 }
