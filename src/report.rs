@@ -558,12 +558,16 @@ fn candidates(p: &Page, s: &mut String) -> Result<()> {
             .take(8)
             .map(|c| {
                 if c.seen() {
+                    let why = c
+                        .flag
+                        .as_ref()
+                        .map_or(String::new(), |f| format!("IMPLAUSIBLE ({f}): "));
                     vec![
                         c.id.clone(),
                         format!("{:.1}", c.delta_bic),
                         format!("{:.3}", c.emm_um),
                         format!("{:.2} {}", c.size, c.size_unit),
-                        c.description.clone(),
+                        format!("{why}{}", c.description),
                     ]
                 } else {
                     vec![

@@ -142,6 +142,12 @@ fn a_drifting_rotary_axis_line_is_found_as_location_drift() {
     );
 }
 
+/// The tracker's stand turning as it warms is found as the tracker's drift.
+#[test]
+fn a_turning_tracker_is_found_as_tracker_drift() {
+    finds("tracker-drift=2,-1,4", low_noise(), 6, 8.0, "tracker-drift");
+}
+
 /// No hidden effect, five seeds, both noises: the verdict is "at the noise, nothing is
 /// missing" and the loop adds nothing (no generic field fits the noise).
 #[test]

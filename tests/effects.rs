@@ -21,6 +21,7 @@ reflector_offset = ["R1", "R2"]
 range_scale = true
 thermal_scale = ["X"]
 location_drift = ["C"]
+tracker_drift = true
 [[effects.ball_screw]]
 axis = "X"
 period_mm = 350.0
@@ -51,14 +52,18 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
     assert_eq!(model.params()[name("screw.Z.b")].unit, Unit::Mm);
     assert_eq!(model.params()[name("thermal.X")].unit, Unit::PpmPerHour);
     assert_eq!(model.params()[name("locdrift.C.y")].unit, Unit::MmPerHour);
+    assert_eq!(
+        model.params()[name("trackerdrift.rz")].unit,
+        Unit::RadPerHour
+    );
     assert_eq!(model.params()[name("field.X*Z.z_2_1")].unit, Unit::Mm);
     assert_eq!(model.params()[name("field.C*t.x_s1_2")].unit, Unit::Mm);
     assert_eq!(model.params()[name("field.X.y_3")].unit, Unit::Mm);
-    // drift 3, reflectors 6, range 1, screws 4, scale 1, location drift 2; fields: X*Z and
-    // C*t 4 products × 3 components each, X 3 × 3, t 2 × 3.
+    // drift 3, reflectors 6, range 1, screws 4, scale 1, location drift 2, tracker drift 3;
+    // fields: X*Z and C*t 4 products × 3 components each, X 3 × 3, t 2 × 3.
     assert_eq!(
         model.n_params(),
-        74 + 3 + 6 + 1 + 4 + 1 + 2 + 12 + 12 + 9 + 6
+        74 + 3 + 6 + 1 + 4 + 1 + 2 + 3 + 12 + 12 + 9 + 6
     );
     let mut rng = Rng::new(5);
     let mut p = model.initial_params();
@@ -67,6 +72,7 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
             Unit::Mm => 0.02,
             Unit::Rad => 2e-5,
             Unit::MmPerHour => 0.01,
+            Unit::RadPerHour => 1e-5,
             Unit::Ppm | Unit::PpmPerHour => 10.0,
         };
         p[j] += scale * rng.normal();
@@ -82,7 +88,7 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
         model.predict_with_jacobian_at(&cmd, refl, t_s, &p, &mut jac);
         for j in 0..n {
             let h = match model.params()[j].unit {
-                Unit::Rad => 1e-6,
+                Unit::Rad | Unit::RadPerHour => 1e-6,
                 Unit::Ppm | Unit::PpmPerHour => 1e-1,
                 _ => 1e-4,
             };
@@ -119,6 +125,7 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
         "ball-screw=X,350,4",
         "thermal-scale=X,12",
         "location-drift=C,20,-15",
+        "tracker-drift=8,-5,12",
     ]
     .iter()
     .map(|e| Effect::parse(e).unwrap())

@@ -62,6 +62,7 @@ fn random_params(model: &Model, rng: &mut Rng) -> Vec<f64> {
                 (false, volver::core::iso::Unit::Mm) => 0.05,
                 (false, volver::core::iso::Unit::Rad) => 2e-4,
                 (false, volver::core::iso::Unit::MmPerHour) => 0.01,
+                (false, volver::core::iso::Unit::RadPerHour) => 1e-5,
                 (false, volver::core::iso::Unit::Ppm | volver::core::iso::Unit::PpmPerHour) => 10.0,
             };
             let base = if p.name == "tracker.x" { 150.0 } else { 0.0 };

@@ -138,11 +138,14 @@ pub enum Unit {
     /// Parts per million per hour (a scale growing with time).
     #[serde(rename = "ppm/h")]
     PpmPerHour,
+    /// Radians per hour (an orientation drifting with time).
+    #[serde(rename = "rad/h")]
+    RadPerHour,
 }
 
 impl Unit {
     /// The factor to the unit volver prints values of this unit in, and that unit: µm for mm,
-    /// µrad for rad, µm/h for mm/h, ppm for ppm, ppm/h for ppm/h.
+    /// µrad for rad, µm/h for mm/h, ppm for ppm, ppm/h for ppm/h, µrad/h for rad/h.
     pub fn micro(self) -> (f64, &'static str) {
         match self {
             Unit::Mm => (1e3, "µm"),
@@ -150,6 +153,7 @@ impl Unit {
             Unit::MmPerHour => (1e3, "µm/h"),
             Unit::Ppm => (1.0, "ppm"),
             Unit::PpmPerHour => (1.0, "ppm/h"),
+            Unit::RadPerHour => (1e6, "µrad/h"),
         }
     }
 }
@@ -162,6 +166,7 @@ impl fmt::Display for Unit {
             Unit::MmPerHour => "mm/h",
             Unit::Ppm => "ppm",
             Unit::PpmPerHour => "ppm/h",
+            Unit::RadPerHour => "rad/h",
         })
     }
 }

@@ -9,6 +9,10 @@
 //! | a rotation error over its axis' travel (EAX, ECC …), a squareness or location tilt (B0Z, A0C …) | [`MAX_ANGLE_RAD`] = 1 mrad (1 mm per metre) |
 //! | a thermal drift | 1 mm/h |
 //! | a range scale | 1 000 ppm |
+//! | a scale growing with time | [`MAX_SCALE_GROWTH_PPM_PER_H`] = 100 ppm/h (steel at 9 K/h) |
+//! | a location drifting with time | 1 mm/h |
+//! | the tracker's orientation drifting with time | 1 mrad/h |
+//! | a generic field's coefficients | [`MAX_TRANSLATION_MM`] = 1 mm |
 //! | the tracker's pose against its rigid fit to the measurements (errors zero) | [`MAX_TRACKER_SHIFT_MM`] = 25 mm, 5 mrad |
 //! | the EMM the fit leaves | [`MAX_TRANSLATION_MM`] = 1 mm |
 //!
@@ -47,7 +51,7 @@ pub const MAX_TRACKER_SHIFT_MM: f64 = 25.0;
 const MAX_TRACKER_TURN_RAD: f64 = 5e-3;
 
 /// The largest plausible size of a value in `unit` (in that unit): a translation
-/// [`MAX_TRANSLATION_MM`], an angle [`MAX_ANGLE_RAD`], a drift 1 mm/h, a scale 1 000 ppm, a scale
+/// [`MAX_TRANSLATION_MM`], an angle [`MAX_ANGLE_RAD`] (and per hour), a drift 1 mm/h, a scale 1 000 ppm, a scale
 /// growth [`MAX_SCALE_GROWTH_PPM_PER_H`].
 ///
 /// ```
@@ -60,6 +64,7 @@ pub fn limit(unit: Unit) -> f64 {
     match unit {
         Unit::Mm => MAX_TRANSLATION_MM,
         Unit::MmPerHour => 1.0,
+        Unit::RadPerHour => MAX_ANGLE_RAD,
         Unit::Ppm => 1e3,
         Unit::PpmPerHour => MAX_SCALE_GROWTH_PPM_PER_H,
         Unit::Rad => MAX_ANGLE_RAD,

@@ -35,6 +35,7 @@
 //! | `range-scale` | s ppm | every point is scaled about the tracker's centre by 1 + s·10⁻⁶ before the noise |
 //! | `thermal-scale` | axis, α ppm/h | the positioning error of a linear axis gets `α·10⁻⁶·u·t` (u its position in mm, t in h): its scale grows with time |
 //! | `location-drift` | rotary axis, v₁, v₂ µm/h | its two location translations (X0C, Y0C for C) grow by `v·t` |
+//! | `tracker-drift` | ω = (ωx, ωy, ωz) µrad/h | the tracker's small rotations (eq. 9) grow by `ω·t`: its stand turning as it warms |
 //! | `coupling` | axis, component, by, A µm | the error E{component}{axis} gets `A·sin(π·ξ)·η`, ξ and η the positions of the axis and of `by` over their travels, 0 … 1: a straightness bow that grows with another axis' position, which no rigid-body error expresses |
 //!
 //! Points are measured in plan order, each reflector in turn at every position, evenly over the
@@ -360,6 +361,7 @@ impl Simulation {
                 Effect::ReflectorOffset { .. }
                 | Effect::ThermalScale { .. }
                 | Effect::LocationDrift { .. }
+                | Effect::TrackerDrift { .. }
                 | Effect::Coupling { .. } => {}
             }
         }
@@ -487,7 +489,7 @@ impl Simulation {
     }
 
     /// The errors at `cmd` at time `t_s` (s): `errors` with the effects that grow with time
-    /// (`thermal-scale`, `location-drift`).
+    /// (`thermal-scale`, `location-drift`, `tracker-drift`).
     fn age(
         &self,
         machine: &Machine,
@@ -502,6 +504,11 @@ impl Simulation {
                 Effect::ThermalScale { axis, ppm_per_h } => {
                     let (k, _) = machine.axis(*axis).expect("validated: the axis exists");
                     out.component[k][axis.direction()] += ppm_per_h * 1e-6 * cmd.0[k] * t_h;
+                }
+                Effect::TrackerDrift { rate_urad_per_h } => {
+                    for (k, v) in rate_urad_per_h.iter().enumerate() {
+                        out.tracker[3 + k] += v * 1e-6 * t_h;
+                    }
                 }
                 Effect::LocationDrift {
                     axis,

@@ -22,6 +22,7 @@
 //! | `range-scale` | a scale error of the tracker's range |
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
 //! | `thermal-scale:X` | the scale of linear axis X growing with time: EXX += α·x·t (`[effects] thermal_scale`; needs `t_s`) |
+//! | `tracker-drift` | the tracker's small rotations drifting with time (`[effects] tracker_drift`) |
 //! | `location-drift:C` | the line of rotary axis C drifting with time: X0C, Y0C += v·t (`[effects] location_drift`) |
 //! | `field:X`, `field:X*Z`, `field:X*t` | a generic displacement of the tool point over one variable or jointly over two (axes and time `t`; `[effects] field`): names what the misfit depends on when no physical candidate explains it |
 
@@ -302,6 +303,17 @@ pub fn library(model: &Model) -> Vec<Candidate> {
         out.push(Candidate {
             id,
             description,
+            spec: s,
+        });
+    }
+    if !fx.tracker_drift {
+        let mut s = spec.clone();
+        s.effects.tracker_drift = true;
+        out.push(Candidate {
+            id: "tracker-drift".into(),
+            description: "the tracker's orientation drifting with time (its stand turning as it \
+                          warms; needs t_s)"
+                .into(),
             spec: s,
         });
     }

@@ -71,7 +71,7 @@ pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
             if id.unit() == Unit::Mm { 1.0 } else { LEVER_MM }
         },
         |info| match info.unit {
-            Unit::Rad => LEVER_MM,
+            Unit::Rad | Unit::RadPerHour => LEVER_MM,
             Unit::Ppm | Unit::PpmPerHour => 1e-3,
             Unit::Mm | Unit::MmPerHour => 1.0,
         },

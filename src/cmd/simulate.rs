@@ -34,6 +34,7 @@ Effects (--effect, repeatable):
   thermal-scale=AXIS,PPM_PER_H        scale of a linear axis growing with time: EXX += α·x·t
   location-drift=AXIS,V1_UM_PER_H,V2_UM_PER_H
                                       line of a rotary axis drifting (X0C, Y0C += v·t for C)
+  tracker-drift=RX,RY,RZ              tracker's orientation drifting with time, µrad/h
   coupling=AXIS,COMPONENT,BY,AMP_UM   E{COMPONENT}{AXIS} += A·sin(πξ)·η: a straightness bow
                                       growing with the position of BY (ξ, η over 0 … 1)
 

@@ -201,6 +201,15 @@ impl Model {
                     );
                 }
             }
+            if fx.tracker_drift {
+                for (k, x) in ["rx", "ry", "rz"].iter().enumerate() {
+                    push(
+                        EffectSlot::TrackerDrift(3 + k),
+                        &[(format!("trackerdrift.{x}"), Unit::RadPerHour)],
+                        &mut params,
+                    );
+                }
+            }
             for id in &fx.field {
                 let vars = field_vars(&machine, id)
                     .map_err(|why| Error::input(place(id, "effects.field"), why))?;

@@ -138,6 +138,7 @@ impl Model {
                     e.component[k][dir] += v
                 }
                 EffectSlot::LocationDrift { k, c } => e.location[k][c] += v,
+                EffectSlot::TrackerDrift(k) => e.tracker[k] += v,
             }
         }
     }
@@ -147,7 +148,7 @@ impl Model {
     pub fn needs_time(&self) -> bool {
         self.effects.iter().any(|(slot, _)| match slot {
             EffectSlot::Drift(_) | EffectSlot::ThermalScale { .. } => true,
-            EffectSlot::LocationDrift { .. } => true,
+            EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => true,
             EffectSlot::Field { vars, pair, .. } => {
                 vars[0] == FieldVar::Time || (*pair && vars[1] == FieldVar::Time)
             }
@@ -238,7 +239,7 @@ impl Model {
                     set(j, commands[k].re() * g);
                     commands[k] * (params[j] * g)
                 }
-                EffectSlot::LocationDrift { .. } => {
+                EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => {
                     let t_h = t_s / 3600.0;
                     set(j, t_h);
                     S::from(params[j] * t_h)
@@ -654,6 +655,7 @@ impl Model {
                         de.component[k][dir]
                     }
                     EffectSlot::LocationDrift { k, c } => de.location[k][c],
+                    EffectSlot::TrackerDrift(k) => de.tracker[k],
                 },
             );
         }

@@ -130,6 +130,7 @@ pub struct BallScrewSpec {
 /// range_scale = true            # range.scale (ppm): points scaled about the tracker
 /// thermal_scale = ["X"]         # thermal.X (ppm/h): EXX += α·10⁻⁶·x·t, the scale of X growing with time
 /// location_drift = ["C"]        # locdrift.C.x, locdrift.C.y (mm/h): X0C, Y0C += v·t
+/// tracker_drift = true          # trackerdrift.rx, .ry, .rz (rad/h): the tracker's small rotations += ω·t
 /// field = ["X*Z", "X*t"]        # field.X*Z.x_1_1 … (mm): a smooth displacement of the tool point
 /// [[effects.ball_screw]]
 /// axis = "X"
@@ -167,6 +168,9 @@ pub struct EffectsSpec {
     /// Rotary axes whose location (the position of their line) drifts with time.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub location_drift: Vec<String>,
+    /// The tracker's orientation drifting with time (its stand turning as it warms).
+    #[serde(skip_serializing_if = "is_false")]
+    pub tracker_drift: bool,
     /// Generic displacement fields, by their variables (`X`, `X*Z`, `C*t`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub field: Vec<String>,
@@ -233,6 +237,8 @@ pub(super) enum EffectSlot {
     ThermalScale { k: usize, dir: usize },
     /// Location drift of chain axis k, component c: value = v × t (h).
     LocationDrift { k: usize, c: usize },
+    /// Drift of the tracker's small rotation k (3, 4, 5: rx, ry, rz): value = ω × t (h).
+    TrackerDrift(usize),
     /// Tool shift component c from a field over `vars` (the second unused when not `pair`):
     /// value = Σ_q φ_q coefficient_q.
     Field {

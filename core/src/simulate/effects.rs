@@ -64,6 +64,11 @@ pub enum Effect {
         /// Z0A for A, X0B and Z0B for B.
         rate_um_per_h: [f64; 2],
     },
+    /// The tracker's orientation drifting with time.
+    TrackerDrift {
+        /// Rates of its small rotations about x, y, z (µrad/h).
+        rate_urad_per_h: [f64; 3],
+    },
     /// A non-rigid coupling: a component error of one axis that changes with the position of
     /// another.
     Coupling {
@@ -79,7 +84,7 @@ pub enum Effect {
 }
 
 /// The effects: id, CLI syntax and meaning, in the order `volver simulate --help` lists them.
-pub const EFFECTS: [(&str, &str, &str); 9] = [
+pub const EFFECTS: [(&str, &str, &str); 10] = [
     (
         "thermal-drift",
         "thermal-drift=VX,VY,VZ",
@@ -121,6 +126,11 @@ pub const EFFECTS: [(&str, &str, &str); 9] = [
         "line of a rotary axis drifting with time (X0C, Y0C for C)",
     ),
     (
+        "tracker-drift",
+        "tracker-drift=RX,RY,RZ",
+        "tracker's orientation drifting with time, µrad/h",
+    ),
+    (
         "coupling",
         "coupling=AXIS,COMPONENT,BY,AMP_UM",
         "error E{COMPONENT}{AXIS} changing with the position of BY: A·sin(πξ)·η",
@@ -140,6 +150,7 @@ impl Effect {
             Effect::ThermalScale { .. } => "thermal-scale",
             Effect::LocationDrift { .. } => "location-drift",
             Effect::Coupling { .. } => "coupling",
+            Effect::TrackerDrift { .. } => "tracker-drift",
         }
     }
 
@@ -252,6 +263,13 @@ impl Effect {
                     rate_um_per_h: [v[0], v[1]],
                 }
             }
+            "tracker-drift" => {
+                count(3)?;
+                let v = nums(&args)?;
+                Effect::TrackerDrift {
+                    rate_urad_per_h: [v[0], v[1], v[2]],
+                }
+            }
             "coupling" => {
                 count(4)?;
                 Effect::Coupling {
@@ -276,6 +294,9 @@ impl Effect {
         match self {
             Effect::ThermalDrift { rate_um_per_h } if !finite(rate_um_per_h) => {
                 fail("the drift rate must be finite".into())
+            }
+            Effect::TrackerDrift { rate_urad_per_h } if !finite(rate_urad_per_h) => {
+                fail("the drift rates must be finite".into())
             }
             Effect::RotaryHarmonics {
                 max_order,
@@ -426,6 +447,7 @@ impl fmt::Display for Effect {
                 by,
                 amplitude_um,
             } => write!(f, "{axis},{component},{by},{amplitude_um}"),
+            Effect::TrackerDrift { rate_urad_per_h: v } => write!(f, "{},{},{}", v[0], v[1], v[2]),
         }
     }
 }
