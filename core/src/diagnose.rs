@@ -1,6 +1,7 @@
 //! Where a model fails: its residuals broken down by axis position, reflector, time and tracker
-//! distance, periodograms against an axis, the largest outliers, and the noise estimated from
-//! repeated points. The first part of the diagnosis loop; candidates for the missing effect
+//! distance, periodograms against an axis, the largest outliers, the noise estimated from
+//! repeated points, and what the tracker's noise specification leaves at a set of points
+//! ([`noise_level`]). The first part of the diagnosis loop; candidates for the missing effect
 //! come next.
 //!
 //! ```

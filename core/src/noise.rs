@@ -189,37 +189,30 @@ impl TrackerNoise {
             "none" => return Ok(TrackerNoise::NONE),
             _ => {}
         }
-        if let Some(v) = text.trim().strip_prefix("mpe:") {
-            let ab: Vec<f64> = v
-                .split(',')
+        // `count` values ≥ 0, comma-separated.
+        let values = |text: &str, count: usize| -> crate::Result<Vec<f64>> {
+            text.split(',')
                 .map(|s| {
                     s.trim()
                         .parse::<f64>()
                         .ok()
                         .filter(|v| v.is_finite() && *v >= 0.0)
                 })
-                .collect::<Option<_>>()
-                .filter(|v: &Vec<f64>| v.len() == 2)
-                .ok_or_else(refuse)?;
+                .collect::<Option<Vec<f64>>>()
+                .filter(|v| v.len() == count)
+                .ok_or_else(refuse)
+        };
+        if let Some(v) = text.trim().strip_prefix("mpe:") {
+            let ab = values(v, 2)?;
             return Ok(TrackerNoise::from_mpe(ab[0], ab[1]));
         }
-        let (distribution, values) = match text.trim().split_once(':') {
+        let (distribution, four) = match text.trim().split_once(':') {
             Some(("normal", v)) => (Distribution::Normal, v),
             Some(("uniform", v)) => (Distribution::Uniform, v),
             Some(_) => return Err(refuse()),
             None => (Distribution::Normal, text),
         };
-        let v: Vec<f64> = values
-            .split(',')
-            .map(|s| {
-                s.trim()
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite() && *v >= 0.0)
-            })
-            .collect::<Option<_>>()
-            .filter(|v: &Vec<f64>| v.len() == 4)
-            .ok_or_else(refuse)?;
+        let v = values(four, 4)?;
         Ok(TrackerNoise {
             distribution,
             azimuth_urad: v[0],

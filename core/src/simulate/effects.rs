@@ -291,6 +291,18 @@ impl Effect {
         let place = || Place::file("effects").at_field(self.id());
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
         let fail = |m: String| Err(Error::input(place(), m));
+        // The axis is one of the machine's, rotary or linear as the effect needs.
+        let axis_of_kind = |axis: Axis, rotary: bool| -> Result<()> {
+            if axis.is_rotary() == rotary && machine.axis(axis).is_some() {
+                Ok(())
+            } else {
+                let kind = if rotary { "rotary" } else { "linear" };
+                fail(format!(
+                    "{axis} is not a {kind} axis of {}",
+                    machine.chain()
+                ))
+            }
+        };
         match self {
             Effect::ThermalDrift { rate_um_per_h } if !finite(rate_um_per_h) => {
                 fail("the drift rate must be finite".into())
@@ -326,12 +338,8 @@ impl Effect {
                 period_mm,
                 amplitude_um,
             } => {
-                if axis.is_rotary() || machine.axis(*axis).is_none() {
-                    fail(format!(
-                        "{axis} is not a linear axis of {}",
-                        machine.chain()
-                    ))
-                } else if !(period_mm.is_finite() && *period_mm > 0.0) {
+                axis_of_kind(*axis, false)?;
+                if !(period_mm.is_finite() && *period_mm > 0.0) {
                     fail(format!("the period {period_mm} mm must be positive"))
                 } else if !amplitude_um.is_finite() {
                     fail("the amplitude must be finite".into())
@@ -360,30 +368,22 @@ impl Effect {
                 fail(format!("{ppm} ppm is not a finite scale above −10⁶ ppm"))
             }
             Effect::ThermalScale { axis, ppm_per_h } => {
-                if axis.is_rotary() || machine.axis(*axis).is_none() {
-                    fail(format!(
-                        "{axis} is not a linear axis of {}",
-                        machine.chain()
-                    ))
-                } else if !ppm_per_h.is_finite() {
-                    fail("the growth rate must be finite".into())
-                } else {
+                axis_of_kind(*axis, false)?;
+                if ppm_per_h.is_finite() {
                     Ok(())
+                } else {
+                    fail("the growth rate must be finite".into())
                 }
             }
             Effect::LocationDrift {
                 axis,
                 rate_um_per_h,
             } => {
-                if !axis.is_rotary() || machine.axis(*axis).is_none() {
-                    fail(format!(
-                        "{axis} is not a rotary axis of {}",
-                        machine.chain()
-                    ))
-                } else if !finite(rate_um_per_h) {
-                    fail("the drift rates must be finite".into())
-                } else {
+                axis_of_kind(*axis, true)?;
+                if finite(rate_um_per_h) {
                     Ok(())
+                } else {
+                    fail("the drift rates must be finite".into())
                 }
             }
             Effect::Coupling {
@@ -392,12 +392,8 @@ impl Effect {
                 by,
                 amplitude_um,
             } => {
-                if axis.is_rotary() || machine.axis(*axis).is_none() {
-                    fail(format!(
-                        "{axis} is not a linear axis of {}",
-                        machine.chain()
-                    ))
-                } else if component.is_rotary() {
+                axis_of_kind(*axis, false)?;
+                if component.is_rotary() {
                     fail(format!(
                         "{component} is not a translation component (X, Y or Z)"
                     ))
