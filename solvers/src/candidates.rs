@@ -597,21 +597,23 @@ pub fn rank(
                 .collect();
             let task = ext.task();
             let (q, rank1) = gauss_newton_step(&task, &start, tolerance, Some(&ridge))?;
-            let (rss1, emm_um) = ext.linear_prediction(&start, &q);
+            let rss1 = ext.linear_prediction(&start, &q).0;
             let (size, unit) = implied_size(&c.id, model, params, &extended, &q);
             let added = rank1.saturating_sub(rank0);
             let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
             let delta_bic = bic(rss1);
             let (scale, size_unit) = unit.micro();
             let bound = limit(unit) * scale;
+            // The same step without the bound.
+            let (qf, _) = gauss_newton_step(&task, &start, tolerance, None)?;
+            let (rss_free, emm_free) = ext.linear_prediction(&start, &qf);
+            let bic_free = bic(rss_free);
             let flag = if size > bound {
                 Some(format!(
                     "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
                 ))
             } else {
-                let (qf, _) = gauss_newton_step(&task, &start, tolerance, None)?;
                 let (size_free, _) = implied_size(&c.id, model, params, &extended, &qf);
-                let bic_free = bic(ext.linear_prediction(&start, &qf).0);
                 (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
                     format!(
                         "nearly unidentifiable: the data support it only with a size of \
@@ -619,6 +621,16 @@ pub fn rank(
                          {bound:.0} {size_unit}"
                     )
                 })
+            };
+            // The EMM a refit would reach is predicted by the unweighted step (the engines
+            // minimise the EMM itself, not the whitened residuals).
+            let emm_um = match &ext {
+                Scored::Plain(_) => emm_free,
+                Scored::Whitened(w) => {
+                    let plain = Scored::Plain(w.problem().clone());
+                    let (qp, _) = gauss_newton_step(&plain.task(), &start, tolerance, None)?;
+                    plain.linear_prediction(&start, &qp).1
+                }
             };
             Some(Score {
                 id: c.id,
