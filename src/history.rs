@@ -30,7 +30,8 @@ pub struct Record {
     pub emax_final_um: f64,
     /// Final Φ (mm).
     pub phi_mm: f64,
-    /// Noise error when a truth was given (µm).
+    /// Noise error (µm): from the truth when one was given to `identify`, from the tracker's
+    /// noise specification for the rounds of `diagnose --iterate`.
     pub noise_error_um: Option<f64>,
     /// How the fit ended.
     pub termination: String,
@@ -123,7 +124,9 @@ pub fn table(records: &[Record]) -> String {
         prev = Some(r.emm_final_um);
     }
     if let Some(n) = records.iter().rev().find_map(|r| r.noise_error_um) {
-        s.push_str(&format!("  noise error (from the truth): {n:.4} µm\n"));
+        s.push_str(&format!(
+            "  noise error (from the truth, or the tracker's specification for diagnose rounds): {n:.4} µm\n"
+        ));
     }
     s
 }
