@@ -515,7 +515,7 @@ fn overall_verdict(ranked: &[Score], emm: f64, noise: Option<&NoiseVerdict>) -> 
     if n.at_noise {
         let aside = match ranked.first() {
             Some(s) if s.strong() => format!(
-                " that matters ({} has strong evidence but would lower the EMM only to {} µm)",
+                " that matters ({} has strong evidence but would bring the EMM only to {} µm)",
                 s.id,
                 um(s.emm_um)
             ),
