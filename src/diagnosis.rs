@@ -367,7 +367,7 @@ pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
     diagnose_with(model, data, model.machine().tracker().noise.as_ref())
 }
 
-/// [`diagnose`] against the tracker noise `noise` (`None`: no specification; the noise is then
+/// [`diagnose()`] against the tracker noise `noise` (`None`: no specification; the noise is then
 /// judged from repeated points alone, and candidates weigh every coordinate the same).
 pub fn diagnose_with(
     model: &Model,
