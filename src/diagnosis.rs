@@ -132,6 +132,10 @@ pub struct Round {
     pub parameters: usize,
     /// The diagnosis of this round's fit.
     pub diagnosis: Diagnosis,
+    /// The candidate the loop adds next; `None` when it stops after this round.
+    pub next: Option<String>,
+    /// `true` when the loop stops only because it added `max_added` candidates.
+    pub limited: bool,
 }
 
 /// The diagnosis loop run to the end: diagnose `model` on `data`; while something is missing
@@ -150,17 +154,22 @@ pub fn iterate(
     let mut rounds: Vec<Round> = Vec::new();
     loop {
         let diagnosis = diagnose_with(&model, data, noise)?;
-        let next = diagnosis.finding().map(|c| c.id.clone());
+        let wanted = (!diagnosis.done())
+            .then(|| diagnosis.finding().map(|c| c.id.clone()))
+            .flatten();
+        let limited = wanted.is_some() && added.len() >= max_added;
+        let next = wanted.filter(|_| !limited);
         let round = Round {
             added: added.clone(),
             parameters: model.n_params(),
             diagnosis,
+            next: next.clone(),
+            limited,
         };
         each(&round);
-        let done = round.diagnosis.done() || added.len() >= max_added;
         rounds.push(round);
         match next {
-            Some(id) if !done => {
+            Some(id) => {
                 model = crate::inputs::with_candidates(
                     model.machine(),
                     model.clone(),

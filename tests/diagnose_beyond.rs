@@ -251,6 +251,23 @@ fn diagnose_iterate_prints_every_round_and_writes_the_history() {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert_eq!(records.len(), 2);
+    // With no addition allowed, the loop says what it would add and stops.
+    let out = common::volver(&[
+        "diagnose",
+        "--data",
+        data.to_str().unwrap(),
+        "--noise",
+        "normal:3,3,0.5,0.1",
+        "--iterate",
+        "--max-added",
+        "0",
+        "--no-history",
+    ]);
+    let capped = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        capped.contains("→ stop: --max-added reached; the loop would add field:X*Z next"),
+        "{capped}"
+    );
     assert_eq!(records[1]["added"][0], "field:X*Z");
     assert!(records[1]["emm_final_um"].as_f64() < records[0]["emm_final_um"].as_f64());
     let _ = std::fs::remove_dir_all(&dir);

@@ -133,12 +133,16 @@ fn print_round(k: usize, r: &volver::diagnosis::Round) {
         },
         um(d.emm_um)
     );
-    match (d.done(), d.finding()) {
-        (false, Some(c)) => println!(
+    match (&r.next, d.finding()) {
+        (Some(_), Some(c)) => println!(
             "  → add {} (ΔBIC {:.0}): {}",
             c.id,
             c.delta_bic.unwrap_or(0.0),
             c.description
+        ),
+        _ if r.limited => println!(
+            "  → stop: --max-added reached; the loop would add {} next",
+            d.finding().map_or("nothing", |c| c.id.as_str())
         ),
         _ => println!("  → stop: {}", d.verdict),
     }
