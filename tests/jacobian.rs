@@ -3,7 +3,8 @@
 //! of the chain, location errors of rotary axes, squareness of linear axes, the tracker pose;
 //! and the second derivative along a direction (geodesic acceleration's curvature term) against
 //! central differences of the exact J·v. The cached path (a problem's fixed regressors) gives the
-//! same bits as the direct one.
+//! same bits as the direct one. The residuals whitened by the tracker's noise (what candidates are
+//! scored on) have their own check.
 
 use volver::core::iso::ErrorId;
 use volver::core::machine::{Commands, Machine};
@@ -237,4 +238,65 @@ fn tracker_on_the_frame() {
     spec.chain = "FXZC".into();
     let m = Machine::from_spec(spec, "frame-mounted").unwrap();
     check(m, 5);
+}
+
+/// The residuals whitened by the tracker's noise (what candidates are scored on): their
+/// Jacobian against central differences of their own residuals, at random parameters of the
+/// paper's model on a simulated test 4.
+#[test]
+fn whitened_residuals() {
+    use volver::core::noise::TrackerNoise;
+    use volver::core::problem::{Problem, Residuals, Whitened};
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let truth = volver::core::simulate::Truth::random_complete(
+        &m,
+        &volver::core::simulate::Magnitudes::default(),
+        3,
+    )
+    .unwrap();
+    let plan = volver::core::plan::Plan::preset(&m, "test4").unwrap();
+    let data = volver::core::simulate::Simulation::new(plan, truth, 3)
+        .run()
+        .unwrap()
+        .measurements;
+    let problem = Problem::new(&model, &data).unwrap();
+    let noise = TrackerNoise::from_text("normal:10,20,2,0.5").unwrap();
+    let w = Whitened::new(problem, &noise).unwrap();
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let p = random_params(&model, &mut rng);
+    let n = model.n_params();
+    let mut jac = vec![0.0; 3 * n];
+    let mut checked = 0;
+    let mut raw = vec![0.0; 3 * n];
+    for i in (0..w.n_points()).step_by(97) {
+        w.residual_and_jacobian(i, &p, &mut jac);
+        w.problem().residual_and_jacobian(i, &p, &mut raw);
+        // The whitening mixes the three rows: differences are judged against the column's
+        // size times the whitening's gain (1e-6 relative, as the raw Jacobian's test).
+        let rows = noise.whitening(data.points[i].measured).unwrap();
+        let gain = rows
+            .iter()
+            .map(|r| (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt())
+            .fold(0.0, f64::max);
+        for (j, info) in model.params().iter().enumerate() {
+            let h = fd_step(info);
+            let (mut a, mut b) = (p.clone(), p.clone());
+            a[j] += h;
+            b[j] -= h;
+            let (ra, rb) = (w.residual(i, &a), w.residual(i, &b));
+            for c in 0..3 {
+                let fd = (ra[c] - rb[c]) / (2.0 * h);
+                let an = jac[c * n + j];
+                let column = (0..3).map(|k| raw[k * n + j].powi(2)).sum::<f64>().sqrt();
+                assert!(
+                    (fd - an).abs() <= 1e-6 * (gain * column).max(1.0),
+                    "point {i}, {} row {c}: {an} vs {fd}",
+                    info.name
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 1000);
 }
