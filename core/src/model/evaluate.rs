@@ -3,6 +3,10 @@
 
 use super::*;
 
+/// A field's variables, its functions' values at a point for each (a second set for a pair),
+/// and how many the first has.
+type FieldValues<S> = ([FieldVar; 2], [S; 4], [S; 4], usize);
+
 impl Model {
     /// Argument of a term's basis for a command: the angle (rad) for periodic bases, otherwise
     /// the position normalised to [−1, 1] over the axis range.
@@ -200,6 +204,9 @@ impl Model {
         mut jac: Option<&mut [f64]>,
     ) {
         let base = self.terms.len() + TRACKER_DOF;
+        // A field's functions at this point, shared by its three components' slots (which
+        // follow one another).
+        let mut field: Option<FieldValues<S>> = None;
         for (i, &(slot, j)) in self.effects.iter().enumerate() {
             let mut set = |p: usize, g: f64| {
                 if let Some(jac) = jac.as_deref_mut() {
@@ -245,13 +252,19 @@ impl Model {
                     S::from(params[j] * t_h)
                 }
                 EffectSlot::Field { vars, pair, .. } => {
-                    let t_h = t_s / 3600.0;
-                    let mut a = [S::zero(); 4];
-                    let na = self.field_functions(vars[0], commands, t_h, &mut a);
+                    // A single field holds its variable twice; a pair's two are distinct.
+                    if field.is_none_or(|f| f.0 != vars) {
+                        let t_h = t_s / 3600.0;
+                        let (mut a, mut b) = ([S::zero(); 4], [S::zero(); 4]);
+                        let na = self.field_functions(vars[0], commands, t_h, &mut a);
+                        if pair {
+                            self.field_functions(vars[1], commands, t_h, &mut b);
+                        }
+                        field = Some((vars, a, b, na));
+                    }
+                    let (_, a, b, na) = field.expect("set above");
                     let mut v = S::zero();
                     if pair {
-                        let mut b = [S::zero(); 4];
-                        self.field_functions(vars[1], commands, t_h, &mut b);
                         for (q, (x, y)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate()
                         {
                             let phi = a[x] * b[y];
