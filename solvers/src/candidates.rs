@@ -399,55 +399,61 @@ pub fn carry_over(model: &Model, params: &[f64], extended: &Model) -> Vec<f64> {
     p
 }
 
-/// One Gauss–Newton step of least squares from `params` under the task's constraints: the
-/// parameters after it and the number of directions the data identify (relative curvature
-/// above `tolerance`). `ridge` (one weight per parameter, in the residuals' units squared per
-/// parameter unit squared) adds `Σ ridge_j δ_j²` to the least squares: a prior that holds a
-/// candidate's new parameters to plausible sizes along directions the data barely see. The
-/// identified directions are counted without it.
-fn gauss_newton_step(
+/// Gauss–Newton steps of least squares from `params` under the task's constraints, one per
+/// entry of `ridges`, from one pass of the normal equations: the parameters after each, and
+/// the number of directions the data identify (relative curvature above `tolerance`). A ridge
+/// (one weight per parameter, in the residuals' units squared per parameter unit squared) adds
+/// `Σ ridge_j δ_j²` to the least squares: a prior that holds a candidate's new parameters to
+/// plausible sizes along directions the data barely see. The identified directions are counted
+/// without it.
+fn gauss_newton_steps(
     task: &Task,
     params: &[f64],
     tolerance: f64,
-    ridge: Option<&[f64]>,
-) -> Option<(Vec<f64>, usize)> {
+    ridges: &[Option<&[f64]>],
+) -> Option<(Vec<Vec<f64>>, usize)> {
     let n = params.len();
     let Reduced { d, ns, hz, gz } = reduced_normal(task, params)?;
     let nf = ns.n_free();
     if nf == 0 {
-        return Some((params.to_vec(), 0));
+        return Some((vec![params.to_vec(); ridges.len()], 0));
     }
     let basis = ns.basis();
     let evd = hz.self_adjoint_eigen(Side::Lower).ok()?;
     let mu = evd.S().column_vector();
     let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
     let rank = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).count();
-    let ridged;
-    let evd = match ridge {
-        Some(w) => {
-            let wm = faer::Mat::from_fn(n, n, |i, j| if i == j { w[i] } else { 0.0 });
-            let (extra, _) = crate::coordinates::reduce(&d, basis, &wm, None);
-            ridged = (&hz + &extra).self_adjoint_eigen(Side::Lower).ok()?;
-            &ridged
-        }
-        None => &evd,
-    };
-    // Directions are kept by the data's own curvature scale (the ridge can only raise a
-    // curvature, and must not push the data's directions below the tolerance).
-    let (mu, v) = (evd.S().column_vector(), evd.U());
-    let mut zeta = vec![0.0; nf];
-    for i in 0..nf {
-        if mu[i] > tolerance * mu_max {
-            let c = -(0..nf).map(|k| v[(k, i)] * gz[k]).sum::<f64>() / mu[i];
-            for (k, z) in zeta.iter_mut().enumerate() {
-                *z += v[(k, i)] * c;
+    let mut steps = Vec::with_capacity(ridges.len());
+    for ridge in ridges {
+        let ridged;
+        let evd = match ridge {
+            Some(w) => {
+                let wm = faer::Mat::from_fn(n, n, |i, j| if i == j { w[i] } else { 0.0 });
+                let (extra, _) = crate::coordinates::reduce(&d, basis, &wm, None);
+                ridged = (&hz + &extra).self_adjoint_eigen(Side::Lower).ok()?;
+                &ridged
+            }
+            None => &evd,
+        };
+        // Directions are kept by the data's own curvature scale (the ridge can only raise a
+        // curvature, and must not push the data's directions below the tolerance).
+        let (mu, v) = (evd.S().column_vector(), evd.U());
+        let mut zeta = vec![0.0; nf];
+        for i in 0..nf {
+            if mu[i] > tolerance * mu_max {
+                let c = -(0..nf).map(|k| v[(k, i)] * gz[k]).sum::<f64>() / mu[i];
+                for (k, z) in zeta.iter_mut().enumerate() {
+                    *z += v[(k, i)] * c;
+                }
             }
         }
+        steps.push(
+            (0..n)
+                .map(|j| params[j] + d[j] * (0..nf).map(|k| basis[(j, k)] * zeta[k]).sum::<f64>())
+                .collect(),
+        );
     }
-    let p: Vec<f64> = (0..n)
-        .map(|j| params[j] + d[j] * (0..nf).map(|k| basis[(j, k)] * zeta[k]).sum::<f64>())
-        .collect();
-    Some((p, rank))
+    Some((steps, rank))
 }
 
 /// What the candidates are scored on: the problem's residuals, whitened by the tracker's noise
@@ -481,28 +487,36 @@ impl<'a> Scored<'a> {
     }
 
     /// The residuals' sum of squares (in the scoring's units) and EMM (µm) predicted to first
-    /// order after moving from `params` to `q`: `r_i + J_i (q − params)` (the score test is a
-    /// linear prediction; a full nonlinear step could overshoot along nearly redundant
-    /// directions).
-    fn linear_prediction(&self, params: &[f64], q: &[f64]) -> (f64, f64) {
+    /// order after moving from `params` to each of `qs`: `r_i + J_i (q − params)` (the score
+    /// test is a linear prediction; a full nonlinear step could overshoot along nearly
+    /// redundant directions). One pass over the points.
+    fn linear_predictions(&self, params: &[f64], qs: &[&[f64]]) -> Vec<(f64, f64)> {
         let problem = self.problem();
         let n = params.len();
-        let delta: Vec<f64> = q.iter().zip(params).map(|(a, b)| a - b).collect();
+        let deltas: Vec<Vec<f64>> = qs
+            .iter()
+            .map(|q| q.iter().zip(params).map(|(a, b)| a - b).collect())
+            .collect();
         let mut jac = vec![0.0; 3 * n];
-        let (mut rss, mut sum) = (0.0, 0.0);
+        let mut sums = vec![(0.0, 0.0); qs.len()];
         for i in 0..problem.n_points() {
             let r = problem.residual_and_jacobian(i, params, &mut jac);
-            let lin: [f64; 3] = std::array::from_fn(|c| {
-                r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>()
-            });
-            let scored = match self {
-                Scored::Plain(_) => lin,
-                Scored::Whitened(w) => w.apply(i, lin),
-            };
-            rss += scored.iter().map(|v| v * v).sum::<f64>();
-            sum += volver_core::problem::norm(lin);
+            for (delta, (rss, sum)) in deltas.iter().zip(sums.iter_mut()) {
+                let lin: [f64; 3] = std::array::from_fn(|c| {
+                    r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>()
+                });
+                let scored = match self {
+                    Scored::Plain(_) => lin,
+                    Scored::Whitened(w) => w.apply(i, lin),
+                };
+                *rss += scored.iter().map(|v| v * v).sum::<f64>();
+                *sum += volver_core::problem::norm(lin);
+            }
         }
-        (rss, sum / problem.n_points() as f64 * 1e3)
+        let count = problem.n_points() as f64;
+        sums.into_iter()
+            .map(|(rss, sum)| (rss, sum / count * 1e3))
+            .collect()
     }
 }
 
@@ -575,10 +589,10 @@ pub fn rank(
     let data = problem.data();
     let m = (3 * problem.n_points()) as f64;
     let base = Scored::new(problem.clone(), noise);
-    let Some((p0, rank0)) = gauss_newton_step(&base.task(), params, tolerance, None) else {
+    let Some((p0, rank0)) = gauss_newton_steps(&base.task(), params, tolerance, &[None]) else {
         return Vec::new();
     };
-    let (rss0, _) = base.linear_prediction(params, &p0);
+    let rss0 = base.linear_predictions(params, &[&p0[0]])[0].0;
     // The residuals' variance per coordinate in the scoring's units: the prior's scale.
     let variance = rss0 / (m - rank0 as f64).max(1.0);
     let mut scores: Vec<Score> = library(model)
@@ -596,24 +610,25 @@ pub fn rank(
                 })
                 .collect();
             let task = ext.task();
-            let (q, rank1) = gauss_newton_step(&task, &start, tolerance, Some(&ridge))?;
-            let rss1 = ext.linear_prediction(&start, &q).0;
-            let (size, unit) = implied_size(&c.id, model, params, &extended, &q);
+            // The step held to plausible sizes, and the same step without the bound.
+            let (steps, rank1) =
+                gauss_newton_steps(&task, &start, tolerance, &[Some(&ridge), None])?;
+            let (q, qf) = (&steps[0], &steps[1]);
+            let predicted = ext.linear_predictions(&start, &[q, qf]);
+            let (rss1, (rss_free, emm_free)) = (predicted[0].0, predicted[1]);
+            let (size, unit) = implied_size(&c.id, model, params, &extended, q);
             let added = rank1.saturating_sub(rank0);
             let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
             let delta_bic = bic(rss1);
             let (scale, size_unit) = unit.micro();
             let bound = limit(unit) * scale;
-            // The same step without the bound.
-            let (qf, _) = gauss_newton_step(&task, &start, tolerance, None)?;
-            let (rss_free, emm_free) = ext.linear_prediction(&start, &qf);
             let bic_free = bic(rss_free);
             let flag = if size > bound {
                 Some(format!(
                     "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
                 ))
             } else {
-                let (size_free, _) = implied_size(&c.id, model, params, &extended, &qf);
+                let (size_free, _) = implied_size(&c.id, model, params, &extended, qf);
                 (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
                     format!(
                         "nearly unidentifiable: the data support it only with a size of \
@@ -628,8 +643,8 @@ pub fn rank(
                 Scored::Plain(_) => emm_free,
                 Scored::Whitened(w) => {
                     let plain = Scored::Plain(w.problem().clone());
-                    let (qp, _) = gauss_newton_step(&plain.task(), &start, tolerance, None)?;
-                    plain.linear_prediction(&start, &qp).1
+                    let (qp, _) = gauss_newton_steps(&plain.task(), &start, tolerance, &[None])?;
+                    plain.linear_predictions(&start, &[&qp[0]])[0].1
                 }
             };
             Some(Score {
