@@ -418,7 +418,9 @@ pub fn diagnose_with(
     let verdict_noise = levels.as_ref().map(|(n, moments, _)| {
         let all: Vec<usize> = (0..r.len()).collect();
         let level = level_of(&all).expect("a noise model");
-        noise_verdict(n, &level, emm, &breakdowns, &level_of, &problem, moments)
+        let pairs = diagnose::repeat_pairs(&problem);
+        let repeats = repeat.map(|(s, _)| (s.emm_um, pairs.as_slice()));
+        noise_verdict(n, &level, emm, &breakdowns, &level_of, repeats, moments)
     });
     Ok(Diagnosis {
         points: data.points.len(),
@@ -446,14 +448,15 @@ pub fn diagnose_with(
     })
 }
 
-/// The fit against the noise: overall, per bin, and the repeats against the specification.
+/// The fit against the noise: overall, per bin, and the repeats (their estimate in µm and their
+/// pairs) against the specification.
 fn noise_verdict(
     noise: &TrackerNoise,
     level: &diagnose::NoiseLevel,
     emm: f64,
     breakdowns: &[diagnose::Breakdown],
     level_of: &dyn Fn(&[usize]) -> Option<diagnose::NoiseLevel>,
-    problem: &Problem,
+    repeats: Option<(f64, &[(usize, usize)])>,
     moments: &[(f64, f64)],
 ) -> NoiseVerdict {
     let mut above: Vec<BinAbove> = breakdowns
@@ -472,17 +475,8 @@ fn noise_verdict(
         })
         .collect();
     above.sort_by(|a, b| b.z.total_cmp(&a.z));
-    let pairs = diagnose::repeat_pairs(problem);
-    let repeats = (!pairs.is_empty()).then(|| {
-        let pts = &problem.data().points;
-        let modules: Vec<f64> = pairs
-            .iter()
-            .map(|&(a, b)| {
-                let (a, b) = (pts[a].measured, pts[b].measured);
-                volver_core::problem::norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) / 2f64.sqrt()
-            })
-            .collect();
-        let estimate_um = modules.iter().sum::<f64>() / modules.len() as f64 * 1e3;
+    // The repeats' estimate ([`diagnose::repeat_noise`]) and the pairs behind it.
+    let repeats = repeats.map(|(estimate_um, pairs)| {
         let firsts: Vec<usize> = pairs.iter().map(|p| p.0).collect();
         // The noise itself (no fit absorbs any of it), at the repeated points.
         let spec = diagnose::noise_level(moments, &firsts, 0, 1);
