@@ -448,6 +448,22 @@ impl Machine {
         self.axes.iter().enumerate().find(|(_, a)| a.axis == axis)
     }
 
+    /// The axis a file names by its letter (`"X"`, `"C"`), as [`Machine::axis`]; `None` for
+    /// anything but one letter of an axis of this machine.
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// assert_eq!(m.axis_named("C").map(|(k, _)| k), Some(1));
+    /// assert!(m.axis_named("Y").is_none() && m.axis_named("XC").is_none());
+    /// ```
+    pub fn axis_named(&self, name: &str) -> Option<(usize, &MachineAxis)> {
+        let mut letters = name.chars();
+        match (letters.next().and_then(Axis::from_letter), letters.next()) {
+            (Some(a), None) => self.axis(a),
+            _ => None,
+        }
+    }
+
     /// The reflectors.
     pub fn reflectors(&self) -> &[Reflector] {
         &self.reflectors

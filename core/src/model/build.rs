@@ -128,23 +128,21 @@ impl Model {
                     &mut params,
                 );
             }
-            let linear_axis = |name: &str, field: &str| {
-                let axis = name
-                    .chars()
-                    .next()
-                    .filter(|_| name.len() == 1)
-                    .and_then(crate::iso::Axis::from_letter);
-                axis.and_then(|a| machine.axis(a))
-                    .filter(|(_, ax)| !ax.axis.is_rotary())
+            // The axis `name` names, rotary or linear as the effect needs.
+            let axis_of_kind = |name: &str, rotary: bool, field: &str| {
+                machine
+                    .axis_named(name)
+                    .filter(|(_, ax)| ax.axis.is_rotary() == rotary)
                     .ok_or_else(|| {
+                        let kind = if rotary { "rotary" } else { "linear" };
                         Error::input(
                             place(name, field),
-                            format!("'{name}' is not a linear axis of {}", machine.chain()),
+                            format!("'{name}' is not a {kind} axis of {}", machine.chain()),
                         )
                     })
             };
             for b in &fx.ball_screw {
-                let (k, ax) = linear_axis(&b.axis, "effects.ball_screw.axis")?;
+                let (k, ax) = axis_of_kind(&b.axis, false, "effects.ball_screw.axis")?;
                 if !(b.period_mm.is_finite() && b.period_mm > 0.0) {
                     return Err(Error::input(
                         place(&b.axis, "effects.ball_screw.period_mm"),
@@ -166,7 +164,7 @@ impl Model {
                 );
             }
             for name in &fx.thermal_scale {
-                let (k, ax) = linear_axis(name, "effects.thermal_scale")?;
+                let (k, ax) = axis_of_kind(name, false, "effects.thermal_scale")?;
                 push(
                     EffectSlot::ThermalScale {
                         k,
@@ -177,20 +175,7 @@ impl Model {
                 );
             }
             for name in &fx.location_drift {
-                let axis = name
-                    .chars()
-                    .next()
-                    .filter(|_| name.len() == 1)
-                    .and_then(crate::iso::Axis::from_letter);
-                let Some((k, ax)) = axis
-                    .and_then(|a| machine.axis(a))
-                    .filter(|(_, ax)| ax.axis.is_rotary())
-                else {
-                    return Err(Error::input(
-                        place(name, "effects.location_drift"),
-                        format!("'{name}' is not a rotary axis of {}", machine.chain()),
-                    ));
-                };
+                let (k, ax) = axis_of_kind(name, true, "effects.location_drift")?;
                 // The two translations across the axis' line (X0C, Y0C for C).
                 for c in (0..3).filter(|&c| c != ax.axis.direction()) {
                     let letter = ["x", "y", "z"][c];
@@ -506,12 +491,7 @@ pub(super) fn field_vars(
             if *p == "t" {
                 return Ok(FieldVar::Time);
             }
-            let axis = p
-                .chars()
-                .next()
-                .filter(|_| p.len() == 1)
-                .and_then(crate::iso::Axis::from_letter);
-            let Some((k, ax)) = axis.and_then(|a| machine.axis(a)) else {
+            let Some((k, ax)) = machine.axis_named(p) else {
                 return Err(format!(
                     "'{p}' in field '{id}' is neither an axis of {} nor t",
                     machine.chain()
