@@ -216,16 +216,20 @@ impl Gauge {
 pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Option<Gauge> {
     let problem: &dyn Residuals = &*task.problem;
     let n = reference.len();
-    let normal = crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false)?;
+    // The design's pass and the metric (which does not depend on it) side by side.
+    let (normal, metric) = rayon::join(
+        || crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false),
+        || match problem.machine() {
+            Some(machine) => function_metric(machine.model(), at),
+            None => Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 }),
+        },
+    );
+    let normal = normal?;
     let h = normal.h.clone();
     let plain = Some(std::sync::Arc::new(crate::PlainNormal {
         at: at.to_vec(),
         normal,
     }));
-    let metric = match problem.machine() {
-        Some(machine) => function_metric(machine.model(), at),
-        None => Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 }),
-    };
     // Jacobi scaling by the metric's diagonal (by the Jacobian's where the metric sees nothing):
     // bases whose coefficients differ in scale by many orders (a monomial's x³ over 1 400 mm)
     // then give the same directions as well-scaled ones, to rounding.

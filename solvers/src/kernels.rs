@@ -67,20 +67,41 @@ pub(crate) fn accumulate(
     weight: impl Fn(f64) -> (f64, f64) + Sync,
     factor: bool,
 ) -> Option<Normal> {
+    accumulate_weighted(problem, p, &weight, false, factor)?.pop()
+}
+
+/// [`accumulate`] under `weight`, after the unweighted (design) equations at the same point
+/// when `with_design`: `[design, weighted]`, each to the same bits as its own pass, from one
+/// evaluation of each point's Jacobian (a block's rows are formed unweighted, multiplied out,
+/// then weighted in place and multiplied out again). A `factor` is formed without the design
+/// only.
+pub(crate) fn accumulate_weighted(
+    problem: &dyn Residuals,
+    p: &[f64],
+    weight: &(dyn Fn(f64) -> (f64, f64) + Sync),
+    with_design: bool,
+    factor: bool,
+) -> Option<Vec<Normal>> {
     let n = p.len();
+    let k = if with_design { 2 } else { 1 };
+    if factor && with_design {
+        return None;
+    }
     let np = problem.n_points();
     let nc = n + 1;
     let blocks = np.div_ceil(BLOCK);
-    let mut g = vec![0.0; n];
-    // The lower triangle of H, column-major (the blocks' parts are added as whole slices).
-    let mut hl = vec![0.0; n * n];
+    let mut g = vec![vec![0.0; n]; k];
+    // The lower triangles of the H's, column-major (the blocks' parts are added as whole
+    // slices).
+    let mut hl = vec![vec![0.0; n * n]; k];
     // With `factor`: R and the residual column (column-major, (n+1)²).
     let mut rf: Option<Vec<f64>> = None;
     // Blocks are computed a wave at a time (bounded memory), each wave on every thread.
     let wave = 2 * rayon::current_num_threads().max(1);
-    // The waves' normal-matrix buffers (none for a factor, whose blocks start from zero).
+    // The waves' normal-matrix buffers, k per block (none for a factor, whose blocks start
+    // from zero).
     let mut bufs = PARTS.with(|b| std::mem::take(&mut *b.borrow_mut()));
-    let (count, len) = if factor { (0, 0) } else { (wave, n * n) };
+    let (count, len) = if factor { (0, 0) } else { (wave * k, n * n) };
     bufs.truncate(count);
     bufs.retain(|b| b.len() == len);
     bufs.resize_with(count, || vec![0.0; len]);
@@ -88,11 +109,9 @@ pub(crate) fn accumulate(
     let mut failed = false;
     while first < blocks && !failed {
         let last = (first + wave).min(blocks);
-        let outs = bufs
-            .iter_mut()
-            .map(Some)
-            .chain(std::iter::repeat_with(|| None));
-        let jobs: Vec<(usize, Option<&mut Vec<f64>>)> = (first..last).zip(outs).collect();
+        let chunks = bufs.chunks_mut(k.max(1)).map(Some);
+        let outs = chunks.chain(std::iter::repeat_with(|| None));
+        let jobs: Vec<(usize, Option<&mut [Vec<f64>]>)> = (first..last).zip(outs).collect();
         let parts: Vec<Option<BlockPart>> = jobs
             .into_par_iter()
             .map(|(b, out)| {
@@ -104,25 +123,29 @@ pub(crate) fn accumulate(
                     if factor {
                         tb.resize(3 * BLOCK * nc, 0.0);
                     }
-                    block_part(problem, p, &weight, b, (blk, row, tb), out)
+                    block_part(problem, p, (weight, with_design), b, (blk, row, tb), out)
                 })
             })
             .collect();
-        for (k, part) in parts.into_iter().enumerate() {
+        for (b, part) in parts.into_iter().enumerate() {
             let Some(part) = part else {
                 failed = true;
                 break;
             };
-            for (gj, pj) in g.iter_mut().zip(&part.g) {
-                *gj += pj;
+            for (gw, pw) in g.iter_mut().zip(&part.g) {
+                for (gj, pj) in gw.iter_mut().zip(pw) {
+                    *gj += pj;
+                }
             }
             match (part.factor, rf.as_mut()) {
                 (Some(m), None) => rf = Some(m),
                 (Some(mut rb), Some(r)) => qr_update(r, nc, &mut rb, nc),
                 (None, _) => {
                     // The upper triangle of a part is zero: adding it whole changes nothing.
-                    for (hv, pv) in hl.iter_mut().zip(&bufs[k]) {
-                        *hv += pv;
+                    for (w, hw) in hl.iter_mut().enumerate() {
+                        for (hv, pv) in hw.iter_mut().zip(&bufs[b * k + w]) {
+                            *hv += pv;
+                        }
                     }
                 }
             }
@@ -133,48 +156,60 @@ pub(crate) fn accumulate(
     if failed {
         return None;
     }
-    let mut h = Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]);
-    let factor = factor.then(|| {
-        let rf = rf.unwrap_or_else(|| vec![0.0; nc * nc]);
-        let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);
-        h = r.transpose() * &r;
-        Factor {
-            r,
-            c: (0..n).map(|i| rf[n * nc + i]).collect(),
-        }
-    });
-    for j in 0..n {
-        for i in 0..j {
-            h[(i, j)] = h[(j, i)];
-        }
-    }
-    Some(Normal { h, g, factor })
+    let normals = hl
+        .into_iter()
+        .zip(g)
+        .map(|(hl, g)| {
+            let mut h = Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]);
+            let factor = factor.then(|| {
+                let rf = rf.take().unwrap_or_else(|| vec![0.0; nc * nc]);
+                let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);
+                h = r.transpose() * &r;
+                Factor {
+                    r,
+                    c: (0..n).map(|i| rf[n * nc + i]).collect(),
+                }
+            });
+            for j in 0..n {
+                for i in 0..j {
+                    h[(i, j)] = h[(j, i)];
+                }
+            }
+            Normal { h, g, factor }
+        })
+        .collect();
+    Some(normals)
 }
 
-/// One block's share of a pass: its gradient and, for a factor, the triangular factor of its
-/// rows with the residual column ((n+1)², column-major); else the lower triangle of its
-/// `J_bᵀ W_b J_b` is in the buffer the block was given.
+/// One block's share of a pass: its gradient under each weighting (the design's first) and,
+/// for a factor, the triangular factor of its rows with the residual column ((n+1)²,
+/// column-major); else the lower triangle of each weighting's `J_bᵀ W_b J_b` is in the buffers
+/// the block was given.
 struct BlockPart {
-    g: Vec<f64>,
+    g: Vec<Vec<f64>>,
     factor: Option<Vec<f64>>,
 }
 
-/// [`accumulate`]'s work on block `b`, with the scratch `blk` (3 [`BLOCK`] (n+1)), `row` (3n)
-/// and, for a factor, `tb` (3 [`BLOCK`] (n+1)); without `out` (n × n, column-major, upper
-/// triangle zero) the block forms the factor, else the lower triangle of `J_bᵀ W_b J_b` in
+/// [`accumulate_weighted`]'s work on block `b` under `weight` (after the design when
+/// `with_design`), with the scratch `blk` (3 [`BLOCK`] (n+1)), `row` (3n) and, for a factor,
+/// `tb` (3 [`BLOCK`] (n+1)); without `out` (one n × n buffer per weighting, column-major, upper
+/// triangle zero) the block forms the factor, else the lower triangle of each `J_bᵀ W_b J_b` in
 /// `out`.
 ///
-/// The block's weighted rows are written one after another (row ρ = 3q + c of point q at
+/// The block's rows are written one after another (row ρ = 3q + c of point q at
 /// `blk[ρ (n+1)..]`, its residual last), so that each point's writes are contiguous; the block's
 /// `J_bᵀ W_b J_b` is then the product of that (n × rows, column stride n+1) view with its
-/// transpose. The factor's QR works on columns: the rows are transposed into `tb` first.
+/// transpose. With the design the rows are first written unweighted, multiplied out, then
+/// weighted in place (`blk` is mapped once per thread: a second one would cost its pages'
+/// first touch at the pass that first needs it). The factor's QR works on columns: the rows are
+/// transposed into `tb` first.
 fn block_part(
     problem: &dyn Residuals,
     p: &[f64],
-    weight: &impl Fn(f64) -> (f64, f64),
+    (weight, with_design): (&(dyn Fn(f64) -> (f64, f64) + Sync), bool),
     b: usize,
     (blk, row, tb): (&mut [f64], &mut [f64], &mut [f64]),
-    out: Option<&mut Vec<f64>>,
+    out: Option<&mut [Vec<f64>]>,
 ) -> Option<BlockPart> {
     let factor = out.is_none();
     let n = p.len();
@@ -182,45 +217,28 @@ fn block_part(
     let start = b * BLOCK;
     let m = (problem.n_points() - start).min(BLOCK);
     let rows = 3 * m;
-    let mut g = vec![0.0; n];
+    let unit = |_: f64| (1.0, 0.0);
+    let first: &dyn Fn(f64) -> (f64, f64) = if with_design { &unit } else { weight };
+    let mut g = vec![vec![0.0; n]; if with_design { 2 } else { 1 }];
     for q in 0..m {
         let r = problem.residual_and_jacobian(start + q, p, row);
         let nr = norm(r);
         if !nr.is_finite() || row.iter().any(|v| !v.is_finite()) {
             return None;
         }
-        let (w, c) = weight(nr);
-        if factor && c != 0.0 {
-            return None;
-        }
-        // W^½ = √w (I − k r̂ r̂ᵀ) with (1 − k)² = 1 − c.
-        let k = 1.0 - (1.0 - c).max(0.0).sqrt();
-        let rhat = if nr > 0.0 {
-            r.map(|v| v / nr)
-        } else {
-            [0.0; 3]
-        };
-        let sw = w.sqrt();
-        let kr = rhat.map(|v| k * v);
         let (j0, rest) = row.split_at(n);
         let (j1, j2) = rest.split_at(n);
-        let (j2, g) = (&j2[..n], &mut g[..n]);
         let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
         let (o0, rest) = out.split_at_mut(nc);
         let (o1, o2) = rest.split_at_mut(nc);
-        for j in 0..n {
-            let col = [j0[j], j1[j], j2[j]];
-            let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
-            g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
-            o0[j] = sw * (col[0] - kr[0] * radial);
-            o1[j] = sw * (col[1] - kr[1] * radial);
-            o2[j] = sw * (col[2] - kr[2] * radial);
+        o0[..n].copy_from_slice(j0);
+        o1[..n].copy_from_slice(j1);
+        o2[..n].copy_from_slice(&j2[..n]);
+        if !weigh_rows(first, r, nr, [o0, o1, o2], &mut g[0], factor) {
+            return None;
         }
-        o0[n] = sw * r[0];
-        o1[n] = sw * r[1];
-        o2[n] = sw * r[2];
     }
-    let Some(hb) = out else {
+    let Some(hbs) = out else {
         for rho in 0..rows {
             for j in 0..nc {
                 tb[j * rows + rho] = blk[rho * nc + j];
@@ -228,12 +246,13 @@ fn block_part(
         }
         let mut rb = vec![0.0; nc * nc];
         qr_update(&mut rb, nc, &mut tb[..rows * nc], rows);
+        let g = g.pop().unwrap_or_default();
         return Some(BlockPart {
-            g,
+            g: vec![g],
             factor: Some(rb),
         });
     };
-    {
+    let lower = |blk: &[f64], hb: &mut [f64]| {
         // n × rows: column ρ is row ρ of the block.
         let jt = faer::MatRef::from_column_major_slice_with_stride(&blk[..rows * nc], n, rows, nc);
         triangular_matmul(
@@ -247,8 +266,59 @@ fn block_part(
             1.0,
             Par::Seq,
         );
+    };
+    lower(blk, &mut hbs[0]);
+    if with_design {
+        // The unweighted rows become the weighted ones, point by point.
+        for q in 0..m {
+            let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
+            let (o0, rest) = out.split_at_mut(nc);
+            let (o1, o2) = rest.split_at_mut(nc);
+            let r = [o0[n], o1[n], o2[n]];
+            weigh_rows(weight, r, norm(r), [o0, o1, o2], &mut g[1], false);
+        }
+        lower(blk, &mut hbs[1]);
     }
     Some(BlockPart { g, factor: None })
+}
+
+/// One point's three rows `[J | r]` (`o`, each n + 1 long, the Jacobian's rows and the residual
+/// last) made `W^½ [J | r]` in place under `weight(‖r‖)`, and `w Jᵀ r` added to `g`; `false`
+/// (nothing changed) when a factor is asked (`factor`) of a weighting with a radial correction.
+fn weigh_rows(
+    weight: &dyn Fn(f64) -> (f64, f64),
+    r: [f64; 3],
+    nr: f64,
+    [o0, o1, o2]: [&mut [f64]; 3],
+    g: &mut [f64],
+    factor: bool,
+) -> bool {
+    let n = g.len();
+    let (w, c) = weight(nr);
+    if factor && c != 0.0 {
+        return false;
+    }
+    // W^½ = √w (I − k r̂ r̂ᵀ) with (1 − k)² = 1 − c.
+    let k = 1.0 - (1.0 - c).max(0.0).sqrt();
+    let rhat = if nr > 0.0 {
+        r.map(|v| v / nr)
+    } else {
+        [0.0; 3]
+    };
+    let sw = w.sqrt();
+    let kr = rhat.map(|v| k * v);
+    for j in 0..n {
+        let col = [o0[j], o1[j], o2[j]];
+        let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
+        g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
+        o0[j] = sw * (col[0] - kr[0] * radial);
+        o1[j] = sw * (col[1] - kr[1] * radial);
+        o2[j] = sw * (col[2] - kr[2] * radial);
+    }
+    o0[n] = sw * r[0];
+    o1[n] = sw * r[1];
+    o2[n] = sw * r[2];
+    true
 }
 
 /// `a · b`, for products of at least [`SPLIT`] rows and columns with the columns of `b` in two
@@ -614,6 +684,20 @@ mod tests {
         };
         close(&one.h, &h, "H");
         close_v(&one.g, &g, "g");
+        // The design and the weighted equations from one pass: the same bits as two passes,
+        // on one and on three threads.
+        let plain = pool(1).install(|| accumulate(&problem, &p, |_| (1.0, 0.0), false).unwrap());
+        for threads in [1, 3] {
+            let both = pool(threads)
+                .install(|| accumulate_weighted(&problem, &p, &weight, true, false).unwrap());
+            assert_eq!(both.len(), 2);
+            assert_eq!(both[0].h, plain.h, "the design's H, {threads} threads");
+            assert_eq!(both[0].g, plain.g, "the design's g, {threads} threads");
+            assert_eq!(both[1].h, one.h, "the weighted H, {threads} threads");
+            assert_eq!(both[1].g, one.g, "the weighted g, {threads} threads");
+        }
+        close(&plain.h, &jtj, "JᵀJ");
+        assert!(accumulate_weighted(&problem, &p, &weight, true, true).is_none());
         // Least squares with the factor, on one and on three threads.
         let ls = |threads: usize| {
             pool(threads).install(|| accumulate(&problem, &p, |_| (1.0, 0.0), true).unwrap())

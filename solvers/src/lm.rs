@@ -81,7 +81,9 @@ mod finish;
 mod geodesic;
 
 use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
-use crate::kernels::{accumulate, damped_lstsq, normal_solve, sandwich, solve_spd};
+use crate::kernels::{
+    accumulate, accumulate_weighted, damped_lstsq, normal_solve, sandwich, solve_spd,
+};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
 use crate::run::{Started, begin};
@@ -412,10 +414,11 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
 
     // The named steps.
 
-    /// One Jacobian pass at the current point: the design refreshed when a stage began (its
-    /// unweighted pass first; its decomposition beside this pass's own work, which does not
-    /// depend on it), the majorising stage's ε moved to the current Φ, the weighted normal
-    /// equations.
+    /// One Jacobian pass at the current point: the majorising stage's ε moved to the current
+    /// Φ, the weighted normal equations, and the design: the start's decomposed beside the
+    /// first pass (which does not depend on it), a new stage's unweighted equations formed in
+    /// the same pass as its weighted ones (one evaluation of each point's Jacobian), then
+    /// decomposed.
     fn jacobian_pass(&mut self) -> Result<crate::kernels::Normal, Termination> {
         let iterations = self.run.summary.iterations;
         if self.run.summary.evaluations >= self.options.max_evaluations {
@@ -428,45 +431,54 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             })
         };
         // The start's design fails at the start; a new stage's at this iteration.
-        let mut pending = self.pending_design.take();
+        let pending = self.pending_design.take();
         let at = if pending.is_some() {
             At::Start
         } else {
             At::Iteration(iterations)
         };
-        if self.refresh && self.objective == Objective::Phi {
-            self.refresh = false;
-            let plain = accumulate(self.problem, &self.p, |_| (1.0, 0.0), false);
-            self.run.summary.evaluations += 1;
-            self.run.summary.jacobian_evaluations += 1;
-            let Some(plain) = plain else {
-                return Err(decomposition_failed(At::Iteration(iterations)));
-            };
-            pending = Some(plain.h);
-        }
+        let refresh = self.refresh && self.objective == Objective::Phi;
+        self.refresh = false;
         if self.stage == Stage::Majorising {
             self.eps = (self.options.irls_initial_epsilon * self.phi()).max(1e-300);
             self.cost = cost_of(self.objective, &self.norms, self.eps);
         }
         let this = &*self;
-        let (design, normal) = rayon::join(
-            || pending.as_ref().map(|h| design_of(&this.free, h)),
-            || {
-                accumulate(
-                    this.problem,
-                    &this.p,
-                    |r| this.weight(r),
-                    this.objective == Objective::Ve,
-                )
-            },
-        );
+        let weighted = |r: f64| this.weight(r);
+        let (design, normal) = if refresh {
+            // A new stage: its design (unweighted) and its equations from one pass, then the
+            // design decomposed.
+            let both = accumulate_weighted(this.problem, &this.p, &weighted, true, false);
+            match both {
+                Some(mut both) => {
+                    let normal = both.pop();
+                    let plain = both.pop().map(|plain| plain.h);
+                    (plain.map(|h| design_of(&this.free, &h)), normal)
+                }
+                None => (None, None),
+            }
+        } else {
+            rayon::join(
+                || pending.as_ref().map(|h| design_of(&this.free, h)),
+                || {
+                    accumulate(
+                        this.problem,
+                        &this.p,
+                        weighted,
+                        this.objective == Objective::Ve,
+                    )
+                },
+            )
+        };
+        let Some(normal) = normal else {
+            return Err(Termination::NumericalFailure(Failure::JacobianNotFinite(
+                At::Iteration(iterations),
+            )));
+        };
         if let Some(design) = design {
             self.design = design.ok_or(decomposition_failed(at))?;
             self.design_generation += 1;
         }
-        let normal = normal.ok_or({
-            Termination::NumericalFailure(Failure::JacobianNotFinite(At::Iteration(iterations)))
-        })?;
         self.run.summary.evaluations += 1;
         self.run.summary.jacobian_evaluations += 1;
         Ok(normal)
