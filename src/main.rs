@@ -6,7 +6,7 @@ mod cmd;
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use cmd::{
-    compare, compensate, demo, diagnose, history, identify, layout, report, simulate, study,
+    compare, compensate, demo, diagnose, history, identify, layout, plan, report, simulate, study,
     uncertainty,
 };
 
@@ -73,6 +73,11 @@ enum Command {
     /// and of the tool point over the volume, raw and after the set-up's rigid transform:
     /// linearised (GUM) and, with --monte-carlo N, by Monte Carlo (GUM Supplement 1).
     Uncertainty(uncertainty::UncertaintyArgs),
+    /// Designs a verification: the poses and reflectors that identify the tool point
+    /// compensation needs (I- or D-optimal), in an order that keeps drift separable, written as
+    /// a plan file (`simulate --plan-file`) and a measuring program; `--compare` runs plans on
+    /// simulated truths.
+    Plan(plan::PlanArgs),
 }
 
 fn main() -> Result<()> {
@@ -98,6 +103,7 @@ fn main() -> Result<()> {
         Command::Tables(a) => compensate::tables_command(a),
         Command::Predict(a) => compensate::predict_command(a),
         Command::Uncertainty(a) => uncertainty::uncertainty_command(a),
+        Command::Plan(a) => plan::run(a),
     }
 }
 

@@ -31,6 +31,9 @@ use crate::error::{Error, Place, Result};
 use crate::iso::Axis;
 use crate::machine::{Commands, Machine};
 
+pub mod file;
+pub mod order;
+
 /// The named presets, in the order `volver simulate --help` lists them.
 pub const PRESETS: [&str; 7] = [
     "table4", "table7", "test1", "test2", "test3", "test4", "test5",
@@ -76,14 +79,58 @@ pub struct Plan {
     pub name: String,
     /// Commanded positions, in measuring order.
     pub positions: Vec<Commands>,
-    /// Reflector indices measured at every position.
+    /// Reflector indices measured at every position (when `sequence` is `None`), or every
+    /// reflector the sequence uses.
     pub reflectors: Vec<usize>,
+    /// The measuring sequence, when it is not every reflector of `reflectors` at every position
+    /// in order (a designed plan: `volver plan`, [`crate::plan::file`]).
+    pub sequence: Option<Vec<Step>>,
+}
+
+/// One measurement of a plan: the reflector `reflector` (machine index) at `positions[position]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Step {
+    /// Index into [`Plan::positions`].
+    pub position: usize,
+    /// Reflector index (into the machine's reflectors).
+    pub reflector: usize,
 }
 
 impl Plan {
-    /// Number of measured points (positions × reflectors).
+    /// Number of measured points.
     pub fn n_points(&self) -> usize {
-        self.positions.len() * self.reflectors.len()
+        match &self.sequence {
+            Some(s) => s.len(),
+            None => self.positions.len() * self.reflectors.len(),
+        }
+    }
+
+    /// The measurements in measuring order: the sequence, or every reflector in turn at every
+    /// position.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::plan::{Plan, Step};
+    /// let p = Plan::preset(&Machine::default_xcfz(), "test4").unwrap();
+    /// let steps = p.steps();
+    /// assert_eq!(steps.len(), 1040);
+    /// assert_eq!(steps[1], Step { position: 0, reflector: 1 });
+    /// ```
+    pub fn steps(&self) -> Vec<Step> {
+        match &self.sequence {
+            Some(s) => s.clone(),
+            None => self
+                .positions
+                .iter()
+                .enumerate()
+                .flat_map(|(position, _)| {
+                    self.reflectors.iter().map(move |&reflector| Step {
+                        position,
+                        reflector,
+                    })
+                })
+                .collect(),
+        }
     }
 
     /// A named preset of the paper (see the module documentation). The presets are defined for
@@ -303,6 +350,7 @@ impl Plan {
             name: name.to_string(),
             positions,
             reflectors: (0..machine.reflectors().len()).collect(),
+            sequence: None,
         })
     }
 }

@@ -241,10 +241,27 @@ impl Simulation {
     fn validate(&self) -> Result<f64> {
         let machine = self.truth.model.machine();
         let place = |field: &str| Place::file("simulation").at_field(field.to_string());
-        if self.plan.positions.is_empty() || self.plan.reflectors.is_empty() {
+        if self.plan.positions.is_empty() || self.plan.n_points() == 0 {
             return Err(Error::input(
                 place("plan"),
                 "the plan measures no point (no position or no reflector)",
+            ));
+        }
+        if let Some(sequence) = &self.plan.sequence
+            && let Some((i, s)) = sequence.iter().enumerate().find(|(_, s)| {
+                s.position >= self.plan.positions.len() || s.reflector >= machine.reflectors().len()
+            })
+        {
+            return Err(Error::input(
+                place("plan.sequence"),
+                format!(
+                    "step {i} measures reflector index {} at position {}, but the plan has {} \
+                     positions and the machine {} reflectors",
+                    s.reflector,
+                    s.position,
+                    self.plan.positions.len(),
+                    machine.reflectors().len()
+                ),
             ));
         }
         if let Some(&r) = self
@@ -390,15 +407,25 @@ impl Simulation {
         let mut points = Vec::with_capacity(n);
         let mut noise_free = Vec::with_capacity(n);
         let mut nominal = Vec::with_capacity(n);
-        for (j, cmd) in self.plan.positions.iter().enumerate() {
-            let mut errors = truth.model.errors_at(cmd, &truth.params);
-            for &(k, dir, amp, period, reference) in &screws {
-                errors.component[k][dir] +=
-                    amp * (2.0 * PI * (cmd.0[k] - reference) / period).sin();
-            }
-            self.couple(&machine, cmd, &mut errors);
-            for (ri, &r) in self.plan.reflectors.iter().enumerate() {
-                let i = j * self.plan.reflectors.len() + ri;
+        // The errors of a position, computed once however many reflectors are measured there.
+        let mut cached: Option<(usize, PointErrors<f64>)> = None;
+        for (i, step) in self.plan.steps().into_iter().enumerate() {
+            let (j, r) = (step.position, step.reflector);
+            let cmd = &self.plan.positions[j];
+            let errors = match &cached {
+                Some((at, e)) if *at == j => *e,
+                _ => {
+                    let mut errors = truth.model.errors_at(cmd, &truth.params);
+                    for &(k, dir, amp, period, reference) in &screws {
+                        errors.component[k][dir] +=
+                            amp * (2.0 * PI * (cmd.0[k] - reference) / period).sin();
+                    }
+                    self.couple(&machine, cmd, &mut errors);
+                    cached = Some((j, errors));
+                    errors
+                }
+            };
+            {
                 let t_s = if n > 1 {
                     (duration * i as f64 / (n - 1) as f64 * 1e3).round() / 1e3
                 } else {

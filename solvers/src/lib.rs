@@ -22,6 +22,7 @@ pub mod ceres;
 #[cfg(feature = "clarabel")]
 pub mod clarabel;
 mod coordinates;
+pub mod design;
 mod error;
 pub mod gauge;
 pub mod identifiability;

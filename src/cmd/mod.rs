@@ -7,6 +7,7 @@ pub mod diagnose;
 pub mod history;
 pub mod identify;
 pub mod layout;
+pub mod plan;
 pub mod report;
 pub mod simulate;
 pub mod study;

@@ -48,6 +48,10 @@ pub struct SimulateArgs {
     /// (file units: mm, degrees).
     #[arg(long, default_value = "test4")]
     plan: String,
+    /// A plan file instead (CSV: the axes, reflector, optionally order; as `volver plan`
+    /// writes it): its rows are measured in the file's order.
+    #[arg(long, conflicts_with_all = ["plan", "reflectors"])]
+    plan_file: Option<PathBuf>,
     /// Seed of the true errors, the harmonics' phases and the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -157,6 +161,9 @@ fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
 
 /// The plan of `--plan` on `machine`, measuring the reflectors of `--reflectors`.
 fn plan_of(a: &SimulateArgs, machine: &Machine) -> Result<Plan> {
+    if let Some(path) = &a.plan_file {
+        return Ok(volver::core::plan::file::load(machine, path)?);
+    }
     let mut plan = if a.plan.contains('=') {
         Plan::parse_grid(machine, &a.plan)?
     } else {
@@ -187,14 +194,25 @@ fn plan_of(a: &SimulateArgs, machine: &Machine) -> Result<Plan> {
 /// What was simulated and written.
 fn print_record(out: &volver::core::simulate::Synthetic, machine: &Machine, files: &[PathBuf]) {
     let r = &out.record;
-    println!(
-        "volver simulate — plan {} ({} positions × {} reflectors = {} points), seed {}",
-        r.plan,
-        r.positions,
-        r.reflectors.len(),
-        r.points,
-        r.seed
-    );
+    if r.positions * r.reflectors.len() == r.points {
+        println!(
+            "volver simulate — plan {} ({} positions × {} reflectors = {} points), seed {}",
+            r.plan,
+            r.positions,
+            r.reflectors.len(),
+            r.points,
+            r.seed
+        );
+    } else {
+        println!(
+            "volver simulate — plan {} ({} points at {} positions, reflectors {}, in the plan's order), seed {}",
+            r.plan,
+            r.points,
+            r.positions,
+            r.reflectors.join(", "),
+            r.seed
+        );
+    }
     println!("  machine: {} ({})", machine.spec().name, machine.chain());
     match &r.truth {
         TruthSource::Random { structure, .. } => {

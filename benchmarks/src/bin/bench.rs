@@ -160,6 +160,7 @@ fn build(size: &Size) -> (Model, MeasurementSet) {
                 name: format!("{} random poses", size.poses),
                 positions,
                 reflectors: (0..machine.reflectors().len()).collect(),
+                sequence: None,
             }
         }
     };

@@ -1,0 +1,301 @@
+//! Optimal experimental design of a verification: which poses and reflectors to measure, and how
+//! often, so that the tool point the compensation needs is determined best.
+//!
+//! The candidates are every reflector at every pose of a fine grid. Each candidate point `i`
+//! brings the information `F_i = A_iᵀ A_i`, with `A_i = W_i J_i N` its Jacobian at the nominal
+//! machine (zero errors, the machine file's tracker pose), whitened by the tracker's noise at
+//! that point ([`TrackerNoise::whitening`]: the range weighs far above the angles) and reduced
+//! to the free coordinates `N` of the model's constraints. A design puts weights `w_i` (summing
+//! to one) on the candidates; `m` points give `F(w) = R + m Σ w_i F_i`, where `R` is a weak
+//! prior ([`crate::uncertainty::HELD_PRIOR_MM`] RMS in the function metric of
+//! [`crate::gauge`]) that keeps a direction no candidate sees from being infinitely uncertain:
+//! a design that leaves one unidentified pays for it through the prior.
+//!
+//! - **I-optimal** ([`Criterion::I`]): the mean over a grid of the work volume of the variance
+//!   of the tool point after the set-up's rigid transform, `tr(Q F⁻¹)` with
+//!   `Q = (1/K) Σ_k G_kᵀ G_k` from the tool points' aligned Jacobians
+//!   ([`crate::uncertainty::ToolGrid::jacobian`]): what compensation at that tool offset
+//!   inherits from the noise.
+//! - **D-optimal** ([`Criterion::D`]): `log det F`, the volume of the parameters' confidence
+//!   ellipsoid.
+//!
+//! The weights are found by the multiplicative algorithm (Silvey, Titterington and Torsney
+//! 1978; for linear criteria Fellman 1974): `w_i ← w_i (d_i / Σ_j w_j d_j)^½` with
+//! `d_i = tr(S F_i)`, `S = F⁻¹ Q F⁻¹` (I) or `F⁻¹` (D), which never increases the criterion and
+//! reaches the optimum where every `d_i ≤ Σ_j w_j d_j` (the equivalence theorem of Kiefer and
+//! Wolfowitz): [`Design::equivalence`] is `max_i d_i / Σ_j w_j d_j`, 1 at the optimum. The
+//! weights are rounded to whole measurements by largest remainders.
+//!
+//! The information is that of the whitened least-squares estimate: it ranks designs. The
+//! uncertainty of what volver's Φ estimate of a designed plan gives is
+//! [`crate::uncertainty::linear`]'s, computed on the plan itself.
+
+use crate::nullspace::NullSpace;
+use faer::{Mat, Side};
+use rayon::prelude::*;
+use volver_core::machine::Commands;
+use volver_core::measure::MeasurementSet;
+use volver_core::model::Model;
+use volver_core::noise::TrackerNoise;
+use volver_core::plan::Plan;
+use volver_core::problem::{Problem, Residuals, Whitened};
+use volver_core::simulate::{Simulation, Truth};
+
+/// What a design minimises.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum Criterion {
+    /// The mean variance of the tool point over the work volume, after the set-up's transform.
+    I,
+    /// The volume of the parameters' confidence ellipsoid.
+    D,
+}
+
+impl std::str::FromStr for Criterion {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "i" | "I" => Ok(Criterion::I),
+            "d" | "D" => Ok(Criterion::D),
+            _ => Err(format!(
+                "unknown design criterion '{s}': i (I-optimal) or d (D-optimal)"
+            )),
+        }
+    }
+}
+
+/// The candidates' information, ready for designs.
+pub struct Space {
+    /// The candidates' whitened rows in the free coordinates (3 per candidate point, in
+    /// `candidates.steps()` order).
+    a: Mat<f64>,
+    /// `Q` of the I-criterion (nf × nf).
+    q: Mat<f64>,
+    /// The prior `R` (nf × nf).
+    r: Mat<f64>,
+    /// Candidate points.
+    m: usize,
+}
+
+/// A design: weights on the candidates and the measurements they round to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Design {
+    /// The optimal weight of each candidate point (`candidates.steps()` order), summing to 1.
+    pub weights: Vec<f64>,
+    /// The measurements of each candidate point, summing to the design's size.
+    pub counts: Vec<usize>,
+    /// The criterion of the rounded design: `tr(Q F⁻¹)` (mm², the tool point's mean variance
+    /// summed over its three coordinates) for I, `log det F` for D.
+    pub value: f64,
+    /// `max_i d_i / Σ_j w_j d_j` at the last iteration: 1 at the optimum.
+    pub equivalence: f64,
+    /// Iterations of the multiplicative algorithm.
+    pub iterations: usize,
+}
+
+/// The nominal measurements of `plan` on `model`'s machine: the points the model predicts with
+/// its initial parameters (zero errors, the machine file's tracker pose), without noise.
+pub fn nominal(model: &Model, plan: &Plan) -> volver_core::Result<MeasurementSet> {
+    let truth = Truth {
+        model: model.clone(),
+        params: model.initial_params(),
+    };
+    let mut sim = Simulation::new(plan.clone(), truth, 1);
+    sim.noise = TrackerNoise::NONE;
+    Ok(sim.run()?.measurements)
+}
+
+impl Space {
+    /// The information of every candidate point of `candidates` (every step of the plan) under
+    /// `noise`, and the I-criterion's `Q` for the tool offset `tool` (mm, from the last tool-side
+    /// axis) over the commands `grid`. `None` when the noise is zero (nothing to weigh by), a
+    /// Jacobian is not finite or the model's constraints are inconsistent.
+    pub fn new(
+        model: &Model,
+        candidates: &Plan,
+        noise: &TrackerNoise,
+        tool: [f64; 3],
+        grid: &[Commands],
+    ) -> Option<Space> {
+        let p0 = model.initial_params();
+        let data = nominal(model, candidates).ok()?;
+        let problem = Problem::new(model, &data).ok()?;
+        let whitened = Whitened::new(problem.clone(), noise)?;
+        let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
+        let (n, nf, m) = (p0.len(), ns.n_free(), problem.n_points());
+        let basis = ns.basis();
+        // The whitened Jacobian rows (3m × n), then reduced to z.
+        let rows: Vec<Vec<f64>> = (0..m)
+            .into_par_iter()
+            .map(|i| {
+                let mut row = vec![0.0; 3 * n];
+                whitened.residual_and_jacobian(i, &p0, &mut row);
+                row
+            })
+            .collect();
+        if rows.iter().flatten().any(|v| !v.is_finite()) {
+            return None;
+        }
+        let j = Mat::from_fn(3 * m, n, |r, c| rows[r / 3][(r % 3) * n + c]);
+        let a = crate::kernels::product(j.as_ref(), basis);
+        let tool_grid = crate::uncertainty::ToolGrid {
+            commands: grid.to_vec(),
+            tool,
+        };
+        let g = tool_grid.jacobian(model, &p0, true);
+        let gz = crate::kernels::product(g.as_ref(), basis);
+        let k = grid.len().max(1) as f64;
+        let q = Mat::from_fn(nf, nf, |r, c| {
+            (0..gz.nrows())
+                .map(|i| gz[(i, r)] * gz[(i, c)])
+                .sum::<f64>()
+                / k
+        });
+        let metric = crate::gauge::function_metric(model, &p0);
+        let prior = crate::uncertainty::HELD_PRIOR_MM;
+        let mz = crate::kernels::sandwich(metric.as_ref(), basis);
+        let r = Mat::from_fn(nf, nf, |i, c| mz[(i, c)] / (prior * prior));
+        Some(Space { a, q, r, m })
+    }
+
+    /// Candidate points.
+    pub fn len(&self) -> usize {
+        self.m
+    }
+
+    /// Whether there is no candidate.
+    pub fn is_empty(&self) -> bool {
+        self.m == 0
+    }
+
+    /// `F = R + Σ c_i F_i` for per-candidate multiplicities `c`.
+    fn information(&self, c: &[f64]) -> Mat<f64> {
+        let nf = self.r.nrows();
+        let scaled = Mat::from_fn(3 * self.m, nf, |row, col| {
+            c[row / 3].max(0.0).sqrt() * self.a[(row, col)]
+        });
+        let ata = crate::kernels::product(scaled.transpose(), scaled.as_ref());
+        Mat::from_fn(nf, nf, |i, j| self.r[(i, j)] + ata[(i, j)])
+    }
+
+    /// `F⁻¹` and `log det F` (`None` when F is not positive definite).
+    fn inverse(f: &Mat<f64>) -> Option<(Mat<f64>, f64)> {
+        let e = f.self_adjoint_eigen(Side::Lower).ok()?;
+        let (s, u) = (e.S().column_vector(), e.U());
+        let nf = f.nrows();
+        if (0..nf).any(|i| s[i].is_nan() || s[i] <= 0.0) {
+            return None;
+        }
+        let scaled = Mat::from_fn(nf, nf, |r, c| u[(r, c)] / s[c]);
+        let logdet = (0..nf).map(|i| s[i].ln()).sum();
+        Some((
+            crate::kernels::product(scaled.as_ref(), u.transpose()),
+            logdet,
+        ))
+    }
+
+    /// The criterion of per-candidate multiplicities `c` (measurements of each candidate point):
+    /// `tr(Q F⁻¹)` (mm²) for I, `log det F` for D.
+    pub fn value(&self, c: &[f64], criterion: Criterion) -> Option<f64> {
+        let (inv, logdet) = Space::inverse(&self.information(c))?;
+        Some(match criterion {
+            Criterion::I => (0..inv.nrows())
+                .map(|i| {
+                    (0..inv.nrows())
+                        .map(|k| self.q[(i, k)] * inv[(k, i)])
+                        .sum::<f64>()
+                })
+                .sum(),
+            Criterion::D => logdet,
+        })
+    }
+
+    /// The optimal design of `points` measurements: the multiplicative algorithm from uniform
+    /// weights for at most `iterations` iterations (or until the equivalence ratio is within
+    /// 1e-3 of 1), then rounded.
+    pub fn design(&self, points: usize, criterion: Criterion, iterations: usize) -> Option<Design> {
+        let m = self.m;
+        let total = points as f64;
+        let mut w = vec![1.0 / m as f64; m];
+        let mut equivalence = f64::INFINITY;
+        let mut done = 0;
+        for it in 0..iterations {
+            done = it + 1;
+            let c: Vec<f64> = w.iter().map(|x| x * total).collect();
+            let (inv, _) = Space::inverse(&self.information(&c))?;
+            let s = match criterion {
+                Criterion::I => {
+                    let qi = crate::kernels::product(self.q.as_ref(), inv.as_ref());
+                    crate::kernels::product(inv.as_ref(), qi.as_ref())
+                }
+                Criterion::D => inv,
+            };
+            // d_i = Σ over the candidate's rows of a S aᵀ.
+            let p = crate::kernels::product(self.a.as_ref(), s.as_ref());
+            let nf = s.nrows();
+            let d: Vec<f64> = (0..m)
+                .into_par_iter()
+                .map(|i| {
+                    (3 * i..3 * i + 3)
+                        .map(|row| (0..nf).map(|k| p[(row, k)] * self.a[(row, k)]).sum::<f64>())
+                        .sum()
+                })
+                .collect();
+            let mean: f64 = w.iter().zip(&d).map(|(a, b)| a * b).sum();
+            if !(mean > 0.0 && mean.is_finite()) {
+                return None;
+            }
+            equivalence = d.iter().fold(0.0_f64, |a, &b| a.max(b)) / mean;
+            if equivalence < 1.0 + 1e-3 {
+                break;
+            }
+            for (wi, di) in w.iter_mut().zip(&d) {
+                *wi *= (di / mean).max(0.0).sqrt();
+            }
+            let sum: f64 = w.iter().sum();
+            w.iter_mut().for_each(|x| *x /= sum);
+        }
+        let counts = round(&w, points);
+        let c: Vec<f64> = counts.iter().map(|&k| k as f64).collect();
+        Some(Design {
+            value: self.value(&c, criterion)?,
+            weights: w,
+            counts,
+            equivalence,
+            iterations: done,
+        })
+    }
+}
+
+/// Weights rounded to `points` whole measurements by largest remainders (ties to the earlier
+/// candidate).
+fn round(w: &[f64], points: usize) -> Vec<usize> {
+    let total = points as f64;
+    let mut counts: Vec<usize> = w.iter().map(|x| (x * total).floor() as usize).collect();
+    let mut left = points.saturating_sub(counts.iter().sum());
+    let mut order: Vec<usize> = (0..w.len()).collect();
+    order.sort_by(|&a, &b| {
+        let ra = w[a] * total - counts[a] as f64;
+        let rb = w[b] * total - counts[b] as f64;
+        rb.total_cmp(&ra).then(a.cmp(&b))
+    });
+    for &i in order.iter().cycle().take(w.len() * 2) {
+        if left == 0 {
+            break;
+        }
+        counts[i] += 1;
+        left -= 1;
+    }
+    counts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rounding_keeps_the_total_and_the_largest_remainders() {
+        assert_eq!(round(&[0.5, 0.3, 0.2], 10), vec![5, 3, 2]);
+        assert_eq!(round(&[0.45, 0.35, 0.2], 4), vec![2, 1, 1]);
+        assert_eq!(round(&[1.0 / 3.0; 3], 4).iter().sum::<usize>(), 4);
+    }
+}

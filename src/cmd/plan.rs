@@ -1,0 +1,234 @@
+//! `volver plan`: designs a verification (poses, reflectors, order) for the tool point that
+//! compensation needs, writes it as a plan file (`simulate --plan-file`) and a measuring
+//! program, and with `--compare` runs plans on simulated truths side by side.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use std::path::{Path, PathBuf};
+use volver::core::fsio::write_atomic;
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::{Plan, file};
+use volver::planning::{Request, compare, plan};
+
+/// Arguments of `volver plan`.
+#[derive(Args)]
+pub struct PlanArgs {
+    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    #[arg(long)]
+    machine: Option<PathBuf>,
+    /// Error model (TOML) the plan must identify; the paper's model with the embedded machine.
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// The tracker's noise (`paper`, `normal:…`, `uniform:…`, `mpe:A_UM,B_UM_PER_M`); default:
+    /// the machine file's `[tracker] noise`, else the paper's.
+    #[arg(long)]
+    noise: Option<String>,
+    /// Measurements in the plan (the reference pose's repeats included).
+    #[arg(long, conflicts_with = "hours")]
+    points: Option<usize>,
+    /// The time there is (h); with --seconds-per-point it sets the number of measurements.
+    #[arg(long)]
+    hours: Option<f64>,
+    /// Measuring time per point, moves and dwell included (s).
+    #[arg(long, default_value_t = volver::core::simulate::DEFAULT_SECONDS_PER_POINT)]
+    seconds_per_point: f64,
+    /// The design criterion: i (the tool point's mean variance over the volume after the
+    /// set-up's transform) or d (the parameters' confidence volume).
+    #[arg(long, default_value = "i")]
+    criterion: String,
+    /// The tool point, mm in the frame of the last tool-side axis; default: the reflectors'
+    /// centroid.
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    tool_offset: Option<String>,
+    /// Candidate positions per axis, about (a round step over the travel; a full turn without
+    /// its end).
+    #[arg(long, default_value_t = 13)]
+    per_axis: usize,
+    /// Visits of the reference pose between the first and the last measurement.
+    #[arg(long, default_value_t = 8)]
+    repeats: usize,
+    /// Seed of the measuring order (and of the truths with --compare).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Plan file to write (CSV: order, the axes, reflector), read by `simulate --plan-file`.
+    #[arg(long, required_unless_present = "compare")]
+    out: Option<PathBuf>,
+    /// Measuring program to write (G-code: a move and a dwell per pose).
+    #[arg(long)]
+    gcode: Option<PathBuf>,
+    /// Dwell at each pose for the machine and the tracker to settle (s).
+    #[arg(long, default_value_t = 2.0)]
+    dwell_s: f64,
+    /// Compares plans instead: comma-separated presets (test4 …) or plan files.
+    #[arg(long, value_name = "PLAN,PLAN…")]
+    compare: Option<String>,
+    /// Truths per plan with --compare (seeds 1…N).
+    #[arg(long, default_value_t = 20)]
+    seeds: u64,
+    /// The hidden effect whose detection --compare counts (`none`: skip the diagnoses).
+    #[arg(long, default_value = "thermal-drift=10,-5,60")]
+    drift: String,
+    /// Print one JSON object.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Runs `volver plan`.
+pub fn run(a: PlanArgs) -> Result<()> {
+    let (_, model) = volver::inputs::machine_and_model(a.machine.as_deref(), a.model.as_deref())?;
+    let noise = match &a.noise {
+        Some(t) => TrackerNoise::from_text(t)?,
+        None => model
+            .machine()
+            .tracker()
+            .noise
+            .unwrap_or(TrackerNoise::PAPER),
+    };
+    let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
+    if let Some(list) = &a.compare {
+        return compare_plans(&a, &model, list, &noise, tool);
+    }
+    if !(a.seconds_per_point.is_finite() && a.seconds_per_point > 0.0) {
+        bail!(
+            "--seconds-per-point {}: a positive number of seconds",
+            a.seconds_per_point
+        );
+    }
+    let points = match (a.points, a.hours) {
+        (Some(n), _) => n,
+        (None, Some(h)) if h.is_finite() && h > 0.0 => (h * 3600.0 / a.seconds_per_point) as usize,
+        (None, Some(h)) => bail!("--hours {h}: a positive number of hours"),
+        (None, None) => 1040,
+    };
+    let request = Request {
+        points,
+        criterion: a.criterion.parse().map_err(anyhow::Error::msg)?,
+        tool,
+        noise,
+        per_axis: a.per_axis,
+        seed: a.seed,
+        repeats: a.repeats,
+        seconds_per_point: a.seconds_per_point,
+        ..Request::default()
+    };
+    let planned = plan(&model, &request)?;
+    let machine = model.machine();
+    let r = &planned.report;
+    let title = format!(
+        "{} ({} noise, tool at {:?} mm, seed {})",
+        planned.plan.name, noise, tool, a.seed
+    );
+    if let Some(out) = &a.out {
+        write_atomic(out, file::to_csv(&planned.plan, machine, &title))
+            .with_context(|| format!("writing {}", out.display()))?;
+    }
+    if let Some(path) = &a.gcode {
+        write_atomic(path, file::gcode(&planned.plan, machine, a.dwell_s, &title))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(r)?);
+        return Ok(());
+    }
+    println!("volver plan — {title}");
+    println!(
+        "  {} measurements at {} poses ({}), {:.1} h at {} s per point; chosen among {} candidate points in {:.1} s",
+        r.points,
+        r.poses,
+        r.reflectors
+            .iter()
+            .map(|(id, n)| format!("{id} × {n}"))
+            .collect::<Vec<_>>()
+            .join(", "),
+        r.duration_h,
+        a.seconds_per_point,
+        r.candidates,
+        r.time_s
+    );
+    println!(
+        "  design: {:?}-optimal, equivalence ratio {:.3} (1 at the optimum) after {} iterations",
+        r.criterion, r.equivalence, r.iterations
+    );
+    println!(
+        "  predicted U (k = 2) of the identified tool point after the set-up's transform: mean {:.2} µm, largest {:.2} µm over the volume",
+        r.u95_mean_um, r.u95_max_um
+    );
+    println!(
+        "  order: shuffled; time's largest correlation with an axis function {:.3} ({}); reference pose {:?} visited {} times",
+        r.aliasing.0, r.aliasing.1, r.reference, r.reference_visits
+    );
+    if r.unidentified.is_empty() {
+        println!("  every combination of the model is identified");
+    } else {
+        println!(
+            "  {} combinations stay unidentified (held by the gauge):",
+            r.unidentified.len()
+        );
+        for h in &r.unidentified {
+            println!("    {h}");
+        }
+        if r.unidentifiable_by_candidates.len() == r.unidentified.len() {
+            println!(
+                "  no candidate pose of these reflectors identifies them: a reflector elsewhere on the tool side (or another tool offset) is needed"
+            );
+        }
+    }
+    for (what, path) in [("plan file", &a.out), ("measuring program", &a.gcode)] {
+        if let Some(p) = path {
+            println!("  {what}: {}", p.display());
+        }
+    }
+    Ok(())
+}
+
+/// `--compare`: the plans side by side on simulated truths.
+fn compare_plans(
+    a: &PlanArgs,
+    model: &volver::core::model::Model,
+    list: &str,
+    noise: &TrackerNoise,
+    tool: [f64; 3],
+) -> Result<()> {
+    let machine = model.machine();
+    let mut plans = Vec::new();
+    for item in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let plan = if Path::new(item).exists() {
+            file::load(machine, Path::new(item))?
+        } else {
+            Plan::preset(machine, item)
+                .with_context(|| format!("--compare {item}: neither a plan file nor a preset"))?
+        };
+        plans.push((item.to_string(), plan));
+    }
+    let drift = (a.drift != "none").then_some(a.drift.as_str());
+    let rows = compare(model, &plans, a.seeds, noise, tool, drift)?;
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "volver plan --compare — {} truths per plan ({} noise, tool at {:?} mm); tool point after the set-up's transform",
+        a.seeds, noise, tool
+    );
+    println!(
+        "| plan | points | predicted U mean µm | realised EMM µm (mean of seeds) | coverage of U | {} found |",
+        drift.unwrap_or("drift")
+    );
+    println!("|---|---|---|---|---|---|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.2} | {:.2} | {:.1} % | {} |",
+            r.label,
+            r.points,
+            r.u95_mean_um,
+            r.realised_emm_um,
+            100.0 * r.coverage,
+            if r.drift_runs > 0 {
+                format!("{} of {}", r.drift_found, r.drift_runs)
+            } else {
+                "–".to_string()
+            }
+        );
+    }
+    Ok(())
+}

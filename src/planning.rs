@@ -1,0 +1,523 @@
+//! Measurement planning (`volver plan`): the test that identifies what compensation needs, in the
+//! points there is time for, in an order that keeps drift separable; and the study that compares
+//! plans on simulated truths.
+//!
+//! [`plan`] chooses the poses and reflectors by an optimal-design criterion
+//! ([`volver_solvers::design`]: I-optimal for the tool point over the work volume, or
+//! D-optimal) among every reflector at every pose of a fine candidate grid, orders them
+//! ([`volver_core::plan::order`]) with a reference pose repeated over the test, and predicts what
+//! the plan will give: the U (k = 2) of the identified tool point over the volume after the
+//! set-up's transform (volver's Φ estimate, [`volver_solvers::uncertainty::linear`] on the
+//! plan's nominal points under the tracker's noise) and the combinations it leaves unidentified.
+//! [`compare`] runs plans on simulated truths: the realised tool-point error, the coverage of
+//! the predicted U, and whether a hidden drift is found.
+
+use anyhow::{Context, Result, anyhow};
+use serde::Serialize;
+use volver_core::machine::{Commands, Machine};
+use volver_core::model::Model;
+use volver_core::noise::TrackerNoise;
+use volver_core::plan::order::{self, Visit};
+use volver_core::plan::{AxisRange, Plan, Step};
+use volver_core::problem::Problem;
+use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
+use volver_solvers::design::{Criterion, Space};
+use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
+
+/// What to plan.
+#[derive(Clone, Debug)]
+pub struct Request {
+    /// Measurements in the plan (the reference pose's repeats included).
+    pub points: usize,
+    /// The design criterion.
+    pub criterion: Criterion,
+    /// The tool offset compensation is for (mm, from the last tool-side axis).
+    pub tool: [f64; 3],
+    /// The tracker's noise.
+    pub noise: TrackerNoise,
+    /// Candidate values per axis: linear axes get this many evenly over their travel, full-turn
+    /// rotary axes this many over the turn (the end left out: it is the start).
+    pub per_axis: usize,
+    /// Seed of the measuring order.
+    pub seed: u64,
+    /// Visits of the reference pose between the first and the last (which are visits too).
+    pub repeats: usize,
+    /// Measuring time per point, for the duration (s).
+    pub seconds_per_point: f64,
+    /// Iterations of the design algorithm at most.
+    pub iterations: usize,
+}
+
+impl Default for Request {
+    fn default() -> Self {
+        Request {
+            points: 1040,
+            criterion: Criterion::I,
+            tool: [0.0; 3],
+            noise: TrackerNoise::PAPER,
+            per_axis: 13,
+            seed: 1,
+            repeats: 8,
+            seconds_per_point: volver_core::simulate::DEFAULT_SECONDS_PER_POINT,
+            iterations: 300,
+        }
+    }
+}
+
+/// A planned test and what it promises.
+#[derive(Clone, Debug)]
+pub struct Planned {
+    /// The plan, in measuring order.
+    pub plan: Plan,
+    /// What was chosen and predicted.
+    pub report: Report,
+}
+
+/// What `volver plan` prints (its `--json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// The criterion.
+    pub criterion: Criterion,
+    /// Measurements, distinct poses, reflectors used (ids).
+    pub points: usize,
+    /// Distinct poses.
+    pub poses: usize,
+    /// Reflector ids the plan uses, and the measurements of each.
+    pub reflectors: Vec<(String, usize)>,
+    /// Candidate points (every reflector at every candidate pose).
+    pub candidates: usize,
+    /// Duration at the given time per point (h).
+    pub duration_h: f64,
+    /// The design's equivalence ratio (1 at the optimum) and iterations.
+    pub equivalence: f64,
+    /// Iterations of the design algorithm.
+    pub iterations: usize,
+    /// The tool offset (mm).
+    pub tool_mm: [f64; 3],
+    /// Predicted U (k = 2) of the identified tool point over the volume after the set-up's
+    /// transform: mean and largest over the grid (µm, largest coordinate at each point).
+    pub u95_mean_um: f64,
+    /// See `u95_mean_um`.
+    pub u95_max_um: f64,
+    /// The combinations the plan leaves unidentified (the gauge holds them), each as its
+    /// leading parameters.
+    pub unidentified: Vec<String>,
+    /// The combinations no candidate identifies: a reflector elsewhere or another tool offset
+    /// is needed for these.
+    pub unidentifiable_by_candidates: Vec<String>,
+    /// The reference pose (file units) and its visits.
+    pub reference: Vec<f64>,
+    /// Visits of the reference pose (first, last and between).
+    pub reference_visits: usize,
+    /// The largest correlation of time with an axis function, and which.
+    pub aliasing: (f64, String),
+    /// Wall time of the planning (s).
+    pub time_s: f64,
+}
+
+/// The candidate grid: about `per_axis` values over each axis' travel, at a round step (1, 2,
+/// 2.5 or 5 times a power of ten in file units, the nearest to an even division; the end of the
+/// travel is always a candidate), a full turn at a divisor of 360° without its end.
+///
+/// ```
+/// let m = volver_core::machine::Machine::default_xcfz();
+/// let g = volver::planning::candidate_grid(&m, 13).unwrap();
+/// // X 0…1400 step 100, C 0…330 step 30, Z 0…600 step 50.
+/// assert_eq!(g.positions.len(), 15 * 12 * 13);
+/// ```
+pub fn candidate_grid(machine: &Machine, per_axis: usize) -> Result<Plan> {
+    let per_axis = per_axis.max(2);
+    let round_step = |raw: f64| {
+        let p = 10f64.powf(raw.log10().floor());
+        [1.0, 2.0, 2.5, 5.0, 10.0]
+            .iter()
+            .map(|m| m * p)
+            .min_by(|a, b| (a - raw).abs().total_cmp(&(b - raw).abs()))
+            .unwrap_or(raw)
+    };
+    let ranges: Vec<AxisRange> = machine
+        .axes()
+        .iter()
+        .map(|ax| {
+            let (a, b) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
+            let full_turn = ax.axis.is_rotary() && (b - a) >= 360.0 - 1e-9;
+            let span = b - a;
+            let step = if span <= 0.0 {
+                0.0
+            } else if full_turn {
+                // A divisor of the turn, so that the values repeat turn after turn.
+                let raw = span / per_axis as f64;
+                [5.0, 10.0, 15.0, 20.0, 30.0, 45.0, 60.0, 90.0]
+                    .into_iter()
+                    .min_by(|a, b| (a - raw).abs().total_cmp(&(b - raw).abs()))
+                    .unwrap_or(raw)
+            } else {
+                round_step(span / (per_axis - 1) as f64)
+            };
+            let end = if full_turn { b - step } else { b };
+            AxisRange {
+                axis: ax.axis,
+                start: a,
+                end: if step > 0.0 { end } else { a },
+                step,
+            }
+        })
+        .collect();
+    Ok(Plan::grid(machine, &ranges)?)
+}
+
+/// The leading parameters of each held combination, as text.
+fn held_text(model: &Model, gauge: Option<&volver_solvers::gauge::Gauge>) -> Vec<String> {
+    let names: Vec<&str> = model.params().iter().map(|p| p.name.as_str()).collect();
+    gauge
+        .map(|g| {
+            g.held
+                .iter()
+                .map(|h| {
+                    h.parameters
+                        .iter()
+                        .take(3)
+                        .map(|(j, s)| format!("{} ({:+.2})", names[*j], s))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                })
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+/// The gauge of a plan at the nominal machine: what it leaves unidentified.
+fn nominal_gauge(model: &Model, plan: &Plan) -> Result<Option<volver_solvers::gauge::Gauge>> {
+    let data = volver_solvers::design::nominal(model, plan)?;
+    let problem = Problem::new(model, &data)?;
+    let p0 = model.initial_params();
+    let task = volver_solvers::Task::new(problem);
+    Ok(volver_solvers::gauge::gauge(
+        &task,
+        &p0,
+        &p0,
+        volver_solvers::gauge::TOLERANCE,
+    ))
+}
+
+/// The predicted U (k = 2, µm) of the tool point `tool` over `grid` after the set-up's transform
+/// for a plan identified by volver's Φ estimate under `noise`: mean and largest of each point's
+/// largest coordinate.
+pub fn predicted_u(
+    model: &Model,
+    plan: &Plan,
+    noise: &TrackerNoise,
+    tool: [f64; 3],
+    grid: &[Commands],
+) -> Result<(f64, f64)> {
+    let data = volver_solvers::design::nominal(model, plan)?;
+    let problem = Problem::new(model, &data)?;
+    let p0 = model.initial_params();
+    let gauge = nominal_gauge(model, plan)?;
+    let cov = volver_solvers::uncertainty::linear(
+        &problem,
+        gauge.as_ref(),
+        &p0,
+        volver_solvers::Objective::Phi,
+        NoiseModel::Tracker(*noise),
+    )
+    .ok_or_else(|| anyhow!("the plan's covariance could not be computed"))?;
+    let tg = ToolGrid {
+        commands: grid.to_vec(),
+        tool,
+    };
+    let us: Vec<f64> = tg
+        .uncertainty(model, &p0, &cov, true)
+        .iter()
+        .map(|u| u.u95_max_mm() * 1e3)
+        .collect();
+    let mean = us.iter().sum::<f64>() / us.len().max(1) as f64;
+    Ok((mean, us.iter().copied().fold(0.0, f64::max)))
+}
+
+/// Plans a test of `request.points` measurements for `model` (see the module documentation).
+pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
+    let t0 = std::time::Instant::now();
+    let machine = model.machine();
+    if request.noise.is_none() {
+        return Err(anyhow!(
+            "planning needs the tracker's noise (--noise or the machine file's [tracker] noise): \
+             without it every design is equally good"
+        ));
+    }
+    let candidates = candidate_grid(machine, request.per_axis)?;
+    let grid = crate::uncertainty::default_grid(machine, 5)?;
+    let space = Space::new(
+        model,
+        &candidates,
+        &request.noise,
+        request.tool,
+        &grid.positions,
+    )
+    .ok_or_else(|| anyhow!("the candidates' Jacobians are not finite at the nominal machine"))?;
+    let steps = candidates.steps();
+    // The reference pose's visits come out of the budget: the first design tells which pose
+    // it is (the one the design measures most), the second is made for what is left.
+    let first = space
+        .design(request.points, request.criterion, request.iterations)
+        .ok_or_else(|| anyhow!("the design's information matrix is singular"))?;
+    let mut per_pose = vec![0usize; candidates.positions.len()];
+    for (s, &c) in steps.iter().zip(&first.counts) {
+        per_pose[s.position] += c;
+    }
+    let reference_pose = (0..per_pose.len())
+        .max_by_key(|&p| (per_pose[p], std::cmp::Reverse(p)))
+        .unwrap_or(0);
+    let reference_reflectors: Vec<usize> = steps
+        .iter()
+        .zip(&first.counts)
+        .filter(|(s, c)| s.position == reference_pose && **c > 0)
+        .map(|(s, _)| s.reflector)
+        .collect();
+    let visits_of_reference = request.repeats + 2;
+    let reserved = visits_of_reference * reference_reflectors.len();
+    if reserved >= request.points {
+        return Err(anyhow!(
+            "{} points leave nothing beside the reference pose's {reserved} measurements",
+            request.points
+        ));
+    }
+    let design = space
+        .design(
+            request.points - reserved,
+            request.criterion,
+            request.iterations,
+        )
+        .ok_or_else(|| anyhow!("the design's information matrix is singular"))?;
+    // Visits: a pose measured k times at a reflector is visited k times.
+    let mut visits = Vec::new();
+    for (pose, _) in candidates.positions.iter().enumerate() {
+        let mine: Vec<(usize, usize)> = steps
+            .iter()
+            .zip(&design.counts)
+            .filter(|(s, c)| s.position == pose && **c > 0)
+            .map(|(s, c)| (s.reflector, *c))
+            .collect();
+        let most = mine.iter().map(|m| m.1).max().unwrap_or(0);
+        for k in 0..most {
+            visits.push(Visit {
+                position: pose,
+                reflectors: mine.iter().filter(|m| m.1 > k).map(|m| m.0).collect(),
+            });
+        }
+    }
+    let reference = Visit {
+        position: reference_pose,
+        reflectors: reference_reflectors,
+    };
+    let (sequence, _) = order::sequence(
+        machine,
+        &candidates.positions,
+        visits,
+        Some((reference.clone(), request.repeats)),
+        request.seed,
+        50,
+    );
+    let planned = compact(
+        &candidates.positions,
+        &sequence,
+        format!(
+            "{}-optimal, {} points",
+            match request.criterion {
+                Criterion::I => "I",
+                Criterion::D => "D",
+            },
+            request.points
+        ),
+    );
+    let aliasing = order::aliasing(machine, &planned.positions, &planned.steps());
+    let (u95_mean_um, u95_max_um) = predicted_u(
+        model,
+        &planned,
+        &request.noise,
+        request.tool,
+        &grid.positions,
+    )?;
+    let unidentified = held_text(model, nominal_gauge(model, &planned)?.as_ref());
+    let unidentifiable_by_candidates =
+        held_text(model, nominal_gauge(model, &candidates)?.as_ref());
+    let reflectors = planned
+        .reflectors
+        .iter()
+        .map(|&r| {
+            (
+                machine.reflectors()[r].id.clone(),
+                planned.steps().iter().filter(|s| s.reflector == r).count(),
+            )
+        })
+        .collect();
+    let n = planned.n_points();
+    Ok(Planned {
+        report: Report {
+            criterion: request.criterion,
+            points: n,
+            poses: planned.positions.len(),
+            reflectors,
+            candidates: space.len(),
+            duration_h: n as f64 * request.seconds_per_point / 3600.0,
+            equivalence: design.equivalence,
+            iterations: design.iterations,
+            tool_mm: request.tool,
+            u95_mean_um,
+            u95_max_um,
+            unidentified,
+            unidentifiable_by_candidates,
+            reference: machine
+                .axes()
+                .iter()
+                .enumerate()
+                .map(|(k, ax)| ax.to_file_units(candidates.positions[reference_pose].0[k]))
+                .collect(),
+            reference_visits: visits_of_reference,
+            aliasing,
+            time_s: t0.elapsed().as_secs_f64(),
+        },
+        plan: planned,
+    })
+}
+
+/// A plan of `sequence` over `positions` keeping only the positions it visits, in order of first
+/// visit.
+fn compact(positions: &[Commands], sequence: &[Step], name: String) -> Plan {
+    let mut index = vec![usize::MAX; positions.len()];
+    let mut kept = Vec::new();
+    let mut reflectors = Vec::new();
+    let steps = sequence
+        .iter()
+        .map(|s| {
+            if index[s.position] == usize::MAX {
+                index[s.position] = kept.len();
+                kept.push(positions[s.position]);
+            }
+            if !reflectors.contains(&s.reflector) {
+                reflectors.push(s.reflector);
+            }
+            Step {
+                position: index[s.position],
+                reflector: s.reflector,
+            }
+        })
+        .collect();
+    reflectors.sort_unstable();
+    Plan {
+        name,
+        positions: kept,
+        reflectors,
+        sequence: Some(steps),
+    }
+}
+
+/// One plan of a comparison.
+#[derive(Clone, Debug, Serialize)]
+pub struct Compared {
+    /// The plan's label (as given).
+    pub label: String,
+    /// Its measurements.
+    pub points: usize,
+    /// Predicted U (k = 2) of the tool point after the set-up's transform, mean over the grid
+    /// (µm).
+    pub u95_mean_um: f64,
+    /// The realised error of the identified tool point against the truth after the set-up's
+    /// transform: EMM over the grid, mean over the seeds (µm).
+    pub realised_emm_um: f64,
+    /// The same per seed (µm).
+    pub realised_per_seed_um: Vec<f64>,
+    /// The share of grid coordinates whose realised deviation is within the U predicted for
+    /// the fit of that seed, over every seed.
+    pub coverage: f64,
+    /// Seeds where a hidden drift (`drift`) was the diagnosis' finding, of those run.
+    pub drift_found: usize,
+    /// Seeds run with the drift.
+    pub drift_runs: usize,
+}
+
+/// Compares `plans` on `seeds` simulated truths (random errors of `model`'s structure at the
+/// default magnitudes, seeds 1…`seeds`, the tracker's `noise`): see [`Compared`]. With `drift`
+/// (an effect such as `thermal-drift=10,-5,60`), each seed is also simulated with it hidden
+/// and diagnosed with `model`.
+pub fn compare(
+    model: &Model,
+    plans: &[(String, Plan)],
+    seeds: u64,
+    noise: &TrackerNoise,
+    tool: [f64; 3],
+    drift: Option<&str>,
+) -> Result<Vec<Compared>> {
+    let machine = model.machine();
+    let grid = crate::uncertainty::default_grid(machine, 5)?;
+    let tg = ToolGrid {
+        commands: grid.positions.clone(),
+        tool,
+    };
+    let drift = drift.map(Effect::parse).transpose()?;
+    let mut rows = Vec::new();
+    for (label, plan) in plans {
+        let (u95_mean_um, _) = predicted_u(model, plan, noise, tool, &grid.positions)?;
+        let mut realised = Vec::new();
+        let (mut inside, mut total) = (0usize, 0usize);
+        let (mut found, mut runs) = (0usize, 0usize);
+        for seed in 1..=seeds {
+            let truth = Truth::random(machine, model.spec(), &Magnitudes::default(), seed)?;
+            let mut sim = Simulation::new(plan.clone(), truth.clone(), seed);
+            sim.noise = *noise;
+            let data = sim.run()?.measurements;
+            let problem = Problem::new(model, &data)?;
+            let id = volver_solvers::strategy::fit(problem.clone());
+            if id.termination.failed() {
+                return Err(anyhow!("{label}, seed {seed}: {}", id.termination));
+            }
+            let base = tg.points(&truth.model, &truth.params);
+            let d = tg.deviations(model, &id.params, &base, true);
+            let emm = (0..base.len())
+                .map(|k| (d[3 * k].powi(2) + d[3 * k + 1].powi(2) + d[3 * k + 2].powi(2)).sqrt())
+                .sum::<f64>()
+                / base.len() as f64;
+            realised.push(emm * 1e3);
+            let cov = volver_solvers::uncertainty::linear(
+                &problem,
+                id.gauge.as_ref(),
+                &id.params,
+                volver_solvers::Objective::Phi,
+                NoiseModel::Tracker(*noise),
+            )
+            .with_context(|| format!("{label}, seed {seed}: the fit's covariance"))?;
+            for (k, u) in tg
+                .uncertainty(model, &id.params, &cov, true)
+                .iter()
+                .enumerate()
+            {
+                let u = u.u95_mm();
+                for c in 0..3 {
+                    total += 1;
+                    inside += usize::from(d[3 * k + c].abs() <= u[c]);
+                }
+            }
+            if let Some(effect) = &drift {
+                let mut sim = Simulation::new(plan.clone(), truth, seed);
+                sim.noise = *noise;
+                sim.effects = vec![effect.clone()];
+                let data = sim.run()?.measurements;
+                let diagnosis = crate::diagnosis::diagnose_with(model, &data, Some(noise))?;
+                runs += 1;
+                let name = effect.id();
+                found += usize::from(diagnosis.finding().is_some_and(|c| c.id.starts_with(name)));
+            }
+        }
+        rows.push(Compared {
+            label: label.clone(),
+            points: plan.n_points(),
+            u95_mean_um,
+            realised_emm_um: realised.iter().sum::<f64>() / realised.len().max(1) as f64,
+            realised_per_seed_um: realised,
+            coverage: inside as f64 / total.max(1) as f64,
+            drift_found: found,
+            drift_runs: runs,
+        });
+    }
+    Ok(rows)
+}

@@ -1,0 +1,261 @@
+//! `volver plan`: the plan is what the machine runs (plan file → simulate, G-code → the poses it
+//! moves through), the design is optimal for its criterion, and on simulated truths the planned
+//! test beats test 4 with an honest U and finds a hidden drift.
+
+mod common;
+
+use common::volver;
+use volver::core::gcode::{Linearise, Program};
+use volver::core::machine::Machine;
+use volver::core::model::Model;
+use volver::core::noise::TrackerNoise;
+use volver::core::plan::{Plan, file};
+use volver::planning::{Request, candidate_grid, compare, plan};
+use volver::solvers::design::{Criterion, Space};
+
+/// A small plan: 5 candidates per axis, 240 points.
+fn small(criterion: Criterion, seed: u64) -> volver::planning::Planned {
+    let model = Model::default_xcfz();
+    let request = Request {
+        points: 240,
+        criterion,
+        per_axis: 5,
+        repeats: 3,
+        seed,
+        iterations: 150,
+        tool: volver::compensation::reflector_centroid(&model),
+        ..Request::default()
+    };
+    plan(&model, &request).unwrap()
+}
+
+/// Rows of a plan file read independently of the reader: (axis values, reflector id).
+fn rows(text: &str) -> Vec<(Vec<f64>, String)> {
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[1..4].iter().map(|v| v.parse().unwrap()).collect(),
+                f[4].to_string(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn the_plan_file_and_the_program_are_what_simulate_and_the_machine_run() {
+    let m = Machine::default_xcfz();
+    let planned = small(Criterion::I, 3);
+    let r = &planned.report;
+    assert_eq!(r.points, 240);
+    assert_eq!(planned.plan.n_points(), 240);
+    assert_eq!(r.reference_visits, 5);
+    assert!(
+        r.aliasing.0 < 0.15,
+        "time aliases onto {}: {}",
+        r.aliasing.1,
+        r.aliasing.0
+    );
+    let dir = std::env::temp_dir().join(format!("volver-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("plan.csv");
+    let text = file::to_csv(&planned.plan, &m, "test");
+    std::fs::write(&csv, &text).unwrap();
+    let want = rows(&text);
+    assert_eq!(want.len(), 240);
+    // simulate measures the rows in the file's order.
+    let out = dir.join("sim");
+    let o = volver(&[
+        "simulate",
+        "--plan-file",
+        csv.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--noise",
+        "none",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let measured = std::fs::read_to_string(out.join("measurements.csv")).unwrap();
+    let got: Vec<(Vec<f64>, String)> = measured
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (
+                f[0..3].iter().map(|v| v.parse().unwrap()).collect(),
+                f[3].to_string(),
+            )
+        })
+        .collect();
+    assert_eq!(got.len(), want.len());
+    for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(g.1, w.1, "row {i}: reflector");
+        for k in 0..3 {
+            assert!(
+                (g.0[k] - w.0[k]).abs() < 1e-6,
+                "row {i}: {:?} against {:?}",
+                g.0,
+                w.0
+            );
+        }
+    }
+    // The program moves through the poses of the file's rows, a visit per run of rows at one
+    // pose, with a dwell after each move.
+    let nc = file::gcode(&planned.plan, &m, 1.5, "test");
+    let program = Program::parse(&nc, "plan.nc", &m, &Linearise::default()).unwrap();
+    let moves = program.points();
+    let mut visits: Vec<&Vec<f64>> = Vec::new();
+    let mut last: Option<(&Vec<f64>, Vec<&str>)> = None;
+    for (pose, id) in &want {
+        match &mut last {
+            Some((p, ids)) if *p == pose && !ids.contains(&id.as_str()) => ids.push(id),
+            _ => {
+                visits.push(pose);
+                last = Some((pose, vec![id.as_str()]));
+            }
+        }
+    }
+    assert_eq!(moves.len(), visits.len());
+    for (i, (mv, pose)) in moves.iter().zip(&visits).enumerate() {
+        assert!(mv.1, "move {i} is not a rapid");
+        for k in 0..3 {
+            assert!(
+                (mv.0[k] - pose[k]).abs() < 1e-5,
+                "move {i}: {:?} against {pose:?}",
+                &mv.0[..3]
+            );
+        }
+    }
+    assert_eq!(nc.matches("G4 P1.5").count(), visits.len());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_design_is_optimal_for_its_criterion() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let candidates = candidate_grid(&m, 5).unwrap();
+    let grid = volver::uncertainty::default_grid(&m, 4).unwrap();
+    let tool = volver::compensation::reflector_centroid(&model);
+    let space = Space::new(
+        &model,
+        &candidates,
+        &TrackerNoise::PAPER,
+        tool,
+        &grid.positions,
+    )
+    .unwrap();
+    let n = space.len();
+    let points = 300;
+    for criterion in [Criterion::I, Criterion::D] {
+        let d = space.design(points, criterion, 400).unwrap();
+        assert_eq!(d.counts.iter().sum::<usize>(), points);
+        assert!(
+            d.equivalence < 1.05,
+            "{criterion:?}: equivalence {}",
+            d.equivalence
+        );
+        let weights: f64 = d.weights.iter().sum();
+        assert!((weights - 1.0).abs() < 1e-9);
+        // Better than spreading the points evenly over the candidates, and than 20 random
+        // designs of the same size (any optimum must be).
+        let better = |other: &[f64]| {
+            let v = space.value(other, criterion).unwrap();
+            match criterion {
+                Criterion::I => d.value <= v * 1.001,
+                Criterion::D => d.value >= v - 1e-3,
+            }
+        };
+        let even = vec![points as f64 / n as f64; n];
+        assert!(better(&even), "{criterion:?}: worse than even");
+        let mut rng = volver::core::random::Rng::new(5);
+        for _ in 0..20 {
+            let mut c = vec![0.0; n];
+            for _ in 0..points {
+                c[((rng.uniform() * n as f64) as usize).min(n - 1)] += 1.0;
+            }
+            assert!(better(&c), "{criterion:?}: worse than a random design");
+        }
+    }
+}
+
+#[test]
+fn a_plan_without_noise_or_points_is_refused() {
+    let model = Model::default_xcfz();
+    let none = Request {
+        noise: TrackerNoise::NONE,
+        ..Request::default()
+    };
+    let e = plan(&model, &none).unwrap_err().to_string();
+    assert!(e.contains("noise"), "{e}");
+    let few = Request {
+        points: 10,
+        per_axis: 4,
+        ..Request::default()
+    };
+    let e = plan(&model, &few).unwrap_err().to_string();
+    assert!(e.contains("reference pose"), "{e}");
+    let o = volver(&["plan", "--criterion", "q", "--out", "x.csv"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown design criterion 'q'"));
+}
+
+/// 20 truths each for test 4 and a plan of the same size (fixed seeds, the paper's noise): the
+/// planned test's realised tool-point error after the set-up's transform is below test 4's, the
+/// predicted U covers the realised deviations in 90–99 % of the grid's coordinates for both, and
+/// a drift of issue 5's size hidden in the planned sequence is the diagnosis' finding in at
+/// least 18 of 20.
+#[test]
+#[cfg_attr(
+    debug_assertions,
+    ignore = "release only: cargo test --release --test planning"
+)]
+fn the_planned_test_beats_test_4_with_an_honest_u_and_finds_drift() {
+    let m = Machine::default_xcfz();
+    let model = Model::default_xcfz();
+    let tool = volver::compensation::reflector_centroid(&model);
+    let planned = plan(
+        &model,
+        &Request {
+            tool,
+            ..Request::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(planned.plan.n_points(), 1040);
+    let test4 = Plan::preset(&m, "test4").unwrap();
+    let rows = compare(
+        &model,
+        &[
+            ("test4".to_string(), test4),
+            ("planned".to_string(), planned.plan),
+        ],
+        20,
+        &TrackerNoise::PAPER,
+        tool,
+        Some("thermal-drift=10,-5,60"),
+    )
+    .unwrap();
+    for r in &rows {
+        eprintln!(
+            "{}: U mean {:.2} µm, realised {:.2} µm, coverage {:.3}, drift {} of {}",
+            r.label, r.u95_mean_um, r.realised_emm_um, r.coverage, r.drift_found, r.drift_runs
+        );
+        assert!(
+            (0.90..=0.99).contains(&r.coverage),
+            "{}: coverage {}",
+            r.label,
+            r.coverage
+        );
+    }
+    assert!(
+        rows[1].realised_emm_um < rows[0].realised_emm_um,
+        "planned {} µm against test 4's {} µm",
+        rows[1].realised_emm_um,
+        rows[0].realised_emm_um
+    );
+    assert!(rows[1].u95_mean_um < rows[0].u95_mean_um);
+    assert!(rows[1].drift_found >= 18, "{} of 20", rows[1].drift_found);
+}
