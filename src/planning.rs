@@ -14,7 +14,7 @@
 
 use anyhow::{Context, Result, anyhow};
 use serde::Serialize;
-use volver_core::machine::{Commands, Machine};
+use volver_core::machine::{Commands, Machine, ReflectorSpec};
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::order::{self, Visit};
@@ -46,6 +46,9 @@ pub struct Request {
     pub seconds_per_point: f64,
     /// Iterations of the design algorithm at most.
     pub iterations: usize,
+    /// Candidate reflector positions beside the machine's (on the last tool-side axis), which
+    /// the design may choose.
+    pub extra_reflectors: Vec<ReflectorSpec>,
 }
 
 impl Default for Request {
@@ -60,6 +63,7 @@ impl Default for Request {
             repeats: 8,
             seconds_per_point: volver_core::simulate::DEFAULT_SECONDS_PER_POINT,
             iterations: 300,
+            extra_reflectors: Vec::new(),
         }
     }
 }
@@ -69,6 +73,9 @@ impl Default for Request {
 pub struct Planned {
     /// The plan, in measuring order.
     pub plan: Plan,
+    /// The model the plan is for: the request's, on a machine with the extra reflectors the
+    /// plan uses (write its machine file beside the plan: the plan names them).
+    pub model: Model,
     /// What was chosen and predicted.
     pub report: Report,
 }
@@ -105,6 +112,9 @@ pub struct Report {
     /// The combinations no candidate identifies: a reflector elsewhere or another tool offset
     /// is needed for these.
     pub unidentifiable_by_candidates: Vec<String>,
+    /// Reflector positions that would identify some of them: each with the combinations the
+    /// candidates would still leave with it added (fewer than without), best first.
+    pub reflector_advice: Vec<Advice>,
     /// The reference pose (file units) and its visits.
     pub reference: Vec<f64>,
     /// Visits of the reference pose (first, last and between).
@@ -113,6 +123,70 @@ pub struct Report {
     pub aliasing: (f64, String),
     /// Wall time of the planning (s).
     pub time_s: f64,
+}
+
+/// A reflector position and what the candidates leave unidentified with it.
+#[derive(Clone, Debug, Serialize)]
+pub struct Advice {
+    /// Its id (`auto+x` … for an offset from the reflectors' centroid).
+    pub id: String,
+    /// Its offset on the last tool-side axis (mm).
+    pub offset_mm: [f64; 3],
+    /// Combinations the candidate poses would leave unidentified with it.
+    pub unidentified: usize,
+}
+
+/// `model` on its machine with `extra` reflectors added.
+fn with_reflectors(model: &Model, extra: &[ReflectorSpec]) -> Result<Model> {
+    if extra.is_empty() {
+        return Ok(model.clone());
+    }
+    let mut spec = model.machine().spec().clone();
+    for r in extra {
+        if spec.reflectors.iter().any(|x| x.id == r.id) {
+            return Err(anyhow!(
+                "candidate reflector '{}' has the id of one of the machine's reflectors",
+                r.id
+            ));
+        }
+        spec.reflectors.push(r.clone());
+    }
+    let machine = Machine::from_spec(spec, "the machine with the candidate reflectors")?;
+    Ok(Model::new(machine, model.spec().clone())?)
+}
+
+/// What the candidate poses leave unidentified with a reflector added at each of six positions
+/// 100 mm from the reflectors' centroid along the axes of the tool-side frame, keeping those
+/// that leave fewer than `base` combinations.
+fn advice(model: &Model, per_axis: usize, base: usize) -> Result<Vec<Advice>> {
+    let r = model.machine().reflectors();
+    let c: [f64; 3] =
+        std::array::from_fn(|k| r.iter().map(|x| x.offset[k]).sum::<f64>() / r.len() as f64);
+    let mut out = Vec::new();
+    for i in 0..6 {
+        let mut offset = c;
+        offset[i / 2] += if i % 2 == 0 { 100.0 } else { -100.0 };
+        let trial = ReflectorSpec {
+            id: format!(
+                "auto{}{}",
+                if i % 2 == 0 { '+' } else { '-' },
+                ['x', 'y', 'z'][i / 2]
+            ),
+            offset,
+        };
+        let m = with_reflectors(model, std::slice::from_ref(&trial))?;
+        let candidates = candidate_grid(m.machine(), per_axis)?;
+        let held = nominal_gauge(&m, &candidates)?.map_or(0, |g| g.held.len());
+        if held < base {
+            out.push(Advice {
+                id: trial.id,
+                offset_mm: trial.offset,
+                unidentified: held,
+            });
+        }
+    }
+    out.sort_by_key(|a| a.unidentified);
+    Ok(out)
 }
 
 /// The candidate grid: about `per_axis` values over each axis' travel, at a round step (1, 2,
@@ -238,6 +312,9 @@ pub fn predicted_u(
 /// Plans a test of `request.points` measurements for `model` (see the module documentation).
 pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let t0 = std::time::Instant::now();
+    let given = model;
+    let full = with_reflectors(model, &request.extra_reflectors)?;
+    let model = &full;
     let machine = model.machine();
     if request.noise.is_none() {
         return Err(anyhow!(
@@ -341,6 +418,25 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let unidentified = held_text(model, nominal_gauge(model, &planned)?.as_ref());
     let unidentifiable_by_candidates =
         held_text(model, nominal_gauge(model, &candidates)?.as_ref());
+    // Advice for what the candidates cannot identify (the request's extra reflectors are
+    // candidates already).
+    let reflector_advice = if unidentifiable_by_candidates.is_empty() {
+        Vec::new()
+    } else {
+        advice(model, request.per_axis, unidentifiable_by_candidates.len())?
+    };
+    // The plan's model: the given machine with the extra reflectors the plan measures.
+    let used_extra: Vec<ReflectorSpec> = request
+        .extra_reflectors
+        .iter()
+        .filter(|r| {
+            machine
+                .reflector_index(&r.id)
+                .is_some_and(|i| planned.reflectors.contains(&i))
+        })
+        .cloned()
+        .collect();
+    let plan_model = with_reflectors(given, &used_extra)?;
     let reflectors = planned
         .reflectors
         .iter()
@@ -367,6 +463,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             u95_max_um,
             unidentified,
             unidentifiable_by_candidates,
+            reflector_advice,
             reference: machine
                 .axes()
                 .iter()
@@ -377,8 +474,21 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             aliasing,
             time_s: t0.elapsed().as_secs_f64(),
         },
-        plan: planned,
+        plan: reindex(planned, machine, plan_model.machine()),
+        model: plan_model,
     })
+}
+
+/// `plan` (reflector indices of `from`) with the indices of the same reflector ids in `to`.
+fn reindex(mut plan: Plan, from: &Machine, to: &Machine) -> Plan {
+    let map = |r: usize| to.reflector_index(&from.reflectors()[r].id).unwrap_or(r);
+    plan.reflectors = plan.reflectors.iter().map(|&r| map(r)).collect();
+    if let Some(seq) = &mut plan.sequence {
+        for s in seq.iter_mut() {
+            s.reflector = map(s.reflector);
+        }
+    }
+    plan
 }
 
 /// A plan of `sequence` over `positions` keeping only the positions it visits, in order of first

@@ -40,6 +40,11 @@ pub struct PlanArgs {
     /// centroid.
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     tool_offset: Option<String>,
+    /// Candidate reflector positions beside the machine's (TOML: `[[reflector]]` tables with
+    /// `id` and `offset` in mm on the last tool-side axis, as in a machine file); a plan that
+    /// uses one is written with its machine file (PLAN.machine.toml).
+    #[arg(long)]
+    reflectors: Option<PathBuf>,
     /// Candidate positions per axis, about (a round step over the travel; a full turn without
     /// its end).
     #[arg(long, default_value_t = 13)]
@@ -59,7 +64,8 @@ pub struct PlanArgs {
     /// Dwell at each pose for the machine and the tracker to settle (s).
     #[arg(long, default_value_t = 2.0)]
     dwell_s: f64,
-    /// Compares plans instead: comma-separated presets (test4 …) or plan files.
+    /// Compares plans instead: comma-separated plan files or presets (test4 …; test4/R1+R2
+    /// measures only those reflectors).
     #[arg(long, value_name = "PLAN,PLAN…")]
     compare: Option<String>,
     /// Truths per plan with --compare (seeds 1…N).
@@ -111,8 +117,28 @@ pub fn run(a: PlanArgs) -> Result<()> {
         seconds_per_point: a.seconds_per_point,
         ..Request::default()
     };
+    let request = Request {
+        extra_reflectors: match &a.reflectors {
+            Some(p) => extra_reflectors(p)?,
+            None => Vec::new(),
+        },
+        ..request
+    };
     let planned = plan(&model, &request)?;
-    let machine = model.machine();
+    let machine = planned.model.machine();
+    let machine_out = (machine.reflectors().len() > model.machine().reflectors().len())
+        .then(|| a.out.as_ref().map(|o| o.with_extension("machine.toml")))
+        .flatten();
+    if let Some(path) = &machine_out {
+        let text = toml::to_string(machine.spec()).context("writing the machine file")?;
+        write_atomic(
+            path,
+            format!(
+                "# The machine of a `volver plan` with the candidate reflectors it uses.\n{text}"
+            ),
+        )
+        .with_context(|| format!("writing {}", path.display()))?;
+    }
     let r = &planned.report;
     let title = format!(
         "{} ({} noise, tool at {:?} mm, seed {})",
@@ -169,16 +195,45 @@ pub fn run(a: PlanArgs) -> Result<()> {
         }
         if r.unidentifiable_by_candidates.len() == r.unidentified.len() {
             println!(
-                "  no candidate pose of these reflectors identifies them: a reflector elsewhere on the tool side (or another tool offset) is needed"
+                "  no candidate pose of these reflectors identifies them: a reflector elsewhere on the tool side is needed"
+            );
+        }
+        for adv in &r.reflector_advice {
+            println!(
+                "    a reflector at {:?} mm ({}) would leave {} of them",
+                adv.offset_mm, adv.id, adv.unidentified
             );
         }
     }
-    for (what, path) in [("plan file", &a.out), ("measuring program", &a.gcode)] {
+    for (what, path) in [
+        ("plan file", &a.out),
+        ("measuring program", &a.gcode),
+        ("machine file with the reflectors it uses", &machine_out),
+    ] {
         if let Some(p) = path {
             println!("  {what}: {}", p.display());
         }
     }
     Ok(())
+}
+
+/// The candidate reflectors of a TOML file (`[[reflector]]` tables with `id` and `offset`).
+fn extra_reflectors(path: &Path) -> Result<Vec<volver::core::machine::ReflectorSpec>> {
+    #[derive(serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    struct File {
+        reflector: Vec<volver::core::machine::ReflectorSpec>,
+    }
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let file: File = toml::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{}: {}",
+            path.display(),
+            e.to_string().lines().collect::<Vec<_>>().join(" ")
+        )
+    })?;
+    Ok(file.reflector)
 }
 
 /// `--compare`: the plans side by side on simulated truths.
@@ -195,8 +250,21 @@ fn compare_plans(
         let plan = if Path::new(item).exists() {
             file::load(machine, Path::new(item))?
         } else {
-            Plan::preset(machine, item)
-                .with_context(|| format!("--compare {item}: neither a plan file nor a preset"))?
+            // PRESET or PRESET/ID+ID…: the preset measuring those reflectors only.
+            let (name, ids) = item.split_once('/').unwrap_or((item, ""));
+            let mut plan = Plan::preset(machine, name)
+                .with_context(|| format!("--compare {item}: neither a plan file nor a preset"))?;
+            if !ids.is_empty() {
+                plan.reflectors = ids
+                    .split('+')
+                    .map(|id| {
+                        machine.reflector_index(id).ok_or_else(|| {
+                            anyhow::anyhow!("--compare {item}: no reflector '{id}' in the machine")
+                        })
+                    })
+                    .collect::<Result<_>>()?;
+            }
+            plan
         };
         plans.push((item.to_string(), plan));
     }
