@@ -402,6 +402,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             "{}-optimal, {} points",
             match request.criterion {
                 Criterion::I => "I",
+                Criterion::V => "V",
                 Criterion::D => "D",
             },
             request.points

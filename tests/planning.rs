@@ -149,7 +149,7 @@ fn the_design_is_optimal_for_its_criterion() {
     .unwrap();
     let n = space.len();
     let points = 300;
-    for criterion in [Criterion::I, Criterion::D] {
+    for criterion in [Criterion::I, Criterion::V, Criterion::D] {
         let d = space.design(points, criterion, 400).unwrap();
         assert_eq!(d.counts.iter().sum::<usize>(), points);
         assert!(
@@ -164,7 +164,7 @@ fn the_design_is_optimal_for_its_criterion() {
         let better = |other: &[f64]| {
             let v = space.value(other, criterion).unwrap();
             match criterion {
-                Criterion::I => d.value <= v * 1.001,
+                Criterion::I | Criterion::V => d.value <= v * 1.001,
                 Criterion::D => d.value >= v - 1e-3,
             }
         };
@@ -177,6 +177,12 @@ fn the_design_is_optimal_for_its_criterion() {
                 c[((rng.uniform() * n as f64) as usize).min(n - 1)] += 1.0;
             }
             assert!(better(&c), "{criterion:?}: worse than a random design");
+        }
+        // The V-design's worst variance is no larger than the I-design's.
+        if criterion == Criterion::V {
+            let i = space.design(points, Criterion::I, 400).unwrap();
+            let ci: Vec<f64> = i.counts.iter().map(|&k| k as f64).collect();
+            assert!(better(&ci), "V: worse than the I-design at its worst point");
         }
     }
 }

@@ -16,6 +16,8 @@
 //!   `Q = (1/K) Σ_k G_kᵀ G_k` from the tool points' aligned Jacobians
 //!   ([`crate::uncertainty::ToolGrid::jacobian`]): what compensation at that tool offset
 //!   inherits from the noise.
+//! - **V-optimal** ([`Criterion::V`]): the largest of those variances over the grid, approached
+//!   by I-optimal designs whose grid points are reweighted towards the largest variances.
 //! - **D-optimal** ([`Criterion::D`]): `log det F`, the volume of the parameters' confidence
 //!   ellipsoid.
 //!
@@ -48,6 +50,9 @@ pub enum Criterion {
     I,
     /// The volume of the parameters' confidence ellipsoid.
     D,
+    /// The largest variance of the tool point over the work volume, after the set-up's
+    /// transform.
+    V,
 }
 
 impl std::str::FromStr for Criterion {
@@ -56,8 +61,9 @@ impl std::str::FromStr for Criterion {
         match s {
             "i" | "I" => Ok(Criterion::I),
             "d" | "D" => Ok(Criterion::D),
+            "v" | "V" => Ok(Criterion::V),
             _ => Err(format!(
-                "unknown design criterion '{s}': i (I-optimal) or d (D-optimal)"
+                "unknown design criterion '{s}': i (I-optimal), v (V-optimal) or d (D-optimal)"
             )),
         }
     }
@@ -70,6 +76,8 @@ pub struct Space {
     a: Mat<f64>,
     /// `Q` of the I-criterion (nf × nf).
     q: Mat<f64>,
+    /// The tool points' aligned Jacobians in the free coordinates (3K × nf).
+    gz: Mat<f64>,
     /// The prior `R` (nf × nf).
     r: Mat<f64>,
     /// Candidate points.
@@ -154,7 +162,7 @@ impl Space {
         let prior = crate::uncertainty::HELD_PRIOR_MM;
         let mz = crate::kernels::sandwich(metric.as_ref(), basis);
         let r = Mat::from_fn(nf, nf, |i, c| mz[(i, c)] / (prior * prior));
-        Some(Space { a, q, r, m })
+        Some(Space { a, q, gz, r, m })
     }
 
     /// Candidate points.
@@ -193,11 +201,40 @@ impl Space {
         ))
     }
 
+    /// The variance of each grid point's tool point (summed over its coordinates, mm²) under
+    /// the information of multiplicities `c`.
+    fn point_variances(&self, inv: &Mat<f64>) -> Vec<f64> {
+        let p = crate::kernels::product(self.gz.as_ref(), inv.as_ref());
+        let nf = inv.nrows();
+        (0..self.gz.nrows() / 3)
+            .map(|k| {
+                (3 * k..3 * k + 3)
+                    .map(|row| {
+                        (0..nf)
+                            .map(|j| p[(row, j)] * self.gz[(row, j)])
+                            .sum::<f64>()
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+
+    /// `Σ_k ω_k G_kᵀ G_k` for grid weights `omega` (summing to 1).
+    fn weighted_q(&self, omega: &[f64]) -> Mat<f64> {
+        let nf = self.gz.ncols();
+        let scaled = Mat::from_fn(self.gz.nrows(), nf, |row, col| {
+            omega[row / 3].sqrt() * self.gz[(row, col)]
+        });
+        crate::kernels::product(scaled.transpose(), scaled.as_ref())
+    }
+
     /// The criterion of per-candidate multiplicities `c` (measurements of each candidate point):
-    /// `tr(Q F⁻¹)` (mm²) for I, `log det F` for D.
+    /// `tr(Q F⁻¹)` (mm²) for I, the largest grid point's variance (mm²) for V, `log det F` for
+    /// D.
     pub fn value(&self, c: &[f64], criterion: Criterion) -> Option<f64> {
         let (inv, logdet) = Space::inverse(&self.information(c))?;
         Some(match criterion {
+            Criterion::V => self.point_variances(&inv).into_iter().fold(0.0, f64::max),
             Criterion::I => (0..inv.nrows())
                 .map(|i| {
                     (0..inv.nrows())
@@ -211,23 +248,78 @@ impl Space {
 
     /// The optimal design of `points` measurements: the multiplicative algorithm from uniform
     /// weights for at most `iterations` iterations (or until the equivalence ratio is within
-    /// 1e-3 of 1), then rounded.
+    /// 1e-3 of 1), then rounded. V-optimality is approached by I-optimal designs whose grid
+    /// points are reweighted towards the largest variances (ω_k ∝ ω_k v_k, eight rounds
+    /// warm-started from the previous weights); its equivalence ratio is the last round's.
     pub fn design(&self, points: usize, criterion: Criterion, iterations: usize) -> Option<Design> {
         let m = self.m;
         let total = points as f64;
         let mut w = vec![1.0 / m as f64; m];
+        let (equivalence, done) = match criterion {
+            Criterion::I => self.iterate(&mut w, total, Some(&self.q), iterations)?,
+            Criterion::D => self.iterate(&mut w, total, None, iterations)?,
+            Criterion::V => {
+                const ROUNDS: usize = 8;
+                let k = self.gz.nrows() / 3;
+                let mut omega = vec![1.0 / k as f64; k];
+                let mut last = (f64::INFINITY, 0);
+                let mut done = 0;
+                for round in 0..ROUNDS {
+                    let q = self.weighted_q(&omega);
+                    let share = if round + 1 == ROUNDS {
+                        iterations
+                    } else {
+                        (iterations / ROUNDS).max(1)
+                    };
+                    last = self.iterate(&mut w, total, Some(&q), share)?;
+                    done += last.1;
+                    let c: Vec<f64> = w.iter().map(|x| x * total).collect();
+                    let (inv, _) = Space::inverse(&self.information(&c))?;
+                    let v = self.point_variances(&inv);
+                    let mean: f64 = omega.iter().zip(&v).map(|(a, b)| a * b).sum();
+                    for (o, vk) in omega.iter_mut().zip(&v) {
+                        *o *= vk / mean;
+                    }
+                    let sum: f64 = omega.iter().sum();
+                    omega.iter_mut().for_each(|o| *o /= sum);
+                }
+                (last.0, done)
+            }
+        };
+        let counts = round(&w, points);
+        let c: Vec<f64> = counts.iter().map(|&k| k as f64).collect();
+        Some(Design {
+            value: self.value(&c, criterion)?,
+            weights: w,
+            counts,
+            equivalence,
+            iterations: done,
+        })
+    }
+
+    /// The multiplicative algorithm on `w` for `tr(Q F⁻¹)` (with `q`) or `log det F`
+    /// (without): at most `iterations` iterations, or until the equivalence ratio is within
+    /// 1e-3 of 1. Returns that ratio and the iterations done.
+    fn iterate(
+        &self,
+        w: &mut [f64],
+        total: f64,
+        q: Option<&Mat<f64>>,
+        iterations: usize,
+    ) -> Option<(f64, usize)> {
+        let m = self.m;
         let mut equivalence = f64::INFINITY;
         let mut done = 0;
         for it in 0..iterations {
             done = it + 1;
             let c: Vec<f64> = w.iter().map(|x| x * total).collect();
             let (inv, _) = Space::inverse(&self.information(&c))?;
-            let s = match criterion {
-                Criterion::I => {
-                    let qi = crate::kernels::product(self.q.as_ref(), inv.as_ref());
+            let s = match q {
+                Some(q) => {
+                    let qi = crate::kernels::product(q.as_ref(), inv.as_ref());
                     crate::kernels::product(inv.as_ref(), qi.as_ref())
                 }
-                Criterion::D => inv,
+                None => inv,
             };
             // d_i = Σ over the candidate's rows of a S aᵀ.
             let p = crate::kernels::product(self.a.as_ref(), s.as_ref());
@@ -254,15 +346,7 @@ impl Space {
             let sum: f64 = w.iter().sum();
             w.iter_mut().for_each(|x| *x /= sum);
         }
-        let counts = round(&w, points);
-        let c: Vec<f64> = counts.iter().map(|&k| k as f64).collect();
-        Some(Design {
-            value: self.value(&c, criterion)?,
-            weights: w,
-            counts,
-            equivalence,
-            iterations: done,
-        })
+        Some((equivalence, done))
     }
 }
 

@@ -33,7 +33,7 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = volver::core::simulate::DEFAULT_SECONDS_PER_POINT)]
     seconds_per_point: f64,
     /// The design criterion: i (the tool point's mean variance over the volume after the
-    /// set-up's transform) or d (the parameters' confidence volume).
+    /// set-up's transform), v (its largest) or d (the parameters' confidence volume).
     #[arg(long, default_value = "i")]
     criterion: String,
     /// The tool point, mm in the frame of the last tool-side axis; default: the reflectors'
