@@ -174,6 +174,31 @@ impl MachineAxis {
     pub fn file_unit(&self) -> &'static str {
         if self.axis.is_rotary() { "deg" } else { "mm" }
     }
+
+    /// A position read from a file (file units) in internal units, or the message saying it is
+    /// outside the travel (a tolerance of 1e-9 of the travel).
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// let x = &m.axes()[0];
+    /// assert_eq!(x.position_from_file(1400.0), Ok(1400.0));
+    /// assert_eq!(
+    ///     x.position_from_file(1500.0).unwrap_err(),
+    ///     "1500 mm is outside the travel range [0, 1400] of axis X"
+    /// );
+    /// ```
+    pub fn position_from_file(&self, v: f64) -> std::result::Result<f64, String> {
+        let (lo, hi) = (self.to_file_units(self.min), self.to_file_units(self.max));
+        let tol = 1e-9 * (hi - lo).abs().max(1.0);
+        if v < lo - tol || v > hi + tol {
+            return Err(format!(
+                "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
+                self.file_unit(),
+                self.axis
+            ));
+        }
+        Ok(self.from_file_units(v))
+    }
 }
 
 /// A reflector of a validated machine.

@@ -276,19 +276,9 @@ impl MeasurementSet {
             let mut commands = Commands::default();
             for (k, (&col, ax)) in axis_cols.iter().zip(machine.axes()).enumerate() {
                 let v = number(col, ax.file_unit())?;
-                let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
-                let tol = 1e-9 * (hi - lo).abs().max(1.0);
-                if v < lo - tol || v > hi + tol {
-                    return Err(Error::input(
-                        at(col),
-                        format!(
-                            "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
-                            ax.file_unit(),
-                            ax.axis
-                        ),
-                    ));
-                }
-                commands.0[k] = ax.from_file_units(v);
+                commands.0[k] = ax
+                    .position_from_file(v)
+                    .map_err(|m| Error::input(at(col), m))?;
             }
             let id = &rec[req[0]];
             let reflector = machine.reflector_index(id).ok_or_else(|| {

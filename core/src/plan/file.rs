@@ -290,19 +290,9 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
         let mut commands = Commands::default();
         for (k, (&col, ax)) in axis_cols.iter().zip(machine.axes()).enumerate() {
             let v = number(col, ax.file_unit())?;
-            let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
-            let tol = 1e-9 * (hi - lo).abs().max(1.0);
-            if v < lo - tol || v > hi + tol {
-                return Err(Error::input(
-                    at(col),
-                    format!(
-                        "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
-                        ax.file_unit(),
-                        ax.axis
-                    ),
-                ));
-            }
-            commands.0[k] = ax.from_file_units(v);
+            commands.0[k] = ax
+                .position_from_file(v)
+                .map_err(|m| Error::input(at(col), m))?;
         }
         let id = fields[refl_col];
         let reflector = machine.reflector_index(id).ok_or_else(|| {
