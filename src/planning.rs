@@ -24,6 +24,10 @@ use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver_solvers::design::{Criterion, Space};
 use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
 
+/// The most candidate points a design weighs (their whitened rows are held in memory: 50 000
+/// points of a 200-parameter model take 240 MB).
+pub const MAX_CANDIDATES: usize = 50_000;
+
 /// What to plan.
 #[derive(Clone, Debug)]
 pub struct Request {
@@ -323,6 +327,15 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         ));
     }
     let candidates = candidate_grid(machine, request.per_axis)?;
+    if candidates.n_points() > MAX_CANDIDATES {
+        return Err(anyhow!(
+            "{} candidate points ({} poses × {} reflectors): at most {MAX_CANDIDATES}; use a \
+             smaller --per-axis",
+            candidates.n_points(),
+            candidates.positions.len(),
+            candidates.reflectors.len()
+        ));
+    }
     let grid = crate::uncertainty::default_grid(machine, 5)?;
     let space = Space::new(
         model,

@@ -261,6 +261,18 @@ fn a_plan_without_noise_or_points_is_refused() {
     };
     let e = plan(&model, &few).unwrap_err().to_string();
     assert!(e.contains("reference pose"), "{e}");
+    let many = Request {
+        per_axis: 60,
+        ..Request::default()
+    };
+    let e = plan(&model, &many).unwrap_err().to_string();
+    assert!(
+        e.contains("candidate points") && e.contains("--per-axis"),
+        "{e}"
+    );
+    let o = volver(&["plan", "--dwell-s=-1", "--out", "x.csv"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--dwell-s -1"));
     let o = volver(&["plan", "--criterion", "q", "--out", "x.csv"]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("unknown design criterion 'q'"));

@@ -94,6 +94,9 @@ pub fn run(a: PlanArgs) -> Result<()> {
     if let Some(list) = &a.compare {
         return compare_plans(&a, &model, list, &noise, tool);
     }
+    if !(a.dwell_s.is_finite() && a.dwell_s >= 0.0) {
+        bail!("--dwell-s {}: a number of seconds ≥ 0", a.dwell_s);
+    }
     if !(a.seconds_per_point.is_finite() && a.seconds_per_point > 0.0) {
         bail!(
             "--seconds-per-point {}: a positive number of seconds",

@@ -188,16 +188,14 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
             "empty plan file: expected a header with the axis columns and reflector",
         ));
     };
-    let names: Vec<String> = header
+    // Names without their unit annotations (`X [mm]`, `C (deg)`), checked below.
+    let (names, units): (Vec<String>, Vec<Option<String>>) = header
         .split(',')
         .map(|h| {
-            let h = h.trim();
-            h.split_once(['[', '('])
-                .map_or(h, |(name, _)| name)
-                .trim()
-                .to_string()
+            let (name, unit) = crate::measure::split_unit(h);
+            (name.to_string(), unit.map(str::to_string))
         })
-        .collect();
+        .unzip();
     let at_header = |field: &str| Place::file(file).at_line(header_line).at_field(field);
     let column = |name: &str| -> Result<Option<usize>> {
         let found: Vec<usize> = (0..names.len()).filter(|&i| names[i] == name).collect();
@@ -224,6 +222,12 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
             )
         })?;
         axis_cols.push(col);
+    }
+    for (&col, ax) in axis_cols.iter().zip(machine.axes()) {
+        if let Some(u) = &units[col] {
+            crate::measure::check_unit(u, ax.file_unit())
+                .map_err(|m| Error::input(at_header(&names[col]), m))?;
+        }
     }
     let refl_col = column("reflector")?.ok_or_else(|| {
         Error::input(
@@ -392,6 +396,12 @@ mod tests {
             msg.contains("p.csv:3") && msg.contains("found \"x\""),
             "{msg}"
         );
+        let msg = e("X [m],C,Z,reflector\n0,0,0,R1\n");
+        assert!(
+            msg.contains("p.csv:1") && msg.contains("unit 'm', expected mm"),
+            "{msg}"
+        );
+        assert!(from_csv_str(&m, "X [mm],C (deg),Z,reflector\n0,0,0,R1\n", "p.csv").is_ok());
         let msg = e("X,C,Z,reflector\n0,0,R1\n");
         assert!(msg.contains("p.csv:2") && msg.contains("3 fields"), "{msg}");
     }
