@@ -499,6 +499,26 @@ impl Machine {
         self.reflectors.iter().position(|r| r.id == id)
     }
 
+    /// The index of the reflector `id`, or the message naming the ones the machine has.
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// assert_eq!(m.reflector_named("R2"), Ok(1));
+    /// assert_eq!(
+    ///     m.reflector_named("R9").unwrap_err(),
+    ///     "reflector 'R9' is not in the machine file (known: R1, R2)"
+    /// );
+    /// ```
+    pub fn reflector_named(&self, id: &str) -> std::result::Result<usize, String> {
+        self.reflector_index(id).ok_or_else(|| {
+            let known: Vec<&str> = self.reflectors.iter().map(|r| r.id.as_str()).collect();
+            format!(
+                "reflector '{id}' is not in the machine file (known: {})",
+                known.join(", ")
+            )
+        })
+    }
+
     /// The tracker set-up.
     pub fn tracker(&self) -> &TrackerSetup {
         &self.tracker

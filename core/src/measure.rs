@@ -281,16 +281,9 @@ impl MeasurementSet {
                     .map_err(|m| Error::input(at(col), m))?;
             }
             let id = &rec[req[0]];
-            let reflector = machine.reflector_index(id).ok_or_else(|| {
-                let known: Vec<&str> = machine.reflectors().iter().map(|r| r.id.as_str()).collect();
-                Error::input(
-                    at(req[0]),
-                    format!(
-                        "reflector '{id}' is not in the machine file (known: {})",
-                        known.join(", ")
-                    ),
-                )
-            })?;
+            let reflector = machine
+                .reflector_named(id)
+                .map_err(|m| Error::input(at(req[0]), m))?;
             let coordinate = |col: usize| -> Result<f64> {
                 let v = number(col, "mm")?;
                 if v.abs() > MAX_COORDINATE_MM {

@@ -299,16 +299,9 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
                 .map_err(|m| Error::input(at(col), m))?;
         }
         let id = fields[refl_col];
-        let reflector = machine.reflector_index(id).ok_or_else(|| {
-            let known: Vec<&str> = machine.reflectors().iter().map(|r| r.id.as_str()).collect();
-            Error::input(
-                at(refl_col),
-                format!(
-                    "reflector '{id}' is not in the machine file (known: {})",
-                    known.join(", ")
-                ),
-            )
-        })?;
+        let reflector = machine
+            .reflector_named(id)
+            .map_err(|m| Error::input(at(refl_col), m))?;
         let position = match positions.iter().position(|p| *p == commands) {
             Some(p) => p,
             None => {
