@@ -231,10 +231,15 @@ fn block_part(
         let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
         let (o0, rest) = out.split_at_mut(nc);
         let (o1, o2) = rest.split_at_mut(nc);
-        o0[..n].copy_from_slice(j0);
-        o1[..n].copy_from_slice(j1);
-        o2[..n].copy_from_slice(&j2[..n]);
-        if !weigh_rows(first, r, nr, [o0, o1, o2], &mut g[0], factor) {
+        if !weigh_rows(
+            first,
+            r,
+            nr,
+            [j0, j1, &j2[..n]],
+            [o0, o1, o2],
+            &mut g[0],
+            factor,
+        ) {
             return None;
         }
     }
@@ -269,26 +274,42 @@ fn block_part(
     };
     lower(blk, &mut hbs[0]);
     if with_design {
-        // The unweighted rows become the weighted ones, point by point.
+        // The unweighted rows become the weighted ones, point by point (each point's rows read
+        // through `row`, which the pass no longer needs).
         for q in 0..m {
             let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
+            for c in 0..3 {
+                row[c * n..(c + 1) * n].copy_from_slice(&out[c * nc..c * nc + n]);
+            }
+            let r = [out[n], out[nc + n], out[2 * nc + n]];
             let (o0, rest) = out.split_at_mut(nc);
             let (o1, o2) = rest.split_at_mut(nc);
-            let r = [o0[n], o1[n], o2[n]];
-            weigh_rows(weight, r, norm(r), [o0, o1, o2], &mut g[1], false);
+            let (j0, rest) = row.split_at(n);
+            let (j1, j2) = rest.split_at(n);
+            weigh_rows(
+                weight,
+                r,
+                norm(r),
+                [j0, j1, &j2[..n]],
+                [o0, o1, o2],
+                &mut g[1],
+                false,
+            );
         }
         lower(blk, &mut hbs[1]);
     }
     Some(BlockPart { g, factor: None })
 }
 
-/// One point's three rows `[J | r]` (`o`, each n + 1 long, the Jacobian's rows and the residual
-/// last) made `W^½ [J | r]` in place under `weight(‖r‖)`, and `w Jᵀ r` added to `g`; `false`
-/// (nothing changed) when a factor is asked (`factor`) of a weighting with a radial correction.
+/// One point's weighted rows `W^½ [J | r]` under `weight(‖r‖)` written to `o` (three rows of
+/// n + 1, the residual last) from its Jacobian rows `j` (three of n) and residual `r`, and
+/// `w Jᵀ r` added to `g`; `false` (nothing written) when a factor is asked (`factor`) of a
+/// weighting with a radial correction.
 fn weigh_rows(
     weight: &dyn Fn(f64) -> (f64, f64),
     r: [f64; 3],
     nr: f64,
+    [j0, j1, j2]: [&[f64]; 3],
     [o0, o1, o2]: [&mut [f64]; 3],
     g: &mut [f64],
     factor: bool,
@@ -308,7 +329,7 @@ fn weigh_rows(
     let sw = w.sqrt();
     let kr = rhat.map(|v| k * v);
     for j in 0..n {
-        let col = [o0[j], o1[j], o2[j]];
+        let col = [j0[j], j1[j], j2[j]];
         let radial = rhat[0] * col[0] + rhat[1] * col[1] + rhat[2] * col[2];
         g[j] += w * (col[0] * r[0] + col[1] * r[1] + col[2] * r[2]);
         o0[j] = sw * (col[0] - kr[0] * radial);
