@@ -15,6 +15,7 @@
 use anyhow::{Context, Result, anyhow};
 use serde::Serialize;
 use volver_core::machine::{Commands, Machine, ReflectorSpec};
+use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::order::{self, Visit};
@@ -22,6 +23,7 @@ use volver_core::plan::{AxisRange, Plan, Step};
 use volver_core::problem::Problem;
 use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver_solvers::design::{Criterion, Space};
+use volver_solvers::gauge::Gauge;
 use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
 
 /// The most candidate points a design weighs (their whitened rows are held in memory: 50 000
@@ -180,7 +182,9 @@ fn advice(model: &Model, per_axis: usize, base: usize) -> Result<Vec<Advice>> {
         };
         let m = with_reflectors(model, std::slice::from_ref(&trial))?;
         let candidates = candidate_grid(m.machine(), per_axis)?;
-        let held = nominal_gauge(&m, &candidates)?.map_or(0, |g| g.held.len());
+        let held = Nominal::of(&m, &candidates)?
+            .gauge
+            .map_or(0, |g| g.held.len());
         if held < base {
             out.push(Advice {
                 id: trial.id,
@@ -245,72 +249,65 @@ pub fn candidate_grid(machine: &Machine, per_axis: usize) -> Result<Plan> {
 }
 
 /// The leading parameters of each held combination, as text.
-fn held_text(model: &Model, gauge: Option<&volver_solvers::gauge::Gauge>) -> Vec<String> {
-    let names: Vec<&str> = model.params().iter().map(|p| p.name.as_str()).collect();
+fn held_text(model: &Model, gauge: Option<&Gauge>) -> Vec<String> {
     gauge
         .map(|g| {
-            g.held
-                .iter()
-                .map(|h| {
-                    h.parameters
-                        .iter()
-                        .take(3)
-                        .map(|(j, s)| format!("{} ({:+.2})", names[*j], s))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                })
+            (0..g.held.len())
+                .map(|c| crate::uncertainty::combination_text(model, g, c))
                 .collect()
         })
         .unwrap_or_default()
 }
 
-/// The gauge of a plan at the nominal machine: what it leaves unidentified.
-fn nominal_gauge(model: &Model, plan: &Plan) -> Result<Option<volver_solvers::gauge::Gauge>> {
-    let data = volver_solvers::design::nominal(model, plan)?;
-    let problem = Problem::new(model, &data)?;
-    let p0 = model.initial_params();
-    let task = volver_solvers::Task::new(problem);
-    Ok(volver_solvers::gauge::gauge(
-        &task,
-        &p0,
-        &p0,
-        volver_solvers::gauge::TOLERANCE,
-    ))
+/// A plan's nominal points and its gauge there (what the plan leaves unidentified).
+struct Nominal {
+    data: MeasurementSet,
+    gauge: Option<Gauge>,
 }
 
-/// The predicted U (k = 2, µm) of the tool point `tool` over `grid` after the set-up's transform
-/// for a plan identified by volver's Φ estimate under `noise`: mean and largest of each point's
-/// largest coordinate.
-pub fn predicted_u(
-    model: &Model,
-    plan: &Plan,
-    noise: &TrackerNoise,
-    tool: [f64; 3],
-    grid: &[Commands],
-) -> Result<(f64, f64)> {
-    let data = volver_solvers::design::nominal(model, plan)?;
-    let problem = Problem::new(model, &data)?;
-    let p0 = model.initial_params();
-    let gauge = nominal_gauge(model, plan)?;
-    let cov = volver_solvers::uncertainty::linear(
-        &problem,
-        gauge.as_ref(),
-        &p0,
-        volver_solvers::Objective::Phi,
-        NoiseModel::Tracker(*noise),
-    )
-    .ok_or_else(|| anyhow!("the plan's covariance could not be computed"))?;
-    let tg = ToolGrid {
-        commands: grid.to_vec(),
-        tool,
-    };
-    let us: Vec<f64> = tg
-        .uncertainty(model, &p0, &cov, true)
-        .iter()
-        .map(|u| u.u95_max_mm() * 1e3)
-        .collect();
-    let mean = us.iter().sum::<f64>() / us.len().max(1) as f64;
-    Ok((mean, us.iter().copied().fold(0.0, f64::max)))
+impl Nominal {
+    fn of(model: &Model, plan: &Plan) -> Result<Nominal> {
+        let data = volver_solvers::observability::nominal_data(model, plan);
+        let p0 = model.initial_params();
+        let gauge = {
+            let task = volver_solvers::Task::new(Problem::new(model, &data)?);
+            volver_solvers::gauge::gauge(&task, &p0, &p0, volver_solvers::gauge::TOLERANCE)
+        };
+        Ok(Nominal { data, gauge })
+    }
+
+    /// The predicted U (k = 2, µm) of the tool point `tool` over `grid` after the set-up's
+    /// transform for the plan identified by volver's Φ estimate under `noise`: mean and
+    /// largest of each point's largest coordinate.
+    fn predicted_u(
+        &self,
+        model: &Model,
+        noise: &TrackerNoise,
+        tool: [f64; 3],
+        grid: &[Commands],
+    ) -> Result<(f64, f64)> {
+        let problem = Problem::new(model, &self.data)?;
+        let p0 = model.initial_params();
+        let cov = volver_solvers::uncertainty::linear(
+            &problem,
+            self.gauge.as_ref(),
+            &p0,
+            volver_solvers::Objective::Phi,
+            NoiseModel::Tracker(*noise),
+        )
+        .ok_or_else(|| anyhow!("the plan's covariance could not be computed"))?;
+        let tg = ToolGrid {
+            commands: grid.to_vec(),
+            tool,
+        };
+        let us: Vec<f64> = tg
+            .uncertainty(model, &p0, &cov, true)
+            .iter()
+            .map(|u| u.u95_max_mm() * 1e3)
+            .collect();
+        let mean = us.iter().sum::<f64>() / us.len().max(1) as f64;
+        Ok((mean, us.iter().copied().fold(0.0, f64::max)))
+    }
 }
 
 /// Plans a test of `request.points` measurements for `model` (see the module documentation).
@@ -422,16 +419,12 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         ),
     );
     let aliasing = order::aliasing(machine, &planned.positions, &planned.steps());
-    let (u95_mean_um, u95_max_um) = predicted_u(
-        model,
-        &planned,
-        &request.noise,
-        request.tool,
-        &grid.positions,
-    )?;
-    let unidentified = held_text(model, nominal_gauge(model, &planned)?.as_ref());
+    let nominal = Nominal::of(model, &planned)?;
+    let (u95_mean_um, u95_max_um) =
+        nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
+    let unidentified = held_text(model, nominal.gauge.as_ref());
     let unidentifiable_by_candidates =
-        held_text(model, nominal_gauge(model, &candidates)?.as_ref());
+        held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
     // Advice for what the candidates cannot identify (the request's extra reflectors are
     // candidates already).
     let reflector_advice = if unidentifiable_by_candidates.is_empty() {
@@ -581,7 +574,8 @@ pub fn compare(
     let drift = drift.map(Effect::parse).transpose()?;
     let mut rows = Vec::new();
     for (label, plan) in plans {
-        let (u95_mean_um, _) = predicted_u(model, plan, noise, tool, &grid.positions)?;
+        let (u95_mean_um, _) =
+            Nominal::of(model, plan)?.predicted_u(model, noise, tool, &grid.positions)?;
         let mut realised = Vec::new();
         let (mut inside, mut total) = (0usize, 0usize);
         let (mut found, mut runs) = (0usize, 0usize);

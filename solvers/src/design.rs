@@ -36,12 +36,10 @@ use crate::nullspace::NullSpace;
 use faer::{Mat, Side};
 use rayon::prelude::*;
 use volver_core::machine::Commands;
-use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::Plan;
 use volver_core::problem::{Problem, Residuals, Whitened};
-use volver_core::simulate::{Simulation, Truth};
 
 /// What a design minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -100,18 +98,6 @@ pub struct Design {
     pub iterations: usize,
 }
 
-/// The nominal measurements of `plan` on `model`'s machine: the points the model predicts with
-/// its initial parameters (zero errors, the machine file's tracker pose), without noise.
-pub fn nominal(model: &Model, plan: &Plan) -> volver_core::Result<MeasurementSet> {
-    let truth = Truth {
-        model: model.clone(),
-        params: model.initial_params(),
-    };
-    let mut sim = Simulation::new(plan.clone(), truth, 1);
-    sim.noise = TrackerNoise::NONE;
-    Ok(sim.run()?.measurements)
-}
-
 impl Space {
     /// The information of every candidate point of `candidates` (every step of the plan) under
     /// `noise`, and the I-criterion's `Q` for the tool offset `tool` (mm, from the last tool-side
@@ -125,7 +111,7 @@ impl Space {
         grid: &[Commands],
     ) -> Option<Space> {
         let p0 = model.initial_params();
-        let data = nominal(model, candidates).ok()?;
+        let data = crate::observability::nominal_data(model, candidates);
         let problem = Problem::new(model, &data).ok()?;
         let whitened = Whitened::new(problem.clone(), noise)?;
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;

@@ -61,22 +61,26 @@ pub struct Finding {
 }
 
 /// The points a perfect machine (the model at its start: errors zero, the tracker at its
-/// nominal pose) gives for every position and reflector of `plan`.
+/// nominal pose) gives for every measurement of `plan`, in its measuring order, time-stamped
+/// [`volver_core::simulate::DEFAULT_SECONDS_PER_POINT`] apart.
 pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
     let p = model.initial_params();
-    let mut points = Vec::new();
-    for c in &plan.positions {
-        for &r in &plan.reflectors {
-            points.push(Measurement {
+    let points = plan
+        .steps()
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let c = &plan.positions[s.position];
+            Measurement {
                 commands: *c,
-                reflector: r,
-                measured: model.predict(c, r, &p),
-                t_s: None,
+                reflector: s.reflector,
+                measured: model.predict(c, s.reflector, &p),
+                t_s: Some(i as f64 * volver_core::simulate::DEFAULT_SECONDS_PER_POINT),
                 station: None,
-                line: points.len() + 2,
-            });
-        }
-    }
+                line: i + 2,
+            }
+        })
+        .collect();
     MeasurementSet { points }
 }
 
