@@ -410,10 +410,14 @@ pub fn diagnose_with(
         let rank = ident.as_ref().map_or(model.n_params(), |a| a.rank);
         (n, moments, rank)
     });
+    // Residual coordinates: three per point, one per range alone.
+    let coordinates: usize = (0..r.len())
+        .map(|i| if problem.scalar(i) { 1 } else { 3 })
+        .sum();
     let level_of = |points: &[usize]| {
         levels
             .as_ref()
-            .map(|(_, mom, rank)| diagnose::noise_level(mom, points, *rank, 3 * r.len()))
+            .map(|(_, mom, rank)| diagnose::noise_level(mom, points, *rank, coordinates))
     };
     let verdict_noise = levels.as_ref().map(|(n, moments, _)| {
         let all: Vec<usize> = (0..r.len()).collect();

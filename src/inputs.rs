@@ -52,8 +52,25 @@ pub fn load(
     model: Option<&Path>,
     data: &Path,
 ) -> Result<(Machine, Model, MeasurementSet)> {
+    load_with(machine, model, data, None)
+}
+
+/// [`load`], the measurements read through the import profile `import` when given
+/// ([`volver_core::import::Profile`]: a tracker software's export as it is written).
+pub fn load_with(
+    machine: Option<&Path>,
+    model: Option<&Path>,
+    data: &Path,
+    import: Option<&Path>,
+) -> Result<(Machine, Model, MeasurementSet)> {
     let (m, model) = machine_and_model(machine, model)?;
-    let set = MeasurementSet::load(&m, data).context("reading the measurements")?;
+    let set = match import {
+        Some(profile) => volver_core::import::Profile::load(profile)
+            .context("reading the import profile")?
+            .load_export(&m, data)
+            .context("reading the measurements through the import profile")?,
+        None => MeasurementSet::load(&m, data).context("reading the measurements")?,
+    };
     Problem::new(&model, &set)?.check_scale(&data.display().to_string())?;
     Ok((m, model, set))
 }

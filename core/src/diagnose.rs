@@ -427,7 +427,10 @@ pub fn noise_moments(problem: &Problem, noise: &TrackerNoise) -> Vec<(f64, f64)>
         .data()
         .points
         .iter()
-        .map(|p| noise.module_moments(p.measured))
+        .map(|p| match p.observation {
+            crate::measure::Observation::Point => noise.module_moments(p.measured),
+            crate::measure::Observation::Range => noise.range_moments(p.measured[0]),
+        })
         .collect()
 }
 

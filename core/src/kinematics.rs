@@ -50,8 +50,12 @@ pub struct PointErrors<S> {
     pub location: [[S; 6]; MAX_AXES],
     /// Whether an axis has any location error in the model (otherwise that work is skipped).
     pub has_location: [bool; MAX_AXES],
-    /// Tracker pose: T_LT x, y, z (mm) and the small angles R_LTx, R_LTy, R_LTz (rad, eq. 9).
+    /// Tracker pose: T_LT x, y, z (mm) and the small angles R_LTx, R_LTy, R_LTz (rad, eq. 9),
+    /// of the station that measures the point.
     pub tracker: [S; TRACKER_DOF],
+    /// Which of the machine's stations measures the point ([`Machine::stations`]: its mount and
+    /// base rotation); 0 for the tracker.
+    pub station: usize,
     /// Effects outside the ISO 230 model: a displacement of the tool point in the machine frame
     /// (mm, e.g. thermal drift), applied after the tool-side axes.
     pub tool_shift: [S; 3],
@@ -75,6 +79,7 @@ impl<S: Real> PointErrors<S> {
             location: [[z; 6]; MAX_AXES],
             has_location: [false; MAX_AXES],
             tracker: [z; TRACKER_DOF],
+            station: 0,
             tool_shift: [z; 3],
             reflector_delta: [z; 3],
             range_scale: z,
@@ -268,7 +273,7 @@ pub fn predict_with_tool_shift<S: Real>(
     shift: Option<[f64; 3]>,
 ) -> [S; 3] {
     let u = commands.0.map(S::from);
-    let tracker = machine.tracker();
+    let tracker = &machine.stations()[errors.station].setup;
     let p = chain_point(
         machine,
         &u,

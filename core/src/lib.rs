@@ -50,6 +50,7 @@ pub mod fsio;
 #[doc(hidden)]
 pub mod fuzz;
 pub mod gcode;
+pub mod import;
 pub mod iso;
 pub mod kinematics;
 pub mod machine;

@@ -121,6 +121,106 @@ pub struct MachineSpec {
     /// The tracker.
     #[serde(default)]
     pub tracker: TrackerSpec,
+    /// Tracker stations, for multilateration (several positions of one instrument, or several
+    /// instruments): when any is given they replace the `[tracker]` table's pose, the first being
+    /// the reference station, and every measurement names its station.
+    #[serde(default, rename = "station", skip_serializing_if = "Vec::is_empty")]
+    pub stations: Vec<StationSpec>,
+}
+
+/// A station layout file: `[[station]]` tables as in a machine file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LayoutFile {
+    #[serde(rename = "station")]
+    stations: Vec<StationSpec>,
+}
+
+impl StationSpec {
+    /// Reads a station layout (TOML: `[[station]]` tables as in a machine file); `file` names
+    /// it in messages. At least one station.
+    pub fn layout_from_toml_str(text: &str, file: &str) -> Result<Vec<StationSpec>> {
+        let layout: LayoutFile = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
+        if layout.stations.is_empty() {
+            return Err(Error::input(
+                Place::file(file).at_field("station"),
+                "a station layout needs at least one [[station]] table",
+            ));
+        }
+        Ok(layout.stations)
+    }
+
+    /// A default layout of `n` stations S1 … Sn around `machine`'s tracker, mounted as it is,
+    /// observing `observes`: on a circle of 500 mm radius about its nominal position (the first
+    /// at 45°), every other one raised by 400 mm, so that the stations see the volume from
+    /// directions spread in azimuth and in elevation.
+    pub fn default_layout(machine: &Machine, n: usize, observes: Observes) -> Vec<StationSpec> {
+        let t = machine.tracker();
+        let [rx, ry, rz] = rotation_angles_deg(&t.base_rotation);
+        (0..n)
+            .map(|k| {
+                let a = std::f64::consts::FRAC_PI_4 + std::f64::consts::TAU * k as f64 / n as f64;
+                let lift = if k % 2 == 1 { 400.0 } else { 0.0 };
+                let round = |v: f64| (v * 1e6).round() / 1e6;
+                StationSpec {
+                    id: format!("S{}", k + 1),
+                    mount: t.mount,
+                    position: [
+                        round(t.position[0] + 500.0 * a.cos()),
+                        round(t.position[1] + 500.0 * a.sin()),
+                        t.position[2] + lift,
+                    ],
+                    orientation_deg: [rx, ry, rz],
+                    observes,
+                    noise: None,
+                }
+            })
+            .collect()
+    }
+}
+
+/// The angles `[rx, ry, rz]` (degrees) of a rotation Rz·Ry·Rx ([`base_rotation`]'s inverse).
+fn rotation_angles_deg(r: &[[f64; 3]; 3]) -> [f64; 3] {
+    let ry = (-r[2][0]).clamp(-1.0, 1.0).asin();
+    let rx = r[2][1].atan2(r[2][2]);
+    let rz = r[1][0].atan2(r[0][0]);
+    [rx, ry, rz].map(|v| (v.to_degrees() * 1e9).round() / 1e9)
+}
+
+/// What a station observes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Observes {
+    /// A laser tracker: points (its angles and range), or any of its ranges alone.
+    #[default]
+    Point,
+    /// A tracing interferometer: ranges only. Its orientation means nothing and is held.
+    Range,
+}
+
+/// One tracker station as written in the machine file (`[[station]]`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StationSpec {
+    /// Identifier used by the measurement file's `station` column.
+    pub id: String,
+    /// Where it stands.
+    #[serde(default)]
+    pub mount: TrackerMount,
+    /// Nominal position (mm): the start of its identification.
+    #[serde(default)]
+    pub position: [f64; 3],
+    /// Base orientation `[rx, ry, rz]` (degrees), as the tracker's.
+    #[serde(default)]
+    pub orientation_deg: [f64; 3],
+    /// What it observes (`point` or `range`).
+    #[serde(default)]
+    pub observes: Observes,
+    /// Its noise as `--noise` reads it; absent: the `[tracker]` table's. A range-only station
+    /// uses the range part (`normal:0,0,0.1,0.15` is an interferometer of U(k = 2) = 0.2 µm +
+    /// 0.3 µm/m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<String>,
 }
 
 /// An axis of a validated machine, in internal units (mm, rad).
@@ -223,6 +323,17 @@ pub struct TrackerSetup {
     pub noise: Option<crate::noise::TrackerNoise>,
 }
 
+/// A tracker station of a validated machine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Station {
+    /// Identifier (empty for the `[tracker]` of a machine without `[[station]]` tables).
+    pub id: String,
+    /// Its pose and noise.
+    pub setup: TrackerSetup,
+    /// What it observes.
+    pub observes: Observes,
+}
+
 /// A validated machine in internal units. Build it with [`Machine::from_toml_str`],
 /// [`Machine::load`] or [`Machine::default_xcfz`].
 ///
@@ -239,7 +350,7 @@ pub struct Machine {
     chain: Chain,
     axes: Vec<MachineAxis>,
     reflectors: Vec<Reflector>,
-    tracker: TrackerSetup,
+    stations: Vec<Station>,
 }
 
 impl Machine {
@@ -372,11 +483,7 @@ impl Machine {
                 ));
             }
             // The id is a cell of the measurement and point files (CSV) and a word of messages.
-            if r.id.trim() != r.id
-                || r.id
-                    .chars()
-                    .any(|c| matches!(c, ',' | '"' | ';') || c.is_control())
-            {
+            if !valid_id(&r.id) {
                 return Err(Error::input(
                     at(),
                     format!(
@@ -410,46 +517,97 @@ impl Machine {
             });
         }
         let t = &spec.tracker;
-        if !t
-            .position
-            .iter()
-            .chain(&t.orientation_deg)
-            .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
-        {
+        let noise_of = |text: &Option<String>, field: &str| match text {
+            Some(text) => crate::noise::TrackerNoise::from_text(text)
+                .map(Some)
+                .map_err(|_| {
+                    Error::input(
+                        place(text, field),
+                        format!(
+                            "'{text}' is not a tracker noise: expected paper, none, \
+                             normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M, uniform:… or \
+                             mpe:A_UM,B_UM_PER_M"
+                        ),
+                    )
+                }),
+            None => Ok(None),
+        };
+        let setup = |mount, position: [f64; 3], orientation_deg: [f64; 3], noise, at: Place| {
+            if !position
+                .iter()
+                .chain(&orientation_deg)
+                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
+            {
+                return Err(Error::input(
+                    at,
+                    format!(
+                        "position (mm) and orientation_deg must be finite numbers of at most \
+                         {MAX_DIMENSION:e} in magnitude"
+                    ),
+                ));
+            }
+            let [rx, ry, rz] = orientation_deg.map(f64::to_radians);
+            Ok(TrackerSetup {
+                mount,
+                position,
+                base_rotation: base_rotation(rx, ry, rz),
+                noise,
+            })
+        };
+        let tracker_noise = noise_of(&t.noise, "tracker.noise")?;
+        let mut stations: Vec<Station> = Vec::new();
+        if spec.stations.is_empty() {
+            stations.push(Station {
+                id: String::new(),
+                setup: setup(
+                    t.mount,
+                    t.position,
+                    t.orientation_deg,
+                    tracker_noise,
+                    place("[tracker]", "tracker"),
+                )?,
+                observes: Observes::Point,
+            });
+        } else if t.position != [0.0; 3] || t.orientation_deg != [0.0; 3] {
             return Err(Error::input(
                 place("[tracker]", "tracker"),
-                format!(
-                    "tracker position (mm) and orientation_deg must be finite numbers of at most \
-                     {MAX_DIMENSION:e} in magnitude"
-                ),
+                "with [[station]] tables the stations carry the poses: the [tracker] table may \
+                 only give the default noise (move its position and orientation_deg to the \
+                 first station)",
             ));
         }
-        let noise = match &t.noise {
-            Some(text) => Some(crate::noise::TrackerNoise::from_text(text).map_err(|_| {
-                Error::input(
-                    place("noise", "tracker.noise"),
+        for st in &spec.stations {
+            let at = || place(&st.id, "station.id");
+            if !valid_id(&st.id) {
+                return Err(Error::input(
+                    at(),
                     format!(
-                        "'{text}' is not a tracker noise: expected paper, none, \
-                         normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M, uniform:… or \
-                         mpe:A_UM,B_UM_PER_M"
+                        "station id {:?}: an id is written in CSV files, so it must be non-empty \
+                         and hold no comma, semicolon, quote, control character or surrounding \
+                         space",
+                        st.id
                     ),
-                )
-            })?),
-            None => None,
-        };
-        let [rx, ry, rz] = t.orientation_deg.map(f64::to_radians);
-        let tracker = TrackerSetup {
-            mount: t.mount,
-            position: t.position,
-            base_rotation: base_rotation(rx, ry, rz),
-            noise,
-        };
+                ));
+            }
+            if stations.iter().any(|q| q.id == st.id) {
+                return Err(Error::input(
+                    at(),
+                    format!("station id '{}' is used twice", st.id),
+                ));
+            }
+            let noise = noise_of(&st.noise, "station.noise")?.or(tracker_noise);
+            stations.push(Station {
+                id: st.id.clone(),
+                setup: setup(st.mount, st.position, st.orientation_deg, noise, at())?,
+                observes: st.observes,
+            });
+        }
         Ok(Machine {
             spec,
             chain,
             axes,
             reflectors,
-            tracker,
+            stations,
         })
     }
 
@@ -519,9 +677,75 @@ impl Machine {
         })
     }
 
-    /// The tracker set-up.
+    /// This machine measured from `stations` instead of its tracker (or its stations): the
+    /// `[tracker]` table keeps only its noise, the default of the stations'.
+    ///
+    /// ```
+    /// use volver_core::machine::{Machine, Observes, StationSpec};
+    /// let m = Machine::default_xcfz();
+    /// let layout = StationSpec::default_layout(&m, 4, Observes::Range);
+    /// let multi = m.with_stations(layout).unwrap();
+    /// assert_eq!(multi.stations().len(), 4);
+    /// assert_eq!(multi.station_named(Some("S3")), Ok(2));
+    /// assert!(multi.station_named(None).unwrap_err().contains("4 stations"));
+    /// ```
+    pub fn with_stations(&self, stations: Vec<StationSpec>) -> Result<Machine> {
+        let mut spec = self.spec.clone();
+        spec.tracker.position = [0.0; 3];
+        spec.tracker.orientation_deg = [0.0; 3];
+        spec.stations = stations;
+        Machine::from_spec(spec, "station layout")
+    }
+
+    /// The tracker set-up: the reference station's (the first `[[station]]`, or the
+    /// `[tracker]` table).
     pub fn tracker(&self) -> &TrackerSetup {
-        &self.tracker
+        &self.stations[0].setup
+    }
+
+    /// The tracker stations: one, the `[tracker]` table, unless the machine file gives
+    /// `[[station]]` tables.
+    pub fn stations(&self) -> &[Station] {
+        &self.stations
+    }
+
+    /// Whether the machine file gives `[[station]]` tables (measurements then name their
+    /// station).
+    pub fn has_stations(&self) -> bool {
+        !self.spec.stations.is_empty()
+    }
+
+    /// The index of the station a measurement names (`None`: no station given), or the message
+    /// saying why it cannot be used. Without `[[station]]` tables every measurement is the
+    /// tracker's, whatever its label; with them a station must be named when there are several.
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// assert_eq!(m.station_named(Some("anything")), Ok(0));
+    /// ```
+    pub fn station_named(&self, id: Option<&str>) -> std::result::Result<usize, String> {
+        if !self.has_stations() {
+            return Ok(0);
+        }
+        match id {
+            None if self.stations.len() == 1 => Ok(0),
+            None => Err(format!(
+                "no station given: the machine file has {} stations, so every measurement \
+                 names its own",
+                self.stations.len()
+            )),
+            Some(id) => self
+                .stations
+                .iter()
+                .position(|s| s.id == id)
+                .ok_or_else(|| {
+                    let known: Vec<&str> = self.stations.iter().map(|s| s.id.as_str()).collect();
+                    format!(
+                        "station '{id}' is not in the machine file (known: {})",
+                        known.join(", ")
+                    )
+                }),
+        }
     }
 
     /// Commands from positions in file units (mm, degrees) given in chain order.
@@ -532,6 +756,16 @@ impl Machine {
         }
         c
     }
+}
+
+/// Whether `id` can be a cell of a CSV file and a word of messages: non-empty, no comma,
+/// semicolon, quote, control character or surrounding space.
+fn valid_id(id: &str) -> bool {
+    !id.is_empty()
+        && id.trim() == id
+        && !id
+            .chars()
+            .any(|c| matches!(c, ',' | '"' | ';') || c.is_control())
 }
 
 /// Rz(rz)·Ry(ry)·Rx(rx), row-major.

@@ -1,9 +1,15 @@
 //! Measurement files (CSV with a header).
 //!
 //! One column per machine axis named by its letter (`X`, `C`, `Z`: linear axes in mm, rotary
-//! axes in degrees), `reflector` (an id from the machine file), `meas_x`, `meas_y`, `meas_z` (mm,
-//! tracker frame); optional `t_s` (seconds since the test started) and `station` (tracker station
-//! id). Column order is free and extra columns are ignored, except a single-letter axis column for
+//! axes in degrees), `reflector` (an id from the machine file), and per row one observation:
+//! * a point: `meas_x`, `meas_y`, `meas_z` (mm, in the station's frame);
+//! * a point in the station's spherical coordinates: `az_deg` (azimuth from x towards y),
+//!   `el_deg` (elevation above the x–y plane), `range_mm` — converted to a point when read;
+//! * a range alone: `range_mm` with the other observation cells empty (a tracing
+//!   interferometer, or a tracker's range): it needs its `station`.
+//!
+//! Optional: `t_s` (seconds since the test started) and `station` (a station id of the machine
+//! file's `[[station]]` tables; without them every row is the tracker's). Column order is free and extra columns are ignored, except a single-letter axis column for
 //! an axis the machine does not have, which is an error. A header may carry its unit in brackets
 //! or parentheses (`C [deg]`, `meas_x (mm)`); a unit other than the one volver reads is refused
 //! ([`check_unit`]), not converted. Measured coordinates beyond 1 km ([`MAX_COORDINATE_MM`]) are
@@ -73,6 +79,16 @@ pub fn check_unit(found: &str, expected: &str) -> std::result::Result<(), String
     }
 }
 
+/// What one measurement observed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Observation {
+    /// A point: `measured` is its position in the station's frame (mm).
+    #[default]
+    Point,
+    /// A range alone: `measured[0]` is the distance from the station (mm), the other two zero.
+    Range,
+}
+
 /// One measured point.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Measurement {
@@ -80,18 +96,24 @@ pub struct Measurement {
     pub commands: Commands,
     /// Index of the reflector in the machine's list.
     pub reflector: usize,
-    /// Measured position in the tracker frame (mm).
+    /// Measured position in the station's frame (mm); for a range, `[range, 0, 0]`.
     pub measured: [f64; 3],
+    /// What was observed.
+    pub observation: Observation,
     /// Seconds since the test started, when recorded.
     pub t_s: Option<f64>,
     /// Tracker station id, when recorded.
     pub station: Option<String>,
+    /// Index of the station in the machine's list ([`Machine::stations`]; 0 without
+    /// `[[station]]` tables).
+    pub station_index: usize,
     /// Line of the source file (1-based), for messages.
     pub line: usize,
 }
 
-/// A key equal for two measurements of one pose: the commands rounded to 1e-6 (mm, rad) with
-/// rotary positions a full turn apart taken as one (C = 0° and 360°), and the reflector.
+/// A key equal for two measurements of one pose from one station: the commands rounded to 1e-6
+/// (mm, rad) with rotary positions a full turn apart taken as one (C = 0° and 360°), the
+/// reflector and the station (the same pose seen from two stations is not a repeat).
 pub fn pose_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
     let mut k: Vec<i64> = machine
         .axes()
@@ -109,6 +131,7 @@ pub fn pose_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
         })
         .collect();
     k.push(p.reflector as i64);
+    k.push(p.station_index as i64);
     k
 }
 
@@ -124,7 +147,37 @@ pub struct MeasurementSet {
 /// the objective.
 pub const MAX_COORDINATE_MM: f64 = 1e6;
 
-const REQUIRED: [&str; 4] = ["reflector", "meas_x", "meas_y", "meas_z"];
+const POINT_COLUMNS: [&str; 3] = ["meas_x", "meas_y", "meas_z"];
+
+/// A point from spherical coordinates in a station's frame: azimuth from x towards y and
+/// elevation above the x–y plane (rad), range (mm).
+///
+/// ```
+/// use volver_core::measure::from_spherical;
+/// let p = from_spherical(std::f64::consts::FRAC_PI_2, 0.0, 1000.0);
+/// assert!(p[0].abs() < 1e-12 && (p[1] - 1000.0).abs() < 1e-12 && p[2] == 0.0);
+/// ```
+pub fn from_spherical(az: f64, el: f64, range: f64) -> [f64; 3] {
+    let (se, ce) = el.sin_cos();
+    let (sa, ca) = az.sin_cos();
+    [range * ce * ca, range * ce * sa, range * se]
+}
+
+/// [`from_spherical`]'s inverse: `[az, el, range]` (rad, rad, mm).
+pub fn to_spherical(p: [f64; 3]) -> [f64; 3] {
+    let h = p[0].hypot(p[1]);
+    [p[1].atan2(p[0]), p[2].atan2(h), h.hypot(p[2])]
+}
+
+/// How [`MeasurementSet::to_csv_with`] writes points.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PointColumns {
+    /// `meas_x`, `meas_y`, `meas_z` (mm).
+    #[default]
+    Cartesian,
+    /// `az_deg`, `el_deg`, `range_mm`.
+    Spherical,
+}
 
 impl MeasurementSet {
     /// Reads a measurement file for `machine`.
@@ -218,17 +271,58 @@ impl MeasurementSet {
             };
             axis_cols.push(i);
         }
-        let mut req = [0usize; 4];
-        for (k, name) in REQUIRED.iter().enumerate() {
-            req[k] = find(name)?.ok_or_else(|| {
-                Error::input(
-                    header_place(name),
+        let refl_col = find("reflector")?.ok_or_else(|| {
+            Error::input(
+                header_place("reflector"),
+                "missing column 'reflector'; required: axis letters, reflector, and meas_x, \
+                 meas_y, meas_z or range_mm (with az_deg, el_deg for spherical points)",
+            )
+        })?;
+        let mut xyz = [None; 3];
+        for (k, name) in POINT_COLUMNS.iter().enumerate() {
+            xyz[k] = find(name)?;
+        }
+        let (az_col, el_col, range_col) = (find("az_deg")?, find("el_deg")?, find("range_mm")?);
+        let xyz: Option<[usize; 3]> = match xyz {
+            [Some(a), Some(b), Some(c)] => Some([a, b, c]),
+            [None, None, None] => None,
+            _ => {
+                let missing = POINT_COLUMNS
+                    .iter()
+                    .zip(xyz)
+                    .find(|(_, c)| c.is_none())
+                    .map_or("meas_x", |(n, _)| *n);
+                return Err(Error::input(
+                    header_place(missing),
+                    format!("missing column '{missing}': a point needs meas_x, meas_y and meas_z"),
+                ));
+            }
+        };
+        let spherical = match (az_col, el_col) {
+            (Some(a), Some(e)) => Some((a, e)),
+            (None, None) => None,
+            (a, _) => {
+                let missing = if a.is_none() { "az_deg" } else { "el_deg" };
+                return Err(Error::input(
+                    header_place(missing),
                     format!(
-                        "missing column '{name}'; required: axis letters, {}",
-                        REQUIRED.join(", ")
+                        "missing column '{missing}': a spherical point needs az_deg and el_deg"
                     ),
-                )
-            })?;
+                ));
+            }
+        };
+        if spherical.is_some() && range_col.is_none() {
+            return Err(Error::input(
+                header_place("range_mm"),
+                "missing column 'range_mm': a spherical point needs az_deg, el_deg and range_mm",
+            ));
+        }
+        if xyz.is_none() && range_col.is_none() {
+            return Err(Error::input(
+                header_place("meas_x"),
+                "missing column 'meas_x'; required: axis letters, reflector, and meas_x, meas_y, \
+                 meas_z or range_mm (with az_deg, el_deg for spherical points)",
+            ));
         }
         let t_col = find("t_s")?;
         let st_col = find("station")?;
@@ -237,7 +331,13 @@ impl MeasurementSet {
             .zip(machine.axes())
             .map(|(&c, ax)| (c, ax.file_unit()))
             .collect();
-        expected.extend(req[1..].iter().map(|&c| (c, "mm")));
+        expected.extend(xyz.iter().flatten().map(|&c| (c, "mm")));
+        expected.extend(range_col.map(|c| (c, "mm")));
+        expected.extend(
+            spherical
+                .iter()
+                .flat_map(|&(a, e)| [(a, "deg"), (e, "deg")]),
+        );
         expected.extend(t_col.map(|c| (c, "s")));
         for (c, unit) in expected {
             if let Some(u) = &units[c] {
@@ -280,10 +380,10 @@ impl MeasurementSet {
                     .position_from_file(v)
                     .map_err(|m| Error::input(at(col), m))?;
             }
-            let id = &rec[req[0]];
+            let id = &rec[refl_col];
             let reflector = machine
                 .reflector_named(id)
-                .map_err(|m| Error::input(at(req[0]), m))?;
+                .map_err(|m| Error::input(at(refl_col), m))?;
             let coordinate = |col: usize| -> Result<f64> {
                 let v = number(col, "mm")?;
                 if v.abs() > MAX_COORDINATE_MM {
@@ -297,22 +397,81 @@ impl MeasurementSet {
                 }
                 Ok(v)
             };
-            let measured = [
-                coordinate(req[1])?,
-                coordinate(req[2])?,
-                coordinate(req[3])?,
-            ];
+            let filled = |c: Option<usize>| c.is_some_and(|c| !rec[c].is_empty());
+            let range = |col: usize| -> Result<f64> {
+                let v = coordinate(col)?;
+                if v <= 0.0 {
+                    return Err(Error::input(
+                        at(col),
+                        format!("a range is a distance from the station, > 0 mm; found {v}"),
+                    ));
+                }
+                Ok(v)
+            };
             let t_s = match t_col {
                 Some(c) if !rec[c].is_empty() => Some(number(c, "seconds")?),
                 _ => None,
             };
             let station = st_col.map(|c| rec[c].to_string()).filter(|s| !s.is_empty());
+            let station_at =
+                || st_col.map_or_else(|| Place::file(file).at_line(line).at_field("station"), at);
+            let station_index = machine
+                .station_named(station.as_deref())
+                .map_err(|m| Error::input(station_at(), m))?;
+            let (measured, observation) = if let Some(c) = xyz.filter(|c| filled(Some(c[0]))) {
+                (
+                    [coordinate(c[0])?, coordinate(c[1])?, coordinate(c[2])?],
+                    Observation::Point,
+                )
+            } else if let Some((a, e)) = spherical.filter(|&(a, _)| filled(Some(a))) {
+                let d = range(range_col.expect("checked with the header"))?;
+                let (az, el) = (number(a, "degrees")?, number(e, "degrees")?);
+                if el.abs() > 90.0 {
+                    return Err(Error::input(
+                        at(e),
+                        format!("an elevation lies in [-90, 90] degrees; found {el}"),
+                    ));
+                }
+                (
+                    from_spherical(az.to_radians(), el.to_radians(), d),
+                    Observation::Point,
+                )
+            } else if let Some(c) = range_col.filter(|&c| filled(Some(c))) {
+                if station.is_none() {
+                    return Err(Error::input(
+                        station_at(),
+                        "a range alone needs the station that measured it: give its id in the \
+                         station column",
+                    ));
+                }
+                ([range(c)?, 0.0, 0.0], Observation::Range)
+            } else {
+                let c = xyz.map_or_else(|| range_col.expect("one is present"), |c| c[0]);
+                return Err(Error::input(
+                    at(c),
+                    "no observation: give meas_x, meas_y, meas_z, or az_deg, el_deg, range_mm, or \
+                     range_mm alone",
+                ));
+            };
+            let st = &machine.stations()[station_index];
+            if observation == Observation::Point && st.observes == crate::machine::Observes::Range {
+                return Err(Error::input(
+                    station_at(),
+                    format!(
+                        "station '{}' observes ranges only (observes = \"range\" in the machine \
+                         file), but this row gives a point",
+                        st.id
+                    ),
+                ));
+            }
             points.push(Measurement {
                 commands,
                 reflector,
                 measured,
+                observation,
                 t_s,
                 station,
+                station_index,
                 line,
             });
         }
@@ -330,6 +489,7 @@ impl MeasurementSet {
             let mut k: Vec<u64> = p.commands.0.iter().map(|v| v.to_bits()).collect();
             k.extend(p.measured.iter().map(|v| v.to_bits()));
             k.push(p.reflector as u64);
+            k.push(p.station_index as u64);
             k
         };
         order.sort_by_key(|&i| (key(&points[i]), i));
@@ -350,15 +510,42 @@ impl MeasurementSet {
     }
 
     /// Writes the set as measurement CSV (axis columns in chain order, positions in mm and
-    /// degrees, coordinates with 9 decimals; `t_s` and `station` when any point has them).
+    /// degrees, coordinates with 9 decimals; `t_s` and `station` when any point has them,
+    /// `range_mm` when any is a range alone).
     pub fn to_csv_string(&self, machine: &Machine) -> String {
+        self.to_csv_with(machine, PointColumns::Cartesian)
+    }
+
+    /// [`MeasurementSet::to_csv_string`] with the points written in `columns` (spherical: the
+    /// angles in degrees with 12 decimals, the range with 9).
+    pub fn to_csv_with(&self, machine: &Machine, columns: PointColumns) -> String {
         let with_t = self.points.iter().any(|p| p.t_s.is_some());
         let with_station = self.points.iter().any(|p| p.station.is_some());
+        let with_range = self
+            .points
+            .iter()
+            .any(|p| p.observation == Observation::Range);
+        let with_point = !with_range
+            || self
+                .points
+                .iter()
+                .any(|p| p.observation == Observation::Point);
+        let spherical = columns == PointColumns::Spherical;
         let mut out = String::new();
         for ax in machine.axes() {
             let _ = write!(out, "{},", ax.axis);
         }
-        out.push_str("reflector,meas_x,meas_y,meas_z");
+        out.push_str("reflector");
+        if spherical {
+            out.push_str(",az_deg,el_deg,range_mm");
+        } else {
+            if with_point {
+                out.push_str(",meas_x,meas_y,meas_z");
+            }
+            if with_range {
+                out.push_str(",range_mm");
+            }
+        }
         if with_t {
             out.push_str(",t_s");
         }
@@ -370,14 +557,33 @@ impl MeasurementSet {
             for (k, ax) in machine.axes().iter().enumerate() {
                 let _ = write!(out, "{},", round_file(ax.to_file_units(p.commands.0[k])));
             }
-            let _ = write!(
-                out,
-                "{},{:.9},{:.9},{:.9}",
-                machine.reflectors()[p.reflector].id,
-                p.measured[0],
-                p.measured[1],
-                p.measured[2]
-            );
+            out.push_str(&machine.reflectors()[p.reflector].id);
+            let m = p.measured;
+            match (p.observation, spherical) {
+                (Observation::Range, true) => {
+                    let _ = write!(out, ",,,{:.9}", m[0]);
+                }
+                (Observation::Range, false) => {
+                    let empty = if with_point { ",,," } else { "" };
+                    let _ = write!(out, "{empty},{:.9}", m[0]);
+                }
+                (Observation::Point, true) => {
+                    let [az, el, d] = to_spherical(m);
+                    let _ = write!(
+                        out,
+                        ",{:.12},{:.12},{:.9}",
+                        az.to_degrees(),
+                        el.to_degrees(),
+                        d
+                    );
+                }
+                (Observation::Point, false) => {
+                    let _ = write!(out, ",{:.9},{:.9},{:.9}", m[0], m[1], m[2]);
+                    if with_range {
+                        out.push(',');
+                    }
+                }
+            }
             if with_t {
                 let _ = write!(
                     out,

@@ -37,7 +37,7 @@ use crate::kinematics::{
     ErrorsJacobian, PointErrors, Real, TRACKER_DOF, TRACKER_NAMES, predict,
     predict_with_errors_jacobian, tool_in_workpiece_with_errors_jacobian,
 };
-use crate::machine::{Commands, Machine};
+use crate::machine::{Commands, Machine, Observes};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -46,6 +46,7 @@ use std::path::Path;
 
 mod build;
 mod evaluate;
+mod observe;
 mod regressors;
 mod spec;
 use regressors::PointRegressors;
@@ -84,8 +85,16 @@ pub enum Owner {
         /// Index of the coefficient in the term's basis.
         coeff: usize,
     },
-    /// Tracker pose value (0..6: x, y, z, rx, ry, rz).
+    /// Tracker pose value (0..6: x, y, z, rx, ry, rz): the reference station's.
     Tracker(usize),
+    /// A station's value: a further station's pose (`value` 0..6) or any station's range
+    /// offset (`value` 6).
+    Station {
+        /// The station's index in [`Machine::stations`].
+        station: usize,
+        /// 0..6: x, y, z, rx, ry, rz; 6: the range offset.
+        value: usize,
+    },
     /// An effect outside the ISO 230 model (index of its value slot among the effects).
     Effect(usize),
 }
@@ -200,6 +209,15 @@ struct TermGroup {
     params: usize,
 }
 
+/// Where one station's parameters are in the layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StationBlock {
+    /// Its pose's first parameter (x; then y, z, rx, ry, rz): the tracker's for station 0.
+    pub pose: usize,
+    /// Its range offset's parameter, when modelled.
+    pub offset: Option<usize>,
+}
+
 /// A machine plus an error model, compiled: parameter layout, constraints, evaluation.
 ///
 /// ```
@@ -225,6 +243,8 @@ pub struct Model {
     /// The terms in groups that share their basis' values at a point.
     groups: Vec<TermGroup>,
     tracker_start: usize,
+    /// Per station ([`Machine::stations`]): where its parameters are.
+    stations: Vec<StationBlock>,
     has_location: [bool; MAX_AXES],
     constraints: Constraints,
     initial: Vec<f64>,
@@ -292,6 +312,21 @@ impl Model {
     /// Index of the first tracker parameter (`tracker.x`).
     pub fn tracker_start(&self) -> usize {
         self.tracker_start
+    }
+
+    /// Where each station's parameters are ([`Machine::stations`] order; station 0's pose is
+    /// the tracker's, at [`Model::tracker_start`]).
+    pub fn stations(&self) -> &[StationBlock] {
+        &self.stations
+    }
+
+    /// Whether parameter `j` belongs to a station (a pose value or a range offset): what the
+    /// measurement set-up, not the machine, is.
+    pub fn is_station_param(&self, j: usize) -> bool {
+        matches!(
+            self.params[j].owner,
+            Owner::Tracker(_) | Owner::Station { .. }
+        )
     }
 
     /// The linear equality constraints.

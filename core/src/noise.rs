@@ -324,6 +324,26 @@ impl TrackerNoise {
         (mean, (second - mean * mean).max(0.0))
     }
 
+    /// The mean and the variance of the noise's module for a range alone measured at `r_mm`
+    /// (mm, mm²): only the range part, `E|e| = σ √(2/π)` for a normal, `a/2` for a uniform on
+    /// ±a.
+    ///
+    /// ```
+    /// use volver_core::noise::TrackerNoise;
+    /// let n = TrackerNoise::from_text("uniform:30,30,4,0").unwrap();
+    /// let (m, v) = n.range_moments(2000.0);
+    /// assert!((m - 0.002).abs() < 1e-15 && (v - (0.004f64.powi(2) / 3.0 - 0.002f64.powi(2))).abs() < 1e-15);
+    /// ```
+    pub fn range_moments(&self, r_mm: f64) -> (f64, f64) {
+        let value = self.range_value_mm(r_mm);
+        let sigma = self.range_sigma_mm(r_mm);
+        let mean = match self.distribution {
+            Distribution::Normal => value * (2.0 / std::f64::consts::PI).sqrt(),
+            Distribution::Uniform => value / 2.0,
+        };
+        (mean, (sigma * sigma - mean * mean).max(0.0))
+    }
+
     /// Standard deviations of azimuth and elevation, rad, whatever the distribution.
     pub fn angle_sigmas_rad(&self) -> (f64, f64) {
         (

@@ -75,6 +75,13 @@ pub trait Residuals: Send + Sync + std::fmt::Debug {
     /// `ε · observation_scale / ‖r‖` relative.
     fn observation_scale(&self, i: usize) -> f64;
 
+    /// Whether point `i`'s residual is a scalar `(r, 0, 0)`, its module the absolute value (a
+    /// range alone): its curvature in Φ's smoothed objective is all radial, ε²/(r² + ε²)^³ᐟ²,
+    /// which the native LM reaches by continuation in ε. `false` by default.
+    fn scalar(&self, _i: usize) -> bool {
+        false
+    }
+
     /// The machine problem these residuals are, if they are one: what the engines read of the
     /// machine (the tracker's pose, the model's parameters) goes through it. `None` by default.
     fn machine(&self) -> Option<&Problem<'_>> {
@@ -145,6 +152,13 @@ impl<'a> Problem<'a> {
             return Err(Error::Model(format!(
                 "the model has thermal drift, but the measurement of line {} has no t_s",
                 p.line
+            )));
+        }
+        let n_st = model.machine().stations().len();
+        if let Some(p) = data.points.iter().find(|p| p.station_index >= n_st) {
+            return Err(Error::Model(format!(
+                "measurement of line {} uses station index {} but the machine has {n_st}",
+                p.line, p.station_index
             )));
         }
         if let Some(p) = data.points.iter().find(|p| p.reflector >= n_refl) {
@@ -280,44 +294,31 @@ impl Residuals for Problem<'_> {
 
     fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
         let m = &self.data.points[i];
-        let x = self.model.predict_cached(
-            &self.regressors,
-            i,
-            &m.commands,
-            m.reflector,
-            m.t_s.unwrap_or(0.0),
-            params,
-        );
-        minus(x, m.measured)
+        minus(
+            self.model.observe_cached(&self.regressors, i, m, params),
+            m.measured,
+        )
     }
 
     fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
         let m = &self.data.points[i];
-        let x = self.model.predict_with_jacobian_cached(
-            &self.regressors,
-            i,
-            &m.commands,
-            m.reflector,
-            m.t_s.unwrap_or(0.0),
-            params,
-            jac,
-        );
+        let x = self
+            .model
+            .observe_with_jacobian_cached(&self.regressors, i, m, params, jac);
         minus(x, m.measured)
     }
 
     fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
-        let m = &self.data.points[i];
-        self.model.predict_second_directional_at(
-            &m.commands,
-            m.reflector,
-            m.t_s.unwrap_or(0.0),
-            params,
-            dir,
-        )
+        self.model
+            .observe_second_directional(&self.data.points[i], params, dir)
     }
 
     fn observation_scale(&self, i: usize) -> f64 {
         norm(self.data.points[i].measured)
+    }
+
+    fn scalar(&self, i: usize) -> bool {
+        self.data.points[i].observation == crate::measure::Observation::Range
     }
 
     fn machine(&self) -> Option<&Problem<'_>> {
@@ -427,6 +428,10 @@ impl Residuals for Whitened<'_> {
 
     fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
         self.apply(i, self.problem.residual_second_directional(i, params, dir))
+    }
+
+    fn scalar(&self, i: usize) -> bool {
+        self.problem.scalar(i)
     }
 
     fn observation_scale(&self, i: usize) -> f64 {

@@ -209,6 +209,11 @@ pub struct Simulation {
     pub duration_s: Option<f64>,
     /// Seed of the noise and of the harmonics' phases.
     pub seed: u64,
+    /// What every station observes: points (the tracker), or ranges alone (tracing
+    /// interferometers, or a tracker's ranges). A machine with `[[station]]` tables is measured
+    /// from each station in turn (one instrument moved between them: all the plan from the
+    /// first, then from the next), with the noise's range part alone for a range.
+    pub observe: crate::measure::Observation,
 }
 
 /// The output of a simulation.
@@ -235,6 +240,7 @@ impl Simulation {
             effects: Vec::new(),
             duration_s: None,
             seed,
+            observe: crate::measure::Observation::Point,
         }
     }
 
@@ -297,7 +303,21 @@ impl Simulation {
                 }
             }
         }
-        let n = self.plan.n_points() as f64;
+        let n = (self.plan.n_points() * machine.stations().len()) as f64;
+        if self.observe == crate::measure::Observation::Point
+            && let Some(st) = machine
+                .stations()
+                .iter()
+                .find(|s| s.observes == crate::machine::Observes::Range)
+        {
+            return Err(Error::input(
+                place("observe"),
+                format!(
+                    "station '{}' observes ranges only: simulate it with ranges (--observe range)",
+                    st.id
+                ),
+            ));
+        }
         let duration = self.duration_s.unwrap_or(DEFAULT_SECONDS_PER_POINT * n);
         if !(duration.is_finite() && duration >= 0.0) {
             return Err(Error::input(
@@ -402,14 +422,17 @@ impl Simulation {
         let mut nominal_errors = PointErrors::<f64>::zero();
         nominal_errors.tracker = truth.tracker_pose();
 
-        let n = self.plan.n_points();
+        let stations = machine.stations().len();
+        let steps = self.plan.steps();
+        let n = steps.len() * stations;
         let mut noise_rng = stream(self.seed, Stream::Noise);
         let mut points = Vec::with_capacity(n);
         let mut noise_free = Vec::with_capacity(n);
         let mut nominal = Vec::with_capacity(n);
         // The errors of a position, computed once however many reflectors are measured there.
         let mut cached: Option<(usize, PointErrors<f64>)> = None;
-        for (i, step) in self.plan.steps().into_iter().enumerate() {
+        let visits = (0..stations).flat_map(|s| steps.iter().map(move |step| (s, step)));
+        for (i, (station, step)) in visits.enumerate() {
             let (j, r) = (step.position, step.reflector);
             let cmd = &self.plan.positions[j];
             let errors = match &cached {
@@ -432,28 +455,71 @@ impl Simulation {
                     0.0
                 };
                 let shift = has_drift.then(|| drift.map(|v| v * t_s));
+                let mut errors = errors;
+                if station > 0 {
+                    let pose = truth.model.stations()[station].pose;
+                    errors.tracker = std::array::from_fn(|k| truth.params[pose + k]);
+                    errors.station = station;
+                }
                 let errors = self.age(&machine, cmd, t_s, &errors);
-                let clean = predict_with_tool_shift(&machine, cmd, &offsets[r], &errors, shift)
+                let point = predict_with_tool_shift(&machine, cmd, &offsets[r], &errors, shift)
                     .map(|v| v * scale);
-                let measured = self.noise.apply(clean, &mut noise_rng);
+                let offset = truth.model.stations()[station]
+                    .offset
+                    .map_or(0.0, |o| truth.params[o]);
+                let (clean, measured) = match self.observe {
+                    crate::measure::Observation::Point => {
+                        let clean = if offset == 0.0 {
+                            point
+                        } else {
+                            let len = point.iter().map(|v| v * v).sum::<f64>().sqrt();
+                            point.map(|v| v * (1.0 + offset / len))
+                        };
+                        (clean, self.noise.apply(clean, &mut noise_rng))
+                    }
+                    crate::measure::Observation::Range => {
+                        // The noise's angles turn the point, its range part alone moves it
+                        // along the line of sight: the noisy reading's distance.
+                        let d = point.iter().map(|v| v * v).sum::<f64>().sqrt() + offset;
+                        let noisy = self.noise.apply([d, 0.0, 0.0], &mut noise_rng);
+                        let read = noisy.iter().map(|v| v * v).sum::<f64>().sqrt();
+                        ([d, 0.0, 0.0], [read, 0.0, 0.0])
+                    }
+                };
                 if measured.iter().any(|v| !v.is_finite()) {
                     return Err(Error::Model(format!(
                         "point {i} is not finite: the truth or an effect is out of bounds"
                     )));
                 }
-                nominal.push(predict(
+                let mut nominal_errors = nominal_errors;
+                if station > 0 {
+                    let pose = truth.model.stations()[station].pose;
+                    nominal_errors.tracker = std::array::from_fn(|k| truth.params[pose + k]);
+                    nominal_errors.station = station;
+                }
+                let seen = predict(
                     &machine,
                     cmd,
                     &machine.reflectors()[r].offset,
                     &nominal_errors,
-                ));
+                );
+                nominal.push(match self.observe {
+                    crate::measure::Observation::Point => seen,
+                    crate::measure::Observation::Range => {
+                        [seen.iter().map(|v| v * v).sum::<f64>().sqrt(), 0.0, 0.0]
+                    }
+                });
                 noise_free.push(clean);
                 points.push(Measurement {
                     commands: *cmd,
                     reflector: r,
                     measured,
+                    observation: self.observe,
                     t_s: Some(t_s),
-                    station: None,
+                    station: machine
+                        .has_stations()
+                        .then(|| machine.stations()[station].id.clone()),
+                    station_index: station,
                     line: i + 2,
                 });
             }
@@ -560,6 +626,16 @@ impl Synthetic {
     /// `dir` (created if missing; existing files of these names are replaced). Returns the
     /// paths written.
     pub fn write(&self, dir: &Path) -> Result<Vec<PathBuf>> {
+        self.write_as(dir, crate::measure::PointColumns::Cartesian)
+    }
+
+    /// [`Synthetic::write`] with the measured points in `columns` (spherical: `az_deg`,
+    /// `el_deg`, `range_mm`, as a tracker's software exports them).
+    pub fn write_as(
+        &self,
+        dir: &Path,
+        columns: crate::measure::PointColumns,
+    ) -> Result<Vec<PathBuf>> {
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| Error::Io { path, source }
@@ -568,8 +644,11 @@ impl Synthetic {
         let machine = self.truth.model.machine();
         let files = &self.record.files;
         let measurements = dir.join(&files.measurements);
-        crate::fsio::write_atomic(&measurements, self.measurements.to_csv_string(machine))
-            .map_err(io(&measurements))?;
+        crate::fsio::write_atomic(
+            &measurements,
+            self.measurements.to_csv_with(machine, columns),
+        )
+        .map_err(io(&measurements))?;
         let truth = dir.join(&files.truth);
         self.truth.to_results()?.save(&truth)?;
         let machine_path = dir.join(&files.machine);

@@ -20,6 +20,7 @@
 //! | `thermal-drift` | drift of the tool point with time (`[effects] thermal_drift`; needs `t_s`) |
 //! | `reflector-offset:R1` | reflector R1 off its nominal offset |
 //! | `range-scale` | a scale error of the tracker's range |
+//! | `range-offset` | each station's range offset, the dead path (`[tracker] range_offset`) |
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
 //! | `thermal-scale:X` | the scale of linear axis X growing with time: EXX += α·x·t (`[effects] thermal_scale`; needs `t_s`) |
 //! | `tracker-drift` | the tracker's small rotations drifting with time (`[effects] tracker_drift`) |
@@ -306,6 +307,17 @@ pub fn library(model: &Model) -> Vec<Candidate> {
             spec: s,
         });
     }
+    if !spec.tracker.range_offset {
+        let mut s = spec.clone();
+        s.tracker.range_offset = true;
+        out.push(Candidate {
+            id: "range-offset".into(),
+            description: "each station's range offset (the dead path: every range too long or \
+                          too short by a constant)"
+                .into(),
+            spec: s,
+        });
+    }
     if !fx.tracker_drift {
         let mut s = spec.clone();
         s.effects.tracker_drift = true;
@@ -539,6 +551,16 @@ fn implied_size(
     });
     if let Some(g) = groups.iter().max_by(|a, b| a.1.total_cmp(&b.1)) {
         return (g.1, g.3);
+    }
+    if id == "range-offset" {
+        // The largest station offset, in µm.
+        let largest = extended
+            .stations()
+            .iter()
+            .filter_map(|b| b.offset)
+            .map(|j| q[j].abs() * 1e3)
+            .fold(0.0, f64::max);
+        return (largest, Unit::Mm);
     }
     if id == "tracker-tilt" {
         let (ts, te) = (model.tracker_start(), extended.tracker_start());

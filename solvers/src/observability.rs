@@ -75,8 +75,10 @@ pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
                 commands: *c,
                 reflector: s.reflector,
                 measured: model.predict(c, s.reflector, &p),
+                observation: volver_core::measure::Observation::Point,
                 t_s: Some(i as f64 * volver_core::simulate::DEFAULT_SECONDS_PER_POINT),
                 station: None,
+                station_index: 0,
                 line: i + 2,
             }
         })

@@ -178,7 +178,7 @@ fn eligible(model: &Model, info: &ParamInfo, errors: ErrorScope) -> bool {
     }
     let rotary = match info.owner {
         Owner::Term { term, .. } => model.terms()[term].id.axis().is_rotary(),
-        Owner::Tracker(_) | Owner::Effect(_) => return true,
+        Owner::Tracker(_) | Owner::Station { .. } | Owner::Effect(_) => return true,
     };
     match errors {
         ErrorScope::All => true,

@@ -232,7 +232,11 @@ pub fn linear(
         .iter()
         .map(|r| r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
         .sum();
-    let sigma_mm = (sq / (3 * npts).saturating_sub(nf).max(1) as f64).sqrt();
+    // A range alone is one coordinate, a point three.
+    let coordinates: usize = (0..npts)
+        .map(|i| if problem.scalar(i) { 1 } else { 3 })
+        .sum();
+    let sigma_mm = (sq / coordinates.saturating_sub(nf).max(1) as f64).sqrt();
     let mut a = Mat::<f64>::zeros(nf, nf);
     let mut b = Mat::<f64>::zeros(nf, nf);
     // The Gauss rule over the tracker's deviates, once (the isotropic normal needs none).
@@ -251,7 +255,11 @@ pub fn linear(
             (0..n).map(|j| jac[c * n + j] * basis[(j, k)]).sum::<f64>()
         });
         let x = problem.data().points[i].measured;
-        let (ea, eb) = expectations(objective, noise, x, sigma_mm, &rule);
+        let (ea, eb) = if problem.scalar(i) {
+            range_expectations(objective, noise, x[0], sigma_mm)
+        } else {
+            expectations(objective, noise, x, sigma_mm, &rule)
+        };
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
         a += jz.transpose() * (&ea * &jz);
@@ -288,6 +296,44 @@ pub fn linear(
         sigma_mm,
         noise,
     })
+}
+
+/// [`expectations`] for a range alone measured at `range` (mm): only the first coordinate is a
+/// residual, and only the noise's range part moves it. Least squares: `E[∂ψ/∂r] = 1`,
+/// `E[ψ²] = σ²`; Φ (the absolute value, an L1 fit): `E[∂ψ/∂r] = 2 f(0)`, the density of the
+/// range noise at zero (`1/(σ√(2π))` for a normal, `1/(2a)` for a uniform on ±a), and
+/// `E[ψ²] = 1`.
+fn range_expectations(
+    objective: Objective,
+    noise: NoiseModel,
+    range: f64,
+    sigma_mm: f64,
+) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
+    let (sigma, density0) = match noise {
+        NoiseModel::Residual => (
+            sigma_mm,
+            1.0 / (sigma_mm * (2.0 * std::f64::consts::PI).sqrt()),
+        ),
+        NoiseModel::Tracker(t) => {
+            let value = t.range_value_mm(range).max(f64::MIN_POSITIVE);
+            let density = match t.distribution {
+                volver_core::noise::Distribution::Normal => {
+                    1.0 / (value * (2.0 * std::f64::consts::PI).sqrt())
+                }
+                volver_core::noise::Distribution::Uniform => 1.0 / (2.0 * value),
+            };
+            (t.range_sigma_mm(range), density)
+        }
+    };
+    let one = |v: f64| {
+        let mut m = [[0.0; 3]; 3];
+        m[0][0] = v;
+        m
+    };
+    match objective {
+        Objective::Ve => (one(1.0), one(sigma * sigma)),
+        Objective::Phi => (one(2.0 * density0), one(1.0)),
+    }
 }
 
 /// `E[∂ψ/∂r]` and `E[ψψᵀ]` at a point measured at `x` (the residual at the truth is minus the

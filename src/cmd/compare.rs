@@ -101,6 +101,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
                 machine: a.machine.clone(),
                 model: a.model.clone(),
                 data: path.clone(),
+                import: None,
             };
             let (_, model, data) = inputs.load()?;
             (model, data, path.display().to_string())

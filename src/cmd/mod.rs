@@ -29,9 +29,14 @@ pub struct Inputs {
     /// Error model (TOML); the paper's model when absent (with the embedded machine).
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Measurement file (CSV).
+    /// Measurement file (CSV), or a tracker software's export with `--import`.
     #[arg(long)]
     pub data: PathBuf,
+    /// Import profile (TOML): read `--data` as a tracker software's export (its columns,
+    /// units, and the point names that give the axis positions and the reflector; see
+    /// `volver_core::import`).
+    #[arg(long, value_name = "PROFILE")]
+    pub import: Option<PathBuf>,
 }
 
 impl Inputs {
@@ -41,6 +46,7 @@ impl Inputs {
             self.machine.as_deref(),
             self.model.as_deref(),
             Some(self.data.as_path()),
+            self.import.as_deref(),
         ]
         .into_iter()
         .chain(more.iter().copied())
@@ -50,7 +56,12 @@ impl Inputs {
 
     /// Reads the three files.
     pub fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
-        volver::inputs::load(self.machine.as_deref(), self.model.as_deref(), &self.data)
+        volver::inputs::load_with(
+            self.machine.as_deref(),
+            self.model.as_deref(),
+            &self.data,
+            self.import.as_deref(),
+        )
     }
 }
 

@@ -85,6 +85,17 @@ pub struct SimulateArgs {
     /// Reflectors measured at each position, ids comma-separated; all when absent.
     #[arg(long)]
     reflectors: Option<String>,
+    /// Tracker stations (multilateration), the plan measured from each in turn: a number N (a
+    /// default layout S1 … SN on a 500 mm circle about the tracker, mounted as it is, every
+    /// other one 400 mm higher) or a layout file (TOML, `[[station]]` tables as in a machine
+    /// file). The machine file written carries them.
+    #[arg(long, value_name = "N|LAYOUT", conflicts_with = "truth")]
+    stations: Option<String>,
+    /// What is observed: point (meas_x, meas_y, meas_z), spherical (az_deg, el_deg, range_mm)
+    /// or range (range_mm alone, with its station: a tracing interferometer; only the noise's
+    /// range part applies, e.g. --noise normal:0,0,0.1,0.15 for U(k = 2) = 0.2 µm + 0.3 µm/m).
+    #[arg(long, default_value = "point", value_parser = ["point", "spherical", "range"])]
+    observe: String,
 }
 
 /// Runs `volver simulate`.
@@ -94,6 +105,9 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     let plan = plan_of(&a, &machine)?;
     let mut sim = Simulation::new(plan, truth, a.seed);
     sim.truth_source = source;
+    if a.observe == "range" {
+        sim.observe = volver::core::measure::Observation::Range;
+    }
     sim.noise = TrackerNoise::from_text(&a.noise)?;
     sim.effects = a
         .effect
@@ -104,7 +118,12 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         sim.duration_s = Some(h * 3600.0);
     }
     let out = sim.run()?;
-    let files = out.write(&a.out)?;
+    let columns = if a.observe == "spherical" {
+        volver::core::measure::PointColumns::Spherical
+    } else {
+        volver::core::measure::PointColumns::Cartesian
+    };
+    let files = out.write_as(&a.out, columns)?;
     print_record(&out, &machine, &files);
     Ok(())
 }
@@ -135,7 +154,25 @@ fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
             (truth, TruthSource::File { path: label })
         }
         None => {
-            let m = given_machine.unwrap_or_else(Machine::default_xcfz);
+            let mut m = given_machine.unwrap_or_else(Machine::default_xcfz);
+            if let Some(text) = &a.stations {
+                let observes = if a.observe == "range" {
+                    volver::core::machine::Observes::Range
+                } else {
+                    volver::core::machine::Observes::Point
+                };
+                let layout = match text.parse::<usize>() {
+                    Ok(0) => anyhow::bail!("--stations 0: at least one station"),
+                    Ok(n) => volver::core::machine::StationSpec::default_layout(&m, n, observes),
+                    Err(_) => {
+                        let path = std::path::Path::new(text);
+                        let body = std::fs::read_to_string(path)
+                            .with_context(|| format!("reading the station layout {text}"))?;
+                        volver::core::machine::StationSpec::layout_from_toml_str(&body, text)?
+                    }
+                };
+                m = m.with_stations(layout)?;
+            }
             let structure = match &a.truth_model {
                 Some(p) => Model::load(m.clone(), p)
                     .context("reading the truth model")?

@@ -375,7 +375,7 @@ pub fn predict_with_errors_jacobian(
     errors: &PointErrors<f64>,
 ) -> ([f64; 3], ErrorsJacobian) {
     let mut out = ErrorsJacobian::zero();
-    let tracker = machine.tracker();
+    let tracker = &machine.stations()[errors.station].setup;
     let into_workpiece = tracker.mount == TrackerMount::Workpiece;
     let e = errors;
     let x = chain_with_jacobian(

@@ -73,9 +73,16 @@ impl Model {
             )));
         }
         let tracker_start = params.len();
+        let station_prefix = |s: usize| {
+            if machine.has_stations() {
+                format!("station.{}", machine.stations()[s].id)
+            } else {
+                "tracker".to_string()
+            }
+        };
         for (k, n) in TRACKER_NAMES.iter().enumerate() {
             params.push(ParamInfo {
-                name: format!("tracker.{n}"),
+                name: format!("{}.{n}", station_prefix(0)),
                 unit: if k < 3 { Unit::Mm } else { Unit::Rad },
                 group: Group::Tracker,
                 owner: Owner::Tracker(k),
@@ -234,11 +241,49 @@ impl Model {
                 MAX_SLOTS - TRACKER_DOF
             )));
         }
+        // The further stations' poses, then every station's range offset: after the effects,
+        // so that a one-station model's layout is the tracker's alone.
+        let mut stations = vec![StationBlock {
+            pose: tracker_start,
+            offset: None,
+        }];
+        for s in 1..machine.stations().len() {
+            stations.push(StationBlock {
+                pose: params.len(),
+                offset: None,
+            });
+            for (k, n) in TRACKER_NAMES.iter().enumerate() {
+                params.push(ParamInfo {
+                    name: format!("{}.{n}", station_prefix(s)),
+                    unit: if k < 3 { Unit::Mm } else { Unit::Rad },
+                    group: Group::Tracker,
+                    owner: Owner::Station {
+                        station: s,
+                        value: k,
+                    },
+                });
+            }
+        }
+        if spec.tracker.range_offset {
+            for (s, block) in stations.iter_mut().enumerate() {
+                block.offset = Some(params.len());
+                params.push(ParamInfo {
+                    name: format!("{}.offset", station_prefix(s)),
+                    unit: Unit::Mm,
+                    group: Group::Tracker,
+                    owner: Owner::Station {
+                        station: s,
+                        value: TRACKER_DOF,
+                    },
+                });
+            }
+        }
         let slot_of = params
             .iter()
             .map(|p| match p.owner {
                 Owner::Term { term, .. } => term,
                 Owner::Tracker(k) => terms.len() + k,
+                Owner::Station { value, .. } => terms.len() + value.min(TRACKER_DOF - 1),
                 Owner::Effect(k) => terms.len() + TRACKER_DOF + k,
             })
             .collect();
@@ -254,7 +299,9 @@ impl Model {
             }
         }
         let mut initial = vec![0.0; params.len()];
-        initial[tracker_start..tracker_start + 3].copy_from_slice(&machine.tracker().position);
+        for (st, block) in machine.stations().iter().zip(&stations) {
+            initial[block.pose..block.pose + 3].copy_from_slice(&st.setup.position);
+        }
 
         // Constraints.
         let mut rows = Vec::new();
@@ -334,13 +381,21 @@ impl Model {
                 ));
             }
         }
-        for (k, n) in TRACKER_NAMES.iter().enumerate() {
-            if !spec.tracker.identify.iter().any(|s| s == n) {
-                let j = tracker_start + k;
-                fixed.insert(
-                    j,
-                    (initial[j], format!("tracker.{n} held at its nominal value")),
-                );
+        for (s, (st, block)) in machine.stations().iter().zip(&stations).enumerate() {
+            for (k, n) in TRACKER_NAMES.iter().enumerate() {
+                let j = block.pose + k;
+                let name = &params[j].name;
+                if st.observes == Observes::Range && k >= 3 {
+                    fixed.insert(
+                        j,
+                        (
+                            initial[j],
+                            format!("{name} held: a range-only station has no orientation"),
+                        ),
+                    );
+                } else if s == 0 && !spec.tracker.identify.iter().any(|s| s == n) {
+                    fixed.insert(j, (initial[j], format!("{name} held at its nominal value")));
+                }
             }
         }
         for (name, &value) in &spec.fixed {
@@ -387,6 +442,7 @@ impl Model {
             places,
             groups,
             tracker_start,
+            stations,
             has_location,
             constraints: Constraints { rows },
             initial,

@@ -305,7 +305,7 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [f64; 3] {
-        self.predict_with(commands, reflector, t_s, params, None)
+        self.predict_with(commands, reflector, 0, t_s, params, None)
     }
 
     /// [`Model::predict_at`] with the point's [`Regressors`] when the caller has them.
@@ -313,11 +313,12 @@ impl Model {
         &self,
         commands: &Commands,
         reflector: usize,
+        station: usize,
         t_s: f64,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
     ) -> [f64; 3] {
-        let e = self.errors_with(&commands.0, reflector, t_s, params, cached);
+        let e = self.errors_with(&commands.0, reflector, station, t_s, params, cached);
         predict(
             &self.machine,
             commands,
@@ -364,7 +365,7 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> PointErrors<S> {
-        self.errors_with(commands, reflector, t_s, params, None)
+        self.errors_with(commands, reflector, 0, t_s, params, None)
     }
 
     /// [`Model::errors_with_commands`], with the point's [`Regressors`] when the caller has
@@ -373,6 +374,7 @@ impl Model {
         &self,
         commands: &[S; MAX_AXES],
         reflector: usize,
+        station: usize,
         t_s: f64,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
@@ -398,12 +400,11 @@ impl Model {
                 }
             }
         }
-        for (k, v) in params[self.tracker_start..self.tracker_start + TRACKER_DOF]
-            .iter()
-            .enumerate()
-        {
+        let pose = self.stations[station].pose;
+        for (k, v) in params[pose..pose + TRACKER_DOF].iter().enumerate() {
             e.tracker[k] = S::from(*v);
         }
+        e.station = station;
         if !self.effects.is_empty() {
             let mut vals = [S::zero(); MAX_SLOTS];
             self.effect_values(commands, reflector, t_s, params, &mut vals, None);
@@ -452,6 +453,7 @@ impl Model {
             commands,
             JacobianTarget::Tool(tool),
             usize::MAX,
+            0,
             0.0,
             params,
             None,
@@ -493,15 +495,17 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
-        self.reflector_with_jacobian(commands, reflector, t_s, params, None, jac)
+        self.reflector_with_jacobian(commands, reflector, 0, t_s, params, None, jac)
     }
 
     /// [`Model::predict_with_jacobian_at`] with the point's [`Regressors`] when the caller has
     /// them.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn reflector_with_jacobian(
         &self,
         commands: &Commands,
         reflector: usize,
+        station: usize,
         t_s: f64,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
@@ -512,6 +516,7 @@ impl Model {
             commands,
             JacobianTarget::Reflector(refl),
             reflector,
+            station,
             t_s,
             params,
             cached,
@@ -528,6 +533,7 @@ impl Model {
         commands: &Commands,
         target: JacobianTarget,
         reflector: usize,
+        station: usize,
         t_s: f64,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
@@ -559,13 +565,24 @@ impl Model {
             }
         }
         let m = self.terms.len() + TRACKER_DOF;
-        vals[self.terms.len()..m]
-            .copy_from_slice(&params[self.tracker_start..self.tracker_start + TRACKER_DOF]);
-        jac[self.tracker_start..self.tracker_start + TRACKER_DOF].fill(1.0);
+        let pose = self.stations[station].pose;
+        vals[self.terms.len()..m].copy_from_slice(&params[pose..pose + TRACKER_DOF]);
+        if self.stations.len() > 1 || self.stations[0].offset.is_some() {
+            // Another station's pose and every range offset do not move this point (the
+            // offset enters after the chain, in the observation).
+            for b in &self.stations {
+                jac[b.pose..b.pose + TRACKER_DOF].fill(0.0);
+                if let Some(o) = b.offset {
+                    jac[o] = 0.0;
+                }
+            }
+        }
+        jac[pose..pose + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
         self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
         let mut e = self.point_errors(|i| vals[i]);
         e.rotary_sin_cos = cached.map(|c| c.sin_cos);
+        e.station = station;
         let (point, de) = match target {
             JacobianTarget::Reflector(refl) => {
                 predict_with_errors_jacobian(&self.machine, commands, refl, &e)
@@ -603,6 +620,21 @@ impl Model {
         params: &[f64],
         dir: &[f64],
     ) -> [f64; 3] {
+        let x = self.predict_dual2(commands, reflector, 0, t_s, params, dir);
+        [x[0].v2, x[1].v2, x[2].v2]
+    }
+
+    /// The predicted point as second-order dual numbers along `dir` (value, first and second
+    /// derivative), for the point's station.
+    pub(super) fn predict_dual2(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        station: usize,
+        t_s: f64,
+        params: &[f64],
+        dir: &[f64],
+    ) -> [num_dual::Dual2_64; 3] {
         self.check_len(params);
         self.check_len(dir);
         let mut vals = [0.0; MAX_SLOTS];
@@ -618,17 +650,17 @@ impl Model {
             d2[i] = t.basis.second_directional(x, &params[r.clone()], &dir[r]);
         }
         let k = self.terms.len();
-        let ts = self.tracker_start;
+        let ts = self.stations[station].pose;
         vals[k..k + TRACKER_DOF].copy_from_slice(&params[ts..ts + TRACKER_DOF]);
         d1[k..k + TRACKER_DOF].copy_from_slice(&dir[ts..ts + TRACKER_DOF]);
         // Effects are linear in their parameters: their derivative along dir is their value
         // at dir, and their second derivative is zero.
         self.effect_values(&commands.0, reflector, t_s, params, &mut vals, None);
         self.effect_values(&commands.0, reflector, t_s, dir, &mut d1, None);
-        let e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
+        let mut e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
+        e.station = station;
         let refl = &self.machine.reflectors()[reflector].offset;
-        let x = predict(&self.machine, commands, refl, &e);
-        [x[0].v2, x[1].v2, x[2].v2]
+        predict(&self.machine, commands, refl, &e)
     }
 
     /// ∂point/∂(error value) of every slot (terms, tracker, effects: the first `m`), by rows,

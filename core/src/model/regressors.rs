@@ -137,7 +137,14 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [f64; 3] {
-        self.predict_with(commands, reflector, t_s, params, Some(regressors.point(i)))
+        self.predict_with(
+            commands,
+            reflector,
+            0,
+            t_s,
+            params,
+            Some(regressors.point(i)),
+        )
     }
 
     /// [`Model::predict_with_jacobian_at`] at point `i` of `regressors` (see
@@ -159,6 +166,7 @@ impl Model {
         self.reflector_with_jacobian(
             commands,
             reflector,
+            0,
             t_s,
             params,
             Some(regressors.point(i)),

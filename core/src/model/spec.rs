@@ -62,14 +62,22 @@ pub struct ErrorTermSpec {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrackerModelSpec {
-    /// Which of x, y, z, rx, ry, rz are identified; the others are fixed at their nominal value.
+    /// Which of x, y, z, rx, ry, rz of the tracker (the reference station) are identified; the
+    /// others are fixed at their nominal value. Further stations identify their whole pose (a
+    /// range-only station its position).
     pub identify: Vec<String>,
+    /// Each station's range offset (mm, the dead path): a range is `|x| + offset`, a point is
+    /// moved by the offset along its line of sight. Parameters `tracker.offset` or
+    /// `station.<id>.offset`.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub range_offset: bool,
 }
 
 impl Default for TrackerModelSpec {
     fn default() -> Self {
         TrackerModelSpec {
             identify: TRACKER_NAMES.iter().map(|s| s.to_string()).collect(),
+            range_offset: false,
         }
     }
 }
@@ -321,6 +329,7 @@ impl ErrorModelSpec {
             errors,
             tracker: TrackerModelSpec {
                 identify: TRACKER_NAMES[..3].iter().map(|s| s.to_string()).collect(),
+                range_offset: false,
             },
             fixed: BTreeMap::new(),
             effects: EffectsSpec::default(),

@@ -27,7 +27,10 @@ impl Truth {
         if spec.squareness == SquarenessRule::FromStraightness {
             spec.squareness = SquarenessRule::Separate;
         }
-        spec.tracker = TrackerModelSpec::default();
+        spec.tracker = TrackerModelSpec {
+            range_offset: machine.has_stations(),
+            ..TrackerModelSpec::default()
+        };
         let model = Model::new(machine.clone(), spec)?;
         let mut rng = stream(seed, Stream::Errors);
         let mut p = model.initial_params();
@@ -73,6 +76,22 @@ impl Truth {
                 p[model.tracker_start() + k] += dist * d / norm;
             }
         }
+        // Further stations stand as far from their nominal positions as the tracker; each
+        // station's range offset (the dead path, when modelled) is up to ±0.1 mm. Drawn after
+        // the tracker, so that one station draws what it always did.
+        for (s, block) in model.stations().iter().enumerate() {
+            if s > 0 {
+                let dir = [rng.normal(), rng.normal(), rng.normal()];
+                let norm = dir.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let dist = magnitudes.tracker_mm * (0.5 + 0.5 * rng.uniform());
+                for (k, d) in dir.iter().enumerate() {
+                    p[block.pose + k] += dist * d / norm.max(f64::MIN_POSITIVE);
+                }
+            }
+            if let Some(o) = block.offset {
+                p[o] = 0.1 * (2.0 * rng.uniform() - 1.0);
+            }
+        }
         Ok(Truth { model, params: p })
     }
 
@@ -104,7 +123,10 @@ impl Truth {
 
     pub(super) fn with_free_tracker(model: Model, params: Vec<f64>) -> Result<Truth> {
         let mut spec = model.spec().clone();
-        spec.tracker = TrackerModelSpec::default();
+        spec.tracker = TrackerModelSpec {
+            range_offset: spec.tracker.range_offset,
+            ..TrackerModelSpec::default()
+        };
         let model = Model::new(model.machine().clone(), spec)?;
         Ok(Truth { model, params })
     }

@@ -1,0 +1,588 @@
+//! Import profiles: a tracker software's export read as it is written, one row per measured
+//! point with its name and X, Y, Z (or Hz, V, D, or a distance alone), through a TOML profile
+//! that says which column is which, in what units, and how a point's name gives the machine's
+//! axis positions and the reflector.
+//!
+//! ```toml
+//! name = "tracker software CSV export"
+//! delimiter = ";"                      # default ","
+//! skip_lines = 2                       # lines before the header (a title, a date …)
+//! point = "Point Name"                 # the column holding each point's name
+//! pattern = "{reflector}_X{X}_C{C}_Z{Z}"  # what a name says: the axes in mm and degrees
+//! station = "Station"                  # optional: the column naming the station …
+//! # station_id = "S1"                  # … or one station for the whole file
+//! time = "Time"                        # optional: seconds since the test started
+//!
+//! [coordinates]
+//! x = "X"                              # Cartesian: x, y, z …
+//! y = "Y"
+//! z = "Z"
+//! # hz = "Hz"  v = "V"  d = "D"        # … or spherical, or d alone (a range)
+//! length_unit = "m"                    # mm (default), m, um, in
+//! angle_unit = "gon"                   # deg (default), rad, gon
+//! vertical = "zenith"                  # V from the zenith (default: elevation)
+//! horizontal = "clockwise"             # Hz clockwise seen from above (default: from x to y)
+//! ```
+//!
+//! Every value is converted once, here, at the file's boundary: lengths to mm, angles to rad,
+//! spherical coordinates to a point in the station's frame (azimuth from x towards y, elevation
+//! above the x–y plane). Errors name the file, the line and the column, in the profile or in the
+//! export.
+//!
+//! ```
+//! use volver_core::import::Profile;
+//! use volver_core::machine::Machine;
+//! let m = Machine::default_xcfz();
+//! let profile = Profile::from_toml_str(
+//!     "point = \"Name\"\npattern = \"{reflector}/{X}/{C}/{Z}\"\n[coordinates]\nx = \"X\"\ny = \"Y\"\nz = \"Z\"\nlength_unit = \"m\"\n",
+//!     "p.toml",
+//! )
+//! .unwrap();
+//! let set = profile.read(&m, "Name,X,Y,Z\nR1/0/0/0,0.95,0.075,1.45\n", "export.csv").unwrap();
+//! assert!((set.points[0].measured[0] - 950.0).abs() < 1e-9);
+//! ```
+
+use crate::error::{Error, Place, Result, from_toml};
+use crate::machine::{Commands, Machine};
+use crate::measure::{Measurement, MeasurementSet, Observation, from_spherical};
+use serde::Deserialize;
+use std::path::Path;
+
+/// The `[coordinates]` table of a profile.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoordinateColumns {
+    /// Cartesian columns.
+    #[serde(default)]
+    pub x: Option<String>,
+    /// Cartesian y.
+    #[serde(default)]
+    pub y: Option<String>,
+    /// Cartesian z.
+    #[serde(default)]
+    pub z: Option<String>,
+    /// Horizontal angle.
+    #[serde(default)]
+    pub hz: Option<String>,
+    /// Vertical angle.
+    #[serde(default)]
+    pub v: Option<String>,
+    /// Distance (with hz and v: spherical; alone: a range).
+    #[serde(default)]
+    pub d: Option<String>,
+    /// `mm` (default), `m`, `um`, `in`.
+    #[serde(default)]
+    pub length_unit: Option<String>,
+    /// `deg` (default), `rad`, `gon`.
+    #[serde(default)]
+    pub angle_unit: Option<String>,
+    /// `elevation` (default: above the horizontal plane) or `zenith` (from the vertical).
+    #[serde(default)]
+    pub vertical: Option<String>,
+    /// `counterclockwise` (default: from x towards y) or `clockwise`.
+    #[serde(default)]
+    pub horizontal: Option<String>,
+}
+
+/// An import profile as written in its TOML file.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProfileSpec {
+    /// A name for messages.
+    #[serde(default)]
+    pub name: String,
+    /// The field separator (one character); `,` by default, `\t` for a tab.
+    #[serde(default)]
+    pub delimiter: Option<String>,
+    /// Lines before the header.
+    #[serde(default)]
+    pub skip_lines: usize,
+    /// The column holding each point's name.
+    pub point: String,
+    /// What a name says: `{X}`, `{C}` … (the machine's axes, in mm and degrees), `{reflector}`
+    /// and `{*}` (anything, ignored) between literal text.
+    pub pattern: String,
+    /// The column naming each point's station.
+    #[serde(default)]
+    pub station: Option<String>,
+    /// One station for the whole file.
+    #[serde(default)]
+    pub station_id: Option<String>,
+    /// The column of seconds since the test started.
+    #[serde(default)]
+    pub time: Option<String>,
+    /// The observation's columns and units.
+    pub coordinates: CoordinateColumns,
+}
+
+/// One piece of a name pattern.
+#[derive(Clone, Debug, PartialEq)]
+enum Piece {
+    Literal(String),
+    Field(String),
+}
+
+/// A validated import profile. Read one with [`Profile::load`] or [`Profile::from_toml_str`],
+/// then an export with [`Profile::read`] or [`Profile::load_export`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Profile {
+    spec: ProfileSpec,
+    file: String,
+    delimiter: u8,
+    pieces: Vec<Piece>,
+    length_mm: f64,
+    angle_rad: f64,
+}
+
+/// What the export's rows observe.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    Cartesian([usize; 3]),
+    Spherical([usize; 3]),
+    Range(usize),
+}
+
+impl Profile {
+    /// Reads a profile file.
+    pub fn load(path: &Path) -> Result<Profile> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Profile::from_toml_str(&text, &path.display().to_string())
+    }
+
+    /// Parses and checks a profile; `file` names it in messages.
+    pub fn from_toml_str(text: &str, file: &str) -> Result<Profile> {
+        let spec: ProfileSpec = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
+        let at = |field: &str| {
+            let mut p = Place::file(file).at_field(field);
+            if let Some(line) = crate::error::line_of_text(text, field) {
+                p = p.at_line(line);
+            }
+            p
+        };
+        let delimiter = match spec.delimiter.as_deref() {
+            None => b',',
+            Some("\\t" | "\t") => b'\t',
+            Some(d) if d.len() == 1 && d.is_ascii() => d.as_bytes()[0],
+            Some(d) => {
+                return Err(Error::input(
+                    at("delimiter"),
+                    format!("delimiter {d:?}: one ASCII character (\",\", \";\", \"\\t\" …)"),
+                ));
+            }
+        };
+        let c = &spec.coordinates;
+        let length_mm = match c.length_unit.as_deref().unwrap_or("mm") {
+            "mm" => 1.0,
+            "m" => 1000.0,
+            "um" | "µm" => 1e-3,
+            "in" => 25.4,
+            u => {
+                return Err(Error::input(
+                    at("length_unit"),
+                    format!("length unit '{u}': expected mm, m, um or in"),
+                ));
+            }
+        };
+        let angle_rad = match c.angle_unit.as_deref().unwrap_or("deg") {
+            "deg" => std::f64::consts::PI / 180.0,
+            "rad" => 1.0,
+            "gon" => std::f64::consts::PI / 200.0,
+            u => {
+                return Err(Error::input(
+                    at("angle_unit"),
+                    format!("angle unit '{u}': expected deg, rad or gon"),
+                ));
+            }
+        };
+        if !matches!(c.vertical.as_deref(), None | Some("elevation" | "zenith")) {
+            return Err(Error::input(
+                at("vertical"),
+                "vertical: expected elevation or zenith",
+            ));
+        }
+        if !matches!(
+            c.horizontal.as_deref(),
+            None | Some("counterclockwise" | "clockwise")
+        ) {
+            return Err(Error::input(
+                at("horizontal"),
+                "horizontal: expected counterclockwise or clockwise",
+            ));
+        }
+        if spec.station.is_some() && spec.station_id.is_some() {
+            return Err(Error::input(
+                at("station_id"),
+                "give the station as a column (station) or one id (station_id), not both",
+            ));
+        }
+        let pieces = parse_pattern(&spec.pattern).map_err(|m| Error::input(at("pattern"), m))?;
+        Ok(Profile {
+            spec,
+            file: file.to_string(),
+            delimiter,
+            pieces,
+            length_mm,
+            angle_rad,
+        })
+    }
+
+    /// Reads an export file through the profile.
+    pub fn load_export(&self, machine: &Machine, path: &Path) -> Result<MeasurementSet> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        self.read(machine, &text, &path.display().to_string())
+    }
+
+    /// Reads an export's text through the profile; `file` names it in messages.
+    pub fn read(&self, machine: &Machine, text: &str, file: &str) -> Result<MeasurementSet> {
+        let spec = &self.spec;
+        let profile_at = |field: &str| Place::file(&self.file).at_field(field);
+        // The pattern's fields must be the machine's axes, once each, and the reflector.
+        for axis in machine.axes() {
+            let letter = axis.axis.letter().to_string();
+            if !self.pieces.contains(&Piece::Field(letter.clone())) {
+                return Err(Error::input(
+                    profile_at("pattern"),
+                    format!(
+                        "the pattern names no {{{letter}}}: a point's name must give every axis of \
+                         {} and the reflector",
+                        machine.chain()
+                    ),
+                ));
+            }
+        }
+        for piece in &self.pieces {
+            if let Piece::Field(f) = piece
+                && f != "reflector"
+                && f != "*"
+                && machine.axis_named(f).is_none()
+            {
+                return Err(Error::input(
+                    profile_at("pattern"),
+                    format!(
+                        "{{{f}}} is not an axis of {} (nor reflector or *)",
+                        machine.chain()
+                    ),
+                ));
+            }
+        }
+        let with_reflector = self.pieces.contains(&Piece::Field("reflector".into()));
+        if !with_reflector && machine.reflectors().len() > 1 {
+            return Err(Error::input(
+                profile_at("pattern"),
+                "the pattern names no {reflector}, and the machine has several reflectors",
+            ));
+        }
+        let body: String = text
+            .split_inclusive('\n')
+            .skip(spec.skip_lines)
+            .collect::<String>();
+        let offset = spec.skip_lines;
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .delimiter(self.delimiter)
+            .trim(csv::Trim::All)
+            .flexible(true)
+            .from_reader(body.as_bytes());
+        let csv_err = |e: csv::Error| {
+            let mut place = Place::file(file);
+            if let Some(p) = e.position() {
+                place = place.at_line(p.line() as usize + offset);
+            }
+            Error::input(place, format!("not valid CSV: {e}"))
+        };
+        let headers: Vec<String> = rdr
+            .headers()
+            .map_err(csv_err)?
+            .iter()
+            .map(str::to_string)
+            .collect();
+        let column = |name: &str, field: &str| -> Result<usize> {
+            headers.iter().position(|h| h == name).ok_or_else(|| {
+                Error::input(
+                    profile_at(field),
+                    format!(
+                        "column '{name}' is not in the header of {file} (line {}: {})",
+                        offset + 1,
+                        headers.join(", ")
+                    ),
+                )
+            })
+        };
+        let point_col = column(&spec.point, "point")?;
+        let c = &spec.coordinates;
+        let named =
+            |v: &Option<String>, field: &str| v.as_deref().map(|n| column(n, field)).transpose();
+        let kind = match (
+            named(&c.x, "coordinates.x")?,
+            named(&c.y, "coordinates.y")?,
+            named(&c.z, "coordinates.z")?,
+            named(&c.hz, "coordinates.hz")?,
+            named(&c.v, "coordinates.v")?,
+            named(&c.d, "coordinates.d")?,
+        ) {
+            (Some(x), Some(y), Some(z), None, None, None) => Kind::Cartesian([x, y, z]),
+            (None, None, None, Some(h), Some(v), Some(d)) => Kind::Spherical([h, v, d]),
+            (None, None, None, None, None, Some(d)) => Kind::Range(d),
+            _ => {
+                return Err(Error::input(
+                    profile_at("coordinates"),
+                    "give x, y and z, or hz, v and d, or d alone (a range)",
+                ));
+            }
+        };
+        let station_col = named(&spec.station, "station")?;
+        let time_col = named(&spec.time, "time")?;
+        let mut points = Vec::new();
+        for rec in rdr.records() {
+            let rec = rec.map_err(csv_err)?;
+            let line = rec.position().map_or(0, |p| p.line() as usize) + offset;
+            if rec.iter().all(str::is_empty) {
+                continue;
+            }
+            let at = |col: usize| {
+                Place::file(file)
+                    .at_line(line)
+                    .at_field(headers.get(col).cloned().unwrap_or_default())
+            };
+            let cell = |col: usize| rec.get(col).unwrap_or("");
+            let number = |col: usize, what: &str| -> Result<f64> {
+                let s = cell(col);
+                s.parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .ok_or_else(|| {
+                        Error::input(
+                            at(col),
+                            format!("expected a finite number ({what}), found \"{s}\""),
+                        )
+                    })
+            };
+            let name = cell(point_col);
+            let fields = match_pattern(&self.pieces, name).ok_or_else(|| {
+                Error::input(
+                    at(point_col),
+                    format!(
+                        "point name \"{name}\" does not follow the profile's pattern \"{}\"",
+                        spec.pattern
+                    ),
+                )
+            })?;
+            let mut commands = Commands::default();
+            let mut reflector = 0;
+            for (field, value) in &fields {
+                if field == "*" {
+                    continue;
+                }
+                if field == "reflector" {
+                    reflector = machine
+                        .reflector_named(value)
+                        .map_err(|m| Error::input(at(point_col), m))?;
+                    continue;
+                }
+                let (k, ax) = machine.axis_named(field).expect("checked with the pattern");
+                let v: f64 = value
+                    .parse()
+                    .ok()
+                    .filter(|v: &f64| v.is_finite())
+                    .ok_or_else(|| {
+                        Error::input(
+                            at(point_col),
+                            format!(
+                                "point name \"{name}\": {field} = \"{value}\" is not a number ({})",
+                                ax.file_unit()
+                            ),
+                        )
+                    })?;
+                commands.0[k] = ax.position_from_file(v).map_err(|m| {
+                    Error::input(at(point_col), format!("point name \"{name}\": {m}"))
+                })?;
+            }
+            let length = |col: usize| -> Result<f64> {
+                let v = number(col, "a length")? * self.length_mm;
+                if v.abs() > crate::measure::MAX_COORDINATE_MM {
+                    return Err(Error::input(
+                        at(col),
+                        format!("{v} mm is beyond any laser tracker's reach: check length_unit"),
+                    ));
+                }
+                Ok(v)
+            };
+            let distance = |col: usize| -> Result<f64> {
+                let d = length(col)?;
+                if d <= 0.0 {
+                    return Err(Error::input(
+                        at(col),
+                        format!("a distance from the station is > 0; found {d} mm"),
+                    ));
+                }
+                Ok(d)
+            };
+            let (measured, observation) = match kind {
+                Kind::Cartesian([x, y, z]) => {
+                    ([length(x)?, length(y)?, length(z)?], Observation::Point)
+                }
+                Kind::Spherical([h, v, d]) => {
+                    let mut hz = number(h, "an angle")? * self.angle_rad;
+                    if c.horizontal.as_deref() == Some("clockwise") {
+                        hz = -hz;
+                    }
+                    let mut el = number(v, "an angle")? * self.angle_rad;
+                    if c.vertical.as_deref() == Some("zenith") {
+                        el = std::f64::consts::FRAC_PI_2 - el;
+                    }
+                    if el.abs() > std::f64::consts::FRAC_PI_2 + 1e-12 {
+                        return Err(Error::input(
+                            at(v),
+                            "the vertical angle is beyond the vertical: check vertical and angle_unit",
+                        ));
+                    }
+                    (from_spherical(hz, el, distance(d)?), Observation::Point)
+                }
+                Kind::Range(d) => ([distance(d)?, 0.0, 0.0], Observation::Range),
+            };
+            let station = match (station_col, &spec.station_id) {
+                (Some(col), _) => Some(cell(col).to_string()).filter(|s| !s.is_empty()),
+                (None, Some(id)) => Some(id.clone()),
+                (None, None) => None,
+            };
+            let station_at = || {
+                station_col.map_or_else(|| Place::file(file).at_line(line).at_field("station"), at)
+            };
+            if observation == Observation::Range && station.is_none() {
+                return Err(Error::input(
+                    station_at(),
+                    "a range alone needs the station that measured it (the profile's station or \
+                     station_id)",
+                ));
+            }
+            let station_index = machine
+                .station_named(station.as_deref())
+                .map_err(|m| Error::input(station_at(), m))?;
+            let t_s = match time_col {
+                Some(col) if !cell(col).is_empty() => Some(number(col, "seconds")?),
+                _ => None,
+            };
+            points.push(Measurement {
+                commands,
+                reflector,
+                measured,
+                observation,
+                t_s,
+                station,
+                station_index,
+                line,
+            });
+        }
+        if points.is_empty() {
+            return Err(Error::input(
+                Place::file(file),
+                "the export has a header but no rows",
+            ));
+        }
+        Ok(MeasurementSet { points })
+    }
+}
+
+/// The pieces of a name pattern: literal text and `{field}`s; two fields in a row cannot be
+/// told apart, and a brace must close.
+fn parse_pattern(pattern: &str) -> std::result::Result<Vec<Piece>, String> {
+    let mut pieces = Vec::new();
+    let mut rest = pattern;
+    while !rest.is_empty() {
+        match rest.find('{') {
+            Some(0) => {
+                let end = rest
+                    .find('}')
+                    .ok_or_else(|| format!("pattern \"{pattern}\": a '{{' is not closed"))?;
+                let field = rest[1..end].trim().to_string();
+                if field.is_empty() {
+                    return Err(format!("pattern \"{pattern}\": an empty {{}}"));
+                }
+                if matches!(pieces.last(), Some(Piece::Field(_))) {
+                    return Err(format!(
+                        "pattern \"{pattern}\": two fields in a row cannot be told apart; put text \
+                         between them"
+                    ));
+                }
+                if field != "*" && pieces.contains(&Piece::Field(field.clone())) {
+                    return Err(format!("pattern \"{pattern}\": {{{field}}} appears twice"));
+                }
+                pieces.push(Piece::Field(field));
+                rest = &rest[end + 1..];
+            }
+            Some(i) => {
+                pieces.push(Piece::Literal(rest[..i].to_string()));
+                rest = &rest[i..];
+            }
+            None => {
+                pieces.push(Piece::Literal(rest.to_string()));
+                rest = "";
+            }
+        }
+    }
+    if pieces.is_empty() {
+        return Err("the pattern is empty".into());
+    }
+    Ok(pieces)
+}
+
+/// The fields of `name` under `pieces` (each field up to the next literal's first occurrence;
+/// the last one to the end), or `None` when it does not follow them.
+fn match_pattern(pieces: &[Piece], name: &str) -> Option<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    let mut rest = name;
+    let mut i = 0;
+    while i < pieces.len() {
+        match &pieces[i] {
+            Piece::Literal(l) => rest = rest.strip_prefix(l.as_str())?,
+            Piece::Field(f) => {
+                let value = match pieces.get(i + 1) {
+                    Some(Piece::Literal(l)) => {
+                        let end = rest.find(l.as_str())?;
+                        let v = &rest[..end];
+                        rest = &rest[end..];
+                        v
+                    }
+                    _ => std::mem::take(&mut rest),
+                };
+                if value.is_empty() {
+                    return None;
+                }
+                out.push((f.clone(), value.to_string()));
+            }
+        }
+        i += 1;
+    }
+    rest.is_empty().then_some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn patterns_split_names_into_fields() {
+        let p = parse_pattern("{reflector}_X{X}_C{C}_Z{Z}").unwrap();
+        let f = match_pattern(&p, "R1_X-12.5_C90_Z300").unwrap();
+        assert_eq!(
+            f,
+            vec![
+                ("reflector".into(), "R1".into()),
+                ("X".into(), "-12.5".into()),
+                ("C".into(), "90".into()),
+                ("Z".into(), "300".into())
+            ]
+        );
+        assert!(match_pattern(&p, "R1_X0_C0").is_none());
+        assert!(match_pattern(&p, "R1_X0_C0_Z1_extra").is_some()); // Z takes the rest
+        assert!(parse_pattern("{X}{C}").is_err());
+        assert!(parse_pattern("{X").is_err());
+        assert!(parse_pattern("{X}-{X}").is_err());
+    }
+}
