@@ -303,8 +303,22 @@ fn solve_step(jac: &[f64], r: &[f64; 3], m: usize) -> Option<Vec<f64>> {
         }
         (a, b)
     };
+    solve_dense(&mut a, &mut b, m)
+}
+
+/// Solves the m × m system `a x = b` (row-major; both overwritten) by Gaussian elimination with
+/// partial pivoting; `None` when a pivot is not finite or below 1e-14 of the largest entry (a
+/// singular system). For the few unknowns of a Newton step.
+///
+/// ```
+/// let mut a = vec![2.0, 1.0, 1.0, 3.0];
+/// let mut b = vec![3.0, 5.0];
+/// let x = volver_core::compensate::solve_dense(&mut a, &mut b, 2).unwrap();
+/// assert!((x[0] - 0.8).abs() < 1e-15 && (x[1] - 1.4).abs() < 1e-15);
+/// assert!(volver_core::compensate::solve_dense(&mut vec![1.0, 2.0, 2.0, 4.0], &mut vec![1.0, 1.0], 2).is_none());
+/// ```
+pub fn solve_dense(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
     let scale = a.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    // Gaussian elimination with partial pivoting.
     for col in 0..m {
         let piv =
             (col..m).max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))?;

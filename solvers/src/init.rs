@@ -56,6 +56,9 @@ pub fn held_tracker_values(problem: &Problem) -> [bool; 6] {
 /// machine file's tracker `orientation_deg` is then wrong.
 pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, crate::Error> {
     let model = problem.model();
+    if model.stations().len() > 1 || (0..problem.n_points()).any(|i| problem.scalar(i)) {
+        return Ok(init_stations(problem, params));
+    }
     let ts = model.tracker_start();
     let held = held_tracker_values(problem);
     let r0 = model.machine().tracker().base_rotation;
@@ -100,6 +103,95 @@ pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, crate
         }
     }
     Ok(p)
+}
+
+/// Gauss–Newton iterations at most per station in [`init_stations`].
+const STATION_STEPS: usize = 30;
+
+/// `params` with every station's free values (its position, its orientation when it observes
+/// points and the model frees it, its range offset when modelled) fitted to that station's own
+/// measurements, the machine's errors held: Gauss–Newton on the exact Jacobian, each step halved
+/// until the squared residuals decrease, until a step moves less than 1e-9 mm or rad. What
+/// [`init_tracker`] does for several stations or for ranges alone (a rigid fit of all the
+/// points at once would mix the stations' frames).
+pub fn init_stations(problem: &Problem, params: &[f64]) -> Vec<f64> {
+    let model = problem.model();
+    let n = model.n_params();
+    let held: Vec<bool> = {
+        let mut h = vec![false; n];
+        for row in &model.constraints().rows {
+            if let [(j, _)] = row.coeffs.as_slice() {
+                h[*j] = true;
+            }
+        }
+        h
+    };
+    let mut p = params.to_vec();
+    let data = problem.data();
+    for (s, block) in model.stations().iter().enumerate() {
+        let rows: Vec<usize> = (0..problem.n_points())
+            .filter(|&i| data.points[i].station_index == s)
+            .collect();
+        let cols: Vec<usize> = (block.pose..block.pose + 6)
+            .chain(block.offset)
+            .filter(|&j| !held[j])
+            .collect();
+        if rows.is_empty() || cols.is_empty() {
+            continue;
+        }
+        let cost = |p: &[f64]| -> f64 {
+            rows.iter()
+                .map(|&i| {
+                    let r = problem.residual(i, p);
+                    r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+                })
+                .sum()
+        };
+        let k = cols.len();
+        let mut jac = vec![0.0; 3 * n];
+        let mut current = cost(&p);
+        for _ in 0..STATION_STEPS {
+            // Normal equations over the station's columns.
+            let mut h = vec![0.0; k * k];
+            let mut g = vec![0.0; k];
+            for &i in &rows {
+                let r = problem.residual_and_jacobian(i, &p, &mut jac);
+                for c in 0..3 {
+                    for (a, &ja) in cols.iter().enumerate() {
+                        let va = jac[c * n + ja];
+                        g[a] += va * r[c];
+                        for (b, &jb) in cols.iter().enumerate() {
+                            h[a * k + b] += va * jac[c * n + jb];
+                        }
+                    }
+                }
+            }
+            let Some(step) = volver_core::compensate::solve_dense(&mut h, &mut g, k) else {
+                break;
+            };
+            let mut t = 1.0;
+            let mut moved = false;
+            for _ in 0..20 {
+                let mut q = p.clone();
+                for (a, &j) in cols.iter().enumerate() {
+                    q[j] -= t * step[a];
+                }
+                let c = cost(&q);
+                if c.is_finite() && c < current {
+                    p = q;
+                    current = c;
+                    moved = true;
+                    break;
+                }
+                t *= 0.5;
+            }
+            let size = step.iter().fold(0.0_f64, |m, v| m.max(v.abs())) * t;
+            if !moved || size < 1e-9 {
+                break;
+            }
+        }
+    }
+    p
 }
 
 /// Predicted and measured points.

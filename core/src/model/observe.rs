@@ -46,13 +46,23 @@ impl Model {
     /// # Panics
     /// As [`Model::predict`], and when the measurement's station is not the machine's.
     pub fn observe(&self, m: &Measurement, params: &[f64]) -> [f64; 3] {
+        self.observe_with(m, params, None)
+    }
+
+    /// [`Model::observe`] with the point's [`Regressors`] when the caller has them.
+    fn observe_with(
+        &self,
+        m: &Measurement,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+    ) -> [f64; 3] {
         let x = self.predict_with(
             &m.commands,
             m.reflector,
             m.station_index,
             m.t_s.unwrap_or(0.0),
             params,
-            None,
+            cached,
         );
         observed(x, self.offset_of(m.station_index, params), m.observation)
     }
@@ -69,15 +79,7 @@ impl Model {
         m: &Measurement,
         params: &[f64],
     ) -> [f64; 3] {
-        let x = self.predict_with(
-            &m.commands,
-            m.reflector,
-            m.station_index,
-            m.t_s.unwrap_or(0.0),
-            params,
-            Some(regressors.point(i)),
-        );
-        observed(x, self.offset_of(m.station_index, params), m.observation)
+        self.observe_with(m, params, Some(regressors.point(i)))
     }
 
     /// [`Model::observe_cached`] and its exact Jacobian (row-major 3 × n_params; a range's
