@@ -462,7 +462,9 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             poses: planned.positions.len(),
             reflectors,
             candidates: space.len(),
-            duration_h: n as f64 * request.seconds_per_point / 3600.0,
+            // Every station measures the plan.
+            duration_h: (n * model.machine().stations().len()) as f64 * request.seconds_per_point
+                / 3600.0,
             equivalence: design.equivalence,
             iterations: design.iterations,
             tool_mm: request.tool,
@@ -475,7 +477,11 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
                 .axes()
                 .iter()
                 .enumerate()
-                .map(|(k, ax)| ax.to_file_units(candidates.positions[reference_pose].0[k]))
+                .map(|(k, ax)| {
+                    // File units to 1e-9, without the radians' round trip (29.999999999999996°).
+                    (ax.to_file_units(candidates.positions[reference_pose].0[k]) * 1e9).round()
+                        / 1e9
+                })
                 .collect(),
             reference_visits: visits_of_reference,
             aliasing,

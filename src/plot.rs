@@ -528,9 +528,136 @@ fn draw_bars(s: &mut String, f: &Frame, bw: f64, data: &[(String, f64)]) {
     }
 }
 
+/// One view of [`layout_views`]: the measured points and the stations projected on two axes
+/// (mm).
+pub struct LayoutView {
+    /// The view's title ("plan (x–y)").
+    pub title: String,
+    /// The horizontal axis' label.
+    pub xlabel: String,
+    /// The vertical axis' label.
+    pub ylabel: String,
+    /// The measured points.
+    pub points: Vec<[f64; 2]>,
+    /// The stations: id and position.
+    pub stations: Vec<(String, [f64; 2])>,
+}
+
+/// Side-by-side views of a measuring set-up (a plan and an elevation): the measured points as
+/// dots, the stations as labelled triangles; one scale for both axes of every view, so that
+/// distances and angles read true.
+pub fn layout_views(title: &str, views: &[LayoutView]) -> String {
+    let side = 320.0;
+    let (gap, left, top) = (90.0, 70.0, 50.0);
+    let n = views.len().max(1) as f64;
+    let (w, h) = (left + n * (side + gap), top + side + 50.0);
+    let mut s = header(w, h, title);
+    let extent = |v: &LayoutView| {
+        let xs = v
+            .points
+            .iter()
+            .map(|p| p[0])
+            .chain(v.stations.iter().map(|s| s.1[0]));
+        let ys = v
+            .points
+            .iter()
+            .map(|p| p[1])
+            .chain(v.stations.iter().map(|s| s.1[1]));
+        (range(xs), range(ys))
+    };
+    // One span for every view (the largest extent, with a margin).
+    let span = views
+        .iter()
+        .map(|v| {
+            let (x, y) = extent(v);
+            (x.1 - x.0).max(y.1 - y.0)
+        })
+        .fold(1.0_f64, f64::max)
+        * 1.15;
+    for (k, v) in views.iter().enumerate() {
+        let (x, y) = extent(v);
+        let (cx, cy) = (0.5 * (x.0 + x.1), 0.5 * (y.0 + y.1));
+        let f = Frame {
+            x0: left + k as f64 * (side + gap),
+            y0: top,
+            w: side,
+            h: side,
+            xr: (cx - span / 2.0, cx + span / 2.0),
+            yr: (cy - span / 2.0, cy + span / 2.0),
+        };
+        f.axes(&mut s, &v.xlabel, &v.ylabel);
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\" font-weight=\"bold\">{}</text>",
+            f.x0 + side / 2.0,
+            top - 6.0,
+            escape(&v.title)
+        );
+        for p in &v.points {
+            let _ = writeln!(
+                s,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"1.6\" fill=\"#4a7ab5\" fill-opacity=\"0.45\"/>",
+                f.x(p[0]),
+                f.y(p[1])
+            );
+        }
+        for (id, p) in &v.stations {
+            let (x, y) = (f.x(p[0]), f.y(p[1]));
+            let _ = writeln!(
+                s,
+                "<path class=\"station\" d=\"M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z\" fill=\"#c0392b\"/><text x=\"{:.1}\" y=\"{:.1}\" fill=\"#c0392b\">{}</text>",
+                x,
+                y - 7.0,
+                x - 6.0,
+                y + 4.0,
+                x + 6.0,
+                y + 4.0,
+                x + 8.0,
+                y - 6.0,
+                escape(id)
+            );
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A layout is drawn at one scale on both axes: stations 1 000 mm apart along x and along y
+    /// are as far apart on the page.
+    #[test]
+    fn layout_views_keep_one_scale_on_both_axes() {
+        let view = LayoutView {
+            title: "plan".into(),
+            xlabel: "x".into(),
+            ylabel: "y".into(),
+            points: vec![[0.0, 0.0], [3000.0, 500.0]],
+            stations: vec![
+                ("A".into(), [0.0, 0.0]),
+                ("B".into(), [1000.0, 0.0]),
+                ("C".into(), [0.0, 1000.0]),
+            ],
+        };
+        let svg = layout_views("set-up", &[view]);
+        // Each station's triangle starts at its apex "M x,y".
+        let apex: Vec<(f64, f64)> = svg
+            .match_indices("class=\"station\" d=\"M")
+            .map(|(i, m)| {
+                let rest = &svg[i + m.len()..];
+                let end = rest.find(' ').unwrap();
+                let (x, y) = rest[..end].split_once(',').unwrap();
+                (x.parse().unwrap(), y.parse().unwrap())
+            })
+            .collect();
+        assert_eq!(apex.len(), 3);
+        let dx = apex[1].0 - apex[0].0;
+        let dy = apex[0].1 - apex[2].1;
+        assert!(dx > 10.0 && (dx - dy).abs() < 0.2, "{dx} against {dy}");
+        assert!(svg.contains(">A</text>") && svg.ends_with("</svg>\n"));
+    }
 
     #[test]
     fn ticks_are_round_and_cover_the_range() {

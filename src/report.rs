@@ -166,6 +166,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     };
     head(&page, &mut s)?;
     machine_and_model(&page, &mut s)?;
+    stations(&page, &mut s)?;
     summary(&page, &mut s)?;
     maps(&page, &mut s)?;
     error_functions(&page, &mut s)?;
@@ -265,6 +266,130 @@ fn machine_and_model(p: &Page, s: &mut String) -> Result<()> {
             "modelled errors (basis, degree/order)",
         ],
         &axis_rows,
+    ));
+    Ok(())
+}
+
+/// The stations of a machine with `[[station]]` tables: each one's identified position and
+/// range offset with their U (k = 2), its measurements and what it leaves, and the set-up drawn
+/// in the reference station's mount frame (plan and elevation). Nothing for one tracker.
+fn stations(p: &Page, s: &mut String) -> Result<()> {
+    let Page {
+        model,
+        m,
+        problem,
+        params,
+        after,
+        cov,
+        ..
+    } = p;
+    if !m.has_stations() {
+        return Ok(());
+    }
+    let data = problem.data();
+    let u = cov.as_ref().map(|c| c.parameters());
+    let with_u = |j: usize, scale: f64, decimals: usize| match &u {
+        Some(u) => format!(
+            "{:.decimals$} ± {:.decimals$}",
+            params[j] * scale,
+            K * u[j] * scale
+        ),
+        None => format!("{:.decimals$}", params[j] * scale),
+    };
+    let mut rows = Vec::new();
+    for (k, (st, b)) in m.stations().iter().zip(model.stations()).enumerate() {
+        let mine: Vec<usize> = (0..data.points.len())
+            .filter(|&i| data.points[i].station_index == k)
+            .collect();
+        let ranges = mine.iter().filter(|&&i| problem.scalar(i)).count();
+        let emm = if mine.is_empty() {
+            "–".to_string()
+        } else {
+            format!(
+                "{:.3}",
+                mine.iter().map(|&i| norm(after[i])).sum::<f64>() / mine.len() as f64 * 1e3
+            )
+        };
+        rows.push(vec![
+            st.id.clone(),
+            format!("{:?}", st.observes).to_lowercase(),
+            format!("{:?}", st.setup.mount).to_lowercase(),
+            with_u(b.pose, 1.0, 4),
+            with_u(b.pose + 1, 1.0, 4),
+            with_u(b.pose + 2, 1.0, 4),
+            b.offset
+                .map_or("not modelled".to_string(), |j| with_u(j, 1e3, 2)),
+            format!("{} ({ranges} ranges)", mine.len()),
+            emm,
+        ]);
+    }
+    let _ = writeln!(
+        s,
+        "<h2>Stations</h2><p>Each station's identified position (mm, in the frame it is mounted          in) and range offset (µm, the dead path), with U (k = 2); its measurements and the EMM          they leave. With ranges alone a station's position is determined only up to the          combinations the gauge holds (raising every station is a constant EZC, turning them          about C a constant ECC: see Identifiability); distances between stations are not.</p>"
+    );
+    s.push_str(&table(
+        &[
+            "station",
+            "observes",
+            "mount",
+            "x mm",
+            "y mm",
+            "z mm",
+            "range offset µm",
+            "measurements",
+            "EMM µm",
+        ],
+        &rows,
+    ));
+    // The set-up in the reference station's mount frame: each measured reflector (the
+    // identified machine, the station's pose removed) and the stations mounted as it is.
+    let reference = &m.stations()[0].setup;
+    let r0 = reference.base_rotation;
+    let step = data.points.len().div_ceil(3000).max(1);
+    let points: Vec<[f64; 3]> = data
+        .points
+        .iter()
+        .step_by(step)
+        .map(|pt| {
+            let mut e = model.errors_at_point(&pt.commands, pt.reflector, 0.0, params);
+            e.tracker = [0.0; 6];
+            let x = volver_core::kinematics::predict(
+                m,
+                &pt.commands,
+                &m.reflectors()[pt.reflector].offset,
+                &e,
+            );
+            std::array::from_fn(|i| (0..3).map(|j| r0[i][j] * x[j]).sum())
+        })
+        .collect();
+    let placed: Vec<(String, [f64; 3])> = m
+        .stations()
+        .iter()
+        .zip(model.stations())
+        .filter(|(st, _)| st.setup.mount == reference.mount)
+        .map(|(st, b)| {
+            (
+                st.id.clone(),
+                [params[b.pose], params[b.pose + 1], params[b.pose + 2]],
+            )
+        })
+        .collect();
+    let view = |title: &str, a: usize, c: usize| plot::LayoutView {
+        title: title.to_string(),
+        xlabel: format!("{} (mm)", ["x", "y", "z"][a]),
+        ylabel: format!("{} (mm)", ["x", "y", "z"][c]),
+        points: points.iter().map(|p| [p[a], p[c]]).collect(),
+        stations: placed
+            .iter()
+            .map(|(id, q)| (id.clone(), [q[a], q[c]]))
+            .collect(),
+    };
+    s.push_str(&plot::layout_views(
+        &format!(
+            "The set-up, mounted on the {} (the reflectors measured, the stations)",
+            format!("{:?}", reference.mount).to_lowercase()
+        ),
+        &[view("plan (x–y)", 0, 1), view("elevation (x–z)", 0, 2)],
     ));
     Ok(())
 }

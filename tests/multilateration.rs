@@ -717,3 +717,100 @@ fn simulate_and_identify_ranges_from_the_command_line() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--stations 0"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The report of a multi-station fit has a stations section: a row per station with its
+/// identified position and range offset (± U), and the set-up drawn in plan and elevation with
+/// every station; a one-tracker report has none.
+#[test]
+fn the_report_draws_the_stations() {
+    use volver::report::{Fit, ReportInput, html};
+    let xcfz = Machine::default_xcfz();
+    let multi = xcfz
+        .with_stations(StationSpec::default_layout(&xcfz, 3, Observes::Range))
+        .unwrap();
+    let truth = Truth::random(
+        &multi,
+        Model::default_xcfz().spec(),
+        &Magnitudes::default(),
+        3,
+    )
+    .unwrap();
+    let mut sim = Simulation::new(Plan::preset(&multi, "test3").unwrap(), truth, 3);
+    sim.noise = interferometer();
+    sim.observe = Observation::Range;
+    let data = sim.run().unwrap().measurements;
+    let model = multilateration_model(multi);
+    let id = fit_ve(Problem::new(&model, &data).unwrap());
+    let fits = vec![Fit {
+        label: "paper model with range offsets".into(),
+        model: &model,
+        id: &id,
+    }];
+    let page = html(&ReportInput::new("ranges", "ranges.csv", &data, fits)).unwrap();
+    assert!(page.contains("<h2>Stations</h2>"));
+    for id in ["S1", "S2", "S3"] {
+        assert!(
+            page.contains(&format!("<td>{id}</td><td>range</td><td>workpiece</td>")),
+            "{id}"
+        );
+    }
+    // Three stations in each of the two views.
+    assert_eq!(page.matches("class=\"station\"").count(), 6);
+
+    let one = Model::default_xcfz();
+    let data = Simulation::new(
+        Plan::preset(&xcfz, "test3").unwrap(),
+        Truth::random(&xcfz, one.spec(), &Magnitudes::default(), 3).unwrap(),
+        3,
+    )
+    .run()
+    .unwrap()
+    .measurements;
+    let id = strategy::fit(Problem::new(&one, &data).unwrap());
+    let fits = vec![Fit {
+        label: "paper model".into(),
+        model: &one,
+        id: &id,
+    }];
+    let page = html(&ReportInput::new("one", "one.csv", &data, fits)).unwrap();
+    assert!(!page.contains("<h2>Stations</h2>"));
+}
+
+/// `volver plan` on a layout of ranges: the candidates are measured from every station, the
+/// design weighs each station's whitened range, and the plan's predicted U (k = 2) of the tool
+/// point is far below one tracker's for the same plan size (interferometer against the paper's
+/// tracker noise: the ranges' noise is 30–100 times smaller than the angles').
+#[test]
+fn a_plan_for_ranges_from_several_stations_predicts_their_u() {
+    use volver::planning::{Request, plan};
+    let xcfz = Machine::default_xcfz();
+    let multi = xcfz
+        .with_stations(StationSpec::default_layout(&xcfz, 4, Observes::Range))
+        .unwrap();
+    let small = |model: &Model, noise: TrackerNoise| {
+        let request = Request {
+            points: 240,
+            per_axis: 5,
+            repeats: 3,
+            seed: 1,
+            iterations: 150,
+            noise,
+            tool: volver::compensation::reflector_centroid(model),
+            ..Request::default()
+        };
+        plan(model, &request).unwrap()
+    };
+    let ranges = small(&multilateration_model(multi), interferometer());
+    let one = small(&Model::default_xcfz(), TrackerNoise::PAPER);
+    assert_eq!(ranges.plan.n_points(), 240);
+    let (u_ranges, u_one) = (ranges.report.u95_mean_um, one.report.u95_mean_um);
+    eprintln!(
+        "plan of 240: U {u_ranges:.3} µm from four stations' ranges, {u_one:.3} µm from one tracker"
+    );
+    assert!(
+        u_ranges.is_finite() && u_ranges < 0.2 * u_one,
+        "{u_ranges} µm against {u_one} µm"
+    );
+    // Each of the 240 measurements is taken from the four stations.
+    assert!((ranges.report.duration_h - 4.0 * one.report.duration_h).abs() < 1e-9);
+}

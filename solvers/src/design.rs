@@ -69,9 +69,11 @@ impl std::str::FromStr for Criterion {
 
 /// The candidates' information, ready for designs.
 pub struct Space {
-    /// The candidates' whitened rows in the free coordinates (3 per candidate point, in
-    /// `candidates.steps()` order).
+    /// The candidates' whitened rows in the free coordinates (`per` per candidate point, in
+    /// `candidates.steps()` order: 3 from each station).
     a: Mat<f64>,
+    /// Rows per candidate: 3 per station of the machine.
+    per: usize,
     /// `Q` of the I-criterion (nf × nf).
     q: Mat<f64>,
     /// The tool points' aligned Jacobians in the free coordinates (3K × nf).
@@ -115,10 +117,12 @@ impl Space {
         let problem = Problem::new(model, &data).ok()?;
         let whitened = Whitened::new(problem.clone(), noise)?;
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
-        let (n, nf, m) = (p0.len(), ns.n_free(), problem.n_points());
+        let (n, nf, rows_total) = (p0.len(), ns.n_free(), problem.n_points());
+        let stations = model.machine().stations().len();
+        let (m, per) = (rows_total / stations, 3 * stations);
         let basis = ns.basis();
-        // The whitened Jacobian rows (3m × n), then reduced to z.
-        let rows: Vec<Vec<f64>> = (0..m)
+        // The whitened Jacobian rows (3 per measurement, n columns), then reduced to z.
+        let rows: Vec<Vec<f64>> = (0..rows_total)
             .into_par_iter()
             .map(|i| {
                 let mut row = vec![0.0; 3 * n];
@@ -129,7 +133,11 @@ impl Space {
         if rows.iter().flatten().any(|v| !v.is_finite()) {
             return None;
         }
-        let j = Mat::from_fn(3 * m, n, |r, c| rows[r / 3][(r % 3) * n + c]);
+        // Candidate-major: candidate i's rows from station s are measurement s·m + i's.
+        let j = Mat::from_fn(per * m, n, |r, c| {
+            let (i, within) = (r / per, r % per);
+            rows[(within / 3) * m + i][(within % 3) * n + c]
+        });
         let a = crate::kernels::product(j.as_ref(), basis);
         let tool_grid = crate::uncertainty::ToolGrid {
             commands: grid.to_vec(),
@@ -148,7 +156,14 @@ impl Space {
         let prior = crate::uncertainty::HELD_PRIOR_MM;
         let mz = crate::kernels::sandwich(metric.as_ref(), basis);
         let r = Mat::from_fn(nf, nf, |i, c| mz[(i, c)] / (prior * prior));
-        Some(Space { a, q, gz, r, m })
+        Some(Space {
+            a,
+            per,
+            q,
+            gz,
+            r,
+            m,
+        })
     }
 
     /// Candidate points.
@@ -164,8 +179,9 @@ impl Space {
     /// `F = R + Σ c_i F_i` for per-candidate multiplicities `c`.
     fn information(&self, c: &[f64]) -> Mat<f64> {
         let nf = self.r.nrows();
-        let scaled = Mat::from_fn(3 * self.m, nf, |row, col| {
-            c[row / 3].max(0.0).sqrt() * self.a[(row, col)]
+        let per = self.per;
+        let scaled = Mat::from_fn(per * self.m, nf, |row, col| {
+            c[row / per].max(0.0).sqrt() * self.a[(row, col)]
         });
         let ata = crate::kernels::product(scaled.transpose(), scaled.as_ref());
         Mat::from_fn(nf, nf, |i, j| self.r[(i, j)] + ata[(i, j)])
@@ -313,7 +329,7 @@ impl Space {
             let d: Vec<f64> = (0..m)
                 .into_par_iter()
                 .map(|i| {
-                    (3 * i..3 * i + 3)
+                    (self.per * i..self.per * (i + 1))
                         .map(|row| (0..nf).map(|k| p[(row, k)] * self.a[(row, k)]).sum::<f64>())
                         .sum()
                 })

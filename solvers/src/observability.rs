@@ -62,27 +62,38 @@ pub struct Finding {
 
 /// The points a perfect machine (the model at its start: errors zero, the tracker at its
 /// nominal pose) gives for every measurement of `plan`, in its measuring order, time-stamped
-/// [`volver_core::simulate::DEFAULT_SECONDS_PER_POINT`] apart.
+/// [`volver_core::simulate::DEFAULT_SECONDS_PER_POINT`] apart. A machine with `[[station]]`
+/// tables is measured from each station in turn, as the generator does (all the plan from the
+/// first, then from the next), each observing what it observes (a point, or a range alone).
 pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
     let p = model.initial_params();
-    let points = plan
-        .steps()
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            let c = &plan.positions[s.position];
-            Measurement {
-                commands: *c,
+    let machine = model.machine();
+    let steps = plan.steps();
+    let mut points = Vec::with_capacity(steps.len() * machine.stations().len());
+    for (k, st) in machine.stations().iter().enumerate() {
+        for (i, s) in steps.iter().enumerate() {
+            let at = k * steps.len() + i;
+            let mut m = Measurement {
+                commands: plan.positions[s.position],
                 reflector: s.reflector,
-                measured: model.predict(c, s.reflector, &p),
-                observation: volver_core::measure::Observation::Point,
-                t_s: Some(i as f64 * volver_core::simulate::DEFAULT_SECONDS_PER_POINT),
-                station: None,
-                station_index: 0,
-                line: i + 2,
-            }
-        })
-        .collect();
+                measured: [0.0; 3],
+                observation: match st.observes {
+                    volver_core::machine::Observes::Point => {
+                        volver_core::measure::Observation::Point
+                    }
+                    volver_core::machine::Observes::Range => {
+                        volver_core::measure::Observation::Range
+                    }
+                },
+                t_s: Some(at as f64 * volver_core::simulate::DEFAULT_SECONDS_PER_POINT),
+                station: machine.has_stations().then(|| st.id.clone()),
+                station_index: k,
+                line: at + 2,
+            };
+            m.measured = model.observe(&m, &p);
+            points.push(m);
+        }
+    }
     MeasurementSet { points }
 }
 

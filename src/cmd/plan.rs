@@ -26,7 +26,8 @@ pub struct PlanArgs {
     /// Measurements in the plan (the reference pose's repeats included).
     #[arg(long, conflicts_with = "hours")]
     points: Option<usize>,
-    /// The time there is (h); with --seconds-per-point it sets the number of measurements.
+    /// The time there is (h); with --seconds-per-point it sets the number of measurements (of
+    /// each station, when the machine has several: each measures the plan).
     #[arg(long)]
     hours: Option<f64>,
     /// Measuring time per point, moves and dwell included (s).
@@ -105,7 +106,10 @@ pub fn run(a: PlanArgs) -> Result<()> {
     }
     let points = match (a.points, a.hours) {
         (Some(n), _) => n,
-        (None, Some(h)) if h.is_finite() && h > 0.0 => (h * 3600.0 / a.seconds_per_point) as usize,
+        // Every station measures the plan.
+        (None, Some(h)) if h.is_finite() && h > 0.0 => {
+            (h * 3600.0 / a.seconds_per_point / model.machine().stations().len() as f64) as usize
+        }
         (None, Some(h)) => bail!("--hours {h}: a positive number of hours"),
         (None, None) => 1040,
     };
@@ -160,8 +164,14 @@ pub fn run(a: PlanArgs) -> Result<()> {
         return Ok(());
     }
     println!("volver plan — {title}");
+    let stations = machine.stations().len();
+    let each = if stations > 1 {
+        format!(" from each of {stations} stations")
+    } else {
+        String::new()
+    };
     println!(
-        "  {} measurements at {} poses ({}), {:.1} h at {} s per point; chosen among {} candidate points in {:.1} s",
+        "  {} measurements at {} poses{each} ({}), {:.1} h at {} s per point; chosen among {} candidate points in {:.1} s",
         r.points,
         r.poses,
         r.reflectors
