@@ -317,7 +317,8 @@ pub fn axis_periodogram(
 /// workpiece (on the table of XCFZ) the tracker frame turns with the workpiece-side axes, which
 /// smears an error fixed in the machine over neighbouring harmonics; in the machine frame a
 /// rotary error of harmonic h shows at h. The rotation is that of the nominal chain seen from
-/// the tracker pose in `params`.
+/// the tracker pose in `params` (each point's station's, for several; a range's residual taken
+/// along its line of sight).
 pub fn to_machine_frame(
     problem: &Problem,
     params: &[f64],
@@ -325,17 +326,27 @@ pub fn to_machine_frame(
 ) -> Vec<[f64; 3]> {
     let model = problem.model();
     let machine = model.machine();
-    let mut e = PointErrors::<f64>::zero();
-    let t = model.tracker_start();
-    e.tracker.copy_from_slice(&params[t..t + 6]);
     problem
         .data()
         .points
         .iter()
         .zip(residuals)
         .map(|(p, r)| {
+            // The point's own station's pose.
+            let mut e = PointErrors::<f64>::zero();
+            let t = model.stations()[p.station_index].pose;
+            e.tracker.copy_from_slice(&params[t..t + 6]);
+            e.station = p.station_index;
             let offset = &machine.reflectors()[p.reflector].offset;
             let base = predict_with_tool_shift(machine, &p.commands, offset, &e, None);
+            // A range's residual lies along the line of sight.
+            let r = match p.observation {
+                crate::measure::Observation::Point => *r,
+                crate::measure::Observation::Range => {
+                    let len = norm(base);
+                    base.map(|v| r[0] * v / len)
+                }
+            };
             // Columns of the map machine → tracker: the images of unit tool shifts.
             let cols: [[f64; 3]; 3] = std::array::from_fn(|j| {
                 let mut d = [0.0; 3];
