@@ -382,7 +382,7 @@ fn bad_ranges_and_stations_are_refused_with_file_line_and_column() {
             "station 'S9' is not in the machine",
         ),
         // A range of the wrong sign.
-        ("0,0,0,R1,-1500,S1\n", "in.csv:2", "range_mm", "> 0 mm"),
+        ("0,0,0,R1,-1500,S1\n", "in.csv:2", "range_mm", "≥ 0 mm"),
     ];
     for (rows, at, field, why) in cases {
         let err = MeasurementSet::from_csv_str(&multi, &format!("{head}{rows}"), "in.csv")

@@ -25,10 +25,11 @@ use crate::tables::ErrorTables;
 pub type Harness = fn(&[u8]);
 
 /// The readers with a harness, by the name of their fuzz target.
-pub const TARGETS: [(&str, Harness); 7] = [
+pub const TARGETS: [(&str, Harness); 8] = [
     ("machine_toml", machine_toml),
     ("model_toml", model_toml),
     ("measurement_csv", measurement_csv),
+    ("import_profile", import_profile),
     ("results_json", results_json),
     ("gcode", gcode),
     ("points_csv", points_csv),
@@ -68,20 +69,74 @@ pub fn model_toml(data: &[u8]) {
     }
 }
 
-/// Measurement files (CSV) for the embedded XCFZ machine: what the reader accepts, the writer
-/// writes and the reader accepts again with the same number of points.
+/// The embedded XCFZ machine measured from two stations: S1 a tracker (points), S2 a tracing
+/// interferometer (ranges).
+fn two_stations() -> Machine {
+    let m = Machine::default_xcfz();
+    let mut layout =
+        crate::machine::StationSpec::default_layout(&m, 2, crate::machine::Observes::Point);
+    layout[1].observes = crate::machine::Observes::Range;
+    m.with_stations(layout).expect("a valid layout")
+}
+
+/// Measurement files (CSV) for the embedded XCFZ machine, and for it measured from two stations
+/// (a tracker and an interferometer): what the reader accepts, the writer writes (Cartesian and
+/// spherical) and the reader accepts again with the same points (each observation and station
+/// as read, every value within 1e-6 mm).
 pub fn measurement_csv(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let machine = Machine::default_xcfz();
-    let Ok(set) = MeasurementSet::from_csv_str(&machine, text, "fuzz.csv") else {
+    for machine in [Machine::default_xcfz(), two_stations()] {
+        let Ok(set) = MeasurementSet::from_csv_str(&machine, text, "fuzz.csv") else {
+            continue;
+        };
+        rewritten(&machine, &set);
+    }
+}
+
+/// `set` written by volver in both layouts of points and read back: the same observations.
+fn rewritten(machine: &Machine, set: &MeasurementSet) {
+    use crate::measure::PointColumns;
+    for columns in [PointColumns::Cartesian, PointColumns::Spherical] {
+        let written = set.to_csv_with(machine, columns);
+        let again = match MeasurementSet::from_csv_str(machine, &written, "rewritten.csv") {
+            Ok(again) => again,
+            Err(e) => panic!("volver's own measurement file is refused: {e}\n{written}"),
+        };
+        assert_eq!(again.points.len(), set.points.len(), "{written}");
+        for (a, b) in set.points.iter().zip(&again.points) {
+            assert_eq!(a.observation, b.observation, "{written}");
+            assert_eq!(a.station_index, b.station_index, "{written}");
+            let scale = a.measured.iter().fold(1.0_f64, |m, v| m.max(v.abs()));
+            for k in 0..3 {
+                assert!(
+                    (a.measured[k] - b.measured[k]).abs() <= 1e-6 * scale,
+                    "{:?} written as {:?}\n{written}",
+                    a.measured,
+                    b.measured
+                );
+            }
+        }
+    }
+}
+
+/// An import profile (TOML) and a tracker software's export, separated by a line `---`: the
+/// profile read, the export read through it for the XCFZ machine measured from two stations;
+/// what it accepts volver writes as a measurement file and reads again with the same points.
+pub fn import_profile(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
         return;
     };
-    let written = set.to_csv_string(&machine);
-    match MeasurementSet::from_csv_str(&machine, &written, "rewritten.csv") {
-        Ok(again) => assert_eq!(again.points.len(), set.points.len(), "{written}"),
-        Err(e) => panic!("volver's own measurement file is refused: {e}\n{written}"),
+    let Some((profile, export)) = text.split_once("\n---\n") else {
+        return;
+    };
+    let Ok(profile) = crate::import::Profile::from_toml_str(profile, "fuzz.toml") else {
+        return;
+    };
+    let machine = two_stations();
+    if let Ok(set) = profile.read(&machine, export, "export.txt") {
+        rewritten(&machine, &set);
     }
 }
 

@@ -415,10 +415,10 @@ impl Profile {
             };
             let distance = |col: usize| -> Result<f64> {
                 let d = length(col)?;
-                if d <= 0.0 {
+                if d < 0.0 {
                     return Err(Error::input(
                         at(col),
-                        format!("a distance from the station is > 0; found {d} mm"),
+                        format!("a distance from the station is ≥ 0; found {d} mm"),
                     ));
                 }
                 Ok(d)
@@ -463,6 +463,8 @@ impl Profile {
             }
             let station_index = machine
                 .station_named(station.as_deref())
+                .map_err(|m| Error::input(station_at(), m))?;
+            crate::measure::observable(machine, station_index, observation)
                 .map_err(|m| Error::input(station_at(), m))?;
             let t_s = match time_col {
                 Some(col) if !cell(col).is_empty() => Some(number(col, "seconds")?),

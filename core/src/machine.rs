@@ -28,6 +28,18 @@
 //! noise = "uniform:30,30,4,0.8"   # optional: the tracker's noise, as `--noise` reads it
 //! ```
 //!
+//! For multilateration, `[[station]]` tables replace the tracker's pose (the `[tracker]` table
+//! then gives only the default noise); each measurement names its station:
+//!
+//! ```toml
+//! [[station]]
+//! id = "S1"
+//! mount = "workpiece"
+//! position = [353.55, 353.55, 0.0]
+//! observes = "range"                # "point" (a tracker) or "range" (a tracing interferometer)
+//! noise = "normal:0,0,0.1,0.15"     # optional; a range uses the range part
+//! ```
+//!
 //! Internally every length is in mm and every angle in rad; degrees exist only in files.
 
 use crate::chain::{Chain, MAX_AXES, Side};

@@ -169,6 +169,24 @@ pub fn to_spherical(p: [f64; 3]) -> [f64; 3] {
     [p[1].atan2(p[0]), p[2].atan2(h), h.hypot(p[2])]
 }
 
+/// Whether station `station` of `machine` can give `observation`: a range-only station gives
+/// no point; `Err` says why.
+pub(crate) fn observable(
+    machine: &Machine,
+    station: usize,
+    observation: Observation,
+) -> std::result::Result<(), String> {
+    let st = &machine.stations()[station];
+    if observation == Observation::Point && st.observes == crate::machine::Observes::Range {
+        return Err(format!(
+            "station '{}' observes ranges only (observes = \"range\" in the machine file), but \
+             this row gives a point",
+            st.id
+        ));
+    }
+    Ok(())
+}
+
 /// How [`MeasurementSet::to_csv_with`] writes points.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PointColumns {
@@ -400,10 +418,10 @@ impl MeasurementSet {
             let filled = |c: Option<usize>| c.is_some_and(|c| !rec[c].is_empty());
             let range = |col: usize| -> Result<f64> {
                 let v = coordinate(col)?;
-                if v <= 0.0 {
+                if v < 0.0 {
                     return Err(Error::input(
                         at(col),
-                        format!("a range is a distance from the station, > 0 mm; found {v}"),
+                        format!("a range is a distance from the station, ≥ 0 mm; found {v}"),
                     ));
                 }
                 Ok(v)
@@ -453,17 +471,8 @@ impl MeasurementSet {
                      range_mm alone",
                 ));
             };
-            let st = &machine.stations()[station_index];
-            if observation == Observation::Point && st.observes == crate::machine::Observes::Range {
-                return Err(Error::input(
-                    station_at(),
-                    format!(
-                        "station '{}' observes ranges only (observes = \"range\" in the machine \
-                         file), but this row gives a point",
-                        st.id
-                    ),
-                ));
-            }
+            observable(machine, station_index, observation)
+                .map_err(|m| Error::input(station_at(), m))?;
             points.push(Measurement {
                 commands,
                 reflector,
