@@ -36,6 +36,7 @@
 //! | `thermal-scale` | axis, α ppm/h | the positioning error of a linear axis gets `α·10⁻⁶·u·t` (u its position in mm, t in h): its scale grows with time |
 //! | `location-drift` | rotary axis, v₁, v₂ µm/h | its two location translations (X0C, Y0C for C) grow by `v·t` |
 //! | `tracker-drift` | ω = (ωx, ωy, ωz) µrad/h | the tracker's small rotations (eq. 9) grow by `ω·t`: its stand turning as it warms |
+//! | `station-drift` | station id, v = (vx, vy, vz) µm/h | that station's position grows by `v·t` in the frame it is mounted in (machines with `[[station]]` tables) |
 //! | `coupling` | axis, component, by, A µm | the error E{component}{axis} gets `A·sin(π·ξ)·η`, ξ and η the positions of the axis and of `by` over their travels, 0 … 1: a straightness bow that grows with another axis' position, which no rigid-body error expresses |
 //!
 //! Points are measured in plan order, each reflector in turn at every position, evenly over the
@@ -399,6 +400,7 @@ impl Simulation {
                 | Effect::ThermalScale { .. }
                 | Effect::LocationDrift { .. }
                 | Effect::TrackerDrift { .. }
+                | Effect::StationDrift { .. }
                 | Effect::Coupling { .. } => {}
             }
         }
@@ -601,6 +603,16 @@ impl Simulation {
                 Effect::TrackerDrift { rate_urad_per_h } => {
                     for (k, v) in rate_urad_per_h.iter().enumerate() {
                         out.tracker[3 + k] += v * 1e-6 * t_h;
+                    }
+                }
+                Effect::StationDrift {
+                    station,
+                    rate_um_per_h,
+                } => {
+                    if machine.station_named(Some(station)) == Ok(errors.station) {
+                        for (k, v) in rate_um_per_h.iter().enumerate() {
+                            out.tracker[k] += v * 1e-3 * t_h;
+                        }
                     }
                 }
                 Effect::LocationDrift {

@@ -21,6 +21,7 @@
 //! | `reflector-offset:R1` | reflector R1 off its nominal offset |
 //! | `range-scale` | a scale error of the tracker's range |
 //! | `range-offset` | each station's range offset, the dead path (`[tracker] range_offset`) |
+//! | `station-drift` | each station's position drifting with time (`[effects] station_drift`; machines with `[[station]]` tables) |
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
 //! | `thermal-scale:X` | the scale of linear axis X growing with time: EXX += α·x·t (`[effects] thermal_scale`; needs `t_s`) |
 //! | `tracker-drift` | the tracker's small rotations drifting with time (`[effects] tracker_drift`) |
@@ -314,6 +315,17 @@ pub fn library(model: &Model) -> Vec<Candidate> {
             id: "range-offset".into(),
             description: "each station's range offset (the dead path: every range too long or \
                           too short by a constant)"
+                .into(),
+            spec: s,
+        });
+    }
+    if machine.has_stations() && !fx.station_drift {
+        let mut s = spec.clone();
+        s.effects.station_drift = true;
+        out.push(Candidate {
+            id: "station-drift".into(),
+            description: "each station's position drifting with time (its stand growing as it \
+                          warms; needs t_s)"
                 .into(),
             spec: s,
         });

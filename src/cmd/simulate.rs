@@ -35,6 +35,7 @@ Effects (--effect, repeatable):
   location-drift=AXIS,V1_UM_PER_H,V2_UM_PER_H
                                       line of a rotary axis drifting (X0C, Y0C += v·t for C)
   tracker-drift=RX,RY,RZ              tracker's orientation drifting with time, µrad/h
+  station-drift=ID,VX,VY,VZ           a station's position drifting with time, µm/h
   coupling=AXIS,COMPONENT,BY,AMP_UM   E{COMPONENT}{AXIS} += A·sin(πξ)·η: a straightness bow
                                       growing with the position of BY (ξ, η over 0 … 1)
 

@@ -202,6 +202,24 @@ impl Model {
                     );
                 }
             }
+            if fx.station_drift {
+                if !machine.has_stations() {
+                    return Err(Error::input(
+                        place("station_drift", "effects.station_drift"),
+                        "station_drift needs a machine with [[station]] tables (one tracker \
+                         drifting in position is thermal_drift)",
+                    ));
+                }
+                for (s, st) in machine.stations().iter().enumerate() {
+                    for (c, x) in ["x", "y", "z"].iter().enumerate() {
+                        push(
+                            EffectSlot::StationDrift { station: s, c },
+                            &[(format!("stationdrift.{}.{x}", st.id), Unit::MmPerHour)],
+                            &mut params,
+                        );
+                    }
+                }
+            }
             for id in &fx.field {
                 let vars = field_vars(&machine, id)
                     .map_err(|why| Error::input(place(id, "effects.field"), why))?;

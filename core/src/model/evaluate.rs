@@ -143,6 +143,7 @@ impl Model {
                 }
                 EffectSlot::LocationDrift { k, c } => e.location[k][c] += v,
                 EffectSlot::TrackerDrift(k) => e.tracker[k] += v,
+                EffectSlot::StationDrift { c, .. } => e.tracker[c] += v,
             }
         }
     }
@@ -152,7 +153,9 @@ impl Model {
     pub fn needs_time(&self) -> bool {
         self.effects.iter().any(|(slot, _)| match slot {
             EffectSlot::Drift(_) | EffectSlot::ThermalScale { .. } => true,
-            EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => true,
+            EffectSlot::LocationDrift { .. }
+            | EffectSlot::TrackerDrift(_)
+            | EffectSlot::StationDrift { .. } => true,
             EffectSlot::Field { vars, pair, .. } => {
                 vars[0] == FieldVar::Time || (*pair && vars[1] == FieldVar::Time)
             }
@@ -194,10 +197,12 @@ impl Model {
 
     /// Effect values at a point into `vals` (slots after the tracker's) and, when `jac` is
     /// given, each effect parameter's ∂value/∂p into `jac[parameter]`.
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn effect_values<S: Real>(
         &self,
         commands: &[S; MAX_AXES],
         reflector: usize,
+        station: usize,
         t_s: f64,
         params: &[f64],
         vals: &mut [S],
@@ -248,6 +253,11 @@ impl Model {
                 }
                 EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => {
                     let t_h = t_s / 3600.0;
+                    set(j, t_h);
+                    S::from(params[j] * t_h)
+                }
+                EffectSlot::StationDrift { station: s, .. } => {
+                    let t_h = if s == station { t_s / 3600.0 } else { 0.0 };
                     set(j, t_h);
                     S::from(params[j] * t_h)
                 }
@@ -407,7 +417,7 @@ impl Model {
         e.station = station;
         if !self.effects.is_empty() {
             let mut vals = [S::zero(); MAX_SLOTS];
-            self.effect_values(commands, reflector, t_s, params, &mut vals, None);
+            self.effect_values(commands, reflector, station, t_s, params, &mut vals, None);
             let base = self.terms.len() + TRACKER_DOF;
             self.place_effects(&mut e, |i| vals[base + i]);
         }
@@ -579,7 +589,15 @@ impl Model {
         }
         jac[pose..pose + TRACKER_DOF].fill(1.0);
         let m = m + self.effects.len();
-        self.effect_values(&commands.0, reflector, t_s, params, &mut vals, Some(jac));
+        self.effect_values(
+            &commands.0,
+            reflector,
+            station,
+            t_s,
+            params,
+            &mut vals,
+            Some(jac),
+        );
         let mut e = self.point_errors(|i| vals[i]);
         e.rotary_sin_cos = cached.map(|c| c.sin_cos);
         e.station = station;
@@ -655,8 +673,16 @@ impl Model {
         d1[k..k + TRACKER_DOF].copy_from_slice(&dir[ts..ts + TRACKER_DOF]);
         // Effects are linear in their parameters: their derivative along dir is their value
         // at dir, and their second derivative is zero.
-        self.effect_values(&commands.0, reflector, t_s, params, &mut vals, None);
-        self.effect_values(&commands.0, reflector, t_s, dir, &mut d1, None);
+        self.effect_values(
+            &commands.0,
+            reflector,
+            station,
+            t_s,
+            params,
+            &mut vals,
+            None,
+        );
+        self.effect_values(&commands.0, reflector, station, t_s, dir, &mut d1, None);
         let mut e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
         e.station = station;
         let refl = &self.machine.reflectors()[reflector].offset;
@@ -701,6 +727,7 @@ impl Model {
                     }
                     EffectSlot::LocationDrift { k, c } => de.location[k][c],
                     EffectSlot::TrackerDrift(k) => de.tracker[k],
+                    EffectSlot::StationDrift { c, .. } => de.tracker[c],
                 },
             );
         }

@@ -139,6 +139,7 @@ pub struct BallScrewSpec {
 /// thermal_scale = ["X"]         # thermal.X (ppm/h): EXX += α·10⁻⁶·x·t, the scale of X growing with time
 /// location_drift = ["C"]        # locdrift.C.x, locdrift.C.y (mm/h): X0C, Y0C += v·t
 /// tracker_drift = true          # trackerdrift.rx, .ry, .rz (rad/h): the tracker's small rotations += ω·t
+/// station_drift = true          # stationdrift.S1.x … (mm/h): each station's position += v·t
 /// field = ["X*Z", "X*t"]        # field.X*Z.x_1_1 … (mm): a smooth displacement of the tool point
 /// [[effects.ball_screw]]
 /// axis = "X"
@@ -179,6 +180,9 @@ pub struct EffectsSpec {
     /// The tracker's orientation drifting with time (its stand turning as it warms).
     #[serde(skip_serializing_if = "is_false")]
     pub tracker_drift: bool,
+    /// Each station's position drifting with time (machines with `[[station]]` tables).
+    #[serde(skip_serializing_if = "is_false")]
+    pub station_drift: bool,
     /// Generic displacement fields, by their variables (`X`, `X*Z`, `C*t`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub field: Vec<String>,
@@ -247,6 +251,9 @@ pub(super) enum EffectSlot {
     LocationDrift { k: usize, c: usize },
     /// Drift of the tracker's small rotation k (3, 4, 5: rx, ry, rz): value = ω × t (h).
     TrackerDrift(usize),
+    /// Drift of station `station`'s position component c: value = v × t (h) at its points,
+    /// zero at the other stations'.
+    StationDrift { station: usize, c: usize },
     /// Tool shift component c from a field over `vars` (the second unused when not `pair`):
     /// value = Σ_q φ_q coefficient_q.
     Field {

@@ -69,6 +69,13 @@ pub enum Effect {
         /// Rates of its small rotations about x, y, z (µrad/h).
         rate_urad_per_h: [f64; 3],
     },
+    /// A station's position drifting with time (its stand growing as it warms).
+    StationDrift {
+        /// The station's id (a `[[station]]` of the machine file).
+        station: String,
+        /// Drift rates of its position along x, y, z of the frame it is mounted in (µm/h).
+        rate_um_per_h: [f64; 3],
+    },
     /// A non-rigid coupling: a component error of one axis that changes with the position of
     /// another.
     Coupling {
@@ -84,7 +91,7 @@ pub enum Effect {
 }
 
 /// The effects: id, CLI syntax and meaning, in the order `volver simulate --help` lists them.
-pub const EFFECTS: [(&str, &str, &str); 10] = [
+pub const EFFECTS: [(&str, &str, &str); 11] = [
     (
         "thermal-drift",
         "thermal-drift=VX,VY,VZ",
@@ -131,6 +138,11 @@ pub const EFFECTS: [(&str, &str, &str); 10] = [
         "tracker's orientation drifting with time, µrad/h",
     ),
     (
+        "station-drift",
+        "station-drift=ID,VX,VY,VZ",
+        "a station's position drifting with time, µm/h",
+    ),
+    (
         "coupling",
         "coupling=AXIS,COMPONENT,BY,AMP_UM",
         "error E{COMPONENT}{AXIS} changing with the position of BY: A·sin(πξ)·η",
@@ -151,6 +163,7 @@ impl Effect {
             Effect::LocationDrift { .. } => "location-drift",
             Effect::Coupling { .. } => "coupling",
             Effect::TrackerDrift { .. } => "tracker-drift",
+            Effect::StationDrift { .. } => "station-drift",
         }
     }
 
@@ -270,6 +283,14 @@ impl Effect {
                     rate_urad_per_h: [v[0], v[1], v[2]],
                 }
             }
+            "station-drift" => {
+                count(4)?;
+                let v = nums(&args[1..])?;
+                Effect::StationDrift {
+                    station: args[0].to_string(),
+                    rate_um_per_h: [v[0], v[1], v[2]],
+                }
+            }
             "coupling" => {
                 count(4)?;
                 Effect::Coupling {
@@ -309,6 +330,24 @@ impl Effect {
             }
             Effect::TrackerDrift { rate_urad_per_h } if !finite(rate_urad_per_h) => {
                 fail("the drift rates must be finite".into())
+            }
+            Effect::StationDrift {
+                station,
+                rate_um_per_h,
+            } => {
+                if !machine.has_stations() {
+                    fail(format!(
+                        "the machine {} has no [[station]] tables: a tracker drifting in \
+                         position is thermal-drift",
+                        machine.chain()
+                    ))
+                } else if let Err(why) = machine.station_named(Some(station)) {
+                    fail(why)
+                } else if !finite(rate_um_per_h) {
+                    fail("the drift rates must be finite".into())
+                } else {
+                    Ok(())
+                }
             }
             Effect::RotaryHarmonics {
                 max_order,
@@ -444,6 +483,10 @@ impl fmt::Display for Effect {
                 amplitude_um,
             } => write!(f, "{axis},{component},{by},{amplitude_um}"),
             Effect::TrackerDrift { rate_urad_per_h: v } => write!(f, "{},{},{}", v[0], v[1], v[2]),
+            Effect::StationDrift {
+                station,
+                rate_um_per_h: v,
+            } => write!(f, "{station},{},{},{}", v[0], v[1], v[2]),
         }
     }
 }
