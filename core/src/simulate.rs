@@ -608,11 +608,9 @@ impl Simulation {
                 Effect::StationDrift {
                     station,
                     rate_um_per_h,
-                } => {
-                    if machine.station_named(Some(station)) == Ok(errors.station) {
-                        for (k, v) in rate_um_per_h.iter().enumerate() {
-                            out.tracker[k] += v * 1e-3 * t_h;
-                        }
+                } if machine.station_named(Some(station)) == Ok(errors.station) => {
+                    for (k, v) in rate_um_per_h.iter().enumerate() {
+                        out.tracker[k] += v * 1e-3 * t_h;
                     }
                 }
                 Effect::LocationDrift {
