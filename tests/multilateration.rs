@@ -302,9 +302,9 @@ fn observations_jacobian_matches_finite_differences() {
     let truth = Truth::random(&multi, model.spec(), &Magnitudes::default(), 2).unwrap();
     let mut p = truth.params.clone();
     // Non-zero station rotations, offsets and drifts, so that every column is exercised.
-    for j in 0..model.n_params() {
-        if model.params()[j].name.starts_with("stationdrift.") {
-            p[j] = 0.003 * (1.0 + j as f64 % 3.0);
+    for (j, (v, info)) in p.iter_mut().zip(model.params()).enumerate() {
+        if info.name.starts_with("stationdrift.") {
+            *v = 0.003 * (1.0 + j as f64 % 3.0);
         }
     }
     for b in model.stations() {
