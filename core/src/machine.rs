@@ -37,7 +37,7 @@
 //! mount = "workpiece"
 //! position = [353.55, 353.55, 0.0]
 //! observes = "range"                # "point" (a tracker) or "range" (a tracing interferometer)
-//! noise = "normal:0,0,0.1,0.15"     # optional; a range uses the range part
+//! noise = "normal:0,0,0.1,0.15"     # optional, recorded (the tools use one noise model)
 //! ```
 //!
 //! Internally every length is in mm and every angle in rad; degrees exist only in files.
@@ -228,9 +228,11 @@ pub struct StationSpec {
     /// What it observes (`point` or `range`).
     #[serde(default)]
     pub observes: Observes,
-    /// Its noise as `--noise` reads it; absent: the `[tracker]` table's. A range-only station
-    /// uses the range part (`normal:0,0,0.1,0.15` is an interferometer of U(k = 2) = 0.2 µm +
-    /// 0.3 µm/m).
+    /// Its noise as `--noise` reads it; absent: the `[tracker]` table's (`normal:0,0,0.1,0.15`
+    /// is an interferometer of U(k = 2) = 0.2 µm + 0.3 µm/m). Recorded in
+    /// [`TrackerSetup::noise`]: the generator, the diagnosis, the design and the uncertainty use
+    /// one noise model for every station (`--noise`, or the `[tracker]` table's), of which a
+    /// range takes the range part.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<String>,
 }

@@ -80,17 +80,35 @@ fn print_layout(model: &Model) -> Result<()> {
             r.id, r.offset[0], r.offset[1], r.offset[2]
         );
     }
-    let t = m.tracker();
-    println!(
-        "\nTracker: on the {} · nominal T_LT ({}, {}, {}) mm",
-        match t.mount {
-            TrackerMount::Workpiece => "workpiece end of the chain",
-            TrackerMount::Frame => "machine frame",
-        },
-        t.position[0],
-        t.position[1],
-        t.position[2]
-    );
+    let mount = |t: &volver::core::machine::TrackerSetup| match t.mount {
+        TrackerMount::Workpiece => "workpiece end of the chain",
+        TrackerMount::Frame => "machine frame",
+    };
+    if m.has_stations() {
+        println!("\nStations (multilateration; each measurement names its own):");
+        println!("  station  observes  mount                       nominal position (mm)");
+        for st in m.stations() {
+            let p = st.setup.position;
+            println!(
+                "  {:<8} {:<9} {:<27} ({}, {}, {})",
+                st.id,
+                format!("{:?}", st.observes).to_lowercase(),
+                mount(&st.setup),
+                p[0],
+                p[1],
+                p[2]
+            );
+        }
+    } else {
+        let t = m.tracker();
+        println!(
+            "\nTracker: on the {} · nominal T_LT ({}, {}, {}) mm",
+            mount(t),
+            t.position[0],
+            t.position[1],
+            t.position[2]
+        );
+    }
 
     print_model(model)
 }
