@@ -28,6 +28,34 @@ fn interferometer() -> TrackerNoise {
     TrackerNoise::from_text("normal:0,0,0.1,0.15").unwrap()
 }
 
+/// The embedded XCFZ machine measured from `n` range-only stations of the default layout.
+fn range_machine(n: usize) -> Machine {
+    let xcfz = Machine::default_xcfz();
+    xcfz.with_stations(StationSpec::default_layout(&xcfz, n, Observes::Range))
+        .unwrap()
+}
+
+/// The ranges of the preset `plan` from every station of `machine`, for random true errors of
+/// the paper's structure (`seed`), with `noise` and the hidden `effects`.
+fn simulate_ranges(
+    machine: &Machine,
+    plan: &str,
+    seed: u64,
+    noise: TrackerNoise,
+    effects: &[&str],
+) -> (Truth, volver::core::simulate::Synthetic) {
+    let spec = Model::default_xcfz().spec().clone();
+    let truth = Truth::random(machine, &spec, &Magnitudes::default(), seed).unwrap();
+    let mut sim = Simulation::new(Plan::preset(machine, plan).unwrap(), truth.clone(), seed);
+    sim.noise = noise;
+    sim.observe = Observation::Range;
+    sim.effects = effects
+        .iter()
+        .map(|e| volver::core::simulate::Effect::parse(e).unwrap())
+        .collect();
+    (truth, sim.run().unwrap())
+}
+
 /// Identification by least squares (`ve`), the objective multilateration is fitted with.
 fn fit_ve(problem: Problem) -> strategy::Identification {
     let start = problem.model().initial_params();
@@ -605,13 +633,8 @@ horizontal = "clockwise"
 fn stations_far_from_their_nominal_positions_start_from_their_own_ranges() {
     let xcfz = Machine::default_xcfz();
     let layout = StationSpec::default_layout(&xcfz, 4, Observes::Range);
-    let multi = xcfz.with_stations(layout.clone()).unwrap();
-    let paper = Model::default_xcfz();
-    let truth = Truth::random(&multi, paper.spec(), &Magnitudes::default(), 9).unwrap();
-    let mut sim = Simulation::new(Plan::preset(&multi, "test3").unwrap(), truth.clone(), 9);
-    sim.noise = interferometer();
-    sim.observe = Observation::Range;
-    let out = sim.run().unwrap();
+    let multi = range_machine(4);
+    let (truth, out) = simulate_ranges(&multi, "test3", 9, interferometer(), &[]);
     let rough: Vec<StationSpec> = layout
         .iter()
         .enumerate()
@@ -735,20 +758,10 @@ fn simulate_and_identify_ranges_from_the_command_line() {
 fn the_report_draws_the_stations() {
     use volver::report::{Fit, ReportInput, html};
     let xcfz = Machine::default_xcfz();
-    let multi = xcfz
-        .with_stations(StationSpec::default_layout(&xcfz, 3, Observes::Range))
-        .unwrap();
-    let truth = Truth::random(
-        &multi,
-        Model::default_xcfz().spec(),
-        &Magnitudes::default(),
-        3,
-    )
-    .unwrap();
-    let mut sim = Simulation::new(Plan::preset(&multi, "test3").unwrap(), truth, 3);
-    sim.noise = interferometer();
-    sim.observe = Observation::Range;
-    let data = sim.run().unwrap().measurements;
+    let multi = range_machine(3);
+    let data = simulate_ranges(&multi, "test3", 3, interferometer(), &[])
+        .1
+        .measurements;
     let model = multilateration_model(multi);
     let id = fit_ve(Problem::new(&model, &data).unwrap());
     let fits = vec![Fit {
@@ -833,24 +846,15 @@ fn a_plan_for_ranges_from_several_stations_predicts_their_u() {
     ignore = "release only: cargo test --release --test multilateration"
 )]
 fn a_drifting_station_is_the_diagnosis_finding() {
-    use volver::core::simulate::Effect;
-    let xcfz = Machine::default_xcfz();
-    let multi = xcfz
-        .with_stations(StationSpec::default_layout(&xcfz, 4, Observes::Range))
-        .unwrap();
+    let multi = range_machine(4);
     let model = multilateration_model(multi.clone());
-    let truth = Truth::random(
+    let (_, out) = simulate_ranges(
         &multi,
-        Model::default_xcfz().spec(),
-        &Magnitudes::default(),
+        "test4",
         5,
-    )
-    .unwrap();
-    let mut sim = Simulation::new(Plan::preset(&multi, "test4").unwrap(), truth, 5);
-    sim.noise = interferometer();
-    sim.observe = Observation::Range;
-    sim.effects = vec![Effect::parse("station-drift=S3,2,-1,-1.5").unwrap()];
-    let out = sim.run().unwrap();
+        interferometer(),
+        &["station-drift=S3,2,-1,-1.5"],
+    );
     let noise = interferometer();
     let diagnosis =
         volver::diagnosis::diagnose_with(&model, &out.measurements, Some(&noise)).unwrap();
@@ -873,23 +877,16 @@ fn a_drifting_station_is_the_diagnosis_finding() {
 /// `[[station]]` tables refuses the effect with the model file's field.
 #[test]
 fn station_drift_in_the_model_is_the_generators() {
-    use volver::core::simulate::Effect;
     let xcfz = Machine::default_xcfz();
-    let multi = xcfz
-        .with_stations(StationSpec::default_layout(&xcfz, 4, Observes::Range))
-        .unwrap();
-    let truth = Truth::random(
+    let multi = range_machine(4);
+    let (_, out) = simulate_ranges(
         &multi,
-        Model::default_xcfz().spec(),
-        &Magnitudes::default(),
+        "test3",
         8,
-    )
-    .unwrap();
-    let mut sim = Simulation::new(Plan::preset(&multi, "test3").unwrap(), truth, 8);
-    sim.noise = TrackerNoise::NONE;
-    sim.observe = Observation::Range;
-    sim.effects = vec![Effect::parse("station-drift=S2,4,-3,6").unwrap()];
-    let data = sim.run().unwrap().measurements;
+        TrackerNoise::NONE,
+        &["station-drift=S2,4,-3,6"],
+    );
+    let data = out.measurements;
     let mut spec = multilateration_model(multi.clone()).spec().clone();
     spec.effects.station_drift = true;
     let model = Model::new(multi, spec).unwrap();
