@@ -56,9 +56,10 @@
 //!   find. A fit with scalar residuals (ranges alone, [`Residuals::scalar`]: their module is
 //!   an absolute value, so Φ is an L1 fit whose optimum interpolates some ranges) starts its
 //!   Newton stage at ε = 1e-2 Φ and lowers ε tenfold each time a stage converges, down to
-//!   1e-6 Φ: on test 4's ranges from four stations 94 steps, Φ within
-//!   3e-6 of the L1 optimum. On the bench's test 4 a fit takes 11 steps (10 of the LM, 1 of the polish, which
-//!   stops once a Newton step moves the error functions by less than 1e-10 of their size).
+//!   1e-6 Φ: 80–150 steps on test 4's ranges from four stations, Φ within ~1e-5 of the L1
+//!   optimum (Clarabel's SOCP reaches it exactly). On the bench's test 4 a fit takes 11 steps
+//!   (10 of the LM, 1 of the polish, which stops once a Newton step moves the error functions by
+//!   less than 1e-10 of their size).
 //!
 //! ```
 //! use volver_core::machine::Machine;
@@ -116,7 +117,8 @@ const MAJORISING_GAIN: f64 = 1e-6;
 /// A Φ fit with scalar residuals (ranges alone, whose module is the absolute value: an L1
 /// fit) starts its Newton stage at ε = this × [`Options::irls_initial_epsilon`] × Φ and, each
 /// time it converges there, goes on from that optimum with ε this much smaller, down to
-/// [`Options::irls_final_epsilon`] × Φ: a scalar residual's exact curvature is ε²/(r² + ε²)^³ᐟ²,
+/// [`SCALAR_FINAL_EPSILON`] × Φ (or [`Options::irls_final_epsilon`] × Φ when that is larger):
+/// a scalar residual's exact curvature is ε²/(r² + ε²)^³ᐟ²,
 /// so a Newton model at the final ε straight away sees only the points already within ε of
 /// zero, and the damped steps crawl.
 const CONTINUATION: f64 = 0.1;
@@ -821,8 +823,8 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     }
 
     /// A Φ fit with scalar residuals whose Newton stage converged above the final ε goes on
-    /// from there with ε [`CONTINUATION`] times smaller (the damping and Moré's scaling
-    /// restarted); `false` when ε is already the final one, or for any other fit.
+    /// from there with ε [`CONTINUATION`] times smaller (the damping kept); `false` when ε is
+    /// already the final one, or for any other fit.
     fn shrink_epsilon(&mut self) -> bool {
         let last = self.options.irls_final_epsilon.max(SCALAR_FINAL_EPSILON);
         if self.stage != Stage::Newton || self.objective != Objective::Phi || self.fraction <= last
