@@ -21,28 +21,92 @@ pub const DEMO_EFFECT: &str = "rotary-harmonics=2,10,20";
 /// Where the demo writes its files.
 pub const DEMO_DIR: &str = "volver-demo";
 
-/// The machine of `machine` (TOML) and the error model of `model` (TOML): the embedded XCFZ
-/// grinder and the paper's model when absent. A model file needs its machine: the embedded
-/// model is for the embedded machine.
+/// The machine `machine` names: a machine file (TOML), or, when no such file exists, the name
+/// of an embedded machine ([`volver_core::presets`]: `xcfz`, `table-table`, `head-head`,
+/// `head-table`); the embedded XCFZ grinder when absent. The preset is returned too.
+///
+/// ```
+/// let (m, preset) = volver::inputs::machine(Some(std::path::Path::new("head-head"))).unwrap();
+/// assert_eq!(m.chain().to_string(), "FXYZCA");
+/// assert_eq!(preset.unwrap().name, "head-head");
+/// let err = volver::inputs::machine(Some(std::path::Path::new("five-axis"))).unwrap_err();
+/// assert!(format!("{err:#}").contains("table-table"));
+/// ```
+pub fn machine(
+    machine: Option<&Path>,
+) -> Result<(Machine, Option<&'static volver_core::presets::Preset>)> {
+    let Some(p) = machine else {
+        return Ok((Machine::default_xcfz(), volver_core::presets::named("xcfz")));
+    };
+    if !p.exists()
+        && let Some(preset) = p.to_str().and_then(volver_core::presets::named)
+    {
+        return Ok((preset.machine()?, Some(preset)));
+    }
+    if !p.exists() && p.extension().is_none() && p.components().count() == 1 {
+        bail!(
+            "--machine {}: no such file, nor an embedded machine (they are {}; `volver layout \
+             --list` names them)",
+            p.display(),
+            volver_core::presets::names().join(", ")
+        );
+    }
+    Ok((Machine::load(p).context("reading the machine file")?, None))
+}
+
+/// The machine of `machine` (a TOML file or an embedded machine's name, see [`machine`]) and the
+/// error model of `model` (TOML): the embedded machine's default model when absent (the
+/// paper's model for the embedded XCFZ grinder). A model file needs its machine: a machine
+/// file without a model file is refused.
 ///
 /// ```
 /// let (machine, model) = volver::inputs::machine_and_model(None, None).unwrap();
 /// assert_eq!(machine.chain().to_string(), "XCFZ");
 /// assert_eq!(model.n_params(), 74);
+/// let (_, five) =
+///     volver::inputs::machine_and_model(Some(std::path::Path::new("table-table")), None).unwrap();
+/// assert!(five.param_index("X0C").is_some() && five.param_index("Z0A").is_some());
 /// ```
 pub fn machine_and_model(machine: Option<&Path>, model: Option<&Path>) -> Result<(Machine, Model)> {
-    let m = match machine {
-        Some(p) => Machine::load(p).context("reading the machine file")?,
-        None => Machine::default_xcfz(),
-    };
-    let model = match (model, machine) {
+    let (m, preset) = self::machine(machine)?;
+    let model = match (model, preset) {
         (Some(p), _) => Model::load(m.clone(), p).context("reading the error model")?,
-        (None, None) => Model::default_xcfz(),
-        (None, Some(_)) => bail!(
-            "--model is needed with --machine (the embedded model is for the embedded machine)"
+        (None, Some(preset)) => preset.model()?,
+        (None, None) => bail!(
+            "--model is needed with a machine file (the embedded models are for the embedded \
+             machines)"
         ),
     };
     Ok((m, model))
+}
+
+/// The plan `text` names on `machine` (an embedded machine: `preset`): a preset of
+/// [`Plan::preset`] (`test4` …), an embedded machine's name (its preset plan, on this machine),
+/// or grids ([`Plan::parse_grid`]); when absent, the embedded machine's preset plan, or `test4`
+/// for a machine file.
+///
+/// ```
+/// let (m, preset) = volver::inputs::machine(Some(std::path::Path::new("head-head"))).unwrap();
+/// let plan = volver::inputs::plan(&m, preset, None).unwrap();
+/// assert_eq!(plan.name, "head-head");
+/// assert_eq!(volver::inputs::plan(&m, preset, Some("X=0,Y=0,Z=0,C=0,A=-90:90:45")).unwrap().positions.len(), 5);
+/// ```
+pub fn plan(
+    machine: &Machine,
+    preset: Option<&volver_core::presets::Preset>,
+    text: Option<&str>,
+) -> Result<Plan> {
+    let text = text.unwrap_or(preset.map_or("test4", |p| p.name));
+    if let Some(p) = volver_core::presets::named(text) {
+        return p
+            .plan_on(machine)
+            .with_context(|| format!("the preset plan of the embedded {} machine", p.name));
+    }
+    Ok(if text.contains('=') {
+        Plan::parse_grid(machine, text)?
+    } else {
+        Plan::preset(machine, text)? // an unknown name gets the list of presets
+    })
 }
 
 /// [`machine_and_model`] and the measurements of `data` (CSV), whose scale is checked against

@@ -35,8 +35,7 @@ pub fn default_grid(m: &Machine, per_axis: usize) -> Result<Plan> {
 /// The grid of `--grid` (a preset or a grid text), or the default.
 pub fn grid_of(m: &Machine, text: Option<&str>) -> Result<Plan> {
     Ok(match text {
-        Some(t) if t.contains('=') => Plan::parse_grid(m, t)?,
-        Some(t) => Plan::preset(m, t)?,
+        Some(t) => crate::inputs::plan(m, None, Some(t))?,
         None => default_grid(m, 5)?,
     })
 }

@@ -61,6 +61,7 @@ pub mod nist;
 pub mod noise;
 pub mod plan;
 pub mod plausibility;
+pub mod presets;
 pub mod problem;
 pub mod random;
 pub mod results;

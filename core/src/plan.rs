@@ -185,7 +185,49 @@ impl Plan {
 
     /// A plain grid from text: one `AXIS=start:end:step` or `AXIS=value` per axis of the
     /// machine, comma-separated, in file units, e.g. `X=0:1400:100,Z=0:600:50,C=0`.
+    ///
+    /// Several grids joined by `;` are measured one after the other (a union: a grid of the
+    /// linear axes, then the rotary axes swept at a few positions, say; a position an earlier
+    /// grid has is measured once), e.g.
+    /// `X=0:1400:200,Z=0:600:150,C=0; X=700,Z=300,C=0:330:30`.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::plan::Plan;
+    /// let m = Machine::default_xcfz();
+    /// let p = Plan::parse_grid(&m, "X=0:1400:700,Z=0,C=0; X=700,Z=300,C=0:330:30").unwrap();
+    /// assert_eq!(p.positions.len(), 3 + 12);
+    /// ```
     pub fn parse_grid(machine: &Machine, text: &str) -> Result<Plan> {
+        let grids: Vec<&str> = text.split(';').map(str::trim).collect();
+        if grids.len() > 1 {
+            let mut plan = Plan::parse_grid(machine, grids[0])?;
+            let key = |q: &Commands| q.0.map(f64::to_bits);
+            let mut seen: std::collections::HashSet<_> = plan.positions.iter().map(key).collect();
+            for g in &grids[1..] {
+                if g.is_empty() {
+                    return Err(Error::input(
+                        Place::file("plan").at_field("grid"),
+                        "an empty grid between ';' separators",
+                    ));
+                }
+                let next = Plan::parse_grid(machine, g)?;
+                // A position an earlier grid has is measured once (where it first comes).
+                for q in next.positions {
+                    if seen.insert(key(&q)) {
+                        plan.positions.push(q);
+                    }
+                }
+                if plan.positions.len() > MAX_PLAN_POSITIONS {
+                    return Err(Error::input(
+                        Place::file("plan").at_field("grid"),
+                        format!("more than {MAX_PLAN_POSITIONS} positions"),
+                    ));
+                }
+            }
+            plan.name = text.to_string();
+            return Ok(plan);
+        }
         let place = || Place::file("plan").at_field("grid");
         let mut ranges = Vec::new();
         for part in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {

@@ -382,3 +382,162 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
     }
     out
 }
+
+/// A parameter the data cannot tell from a combination of the others: holding it at its value
+/// loses nothing the data determine.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Redundancy {
+    /// The parameter (index in the model's layout).
+    pub param: usize,
+    /// The motion it makes with the others: moving it by 1 (its unit) and every `(k, c)` here by
+    /// `c` (parameter k's unit) changes no measured point, to first order. Coefficients above
+    /// 1e-3 of the largest (in the Jacobian's scaling), largest first.
+    pub with: Vec<(usize, f64)>,
+}
+
+/// The order in which [`redundant_parameters`] holds parameters, first held first: what a
+/// metrologist reads least from a verification goes first — squareness errors (the model's
+/// rule already holds most), then the rotary axes' component errors (their constants, then
+/// their first harmonics or slopes, then the rest: what the location errors and the tracker's
+/// pose also describe), then the linear axes' component errors from the highest coefficient
+/// down, then the rotary axes' location errors (X0C, B0A …: the ISO 230-7 quantities a
+/// five-axis user knows), then the effects; the tracker's pose and the stations last (a set-up
+/// takes whatever a workpiece's own set-up would absorb).
+pub fn hold_order(model: &Model) -> Vec<usize> {
+    use volver_core::iso::ErrorId;
+    use volver_core::model::Owner;
+    let machine = model.machine();
+    let rank = |j: usize| -> (u32, i64) {
+        match model.params()[j].owner {
+            Owner::Term { term, coeff } => {
+                let t = &model.terms()[term];
+                let rotary = machine.axes()[t.axis].axis.is_rotary();
+                match (t.id, rotary) {
+                    (ErrorId::Location { .. }, false) => (0, 0),
+                    (ErrorId::Location { .. }, true) => (6, 0),
+                    (_, true) => {
+                        let order = match t.basis.kind() {
+                            BasisKind::Fourier | BasisKind::Sine => coeff.div_ceil(2),
+                            _ => coeff,
+                        };
+                        (1 + order.min(2) as u32, 0)
+                    }
+                    (_, false) => (4, -(coeff as i64)),
+                }
+            }
+            Owner::Effect(_) => (7, 0),
+            Owner::Tracker(_) | Owner::Station { .. } => (8, 0),
+        }
+    };
+    let mut order: Vec<usize> = (0..model.n_params()).collect();
+    order.sort_by_key(|&j| (rank(j), j));
+    order
+}
+
+/// The parameters of `task` to hold so that what is left is identifiable at `params`, chosen
+/// greedily in `order` ([`hold_order`] for a machine model): each is held when holding it
+/// leaves one combination fewer that the design cannot identify (relative curvature below
+/// [`crate::identifiability::RANK_TOLERANCE`] in the engine's scaled coordinates), until none is
+/// left. Each comes with the motion it makes with the others. Empty when the task is already
+/// identifiable; `None` when the Jacobian is not finite or a decomposition fails.
+///
+/// ```
+/// use volver_core::model::Model;
+/// use volver_core::plan::Plan;
+/// use volver_core::problem::Problem;
+/// use volver_solvers::Task;
+/// use volver_solvers::observability::{hold_order, nominal_data, redundant_parameters};
+/// let model = Model::default_xcfz();
+/// let data = nominal_data(&model, &Plan::preset(model.machine(), "test3").unwrap());
+/// let task = Task::new(Problem::new(&model, &data).unwrap());
+/// let held = redundant_parameters(&task, &model.initial_params(), &hold_order(&model)).unwrap();
+/// // The paper's model is identifiable on test 3 but for the tool's turn about the line through
+/// // the two reflectors, which each linear axis' angular errors describe along it.
+/// assert!(held.iter().all(|r| model.params()[r.param].name.starts_with('E')));
+/// ```
+pub fn redundant_parameters(
+    task: &Task,
+    params: &[f64],
+    order: &[usize],
+) -> Option<Vec<Redundancy>> {
+    use crate::coordinates::{reduce, scaled_null_space};
+    use volver_core::model::{Constraint, ConstraintKind};
+    let n = params.len();
+    let normal = crate::kernels::accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
+    // The weak directions (in the parameters' units) under `constraints`.
+    let weak = |constraints: &volver_core::model::Constraints| -> Option<Vec<Vec<f64>>> {
+        let (d, ns) = scaled_null_space(&normal.h, constraints, params);
+        let ns = ns.ok()?;
+        let nf = ns.n_free();
+        if nf == 0 {
+            return Some(vec![]);
+        }
+        let (hz, _) = reduce(&d, ns.basis(), &normal.h, None);
+        let evd = hz.self_adjoint_eigen(faer::Side::Lower).ok()?;
+        let (mu, v) = (evd.S().column_vector(), evd.U());
+        let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+        let basis = ns.basis();
+        Some(
+            (0..nf)
+                .filter(|&i| mu[i] <= crate::identifiability::RANK_TOLERANCE * mu_max)
+                .map(|i| {
+                    (0..n)
+                        .map(|j| d[j] * (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum::<f64>())
+                        .collect()
+                })
+                .collect(),
+        )
+    };
+    let col = |k: usize| normal.h[(k, k)].max(0.0).sqrt();
+    let mut constraints = task.constraints.clone();
+    let mut current = weak(&constraints)?;
+    let mut out = Vec::new();
+    for &j in order {
+        if current.is_empty() {
+            break;
+        }
+        // Only a parameter the weak directions move can take one of them away (shares in the
+        // Jacobian's scaling: a coefficient times its column's norm).
+        let share = |dir: &[f64]| {
+            let big = (0..n)
+                .map(|k| (dir[k] * col(k)).abs())
+                .fold(0.0_f64, f64::max);
+            (dir[j] * col(j)).abs() / big.max(f64::MIN_POSITIVE)
+        };
+        let Some(best) = current
+            .iter()
+            .filter(|dir| share(dir) > 1e-6)
+            .max_by(|a, b| share(a).total_cmp(&share(b)))
+            .cloned()
+        else {
+            continue;
+        };
+        let mut trial = constraints.clone();
+        trial.rows.push(Constraint {
+            kind: ConstraintKind::Fixed,
+            label: format!("parameter {j} held: redundant"),
+            coeffs: vec![(j, 1.0)],
+            rhs: params[j],
+        });
+        let Some(left) = weak(&trial) else {
+            continue;
+        };
+        if left.len() >= current.len() {
+            continue;
+        }
+        // The motion, with this parameter's coefficient 1; terms below 1e-3 of the largest
+        // (scaled by the columns' norms) left out.
+        let big = (0..n)
+            .map(|k| (best[k] * col(k)).abs())
+            .fold(0.0_f64, f64::max);
+        let mut with: Vec<(usize, f64)> = (0..n)
+            .filter(|&k| k != j && (best[k] * col(k)).abs() > 1e-3 * big)
+            .map(|k| (k, best[k] / best[j]))
+            .collect();
+        with.sort_by(|a, b| (b.1 * col(b.0)).abs().total_cmp(&(a.1 * col(a.0)).abs()));
+        out.push(Redundancy { param: j, with });
+        constraints = trial;
+        current = left;
+    }
+    Some(out)
+}

@@ -152,11 +152,7 @@ pub fn predict_command(a: PredictArgs) -> Result<()> {
     let file = ResultsFile::load(&a.results).context("reading the results file")?;
     let (model, params) = file.to_model(&label)?;
     let m = model.machine();
-    let plan = if a.grid.contains('=') {
-        volver::core::plan::Plan::parse_grid(m, &a.grid)?
-    } else {
-        volver::core::plan::Plan::preset(m, &a.grid)?
-    };
+    let plan = volver::inputs::plan(m, None, Some(&a.grid))?;
     let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let rows: Vec<(Vec<f64>, [f64; 3])> = plan
         .positions

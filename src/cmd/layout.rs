@@ -5,34 +5,52 @@ use anyhow::{Context, Result};
 use std::path::PathBuf;
 use volver::core::machine::TrackerMount;
 use volver::core::model::{ConstraintKind, Model};
-use volver::core::plan::Plan;
 use volver::solvers::nullspace::NullSpace;
 
 /// Options of `volver layout`.
 #[derive(clap::Args)]
 pub struct LayoutArgs {
-    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    /// Names every embedded machine, one per line: name, chain, what it is.
+    #[arg(long, conflicts_with_all = ["machine", "model", "plan"])]
+    list: bool,
+    /// Machine file (TOML) or an embedded machine's name; the embedded XCFZ grinder when absent.
     #[arg(long)]
     machine: Option<PathBuf>,
-    /// Error-model file (TOML); the paper's model when absent (needs the default machine).
+    /// Error-model file (TOML); the embedded machine's default model when absent (the paper's
+    /// model on the XCFZ grinder).
     #[arg(long)]
     model: Option<PathBuf>,
-    /// A test plan (preset name or grid such as X=0:1400:200,C=0:330:30,Z=0:600:150): also
-    /// states in words what this layout can and cannot measure, and what would fix it.
+    /// A test plan (a preset name such as test4, an embedded machine's name for its preset
+    /// plan, or grids such as X=0:1400:200,C=0:330:30,Z=0:600:150): also states in words what
+    /// this layout can and cannot measure, and what would fix it.
     #[arg(long)]
     plan: Option<String>,
+    /// With --plan: the parameters to hold so that the model is identifiable on the plan (chosen
+    /// greedily: rotary-axis component errors before location errors, the tracker's pose last),
+    /// each with the motion it makes with the others, and the `[fixed]` table that holds them.
+    #[arg(long, requires = "plan")]
+    redundant: bool,
 }
 
 /// Runs `volver layout`.
 pub fn run(a: LayoutArgs) -> Result<()> {
+    if a.list {
+        for p in &volver::core::presets::PRESETS {
+            let m = p.machine()?;
+            println!(
+                "{:<12} {:<7} {}",
+                p.name,
+                m.chain().to_string(),
+                p.description
+            );
+        }
+        return Ok(());
+    }
+    let (_, preset) = volver::inputs::machine(a.machine.as_deref())?;
     let (_, model) = volver::inputs::machine_and_model(a.machine.as_deref(), a.model.as_deref())?;
     print_layout(&model)?;
     if let Some(text) = a.plan {
-        let plan = if text.contains('=') {
-            Plan::parse_grid(model.machine(), &text)?
-        } else {
-            Plan::preset(model.machine(), &text)?
-        };
+        let plan = volver::inputs::plan(model.machine(), preset, Some(&text))?;
         let data = volver::solvers::observability::nominal_data(&model, &plan);
         println!(
             "\nWhat plan {} ({} points) can measure with this layout:",
@@ -44,6 +62,56 @@ pub fn run(a: LayoutArgs) -> Result<()> {
             &data,
             &model.initial_params(),
         ));
+        if a.redundant {
+            print_redundant(&model, &data)?;
+        }
+    }
+    Ok(())
+}
+
+/// The parameters to hold for an identifiable model, and the `[fixed]` table.
+fn print_redundant(model: &Model, data: &volver::core::measure::MeasurementSet) -> Result<()> {
+    use volver::solvers::observability::{hold_order, redundant_parameters};
+    let task = volver::solvers::Task::new(volver::core::problem::Problem::new(model, data)?);
+    let p = model.initial_params();
+    let held = redundant_parameters(&task, &p, &hold_order(model))
+        .context("the design's analysis failed (a Jacobian that is not finite)")?;
+    let name = |j: usize| model.params()[j].name.as_str();
+    if held.is_empty() {
+        println!("\nNo parameter is redundant on this plan: the model is identifiable.");
+        return Ok(());
+    }
+    println!(
+        "\n{} parameter(s) to hold for a model this plan identifies (moving each by 1 and the \
+         others by the factors shown changes no measured point, to first order):",
+        held.len()
+    );
+    for r in &held {
+        let with: Vec<String> = r
+            .with
+            .iter()
+            .take(4)
+            .map(|&(k, c)| format!("{c:+.4} {}", name(k)))
+            .collect();
+        let more = r.with.len().saturating_sub(4);
+        println!(
+            "  {:<14} with {}{}",
+            name(r.param),
+            if with.is_empty() {
+                "nothing (no measured point sees it)".to_string()
+            } else {
+                with.join(", ")
+            },
+            if more > 0 {
+                format!(" and {more} more")
+            } else {
+                String::new()
+            }
+        );
+    }
+    println!("\n[fixed]");
+    for r in &held {
+        println!("\"{}\" = {}", name(r.param), p[r.param]);
     }
     Ok(())
 }

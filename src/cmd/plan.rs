@@ -7,7 +7,7 @@ use clap::Args;
 use std::path::{Path, PathBuf};
 use volver::core::fsio::write_atomic;
 use volver::core::noise::TrackerNoise;
-use volver::core::plan::{Plan, file};
+use volver::core::plan::file;
 use volver::planning::{Request, compare, plan};
 
 /// Arguments of `volver plan`.
@@ -265,7 +265,7 @@ fn compare_plans(
         } else {
             // PRESET or PRESET/ID+ID…: the preset measuring those reflectors only.
             let (name, ids) = item.split_once('/').unwrap_or((item, ""));
-            let mut plan = Plan::preset(machine, name)
+            let mut plan = volver::inputs::plan(machine, None, Some(name))
                 .with_context(|| format!("--compare {item}: neither a plan file nor a preset"))?;
             if !ids.is_empty() {
                 plan.reflectors = ids

@@ -45,10 +45,12 @@ Example:
 /// Options of `volver simulate`.
 #[derive(clap::Args)]
 pub struct SimulateArgs {
-    /// Test plan: table4, table7, test1 … test5, or a grid such as X=0:1400:100,Z=0:600:50,C=0
-    /// (file units: mm, degrees).
-    #[arg(long, default_value = "test4")]
-    plan: String,
+    /// Test plan: table4, table7, test1 … test5, an embedded machine's name (its preset plan), or
+    /// a grid such as X=0:1400:100,Z=0:600:50,C=0 (file units: mm, degrees; grids joined by `;`
+    /// are measured in turn). Default: the embedded machine's preset plan (test4 on the XCFZ
+    /// grinder and on a machine file).
+    #[arg(long)]
+    plan: Option<String>,
     /// A plan file instead (CSV: the axes, reflector, optionally order; as `volver plan`
     /// writes it): its rows are measured in the file's order.
     #[arg(long, conflicts_with_all = ["plan", "reflectors"])]
@@ -59,14 +61,16 @@ pub struct SimulateArgs {
     /// Output folder (created if missing; files of the same names are replaced).
     #[arg(long)]
     out: PathBuf,
-    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    /// Machine file (TOML) or an embedded machine's name (`volver layout --list`); the embedded
+    /// XCFZ grinder when absent.
     #[arg(long)]
     machine: Option<PathBuf>,
     /// True errors from a results file (JSON) instead of random ones.
     #[arg(long, conflicts_with_all = ["truth_model", "magnitude"])]
     truth: Option<PathBuf>,
-    /// Error model (TOML) giving the structure of the random true errors; every error of the
-    /// machine (cubic / first harmonic) when absent.
+    /// Error model (TOML) giving the structure of the random true errors; when absent, an
+    /// embedded five-axis machine's default model, else every error of the machine (cubic /
+    /// first harmonic).
     #[arg(long)]
     truth_model: Option<PathBuf>,
     /// Size of the random true errors of one kind, e.g. straightness=20 (see below).
@@ -103,7 +107,11 @@ pub struct SimulateArgs {
 pub fn run(a: SimulateArgs) -> Result<()> {
     let (truth, source) = truth_of(&a)?;
     let machine = truth.model.machine().clone();
-    let plan = plan_of(&a, &machine)?;
+    let preset = match &a.machine {
+        Some(_) => volver::inputs::machine(a.machine.as_deref())?.1,
+        None => volver::core::presets::named("xcfz"),
+    };
+    let plan = plan_of(&a, &machine, preset)?;
     let mut sim = Simulation::new(plan, truth, a.seed);
     sim.truth_source = source;
     if a.observe == "range" {
@@ -132,9 +140,12 @@ pub fn run(a: SimulateArgs) -> Result<()> {
 /// The true errors: from `--truth`, or drawn at random in `--truth-model`'s structure (every
 /// error of the machine by default) at the `--magnitude`s; and where they come from.
 fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
-    let given_machine = match &a.machine {
-        Some(p) => Some(Machine::load(p).context("reading the machine file")?),
-        None => None,
+    let (given_machine, preset) = match &a.machine {
+        Some(_) => {
+            let (m, preset) = volver::inputs::machine(a.machine.as_deref())?;
+            (Some(m), preset)
+        }
+        None => (None, None),
     };
     let (truth, source) = match &a.truth {
         Some(path) => {
@@ -179,7 +190,10 @@ fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
                     .context("reading the truth model")?
                     .spec()
                     .clone(),
-                None => ErrorModelSpec::complete(&m),
+                None => match preset {
+                    Some(p) if p.name != "xcfz" => p.model()?.spec().clone(),
+                    _ => ErrorModelSpec::complete(&m),
+                },
             };
             let mut magnitudes = Magnitudes::default();
             for text in &a.magnitude {
@@ -197,16 +211,17 @@ fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
     Ok((truth, source))
 }
 
-/// The plan of `--plan` on `machine`, measuring the reflectors of `--reflectors`.
-fn plan_of(a: &SimulateArgs, machine: &Machine) -> Result<Plan> {
+/// The plan of `--plan` on `machine` (an embedded machine: `preset`), measuring the reflectors
+/// of `--reflectors`.
+fn plan_of(
+    a: &SimulateArgs,
+    machine: &Machine,
+    preset: Option<&volver::core::presets::Preset>,
+) -> Result<Plan> {
     if let Some(path) = &a.plan_file {
         return Ok(volver::core::plan::file::load(machine, path)?);
     }
-    let mut plan = if a.plan.contains('=') {
-        Plan::parse_grid(machine, &a.plan)?
-    } else {
-        Plan::preset(machine, &a.plan)? // an unknown name gets the list of presets
-    };
+    let mut plan = volver::inputs::plan(machine, preset, a.plan.as_deref())?;
     if let Some(list) = &a.reflectors {
         plan.reflectors = list
             .split(',')
