@@ -221,6 +221,8 @@ pub struct Compensated {
     pub worst_written_mm: f64,
     /// Corrected commands that leave an axis' travel.
     pub outside: usize,
+    /// With the tool's orientation compensated, what became of its direction.
+    pub orientation: Option<OrientationSummary>,
 }
 
 /// Compensates the point list `text` (read from `label`) with `comp`; each corrected command is
@@ -236,15 +238,22 @@ pub fn compensate_points(
     let pts = read_points(text, label, m)?;
     let axes = m.axes();
     let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
+    let oriented = comp.tool_axis().is_some();
     let mut out = format!(
-        "line,id,{},{},error_um,deviation_um,outside_travel\n",
+        "line,id,{},{},error_um,deviation_um,outside_travel{}\n",
         letters.join(","),
         letters
             .iter()
             .map(|l| format!("{l}_programmed"))
             .collect::<Vec<_>>()
-            .join(",")
+            .join(","),
+        if oriented {
+            ",direction_error_urad,direction_deviation_urad,sensitivity"
+        } else {
+            ""
+        }
     );
+    let (mut dir_err, mut dir_ws, mut dir_ww, mut singular) = (0.0_f64, 0.0_f64, 0.0_f64, 0);
     let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
     for p in &pts {
         let c = comp
@@ -266,8 +275,24 @@ pub fn compensate_points(
             .map(|&k| axes[k].axis.letter())
             .collect();
         outside += usize::from(!off.is_empty());
+        let extra = match &c.orientation {
+            Some(o) => {
+                let wd = comp.direction_deviation_rad(&written, o.target);
+                dir_err = dir_err.max(o.error_rad);
+                dir_ws = dir_ws.max(o.deviation_rad);
+                dir_ww = dir_ww.max(wd);
+                singular += usize::from(o.near_singularity);
+                format!(
+                    ",{:.4},{:.6},{:.6}",
+                    o.error_rad * 1e6,
+                    wd * 1e6,
+                    o.sensitivity
+                )
+            }
+            None => String::new(),
+        };
         out.push_str(&format!(
-            "{},{},{},{},{:.4},{:.6},{off}\n",
+            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
             p.line,
             p.id.clone().unwrap_or_default(),
             cells.join(","),
@@ -283,17 +308,81 @@ pub fn compensate_points(
         worst_solved_mm: ws,
         worst_written_mm: ww,
         outside,
+        orientation: oriented.then_some(OrientationSummary {
+            max_error_rad: dir_err,
+            worst_solved_rad: dir_ws,
+            worst_written_rad: dir_ww,
+            near_singularity: singular,
+        }),
     })
 }
 
-/// The compensator of `model` at `params` for `tool`, solving for every axis but those of
-/// `hold` (axis letters, e.g. `"C"`: they keep their programmed positions).
+/// What compensation did to the tool's direction over a point list or a program.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OrientationSummary {
+    /// The largest angle of the uncompensated tool direction from its target (rad).
+    pub max_error_rad: f64,
+    /// The largest angle left by a compensated command as solved (rad).
+    pub worst_solved_rad: f64,
+    /// … as written with the output's decimals (rad).
+    pub worst_written_rad: f64,
+    /// Points near the singularity.
+    pub near_singularity: usize,
+}
+
+/// The tool's axis of `--tool-axis X,Y,Z` (in the frame of the last tool-side axis), or
+/// `[0, 0, −1]` (the tool points down its spindle, along −z).
+pub fn tool_axis_of(text: Option<&str>) -> Result<[f64; 3]> {
+    match text {
+        None => Ok([0.0, 0.0, -1.0]),
+        Some(t) => {
+            let v: Vec<f64> = t
+                .split(',')
+                .map(|x| x.trim().parse::<f64>())
+                .collect::<std::result::Result<_, _>>()
+                .map_err(|_| anyhow::anyhow!("--tool-axis {t}: expected X,Y,Z (three numbers)"))?;
+            match v.as_slice() {
+                [x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+                _ => bail!("--tool-axis {t}: expected X,Y,Z (three finite numbers)"),
+            }
+        }
+    }
+}
+
+/// Whether `model`'s machine is a five-axis machine (three linear and two rotary axes): its
+/// compensation steers the tool's direction too unless axes are held.
+pub fn five_axis(model: &Model) -> bool {
+    let axes = model.machine().axes();
+    axes.len() == 5 && axes.iter().filter(|a| a.axis.is_rotary()).count() == 2
+}
+
+/// The compensator of `model` at `params` for `tool`: with `hold` (axis letters, e.g. `"C"`),
+/// every other axis solved for the tool point; otherwise, on a five-axis machine, every axis
+/// solved for the tool point and the direction of the tool's axis `axis`
+/// ([`volver_core::compensate::Compensator::with_orientation`]), and on other machines the
+/// default of [`volver_core::compensate::Compensator::new`]. An `axis` given with `hold`, or on
+/// a machine that cannot turn the tool, is refused.
 pub fn compensator<'m>(
     model: &'m Model,
     params: &'m [f64],
     tool: [f64; 3],
     hold: Option<&str>,
+    axis: Option<[f64; 3]>,
 ) -> Result<volver_core::compensate::Compensator<'m>> {
+    if hold.is_some() && axis.is_some() {
+        bail!(
+            "--tool-axis steers the tool's direction with every axis; --hold keeps some axes at \
+             their programmed values: give one of them"
+        );
+    }
+    if hold.is_none() && (axis.is_some() || five_axis(model)) {
+        return Ok(volver_core::compensate::Compensator::with_orientation(
+            model,
+            params,
+            tool,
+            axis.unwrap_or([0.0, 0.0, -1.0]),
+        )?);
+    }
     Ok(match hold {
         Some(h) => {
             let held: Vec<volver_core::iso::Axis> = h

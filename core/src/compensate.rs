@@ -40,7 +40,7 @@ use crate::iso::Axis;
 use crate::kinematics::{PointErrors, tool_in_workpiece};
 use crate::machine::Commands;
 use crate::model::Model;
-use num_dual::DualSVec64;
+use num_dual::{DualNum, DualSVec64};
 
 /// Deviation below which Newton's iteration stops (mm).
 pub const NEWTON_TOLERANCE_MM: f64 = 1e-11;
@@ -56,6 +56,9 @@ pub struct Compensator<'a> {
     tool: [f64; 3],
     /// Chain positions of the axes Newton moves.
     free: Vec<usize>,
+    /// The tool's axis (unit, frame of the last tool-side axis) when its direction is
+    /// compensated too ([`Compensator::with_orientation`]).
+    axis: Option<[f64; 3]>,
 }
 
 /// One compensated command.
@@ -78,7 +81,45 @@ pub struct Compensated {
     /// or a rotary axis of limited range beyond its range, a full-turn rotary axis more than a
     /// turn beyond it.
     pub outside_travel: Vec<usize>,
+    /// With the tool's orientation compensated ([`Compensator::with_orientation`]), its
+    /// direction: the target (the nominal machine's tool direction at the programmed command,
+    /// unit, workpiece frame), the angle between the compensated command's direction and it
+    /// through the forward model (rad), and the uncompensated machine's angle.
+    pub orientation: Option<OrientationResult>,
 }
+
+/// What compensation did to the tool's direction (see [`Compensated::orientation`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct OrientationResult {
+    /// The nominal machine's tool direction at the programmed command (unit, workpiece frame).
+    pub target: [f64; 3],
+    /// The angle between the compensated command's tool direction and the target, through the
+    /// forward model (rad).
+    pub deviation_rad: f64,
+    /// The angle of the uncompensated machine's tool direction from the target (rad).
+    pub error_rad: f64,
+    /// How much the tool's direction turns per radian of the rotary axis that turns it least
+    /// (the smallest singular value of the direction's Jacobian over the free rotary axes, at
+    /// the compensated command): `sin` of the tilt on a machine whose two rotary axes are
+    /// perpendicular. Near zero the rotary axes are nearly parallel (the tilt axis near zero):
+    /// a small direction error there needs a large turn of the other rotary axis.
+    pub sensitivity: f64,
+    /// `sensitivity` below `sin` [`SINGULAR_TILT_DEG`]: the command passes near the singularity.
+    pub near_singularity: bool,
+}
+
+/// A compensated command whose direction turns by less than `sin` of this (degrees) per radian of
+/// a rotary axis is reported near the singularity ([`OrientationResult::near_singularity`]).
+pub const SINGULAR_TILT_DEG: f64 = 1.0;
+
+/// The weight of a direction residual against a position residual (mm per rad) while the
+/// command is solved: 1 µrad weighs as 1 µm. It matters only where position and direction cannot
+/// both be met (at the singularity).
+pub const DIRECTION_LEVER_MM: f64 = 1000.0;
+
+/// Newton's iteration stops once the direction is within this angle (rad) of its target (and
+/// the point within [`NEWTON_TOLERANCE_MM`]).
+pub const NEWTON_TOLERANCE_RAD: f64 = 1e-12;
 
 impl<'a> Compensator<'a> {
     /// The inverse model of `model` with errors `params`, steering the tool point `tool` (mm, in
@@ -142,6 +183,68 @@ impl<'a> Compensator<'a> {
             params,
             tool,
             free,
+            axis: None,
+        })
+    }
+
+    /// The inverse model steering the tool point `tool` *and* the tool's direction `axis` (both
+    /// in the frame of the last tool-side axis, like a reflector offset; `axis` is normalised):
+    /// every axis of a five-axis machine is solved so that the point and the direction match
+    /// the nominal machine's (three equations for the point, two for the direction). Refused
+    /// unless the machine has five axes, two of them rotary, or when `axis` is not a direction.
+    ///
+    /// ```
+    /// use volver_core::compensate::Compensator;
+    /// let model = volver_core::presets::named("table-table").unwrap().model().unwrap();
+    /// let mut p = model.initial_params();
+    /// p[model.param_index("B0A").unwrap()] = 20e-6; // A's line turned 20 µrad about y
+    /// p[model.param_index("X0C").unwrap()] = 0.015; // C's line 15 µm off in x
+    /// let comp = Compensator::with_orientation(&model, &p, [0.0, 0.0, -150.0], [0.0, 0.0, -1.0]).unwrap();
+    /// // Chain order A, C, X, Y, Z (degrees, mm).
+    /// let programmed = model.machine().commands_from_file_units(&[30.0, 45.0, 100.0, -50.0, 200.0]);
+    /// let c = comp.compensate(&programmed).unwrap();
+    /// let o = c.orientation.unwrap();
+    /// assert!(c.deviation_mm < 1e-9 && o.deviation_rad < 1e-9);
+    /// assert!(c.error_mm > 0.01 && o.error_rad > 1e-6 && !o.near_singularity);
+    /// assert!((o.sensitivity - 0.5).abs() < 1e-6); // sin 30°: A tilts C's line by 30°
+    /// ```
+    pub fn with_orientation(
+        model: &'a Model,
+        params: &'a [f64],
+        tool: [f64; 3],
+        axis: [f64; 3],
+    ) -> Result<Compensator<'a>> {
+        if params.len() != model.n_params() {
+            return Err(Error::Model(format!(
+                "compensation needs {} parameters, got {}",
+                model.n_params(),
+                params.len()
+            )));
+        }
+        let m = model.machine();
+        let rotary = m.axes().iter().filter(|a| a.axis.is_rotary()).count();
+        if m.axes().len() != 5 || rotary != 2 {
+            return Err(Error::Model(format!(
+                "compensating the tool's orientation needs a five-axis machine (three linear and \
+                 two rotary axes); {} has {} axes, {rotary} rotary: compensate the tool point \
+                 alone",
+                m.chain(),
+                m.axes().len()
+            )));
+        }
+        let len = crate::problem::norm(axis);
+        if !(len.is_finite() && len > 1e-9) {
+            return Err(Error::Model(format!(
+                "the tool's axis {axis:?} is not a direction (a non-zero vector, in the frame of \
+                 the last tool-side axis)"
+            )));
+        }
+        Ok(Compensator {
+            model,
+            params,
+            tool,
+            free: (0..5).collect(),
+            axis: Some(axis.map(|v| v / len)),
         })
     }
 
@@ -165,13 +268,67 @@ impl<'a> Compensator<'a> {
         self.model.tool_point(&commands.0, &self.tool, self.params)
     }
 
-    /// The command that puts the tool where the nominal machine puts it for `programmed`.
+    /// The tool's axis when its direction is compensated (unit, frame of the last tool-side
+    /// axis).
+    pub fn tool_axis(&self) -> Option<[f64; 3]> {
+        self.axis
+    }
+
+    /// The nominal machine's tool direction at `commands` (unit, workpiece frame); `None` when
+    /// the direction is not compensated.
+    pub fn nominal_direction(&self, commands: &Commands) -> Option<[f64; 3]> {
+        let zero = PointErrors::<f64>::zero();
+        let m = self.model.machine();
+        self.axis.map(|a| {
+            let tip = tool_in_workpiece(m, &commands.0, &self.tool, &zero);
+            let back = tool_in_workpiece(m, &commands.0, &self.behind(a), &zero);
+            unit([tip[0] - back[0], tip[1] - back[1], tip[2] - back[2]])
+        })
+    }
+
+    /// The real machine's tool direction at `commands`, with the identified errors (unit,
+    /// workpiece frame); `None` when the direction is not compensated.
+    pub fn actual_direction(&self, commands: &Commands) -> Option<[f64; 3]> {
+        self.axis.map(|a| {
+            let tip = self.actual_point(commands);
+            let back = self
+                .model
+                .tool_point(&commands.0, &self.behind(a), self.params);
+            unit([tip[0] - back[0], tip[1] - back[1], tip[2] - back[2]])
+        })
+    }
+
+    /// The angle (rad) between the real machine's tool direction at `commands` and `target`,
+    /// through an independent `f64` evaluation of the forward model: the verification of a
+    /// command's orientation. Zero when the direction is not compensated.
+    pub fn direction_deviation_rad(&self, commands: &Commands, target: [f64; 3]) -> f64 {
+        self.actual_direction(commands)
+            .map_or(0.0, |d| angle_between(d, target))
+    }
+
+    /// The point one unit behind the tool point along the tool's axis `a`.
+    fn behind(&self, a: [f64; 3]) -> [f64; 3] {
+        [
+            self.tool[0] - a[0],
+            self.tool[1] - a[1],
+            self.tool[2] - a[2],
+        ]
+    }
+
+    /// The command that puts the tool where the nominal machine puts it for `programmed` (and
+    /// turns it the way the nominal machine turns it, with [`Compensator::with_orientation`]).
     ///
-    /// Fails (naming the deviation) only when Newton's iteration meets a non-finite value or a
-    /// singular Jacobian; a deviation that stays above the tolerance is reported in
-    /// [`Compensated::deviation_mm`] for the caller to judge.
+    /// Newton's iteration starts at the programmed command, so it finds the solution nearest it
+    /// (the branch the program chose; a five-axis direction has a second one, the tilt
+    /// mirrored and the other rotary axis half a turn away). It fails (naming the command) only
+    /// when it meets a non-finite value or a singular Jacobian (for the tool point alone; where
+    /// the direction cannot be met, at the singularity, the nearest command is kept and
+    /// [`OrientationResult::deviation_rad`] says what is left); a deviation that stays above the
+    /// tolerance is reported for the caller to judge.
     pub fn compensate(&self, programmed: &Commands) -> Result<Compensated> {
         let target = self.nominal_point(programmed);
+        let target_dir = self.nominal_direction(programmed);
+        let rows = if target_dir.is_some() { 6 } else { 3 };
         let mut q = *programmed;
         // The first iterate's point is the uncompensated machine's (the duals' real parts are
         // the f64 evaluation).
@@ -179,23 +336,28 @@ impl<'a> Compensator<'a> {
         let mut steps = 0;
         let mut best = (f64::INFINITY, q);
         while steps < MAX_NEWTON_STEPS {
-            let (x, jac) = self.point_and_jacobian(&q);
-            let r = [x[0] - target[0], x[1] - target[1], x[2] - target[2]];
-            let d = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
-            if !d.is_finite() {
+            let (r, jac) = self.residual_and_jacobian(&q, target, target_dir);
+            let d = crate::problem::norm([r[0], r[1], r[2]]);
+            let d_dir = if rows == 6 {
+                crate::problem::norm([r[3], r[4], r[5]]) / DIRECTION_LEVER_MM
+            } else {
+                0.0
+            };
+            let merit = (d * d + (d_dir * DIRECTION_LEVER_MM).powi(2)).sqrt();
+            if !merit.is_finite() {
                 return Err(Error::Model(format!(
                     "compensation met a non-finite tool point at command {:?}",
                     q.0
                 )));
             }
             error_mm.get_or_insert(d);
-            if d < best.0 {
-                best = (d, q);
+            if merit < best.0 {
+                best = (merit, q);
             }
-            if d <= NEWTON_TOLERANCE_MM {
+            if d <= NEWTON_TOLERANCE_MM && d_dir <= NEWTON_TOLERANCE_RAD {
                 break;
             }
-            let step = solve_step(&jac, &r, self.free.len()).ok_or_else(|| {
+            let step = solve_step(&jac, &r[..rows], self.free.len()).ok_or_else(|| {
                 Error::Model(format!(
                     "compensation: the Jacobian of the tool point is singular at command {:?}",
                     q.0
@@ -205,7 +367,8 @@ impl<'a> Compensator<'a> {
                 q.0[k] -= step[i];
             }
             steps += 1;
-            // A least-squares fit (fewer than three free axes) stops when the step vanishes.
+            // A least-squares fit (fewer equations met than axes moved) stops when the step
+            // vanishes.
             let size: f64 = step.iter().map(|s| s * s).sum::<f64>().sqrt();
             if size <= 1e-15 * (1.0 + q.0.iter().map(|v| v.abs()).fold(0.0, f64::max)) {
                 break;
@@ -213,6 +376,17 @@ impl<'a> Compensator<'a> {
         }
         let q = best.1;
         let deviation_mm = self.deviation_mm(&q, target);
+        let orientation = target_dir.map(|t| {
+            let (_, jac) = self.residual_and_jacobian(&q, target, target_dir);
+            let sensitivity = self.rotary_sensitivity(&jac);
+            OrientationResult {
+                target: t,
+                deviation_rad: self.direction_deviation_rad(&q, t),
+                error_rad: self.direction_deviation_rad(programmed, t),
+                sensitivity,
+                near_singularity: sensitivity < SINGULAR_TILT_DEG.to_radians().sin(),
+            }
+        });
         let axes = self.model.machine().axes();
         // Rotary axes too: a trunnion beyond its range, or a turntable commanded more than a
         // turn beyond its (a full-turn axis at −0.001° is at 359.999°).
@@ -236,6 +410,7 @@ impl<'a> Compensator<'a> {
             error_mm: error_mm.unwrap_or(f64::NAN),
             steps,
             outside_travel,
+            orientation,
         })
     }
 
@@ -246,23 +421,77 @@ impl<'a> Compensator<'a> {
         crate::problem::norm([x[0] - target[0], x[1] - target[1], x[2] - target[2]])
     }
 
-    /// The tool point and its exact Jacobian with respect to the free axes (3 × m, row-major),
-    /// from dual numbers over the commands.
-    fn point_and_jacobian(&self, q: &Commands) -> ([f64; 3], Vec<f64>) {
+    /// The residuals at `q` — the tool point's offset from `target` (mm) and, with a target
+    /// direction, the direction's offset from it times [`DIRECTION_LEVER_MM`] — and their exact
+    /// Jacobian with respect to the free axes (rows × m, row-major; 3 or 6 rows), from dual
+    /// numbers over the commands.
+    fn residual_and_jacobian(
+        &self,
+        q: &Commands,
+        target: [f64; 3],
+        target_dir: Option<[f64; 3]>,
+    ) -> ([f64; 6], Vec<f64>) {
+        type D = DualSVec64<MAX_AXES>;
         let m = self.free.len();
-        let mut u = q.0.map(DualSVec64::<MAX_AXES>::from_re);
+        let mut u = q.0.map(D::from_re);
         for (i, &k) in self.free.iter().enumerate() {
-            u[k] = DualSVec64::<MAX_AXES>::from_re(q.0[k]).derivative(i);
+            u[k] = D::from_re(q.0[k]).derivative(i);
         }
-        let x = self.model.tool_point(&u, &self.tool, self.params);
-        let mut jac = vec![0.0; 3 * m];
-        for c in 0..3 {
-            if let Some(eps) = &x[c].eps.0 {
+        let tip = self.model.tool_point(&u, &self.tool, self.params);
+        let mut rows: Vec<D> = (0..3).map(|c| tip[c] - target[c]).collect();
+        if let (Some(a), Some(t)) = (self.axis, target_dir) {
+            let back = self.model.tool_point(&u, &self.behind(a), self.params);
+            let d = [tip[0] - back[0], tip[1] - back[1], tip[2] - back[2]];
+            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            rows.extend((0..3).map(|c| (d[c] / len - t[c]) * DIRECTION_LEVER_MM));
+        }
+        let mut r = [0.0; 6];
+        let mut jac = vec![0.0; rows.len() * m];
+        for (c, v) in rows.iter().enumerate() {
+            r[c] = v.re;
+            if let Some(eps) = &v.eps.0 {
                 jac[c * m..(c + 1) * m].copy_from_slice(&eps.as_slice()[..m]);
             }
         }
-        ([x[0].re, x[1].re, x[2].re], jac)
+        (r, jac)
     }
+
+    /// The smallest singular value of the direction's Jacobian (rows 3–5 of `jac`, unweighted)
+    /// over the free rotary axes: how much the tool turns per radian of the rotary axis that
+    /// turns it least.
+    fn rotary_sensitivity(&self, jac: &[f64]) -> f64 {
+        let m = self.free.len();
+        let axes = self.model.machine().axes();
+        let rot: Vec<usize> = (0..m)
+            .filter(|&i| axes[self.free[i]].axis.is_rotary())
+            .collect();
+        if rot.len() != 2 || jac.len() < 6 * m {
+            return f64::NAN;
+        }
+        let col = |i: usize, c: usize| jac[(3 + c) * m + rot[i]] / DIRECTION_LEVER_MM;
+        let g = |i: usize, j: usize| (0..3).map(|c| col(i, c) * col(j, c)).sum::<f64>();
+        let (a, b, d) = (g(0, 0), g(0, 1), g(1, 1));
+        let mean = 0.5 * (a + d);
+        let disc = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+        (mean - disc).max(0.0).sqrt()
+    }
+}
+
+/// `v` scaled to unit length.
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let n = crate::problem::norm(v);
+    v.map(|x| x / n)
+}
+
+/// The angle between two unit vectors (rad), accurate at small angles.
+fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let cross = [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ];
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    crate::problem::norm(cross).atan2(dot)
 }
 
 /// `commands` as a controller gets them: each axis in file units (mm, degrees) with `decimals`
@@ -287,22 +516,33 @@ pub fn written(
     (texts, out)
 }
 
-/// The Newton step `s` with `J s = r` (three free axes), or the least-squares step
-/// `JᵀJ s = Jᵀ r` (fewer). `None` when the system is singular.
-fn solve_step(jac: &[f64], r: &[f64; 3], m: usize) -> Option<Vec<f64>> {
-    let (mut a, mut b) = if m == 3 {
-        (jac.to_vec(), r.to_vec())
-    } else {
-        let mut a = vec![0.0; m * m];
-        let mut b = vec![0.0; m];
-        for i in 0..m {
-            for j in 0..m {
-                a[i * m + j] = (0..3).map(|c| jac[c * m + i] * jac[c * m + j]).sum();
-            }
-            b[i] = (0..3).map(|c| jac[c * m + i] * r[c]).sum();
+/// The Newton step `s` with `J s = r` when there are as many equations as free axes, or the
+/// least-squares step `JᵀJ s = Jᵀ r` (more equations); a least-squares system that is singular
+/// (the direction at the singularity) is damped by 1e-12 of its largest diagonal, which leaves
+/// the directions it cannot move where they are. `None` when the system is singular.
+fn solve_step(jac: &[f64], r: &[f64], m: usize) -> Option<Vec<f64>> {
+    let rows = r.len();
+    if rows == m {
+        return solve_dense(&mut jac.to_vec(), &mut r.to_vec(), m);
+    }
+    let mut a = vec![0.0; m * m];
+    let mut b = vec![0.0; m];
+    for i in 0..m {
+        for j in 0..m {
+            a[i * m + j] = (0..rows).map(|c| jac[c * m + i] * jac[c * m + j]).sum();
         }
-        (a, b)
-    };
+        b[i] = (0..rows).map(|c| jac[c * m + i] * r[c]).sum();
+    }
+    if let Some(x) = solve_dense(&mut a.clone(), &mut b.clone(), m) {
+        return Some(x);
+    }
+    if rows <= 3 {
+        return None;
+    }
+    let dmax = (0..m).map(|i| a[i * m + i]).fold(0.0_f64, f64::max);
+    for i in 0..m {
+        a[i * m + i] += 1e-12 * dmax;
+    }
     solve_dense(&mut a, &mut b, m)
 }
 
@@ -361,6 +601,10 @@ mod tests {
             assert!((v - r[c]).abs() < 1e-12);
         }
         assert!(solve_step(&[1.0, 2.0, 2.0, 4.0, 0.0, 0.0], &r, 2).is_none());
+        // Six equations, two unknowns of which one moves nothing: damped, it stays put.
+        let jac6 = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+        let s = solve_step(&jac6, &[1.0, 0.0, 0.0, 0.0, 0.0, 0.0], 2).unwrap();
+        assert!((s[0] - 0.2).abs() < 1e-9 && s[1] == 0.0);
     }
 }
 

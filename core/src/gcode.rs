@@ -17,7 +17,10 @@
 //! to mm first; `G70` is also a Fanuc lathe cycle), axis words of axes the machine lacks, two
 //! words for one axis in a block, `G28`/`G30`/`G53`/`G92` with axis words (moves in another
 //! frame), scaling, mirroring and rotation of the coordinates (`G51`, `G51.1`, `G68`), canned
-//! cycles (`G72`–`G76`, `G81`–`G89`: moves the program does not state), arcs whose plane axes
+//! cycles (`G72`–`G76`, `G81`–`G89`: moves the program does not state), tilted working planes
+//! (`G68.2`, `G68.3`), tool-centre-point mode (`G43.4`, `G43.5`, `G234`, `M128`, `TCPM`, `TRAORI`,
+//! `RTCP`: the control does the inverse kinematics there, see [`TOOL_CENTRE_POINT_WORDS`]), arcs
+//! whose plane axes
 //! the machine lacks or whose end is off the circle, malformed numbers. The program's
 //! coordinates are taken as the machine's axis positions (no work offset); axes not yet
 //! programmed start at their reference position.
@@ -112,6 +115,16 @@ pub struct Report {
     pub max_written_deviation_mm: f64,
     /// Lines (1-based) of points whose compensated command leaves an axis' travel.
     pub outside_travel: Vec<usize>,
+    /// With the tool's orientation compensated: the largest angle of the uncompensated tool
+    /// direction from its target (rad).
+    pub max_direction_error_rad: f64,
+    /// … of the compensated commands' directions, as solved (rad).
+    pub max_direction_deviation_rad: f64,
+    /// … of the commands as written (rad).
+    pub max_written_direction_deviation_rad: f64,
+    /// Lines (1-based) of points whose compensated command passes near the singularity
+    /// ([`crate::compensate::OrientationResult::near_singularity`]).
+    pub near_singularity: Vec<usize>,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -126,6 +139,64 @@ struct Word {
     letter: char,
     value: f64,
     text: String,
+}
+
+/// The words that switch a control into tool-centre-point mode, where it does the five-axis
+/// inverse kinematics itself (the programmed coordinates are then the tool tip and direction in
+/// the workpiece, not machine-axis positions), with the controls that use them.
+pub const TOOL_CENTRE_POINT_WORDS: [(&str, &str); 7] = [
+    (
+        "G43.4",
+        "Fanuc, Mazak, Hurco, Mitsubishi: tool centre point control",
+    ),
+    (
+        "G43.5",
+        "Fanuc: tool centre point control with tool-axis vectors",
+    ),
+    ("G234", "Haas: tool centre point control (TCPC)"),
+    ("M128", "Heidenhain (ISO programs): TCPM"),
+    ("TCPM", "Heidenhain: FUNCTION TCPM"),
+    ("TRAORI", "Siemens: orientation transformation"),
+    ("RTCP", "RTCP mode (Fidia, Okuma and others)"),
+];
+
+/// Refuses a block that switches tool-centre-point mode on ([`TOOL_CENTRE_POINT_WORDS`]),
+/// naming the word: volver compensates machine-axis positions, and in that mode the control
+/// computes them from the program.
+fn refuse_tool_centre_point(code: &str, place: &Place) -> Result<()> {
+    let upper: String = code
+        .chars()
+        .filter(|c| !c.is_whitespace())
+        .collect::<String>()
+        .to_ascii_uppercase();
+    for (word, control) in TOOL_CENTRE_POINT_WORDS {
+        for (at, _) in upper.match_indices(word) {
+            // A whole word: G43.4 not G43.45 nor G43.4 inside G143.4 (a word starts at a letter no
+            // letter precedes: X10M128 is M128), TRAORI not the start of a longer name.
+            let numeric = word.ends_with(|c: char| c.is_ascii_digit());
+            let ends = match upper[at + word.len()..].chars().next() {
+                None => true,
+                Some(c) if numeric => !(c.is_ascii_digit() || c == '.'),
+                Some(c) => !c.is_ascii_alphanumeric(),
+            };
+            let starts = !upper[..at]
+                .chars()
+                .last()
+                .is_some_and(|c| c.is_ascii_alphabetic());
+            if ends && starts {
+                return Err(Error::input(
+                    place.clone().at_field(word),
+                    format!(
+                        "{word} switches on tool-centre-point mode ({control}): the control then does \
+                         the five-axis inverse kinematics itself, so the program's coordinates are not \
+                         machine-axis positions that volver can compensate; post-process the program \
+                         into machine-axis coordinates (TCP off) and compensate that"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The words of a block's code (comments removed). Numbers follow RS-274/NGC: an optional sign,
@@ -303,6 +374,7 @@ impl Program {
             }
             let optional = trimmed.starts_with('/');
             let (code, comments) = split_comments(trimmed.trim_start_matches('/'), &place)?;
+            refuse_tool_centre_point(&code, &place)?;
             let ws = words(&code, &place)?;
             // Modal words first: they apply to the whole block.
             let mut groups: Vec<(&str, &str)> = Vec::new();
@@ -367,12 +439,13 @@ impl Program {
                              point by point: convert the program to mm and expand cycles",
                         ));
                     }
-                    510 | 511 | 680 => {
+                    510 | 511 | 680 | 682 | 683 => {
                         return Err(Error::input(
                             place.at_field(&w.text),
                             "scaling, mirroring or rotating the coordinate system \
-                             (G51, G51.1, G68) changes where the programmed points go: \
-                             expand it into the program's coordinates first",
+                             (G51, G51.1, G68, a tilted working plane G68.2/G68.3) changes \
+                             where the programmed points go: expand it into the program's \
+                             coordinates first",
                         ));
                     }
                     720..=760 | 810..=890 if g % 10 == 0 => {
@@ -613,6 +686,17 @@ impl Program {
                 rep.max_written_deviation_mm = rep.max_written_deviation_mm.max(written_dev);
                 if !c.outside_travel.is_empty() && rep.outside_travel.last() != Some(&b.line) {
                     rep.outside_travel.push(b.line);
+                }
+                if let Some(o) = &c.orientation {
+                    let wd = comp.direction_deviation_rad(&written, o.target);
+                    rep.max_direction_error_rad = rep.max_direction_error_rad.max(o.error_rad);
+                    rep.max_direction_deviation_rad =
+                        rep.max_direction_deviation_rad.max(o.deviation_rad);
+                    rep.max_written_direction_deviation_rad =
+                        rep.max_written_direction_deviation_rad.max(wd);
+                    if o.near_singularity && rep.near_singularity.last() != Some(&b.line) {
+                        rep.near_singularity.push(b.line);
+                    }
                 }
             }
         }

@@ -64,7 +64,7 @@ pub const PRESETS: [Preset; 4] = [
         plan: "X=-300:300:150,Y=-300:300:150,Z=0:400:100,A=0,C=0; \
                X=0,Y=0,Z=200,A=-110:110:27.5,C=0:330:30; \
                X=-300:300:600,Y=-300:300:600,Z=0:400:400,A=-110:110:55,C=0:270:90",
-        demo_effect: "location-drift=A,3,4",
+        demo_effect: "location-drift=A,10,15",
     },
     Preset {
         name: "head-head",
@@ -74,7 +74,7 @@ pub const PRESETS: [Preset; 4] = [
         plan: "X=0:2000:500,Y=0:1200:300,Z=0:600:150,C=0,A=0; \
                X=1000,Y=600,Z=300,C=-180:150:30,A=-100:100:25; \
                X=0:2000:2000,Y=0:1200:1200,Z=0:600:600,C=-180:90:90,A=-100:100:50",
-        demo_effect: "location-drift=A,3,4",
+        demo_effect: "location-drift=A,20,30",
     },
     Preset {
         name: "head-table",
@@ -84,7 +84,7 @@ pub const PRESETS: [Preset; 4] = [
         plan: "X=-350:350:175,Y=-300:300:150,Z=0:450:112.5,C=0,B=0; \
                X=0,Y=0,Z=225,C=0:330:30,B=-120:30:18.75; \
                X=-350:350:700,Y=-300:300:600,Z=0:450:450,C=0:270:90,B=-120:30:37.5",
-        demo_effect: "location-drift=B,3,4",
+        demo_effect: "location-drift=B,10,15",
     },
 ];
 

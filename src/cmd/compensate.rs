@@ -42,10 +42,21 @@ pub struct CompensateArgs {
     /// Use a reflector's offset as the tool point.
     #[arg(long, value_name = "ID")]
     tool_reflector: Option<String>,
-    /// Axes kept at their programmed value (letters, e.g. `C`); default: the rotary axes when
-    /// the machine has three linear ones, else none.
+    /// Axes kept at their programmed value (letters, e.g. `AC`: the tool point alone is
+    /// compensated, as controllers' volumetric compensation does); default: none on a five-axis
+    /// machine (the tool's point and direction are both compensated), the rotary axes on a
+    /// machine with three linear ones and fewer rotary ones, else none.
     #[arg(long, value_name = "AXES")]
     hold: Option<String>,
+    /// The tool's axis, from the holder to the tip, in the frame of the last tool-side axis:
+    /// its direction is compensated with every axis of a five-axis machine (default 0,0,-1:
+    /// the tool points down its spindle).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    tool_axis: Option<String>,
+    /// Largest accepted angle between a corrected command's tool direction and its target, as
+    /// solved (rad; five-axis compensation).
+    #[arg(long, default_value_t = 1e-9)]
+    tolerance_rad: f64,
     /// Largest distance between an arc and its chords (mm).
     #[arg(long, default_value_t = 0.001)]
     chord_tolerance: f64,
@@ -203,7 +214,11 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     let (model, params, record) = load_results(&a.results, a.accept)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
-    let comp = compensator(&model, &params, tool, a.hold.as_deref())?;
+    let axis = match &a.tool_axis {
+        Some(t) => Some(volver::compensation::tool_axis_of(Some(t))?),
+        None => None,
+    };
+    let comp = compensator(&model, &params, tool, a.hold.as_deref(), axis)?;
     if let Some(d) = distance_from_reflector_line(&model, tool)
         && d > 1.0
     {
@@ -216,12 +231,21 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         .iter()
         .map(|&k| m.axes()[k].axis.letter())
         .collect();
+    let steering = match comp.tool_axis() {
+        Some(d) => format!(
+            "tool point {} mm and tool axis ({:.4}, {:.4}, {:.4})",
+            point_mm(tool),
+            d[0],
+            d[1],
+            d[2]
+        ),
+        None => format!("tool point {} mm", point_mm(tool)),
+    };
     println!(
-        "volver compensate — {} with the errors of {} (model \"{}\"), tool point {} mm, solving for {free}",
+        "volver compensate — {} with the errors of {} (model \"{}\"), {steering}, solving for {free}",
         m.chain(),
         a.results.display(),
         model.spec().name,
-        point_mm(tool)
     );
     check_max_u(a.max_u_um)?;
     vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
@@ -251,6 +275,38 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     let (outside, worst_solved) = (done.outside, done.worst_solved_mm);
     if outside > 0 {
         println!("  warning: {outside} corrected point(s) leave an axis' travel (see the output)");
+    }
+    if !(a.tolerance_rad.is_finite() && a.tolerance_rad > 0.0) {
+        bail!(
+            "--tolerance-rad {}: the verification tolerance must be a positive angle (rad)",
+            a.tolerance_rad
+        );
+    }
+    if let Some(o) = &done.orientation {
+        println!(
+            "  tool direction: uncompensated error up to {:.4} µrad; verified through the forward \
+             model: largest angle {:.3e} rad as solved, {:.3e} rad as written",
+            o.max_error_rad * 1e6,
+            o.worst_solved_rad,
+            o.worst_written_rad
+        );
+        if o.near_singularity > 0 {
+            println!(
+                "  warning: {} corrected point(s) pass within {}° of the singularity (the rotary \
+                 axes nearly parallel: the tilt axis near zero), where a small direction error \
+                 needs a large turn of the other rotary axis (see the output's sensitivity)",
+                o.near_singularity,
+                volver::core::compensate::SINGULAR_TILT_DEG
+            );
+        }
+        if o.worst_solved_rad.is_nan() || o.worst_solved_rad > a.tolerance_rad {
+            bail!(
+                "a corrected command's tool direction misses its target by {:.3e} rad, above the \
+                 tolerance {:.1e} rad; nothing written",
+                o.worst_solved_rad,
+                a.tolerance_rad
+            );
+        }
     }
     // A failed verification writes nothing: a program that misses its targets must not reach a
     // control.
@@ -305,6 +361,14 @@ fn compensate_gcode(
         worst_solved_mm: rep.max_deviation_mm,
         worst_written_mm: rep.max_written_deviation_mm,
         outside: rep.outside_travel.len(),
+        orientation: comp
+            .tool_axis()
+            .map(|_| volver::compensation::OrientationSummary {
+                max_error_rad: rep.max_direction_error_rad,
+                worst_solved_rad: rep.max_direction_deviation_rad,
+                worst_written_rad: rep.max_written_direction_deviation_rad,
+                near_singularity: rep.near_singularity.len(),
+            }),
     })
 }
 
