@@ -1,7 +1,8 @@
-//! `volver demo`: the main job on the embedded XCFZ grinder. A synthetic verification whose data
-//! carry an effect the starting model lacks; identification; the diagnosis that finds it; the
-//! model with it; compensation checked on the true machine; the HTML report and the controller
-//! tables.
+//! `volver demo`: the main job on an embedded machine (the XCFZ grinder by default, or a
+//! five-axis preset with `--machine`). A synthetic verification whose data carry an effect the
+//! starting model lacks; identification; the diagnosis that finds it; the model with it;
+//! compensation checked on the true machine (of the tool's point, and of its direction on a
+//! five-axis machine); the HTML report and the controller tables.
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
@@ -30,6 +31,33 @@ pub struct DemoArgs {
     /// Output folder.
     #[arg(long, default_value = DEMO_DIR)]
     out: PathBuf,
+    /// The embedded machine (`volver layout --list`): xcfz, the paper's grinder, or a five-axis
+    /// preset (table-table, head-head, head-table), whose demo hides a drift of its tilt axis'
+    /// line and compensates the tool's point and direction.
+    #[arg(long, value_name = "NAME", default_value = "xcfz")]
+    machine: String,
+}
+
+/// The machine the demo runs on and what it hides in the data.
+struct Setup {
+    preset: &'static volver::core::presets::Preset,
+    /// The folder of the simulated test under the output folder.
+    data_dir: String,
+}
+
+impl Setup {
+    fn xcfz(&self) -> bool {
+        self.preset.name == "xcfz"
+    }
+
+    /// The hidden effect: the preset's (the XCFZ demo's is [`DEMO_EFFECT`]).
+    fn effect(&self) -> &'static str {
+        if self.xcfz() {
+            DEMO_EFFECT
+        } else {
+            self.preset.demo_effect
+        }
+    }
 }
 
 fn um(v: f64) -> String {
@@ -39,26 +67,63 @@ fn um(v: f64) -> String {
 /// Runs the demo: seven steps, each printing its paragraph.
 pub fn run(a: DemoArgs) -> Result<()> {
     let out_dir = a.out.as_path();
-    let model = Model::default_xcfz();
-    println!(
-        "volver demo — the XCFZ grinder of Aguado et al. (2014), chain {}, and the paper's error model ({} parameters)\n",
-        model.machine().chain(),
-        model.n_params()
-    );
-    let out = simulate(&model, out_dir)?;
+    let Some(preset) = volver::core::presets::named(&a.machine) else {
+        anyhow::bail!(
+            "--machine {}: not an embedded machine (they are {}; `volver layout --list` names them)",
+            a.machine,
+            volver::core::presets::names().join(", ")
+        );
+    };
+    let setup = Setup {
+        preset,
+        data_dir: if preset.name == "xcfz" {
+            "test4".to_string()
+        } else {
+            preset.name.to_string()
+        },
+    };
+    let model = if setup.xcfz() {
+        Model::default_xcfz()
+    } else {
+        preset.model()?
+    };
+    if setup.xcfz() {
+        println!(
+            "volver demo — the XCFZ grinder of Aguado et al. (2014), chain {}, and the paper's error model ({} parameters)\n",
+            model.machine().chain(),
+            model.n_params()
+        );
+    } else {
+        println!(
+            "volver demo — {}, chain {}, and its default error model ({} parameters: every ISO 230-1 error of the five axes, the rotary axes' location errors among them)\n",
+            model.machine().spec().name,
+            model.machine().chain(),
+            model.n_params()
+        );
+    }
+    let out = simulate(&setup, &model, out_dir)?;
     let data = &out.measurements;
-    let id1 = identify_first(&model, data)?;
-    let (ranked, best, model2) = diagnose(&model, data, &id1)?;
+    let id1 = identify_first(&setup, &model, data)?;
+    let (ranked, best, model2) = diagnose(&setup, &model, data, &id1)?;
     let id2 = identify_with(&model2, data, &best.id, out.record.noise_error.emm_um)?;
     let first = (&model, &id1);
     let second = (&model2, &id2);
-    let cross = cross_validation(first, second, &best.id, &out)?;
-    let check = compensation(&model2, &id2, &out)?;
+    let cross = cross_validation(&setup, first, second, &best.id, &out)?;
+    let check = if setup.xcfz() {
+        compensation(&model2, &id2, &out)?
+    } else {
+        compensation_five_axis(&model2, &id2, &out)?
+    };
     let cov = vouch(&model2, data, &id2, &check)?;
     let table_paths = write_results(out_dir, &model2, &id2, &cov)?;
+    let first_label = if setup.xcfz() {
+        "paper model"
+    } else {
+        "default model"
+    };
     let fits = vec![
         Fit {
-            label: "paper model".into(),
+            label: first_label.into(),
             model: &model,
             id: &id1,
         },
@@ -68,29 +133,55 @@ pub fn run(a: DemoArgs) -> Result<()> {
             id: &id2,
         },
     ];
-    write_report(out_dir, &out, fits, ranked, cross, &check)?;
-    where_you_are(out_dir, &table_paths, &best.id);
+    write_report(&setup, out_dir, &out, fits, ranked, cross, &check)?;
+    where_you_are(&setup, out_dir, &table_paths, &best.id);
     Ok(())
 }
 
-/// Step 1: A verification with something the model lacks, written under `out_dir/test4`.
-fn simulate(model: &Model, out_dir: &Path) -> Result<Synthetic> {
+/// The demo's plan on its machine: test 4 on the XCFZ grinder, the preset plan on the others.
+fn demo_plan(setup: &Setup, m: &volver::core::machine::Machine) -> Result<Plan> {
+    Ok(if setup.xcfz() {
+        Plan::preset(m, "test4")?
+    } else {
+        setup.preset.plan_on(m)?
+    })
+}
+
+/// Step 1: A verification with something the model lacks, written under `out_dir/test4` (the
+/// preset's name on a five-axis machine).
+fn simulate(setup: &Setup, model: &Model, out_dir: &Path) -> Result<Synthetic> {
     let m = model.machine();
     let truth = Truth::random(m, model.spec(), &Magnitudes::default(), DEMO_SEED)?;
-    let mut sim = Simulation::new(Plan::preset(m, "test4")?, truth, DEMO_SEED);
-    sim.effects = vec![Effect::parse(DEMO_EFFECT)?];
+    let mut sim = Simulation::new(demo_plan(setup, m)?, truth, DEMO_SEED);
+    let effect = setup.effect();
+    sim.effects = vec![Effect::parse(effect)?];
     let out = sim.run()?;
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    out.write(&out_dir.join("test4"))?;
+    out.write(&out_dir.join(&setup.data_dir))?;
     let r = &out.record;
     let noise = r.noise_error.emm_um;
-    println!(
-        "1. Simulated verification: plan test4 ({} points), seed {DEMO_SEED}, the paper's tracker noise, true errors at the default magnitudes",
-        r.points
-    );
-    println!(
-        "   hidden in the data: {DEMO_EFFECT} — a 2nd harmonic in every error of the turntable C (the model has only the 1st)"
-    );
+    if setup.xcfz() {
+        println!(
+            "1. Simulated verification: plan test4 ({} points), seed {DEMO_SEED}, the paper's tracker noise, true errors at the default magnitudes",
+            r.points
+        );
+        println!(
+            "   hidden in the data: {DEMO_EFFECT} — a 2nd harmonic in every error of the turntable C (the model has only the 1st)"
+        );
+    } else {
+        let tilt = m
+            .axes()
+            .iter()
+            .find(|a| a.axis.is_rotary() && a.max - a.min < std::f64::consts::TAU - 1e-9)
+            .map_or('A', |a| a.axis.letter());
+        println!(
+            "1. Simulated verification: the preset plan of {} ({} points: a grid of the linear axes, the rotary axes swept at the centre and at the corners), seed {DEMO_SEED}, the paper's tracker noise, true errors at the default magnitudes",
+            setup.preset.name, r.points
+        );
+        println!(
+            "   hidden in the data: {effect} — the line of the tilt axis {tilt} drifting with time as the machine warms (its location errors growing by µm/h), which the model lacks"
+        );
+    }
     println!(
         "   machine error EMM {} µm; noise error EMM {} µm (what a perfect model would leave)",
         um(r.machine_error.emm_um),
@@ -100,7 +191,7 @@ fn simulate(model: &Model, out_dir: &Path) -> Result<Synthetic> {
 }
 
 /// Step 2: Identification with the starting model.
-fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification> {
+fn identify_first(setup: &Setup, model: &Model, data: &MeasurementSet) -> Result<Identification> {
     let p1 = Problem::new(model, data)?;
     let id1 = fit(p1.clone());
     if id1.termination.failed() {
@@ -108,7 +199,8 @@ fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification
     }
     let repeat = volver::core::diagnose::repeat_noise(&p1);
     println!(
-        "\n2. Identification, paper model: EMM {} → {} µm in {} iterations ({:.2} s)",
+        "\n2. Identification, {} model: EMM {} → {} µm in {} iterations ({:.2} s)",
+        if setup.xcfz() { "paper" } else { "default" },
         um(id1.initial.stats.emm_um),
         um(id1.reached.stats.emm_um),
         id1.iterations(),
@@ -127,25 +219,50 @@ fn identify_first(model: &Model, data: &MeasurementSet) -> Result<Identification
 /// Step 3: Where it fails and what is missing: the candidates ranked, the best, and the model with
 /// it.
 fn diagnose(
+    setup: &Setup,
     model: &Model,
     data: &MeasurementSet,
     id1: &Identification,
 ) -> Result<(Vec<Score>, Score, Model)> {
     let m = model.machine();
     let p1 = Problem::new(model, data)?;
-    let rm = volver::core::diagnose::to_machine_frame(&p1, &id1.params, &p1.residuals(&id1.params));
-    let (kc, _) = m
-        .axis(volver::core::iso::Axis::C)
-        .ok_or_else(|| anyhow::anyhow!("the demo machine has no C axis"))?;
-    let lines = volver::core::diagnose::axis_periodogram(&p1, &rm, kc, 4);
-    let cells: Vec<String> = lines
-        .iter()
-        .map(|l| format!("order {}: {:.1} µm", l.frequency, l.total_um()))
-        .collect();
-    println!(
-        "\n3. Diagnosis: periodogram of the residuals over C — {}",
-        cells.join(", ")
-    );
+    if setup.xcfz() {
+        let rm =
+            volver::core::diagnose::to_machine_frame(&p1, &id1.params, &p1.residuals(&id1.params));
+        let (kc, _) = m
+            .axis(volver::core::iso::Axis::C)
+            .ok_or_else(|| anyhow::anyhow!("the demo machine has no C axis"))?;
+        let lines = volver::core::diagnose::axis_periodogram(&p1, &rm, kc, 4);
+        let cells: Vec<String> = lines
+            .iter()
+            .map(|l| format!("order {}: {:.1} µm", l.frequency, l.total_um()))
+            .collect();
+        println!(
+            "\n3. Diagnosis: periodogram of the residuals over C — {}",
+            cells.join(", ")
+        );
+    } else {
+        // A drift shows as residuals that grow with time: the EMM of each quarter of the test.
+        let norms: Vec<f64> = p1
+            .residuals(&id1.params)
+            .iter()
+            .map(|r| volver::core::problem::norm(*r))
+            .collect();
+        let n = norms.len();
+        let cells: Vec<String> = (0..4)
+            .map(|q| {
+                let part = &norms[q * n / 4..(q + 1) * n / 4];
+                format!(
+                    "{:.1}",
+                    1e3 * part.iter().sum::<f64>() / part.len().max(1) as f64
+                )
+            })
+            .collect();
+        println!(
+            "\n3. Diagnosis: EMM of the residuals in each quarter of the test (in measuring order) — {} µm",
+            cells.join(", ")
+        );
+    }
     let ranked = rank(
         &p1,
         &id1.params,
@@ -202,6 +319,7 @@ fn identify_with(
 
 /// Step 5: Cross-validation of both fits on an independent reference test.
 fn cross_validation(
+    setup: &Setup,
     (model, id1): (&Model, &Identification),
     (model2, id2): (&Model, &Identification),
     added: &str,
@@ -210,13 +328,15 @@ fn cross_validation(
     let m = model.machine();
     let options = Options::default();
     let reference =
-        Simulation::new(Plan::preset(m, "test4")?, out.truth.clone(), DEMO_SEED + 1).run()?;
+        Simulation::new(demo_plan(setup, m)?, out.truth.clone(), DEMO_SEED + 1).run()?;
     let lm = volver::solvers::lm::LevenbergMarquardt::default();
     let mut cross = Vec::new();
-    for (label, mdl, params) in [
-        ("paper model", model, &id1.params),
-        (added, model2, &id2.params),
-    ] {
+    let first = if setup.xcfz() {
+        "paper model"
+    } else {
+        "default model"
+    };
+    for (label, mdl, params) in [(first, model, &id1.params), (added, model2, &id2.params)] {
         let problem = Problem::new(mdl, &reference.measurements)?;
         let cv = cross_validate(
             &lm,
@@ -228,7 +348,12 @@ fn cross_validation(
         cross.push(report::CrossRow::new(label.to_string(), &problem, &cv));
     }
     println!(
-        "\n5. Cross-validation on an independent test 4 (new noise), tracker pose fitted only:"
+        "\n5. Cross-validation on an independent {} (new noise), tracker pose fitted only:",
+        if setup.xcfz() {
+            "test 4"
+        } else {
+            "run of the same plan"
+        }
     );
     for c in &cross {
         println!(
@@ -253,6 +378,24 @@ struct Check {
     before: ErrorStats,
     after: ErrorStats,
     rigid: ErrorStats,
+    /// Five-axis: the true tool direction's angle from its target (µrad: mean and largest)
+    /// before compensation, after it, and after the set-up's rigid transform.
+    direction: Option<DirectionCheck>,
+}
+
+/// The tool direction's true error over the demo's grid (µrad).
+struct DirectionCheck {
+    before: (f64, f64),
+    after: (f64, f64),
+    rigid: (f64, f64),
+}
+
+/// Mean and largest of `v` (rad) in µrad.
+fn mean_max_urad(v: &[f64]) -> (f64, f64) {
+    (
+        1e6 * v.iter().sum::<f64>() / v.len().max(1) as f64,
+        1e6 * v.iter().copied().fold(0.0, f64::max),
+    )
 }
 
 /// Step 6: Compensation, checked on the true machine (known here).
@@ -316,6 +459,133 @@ fn compensation(model2: &Model, id2: &Identification, out: &Synthetic) -> Result
         before: sb,
         after: sa,
         rigid,
+        direction: None,
+    })
+}
+
+/// Step 6 on a five-axis machine: compensation of the tool point (the first reflector, at the
+/// tool's tip) and of the tool's direction (−z of the last tool-side axis) over a grid of the
+/// travel (5 positions per axis), checked on the true machine.
+fn compensation_five_axis(model2: &Model, id2: &Identification, out: &Synthetic) -> Result<Check> {
+    let m = model2.machine();
+    let tool = m.reflectors()[0].offset;
+    let axis = [0.0, 0.0, -1.0];
+    let comp = Compensator::with_orientation(model2, &id2.params, tool, axis)?;
+    let truth = Compensator::with_orientation(&out.truth.model, &out.truth.params, tool, axis)?;
+    // Five positions per axis, 10 % inside each end of the travel (compensation moves a command
+    // at an end outside it), a full turn in fifths.
+    let ranges: Vec<String> = m
+        .axes()
+        .iter()
+        .map(|ax| {
+            let (a, b) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
+            if ax.axis.is_rotary() && b - a >= 360.0 - 1e-9 {
+                format!("{}={a}:{}:72", ax.axis, a + 288.0)
+            } else {
+                let (lo, hi) = (a + 0.1 * (b - a), b - 0.1 * (b - a));
+                format!("{}={lo}:{hi}:{}", ax.axis, (hi - lo) / 4.0)
+            }
+        })
+        .collect();
+    let grid = Plan::parse_grid(m, &ranges.join(","))?.positions;
+    let (mut before, mut after) = (Vec::new(), Vec::new());
+    let (mut dir_before, mut dir_after, mut dirs) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut worst, mut worst_rad, mut worst_singular_rad) = (0.0_f64, 0.0_f64, 0.0_f64);
+    let (mut outside, mut singular) = (0usize, 0usize);
+    for programmed in &grid {
+        let c = comp.compensate(programmed)?;
+        let o = c.orientation.as_ref().expect("five-axis compensation");
+        worst = worst.max(c.deviation_mm);
+        if o.near_singularity {
+            worst_singular_rad = worst_singular_rad.max(o.deviation_rad);
+        } else {
+            worst_rad = worst_rad.max(o.deviation_rad);
+        }
+        outside += usize::from(!c.outside_travel.is_empty());
+        singular += usize::from(o.near_singularity);
+        before.push((truth.actual_point(programmed), c.target));
+        after.push((truth.actual_point(&c.commands), c.target));
+        dir_before.push(truth.direction_deviation_rad(programmed, o.target));
+        dir_after.push(truth.direction_deviation_rad(&c.commands, o.target));
+        dirs.push((
+            truth.actual_direction(&c.commands).expect("five-axis"),
+            o.target,
+        ));
+    }
+    let stats = |v: &[([f64; 3], [f64; 3])]| {
+        let (a, b): (Vec<_>, Vec<_>) = v.iter().copied().unzip();
+        ErrorStats::between(&a, &b)
+    };
+    let (sb, sa) = (stats(&before), stats(&after));
+    let (a, b): (Vec<_>, Vec<_>) = after.iter().copied().unzip();
+    let rigid = ErrorStats::after_rigid(&a, &b);
+    // The set-up's turn applies to the directions too.
+    let (r, _) = volver::core::metrics::rigid_fit(&a, &b);
+    let dir_rigid: Vec<f64> = dirs
+        .iter()
+        .map(|(d, t)| {
+            let rd: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| r[i][j] * d[j]).sum());
+            let cross = [
+                rd[1] * t[2] - rd[2] * t[1],
+                rd[2] * t[0] - rd[0] * t[2],
+                rd[0] * t[1] - rd[1] * t[0],
+            ];
+            let dot: f64 = (0..3).map(|i| rd[i] * t[i]).sum();
+            volver::core::problem::norm(cross).atan2(dot)
+        })
+        .collect();
+    let direction = DirectionCheck {
+        before: mean_max_urad(&dir_before),
+        after: mean_max_urad(&dir_after),
+        rigid: mean_max_urad(&dir_rigid),
+    };
+    println!(
+        "\n6. Compensation of the tool point ({} mm, the tool's tip) and of the tool's direction (−z) over a {}-point grid of the travel (5 positions per axis, 10 % inside its ends), every axis solved, checked on the true machine:",
+        volver::compensation::point_mm(tool),
+        grid.len()
+    );
+    println!(
+        "   true tool-point error EMM {} → {} µm, EMax {} → {} µm in the workpiece frame; true direction error mean {} → {} µrad, largest {} → {} µrad",
+        um(sb.emm_um),
+        um(sa.emm_um),
+        um(sb.emax_um),
+        um(sa.emax_um),
+        um(direction.before.0),
+        um(direction.after.0),
+        um(direction.before.1),
+        um(direction.after.1)
+    );
+    println!(
+        "   every command verified through the model (largest deviation {:.1e} mm; direction {:.1e} rad away from the singularity){}{}",
+        worst,
+        worst_rad,
+        if outside > 0 {
+            format!("; {outside} leave the travel")
+        } else {
+            String::new()
+        },
+        if singular > 0 {
+            format!(
+                "; {singular} pass within {}° of the singularity (the tilt axis at zero): there the rotary axis above it keeps its angle, the tilt axis corrects what it can of the direction (up to {:.1} µrad left)",
+                volver::core::compensate::SINGULAR_TILT_DEG,
+                worst_singular_rad * 1e6
+            )
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "   direction after the set-up's rigid transform: mean {} µrad, largest {} µrad",
+        um(direction.rigid.0),
+        um(direction.rigid.1)
+    );
+    Ok(Check {
+        grid,
+        tool,
+        before: sb,
+        after: sa,
+        rigid,
+        direction: Some(direction),
     })
 }
 
@@ -364,10 +634,17 @@ fn vouch(
         um(check.rigid.emax_um),
         um(u_rigid),
     );
-    println!(
-        "   raw, U reaches {} µm, mostly from a combination the data cannot identify ({raw_worst}): a constant shift of the tool that the set-up takes up",
-        um(u_raw)
-    );
+    if id2.gauge.as_ref().is_some_and(|g| !g.held.is_empty()) {
+        println!(
+            "   raw, U reaches {} µm, mostly from a combination the data cannot identify ({raw_worst}): a constant shift of the tool that the set-up takes up",
+            um(u_raw)
+        );
+    } else {
+        println!(
+            "   raw, U reaches {} µm: the model holds no combination; what is left is mostly where the set-up put the tracker relative to the table, which the workpiece set-up takes up",
+            um(u_raw)
+        );
+    }
     Ok(cov)
 }
 
@@ -406,6 +683,7 @@ fn write_results(
 
 /// Step 7, continued: The HTML report of both fits.
 fn write_report(
+    setup: &Setup,
     out_dir: &Path,
     out: &Synthetic,
     fits: Vec<Fit>,
@@ -416,18 +694,21 @@ fn write_report(
     let noise = out.record.noise_error.emm_um;
     let (id1, id2) = (fits[0].id, fits[1].id);
     let added = fits[1].label.trim_start_matches("+ ").to_string();
-    let tool = reflector_centroid(fits[1].model);
-    let input = ReportInput {
-        title: "volver demo — XCFZ grinder, synthetic test 4".into(),
-        data_label: out_dir.join("test4/measurements.csv").display().to_string(),
-        data: &out.measurements,
-        fits,
-        truth: Some((&out.truth.model, &out.truth.params)),
-        noise_um: Some(noise),
-        candidates: ranked,
-        engines: Vec::new(),
-        cross,
-        notes: vec![format!(
+    let tool = if setup.xcfz() {
+        reflector_centroid(fits[1].model)
+    } else {
+        check.tool
+    };
+    let title = if setup.xcfz() {
+        "volver demo — XCFZ grinder, synthetic test 4".to_string()
+    } else {
+        format!(
+            "volver demo — {}, synthetic test",
+            fits[0].model.machine().spec().name
+        )
+    };
+    let note = if setup.xcfz() {
+        format!(
             "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm in the workpiece frame, and to {} µm after the best rigid transform (which a workpiece set-up takes up).",
             um(id1.reached.stats.emm_um),
             added,
@@ -436,7 +717,39 @@ fn write_report(
             um(check.before.emm_um),
             um(check.after.emm_um),
             um(check.rigid.emm_um)
-        )],
+        )
+    } else {
+        let d = check.direction.as_ref();
+        format!(
+            "Synthetic verification of the {} preset (its preset plan, seed {DEMO_SEED}) with an effect its default model lacks ({}). The default model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation of the tool point and direction with every axis takes the true tool-point error from EMM {} to {} µm in the workpiece frame ({} µm after the best rigid transform), and the tool direction's error from {} to {} µrad on average.",
+            setup.preset.name,
+            setup.effect(),
+            um(id1.reached.stats.emm_um),
+            added,
+            um(id2.reached.stats.emm_um),
+            um(noise),
+            um(check.before.emm_um),
+            um(check.after.emm_um),
+            um(check.rigid.emm_um),
+            um(d.map_or(f64::NAN, |d| d.before.0)),
+            um(d.map_or(f64::NAN, |d| d.after.0))
+        )
+    };
+    let input = ReportInput {
+        title,
+        data_label: out_dir
+            .join(&setup.data_dir)
+            .join("measurements.csv")
+            .display()
+            .to_string(),
+        data: &out.measurements,
+        fits,
+        truth: Some((&out.truth.model, &out.truth.params)),
+        noise_um: Some(noise),
+        candidates: ranked,
+        engines: Vec::new(),
+        cross,
+        notes: vec![note],
         tool,
         max_u_um: 25.0,
     };
@@ -448,7 +761,7 @@ fn write_report(
 }
 
 /// Step 7, continued: What was written and what to do next.
-fn where_you_are(out_dir: &Path, table_paths: &[PathBuf], added: &str) {
+fn where_you_are(setup: &Setup, out_dir: &Path, table_paths: &[PathBuf], added: &str) {
     println!("\n7. Written in {}/:", out_dir.display());
     println!(
         "   report.html              the HTML report (maps, vectors, error functions, diagnosis, identifiability)"
@@ -460,12 +773,22 @@ fn where_you_are(out_dir: &Path, table_paths: &[PathBuf], added: &str) {
             p.strip_prefix(out_dir).unwrap_or(p).display()
         );
     }
-    println!("   test4/                   the measurements, the truth and the simulation record");
+    let dir = &setup.data_dir;
+    println!(
+        "   {:<24} the measurements, the truth and the simulation record",
+        format!("{dir}/")
+    );
     println!(
         "\nWhere you are: the errors are identified and the model explains the data to the noise. Next:"
     );
+    // The machine is named on the command line unless it is the default.
+    let machine = if setup.xcfz() {
+        String::new()
+    } else {
+        format!(" --machine {}", setup.preset.name)
+    };
     println!(
-        "   volver diagnose --data {0}/test4/measurements.csv            (the diagnosis in full)",
+        "   volver diagnose{machine} --data {0}/{dir}/measurements.csv            (the diagnosis in full)",
         out_dir.display()
     );
     println!(
@@ -473,7 +796,7 @@ fn where_you_are(out_dir: &Path, table_paths: &[PathBuf], added: &str) {
         out_dir.display()
     );
     println!(
-        "   volver report --data {0}/test4/measurements.csv --add {1} --truth {0}/test4/truth.json --out report.html",
+        "   volver report{machine} --data {0}/{dir}/measurements.csv --add {1} --truth {0}/{dir}/truth.json --out report.html",
         out_dir.display(),
         added
     );
