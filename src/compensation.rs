@@ -253,7 +253,8 @@ pub fn compensate_points(
             ""
         }
     );
-    let (mut dir_err, mut dir_ws, mut dir_ww, mut singular) = (0.0_f64, 0.0_f64, 0.0_f64, 0);
+    let (mut dir_err, mut dir_ws, mut dir_ww) = (0.0_f64, 0.0_f64, 0.0_f64);
+    let (mut singular, mut dir_singular) = (0, 0.0_f64);
     let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
     for p in &pts {
         let c = comp
@@ -279,9 +280,13 @@ pub fn compensate_points(
             Some(o) => {
                 let wd = comp.direction_deviation_rad(&written, o.target);
                 dir_err = dir_err.max(o.error_rad);
-                dir_ws = dir_ws.max(o.deviation_rad);
-                dir_ww = dir_ww.max(wd);
-                singular += usize::from(o.near_singularity);
+                if o.near_singularity {
+                    singular += 1;
+                    dir_singular = dir_singular.max(o.deviation_rad);
+                } else {
+                    dir_ws = dir_ws.max(o.deviation_rad);
+                    dir_ww = dir_ww.max(wd);
+                }
                 format!(
                     ",{:.4},{:.6},{:.6}",
                     o.error_rad * 1e6,
@@ -313,6 +318,7 @@ pub fn compensate_points(
             worst_solved_rad: dir_ws,
             worst_written_rad: dir_ww,
             near_singularity: singular,
+            worst_singular_rad: dir_singular,
         }),
     })
 }
@@ -322,12 +328,16 @@ pub fn compensate_points(
 pub struct OrientationSummary {
     /// The largest angle of the uncompensated tool direction from its target (rad).
     pub max_error_rad: f64,
-    /// The largest angle left by a compensated command as solved (rad).
+    /// The largest angle left by a compensated command away from the singularity, as solved
+    /// (rad).
     pub worst_solved_rad: f64,
     /// … as written with the output's decimals (rad).
     pub worst_written_rad: f64,
-    /// Points near the singularity.
+    /// Points near the singularity, where the direction is met only as far as the tilt axis
+    /// can.
     pub near_singularity: usize,
+    /// The largest angle left there (rad).
+    pub worst_singular_rad: f64,
 }
 
 /// The tool's axis of `--tool-axis X,Y,Z` (in the frame of the last tool-side axis), or

@@ -197,6 +197,25 @@ fn advice(model: &Model, per_axis: usize, base: usize) -> Result<Vec<Advice>> {
     Ok(out)
 }
 
+/// The candidate values per axis a plan of `machine` weighs by default: 13 (about), or fewer
+/// where 13 per axis would give more than [`MAX_CANDIDATES`] candidate points with `reflectors`
+/// reflectors (a five-axis machine gets 6 with three reflectors).
+///
+/// ```
+/// let five = volver_core::presets::named("head-head").unwrap().machine().unwrap();
+/// assert_eq!(volver::planning::default_per_axis(&five, 3).unwrap(), 6);
+/// let xcfz = volver_core::machine::Machine::default_xcfz();
+/// assert_eq!(volver::planning::default_per_axis(&xcfz, 2).unwrap(), 13);
+/// ```
+pub fn default_per_axis(machine: &Machine, reflectors: usize) -> Result<usize> {
+    for n in (2..=13).rev() {
+        if candidate_grid(machine, n)?.positions.len() * reflectors.max(1) <= MAX_CANDIDATES {
+            return Ok(n);
+        }
+    }
+    Ok(2)
+}
+
 /// The candidate grid: about `per_axis` values over each axis' travel, at a round step (1, 2,
 /// 2.5 or 5 times a power of ten in file units, the nearest to an even division; the end of the
 /// travel is always a candidate), a full turn at a divisor of 360° without its end.

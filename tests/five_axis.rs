@@ -430,3 +430,119 @@ fn controller_tables_carry_rotary_and_location_errors() {
         "{plain}"
     );
 }
+
+/// The command line on a preset: simulate, identify with the default model, compensate a point
+/// list and a program in position and direction, write the tables, and plan a test.
+#[test]
+fn the_command_line_runs_a_five_axis_preset_end_to_end() {
+    let dir = std::env::temp_dir().join(format!("volver-five-{}", std::process::id()));
+    let d = |f: &str| dir.join(f).display().to_string();
+    common::simulate(&d("sim"), &["--machine", "head-table", "--seed", "2"]);
+    let text = std::fs::read_to_string(dir.join("sim/measurements.csv")).unwrap();
+    assert_eq!(
+        text.lines().count() - 1,
+        1179,
+        "the preset plan, 3 reflectors"
+    );
+    let out = common::volver(&[
+        "identify",
+        "--machine",
+        "head-table",
+        "--data",
+        &d("sim/measurements.csv"),
+        "--out",
+        &d("fit.json"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::write(
+        dir.join("points.csv"),
+        "id,X,Y,Z,C,B\np1,100,-50,200,30,-45\np2,-200,120,50,300,-90\np3,0,0,100,0,0.1\n",
+    )
+    .unwrap();
+    let out = common::volver(&[
+        "compensate",
+        "--results",
+        &d("fit.json"),
+        "--points",
+        &d("points.csv"),
+        "--out",
+        &d("comp.csv"),
+        "--tool-offset",
+        "0,0,-220",
+        "--force",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("tool axis") && stdout.contains("solving for CXYZB"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("tool direction: uncompensated error up to"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("1 corrected point(s) pass within 1°"),
+        "{stdout}"
+    );
+    let comp = std::fs::read_to_string(dir.join("comp.csv")).unwrap();
+    assert!(
+        comp.lines()
+            .next()
+            .unwrap()
+            .ends_with("direction_error_urad,direction_deviation_urad,sensitivity"),
+        "{comp}"
+    );
+    std::fs::write(
+        dir.join("prog.nc"),
+        "G21 G90\nG1 X10 Y20 Z100 C45 B-30 F500\nG43.4 H1\n",
+    )
+    .unwrap();
+    let out = common::volver(&[
+        "compensate",
+        "--results",
+        &d("fit.json"),
+        "--gcode",
+        &d("prog.nc"),
+        "--out",
+        &d("prog-comp.nc"),
+        "--force",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("prog.nc:3") && err.contains("G43.4"),
+        "{err}"
+    );
+    let out = common::volver(&[
+        "tables",
+        "--results",
+        &d("fit.json"),
+        "--out",
+        &d("tables"),
+        "--force",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let plain = std::fs::read_to_string(dir.join("tables/errors.csv")).unwrap();
+    for name in [
+        "X0C,C,",
+        "Y0C,C,",
+        "X0B,B,",
+        "Z0B,B,",
+        "EBB,B,-120.000000,deg,",
+    ] {
+        assert!(plain.contains(name), "{name}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

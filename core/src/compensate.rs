@@ -17,9 +17,19 @@
 //! orientation), otherwise every axis. [`Compensator::holding`] picks other axes. With fewer
 //! than three free axes the command is a least-squares fit and the deviation says what is left.
 //!
+//! **Five axes: the tool's direction too.** [`Compensator::with_orientation`] steers the tool
+//! point and the direction of the tool's axis with every axis of a five-axis machine (three
+//! equations for the point, two for the direction: `d(q*, p) = d(q_programmed, 0)`), from the
+//! programmed command (so the nearest of the two solution branches). Each step meets the
+//! point's linearised equations and minimises the direction's residual over what they leave
+//! free. Near the singularity — the direction hardly turning with one rotary axis (the tilt
+//! axis at zero) — that axis keeps its programmed angle instead of swinging up to half a turn
+//! for microradians; the point is still met, and what is left of the direction is reported
+//! ([`OrientationResult`]).
+//!
 //! Every compensated command is verified: the tool point it gives through the forward model
 //! (an independent `f64` evaluation) is compared with the target, and the deviation is
-//! reported. Units: mm and rad.
+//! reported (and the direction's angle from its target). Units: mm and rad.
 //!
 //! ```
 //! use volver_core::compensate::Compensator;

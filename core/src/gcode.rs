@@ -118,13 +118,16 @@ pub struct Report {
     /// With the tool's orientation compensated: the largest angle of the uncompensated tool
     /// direction from its target (rad).
     pub max_direction_error_rad: f64,
-    /// … of the compensated commands' directions, as solved (rad).
+    /// … of the compensated commands' directions away from the singularity, as solved (rad).
     pub max_direction_deviation_rad: f64,
-    /// … of the commands as written (rad).
+    /// … of those commands as written (rad).
     pub max_written_direction_deviation_rad: f64,
     /// Lines (1-based) of points whose compensated command passes near the singularity
-    /// ([`crate::compensate::OrientationResult::near_singularity`]).
+    /// ([`crate::compensate::OrientationResult::near_singularity`]: the direction is met there
+    /// only as far as the tilt axis can).
     pub near_singularity: Vec<usize>,
+    /// The largest angle left there (rad).
+    pub max_singular_direction_deviation_rad: f64,
 }
 
 #[derive(Clone, Copy, PartialEq)]
@@ -688,14 +691,20 @@ impl Program {
                     rep.outside_travel.push(b.line);
                 }
                 if let Some(o) = &c.orientation {
-                    let wd = comp.direction_deviation_rad(&written, o.target);
                     rep.max_direction_error_rad = rep.max_direction_error_rad.max(o.error_rad);
-                    rep.max_direction_deviation_rad =
-                        rep.max_direction_deviation_rad.max(o.deviation_rad);
-                    rep.max_written_direction_deviation_rad =
-                        rep.max_written_direction_deviation_rad.max(wd);
-                    if o.near_singularity && rep.near_singularity.last() != Some(&b.line) {
-                        rep.near_singularity.push(b.line);
+                    if o.near_singularity {
+                        rep.max_singular_direction_deviation_rad = rep
+                            .max_singular_direction_deviation_rad
+                            .max(o.deviation_rad);
+                        if rep.near_singularity.last() != Some(&b.line) {
+                            rep.near_singularity.push(b.line);
+                        }
+                    } else {
+                        let wd = comp.direction_deviation_rad(&written, o.target);
+                        rep.max_direction_deviation_rad =
+                            rep.max_direction_deviation_rad.max(o.deviation_rad);
+                        rep.max_written_direction_deviation_rad =
+                            rep.max_written_direction_deviation_rad.max(wd);
                     }
                 }
             }

@@ -11,10 +11,12 @@ use volver::solvers::{Objective, Options, Solver};
 /// Options of `volver compare`.
 #[derive(Args, Debug)]
 pub struct CompareArgs {
-    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    /// Machine file (TOML) or an embedded machine's name (`volver layout --list`); the embedded
+    /// XCFZ grinder when absent.
     #[arg(long)]
     machine: Option<PathBuf>,
-    /// Error model (TOML); the paper's model when absent (with the embedded machine).
+    /// Error model (TOML); the embedded machine's default model when absent (the paper's on the
+    /// XCFZ grinder).
     #[arg(long)]
     model: Option<PathBuf>,
     /// Measurement file (CSV); when absent, the demo's problem: test 4 simulated on the

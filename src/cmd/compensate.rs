@@ -54,7 +54,8 @@ pub struct CompensateArgs {
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     tool_axis: Option<String>,
     /// Largest accepted angle between a corrected command's tool direction and its target, as
-    /// solved (rad; five-axis compensation).
+    /// solved (rad; five-axis compensation, away from the singularity, where what is left is
+    /// reported).
     #[arg(long, default_value_t = 1e-9)]
     tolerance_rad: f64,
     /// Largest distance between an arc and its chords (mm).
@@ -285,7 +286,8 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     if let Some(o) = &done.orientation {
         println!(
             "  tool direction: uncompensated error up to {:.4} µrad; verified through the forward \
-             model: largest angle {:.3e} rad as solved, {:.3e} rad as written",
+             model away from the singularity: largest angle {:.3e} rad as solved, {:.3e} rad as \
+             written",
             o.max_error_rad * 1e6,
             o.worst_solved_rad,
             o.worst_written_rad
@@ -293,10 +295,13 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         if o.near_singularity > 0 {
             println!(
                 "  warning: {} corrected point(s) pass within {}° of the singularity (the rotary \
-                 axes nearly parallel: the tilt axis near zero), where a small direction error \
-                 needs a large turn of the other rotary axis (see the output's sensitivity)",
+                 axes nearly parallel: the tilt axis near zero); there the rotary axis the \
+                 direction hardly depends on keeps its programmed angle (no swing of up to half a \
+                 turn for microradians) and up to {:.3} µrad of the direction is left (see the \
+                 output's sensitivity)",
                 o.near_singularity,
-                volver::core::compensate::SINGULAR_TILT_DEG
+                volver::core::compensate::SINGULAR_TILT_DEG,
+                o.worst_singular_rad * 1e6
             );
         }
         if o.worst_solved_rad.is_nan() || o.worst_solved_rad > a.tolerance_rad {
@@ -368,6 +373,7 @@ fn compensate_gcode(
                 worst_solved_rad: rep.max_direction_deviation_rad,
                 worst_written_rad: rep.max_written_direction_deviation_rad,
                 near_singularity: rep.near_singularity.len(),
+                worst_singular_rad: rep.max_singular_direction_deviation_rad,
             }),
     })
 }

@@ -634,6 +634,13 @@ fn vouch(
         um(check.rigid.emax_um),
         um(u_rigid),
     );
+    if check.direction.is_some() {
+        let u = direction_u95_rad(model2, &id2.params, &cov, check);
+        println!(
+            "   U of the identified tool direction there (k = 2, raw in the workpiece frame) up to {} µrad",
+            um(u * 1e6)
+        );
+    }
     if id2.gauge.as_ref().is_some_and(|g| !g.held.is_empty()) {
         println!(
             "   raw, U reaches {} µm, mostly from a combination the data cannot identify ({raw_worst}): a constant shift of the tool that the set-up takes up",
@@ -646,6 +653,53 @@ fn vouch(
         );
     }
     Ok(cov)
+}
+
+/// The largest expanded uncertainty (k = 2, rad) of the identified tool direction over the
+/// check's grid: the direction is the difference of the tool point and a point 1 mm behind it
+/// on the tool's axis, so its Jacobian is the difference of theirs, taken across the direction.
+fn direction_u95_rad(model: &Model, params: &[f64], cov: &Covariance, check: &Check) -> f64 {
+    let n = model.n_params();
+    let back = [check.tool[0], check.tool[1], check.tool[2] + 1.0];
+    let (mut jt, mut jb) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+    let mut worst = 0.0_f64;
+    for q in &check.grid {
+        let tip = model.tool_point_with_jacobian(q, &check.tool, params, &mut jt);
+        let behind = model.tool_point_with_jacobian(q, &back, params, &mut jb);
+        let d: [f64; 3] = std::array::from_fn(|c| tip[c] - behind[c]);
+        // Two unit vectors across d.
+        let e1 = {
+            let a = if d[0].abs() < 0.9 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 1.0, 0.0]
+            };
+            let c = [
+                d[1] * a[2] - d[2] * a[1],
+                d[2] * a[0] - d[0] * a[2],
+                d[0] * a[1] - d[1] * a[0],
+            ];
+            let l = volver::core::problem::norm(c);
+            c.map(|x| x / l)
+        };
+        let e2 = {
+            let c = [
+                d[1] * e1[2] - d[2] * e1[1],
+                d[2] * e1[0] - d[0] * e1[2],
+                d[0] * e1[1] - d[1] * e1[0],
+            ];
+            let l = volver::core::problem::norm(c);
+            c.map(|x| x / l)
+        };
+        let across = |e: [f64; 3]| -> f64 {
+            let g: Vec<f64> = (0..n)
+                .map(|j| (0..3).map(|c| e[c] * (jt[c * n + j] - jb[c * n + j])).sum())
+                .collect();
+            cov.u(&g)
+        };
+        worst = worst.max(across(e1).hypot(across(e2)));
+    }
+    volver::solvers::uncertainty::K * worst
 }
 
 /// Step 7: The results file and the controller tables (with their U); returns the tables' paths.

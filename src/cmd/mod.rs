@@ -23,10 +23,12 @@ use volver::solvers::{Iteration, Observer};
 /// The machine, error model and measurements that `identify` and `diagnose` read.
 #[derive(clap::Args)]
 pub struct Inputs {
-    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    /// Machine file (TOML) or an embedded machine's name (`volver layout --list`); the embedded
+    /// XCFZ grinder when absent.
     #[arg(long)]
     pub machine: Option<PathBuf>,
-    /// Error model (TOML); the paper's model when absent (with the embedded machine).
+    /// Error model (TOML); the embedded machine's default model when absent (the paper's on the
+    /// XCFZ grinder).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Measurement file (CSV), or a tracker software's export with `--import`.

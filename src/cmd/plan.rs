@@ -13,7 +13,8 @@ use volver::planning::{Request, compare, plan};
 /// Arguments of `volver plan`.
 #[derive(Args)]
 pub struct PlanArgs {
-    /// Machine file (TOML); the embedded XCFZ grinder when absent.
+    /// Machine file (TOML) or an embedded machine's name (`volver layout --list`); the embedded
+    /// XCFZ grinder when absent.
     #[arg(long)]
     machine: Option<PathBuf>,
     /// Error model (TOML) the plan must identify; the paper's model with the embedded machine.
@@ -47,9 +48,10 @@ pub struct PlanArgs {
     #[arg(long)]
     reflectors: Option<PathBuf>,
     /// Candidate positions per axis, about (a round step over the travel; a full turn without
-    /// its end).
-    #[arg(long, default_value_t = 13)]
-    per_axis: usize,
+    /// its end); default 13, or fewer where the grid would exceed 50 000 candidate points (6 on
+    /// a five-axis machine with three reflectors).
+    #[arg(long)]
+    per_axis: Option<usize>,
     /// Visits of the reference pose between the first and the last measurement.
     #[arg(long, default_value_t = 8)]
     repeats: usize,
@@ -113,23 +115,27 @@ pub fn run(a: PlanArgs) -> Result<()> {
         (None, Some(h)) => bail!("--hours {h}: a positive number of hours"),
         (None, None) => 1040,
     };
+    let extra_reflectors = match &a.reflectors {
+        Some(p) => extra_reflectors(p)?,
+        None => Vec::new(),
+    };
     let request = Request {
         points,
         criterion: a.criterion.parse().map_err(anyhow::Error::msg)?,
         tool,
         noise,
-        per_axis: a.per_axis,
+        per_axis: match a.per_axis {
+            Some(n) => n,
+            None => volver::planning::default_per_axis(
+                model.machine(),
+                model.machine().reflectors().len() + extra_reflectors.len(),
+            )?,
+        },
         seed: a.seed,
         repeats: a.repeats,
         seconds_per_point: a.seconds_per_point,
+        extra_reflectors,
         ..Request::default()
-    };
-    let request = Request {
-        extra_reflectors: match &a.reflectors {
-            Some(p) => extra_reflectors(p)?,
-            None => Vec::new(),
-        },
-        ..request
     };
     let planned = plan(&model, &request)?;
     let machine = planned.model.machine();
