@@ -218,12 +218,8 @@ fn compensation_round_trips_position_and_direction_over_random_commands() {
             let dir = comp.actual_direction(&c.commands).unwrap();
             let target = comp.nominal_direction(&q).unwrap();
             // |d × t| = sin of the angle between the unit vectors.
-            let angle = volver::core::problem::norm([
-                dir[1] * target[2] - dir[2] * target[1],
-                dir[2] * target[0] - dir[0] * target[2],
-                dir[0] * target[1] - dir[1] * target[0],
-            ])
-            .asin();
+            let angle =
+                volver::core::problem::norm(volver::core::compensate::cross(dir, target)).asin();
             worst_mm = worst_mm.max(dev);
             worst_rad = worst_rad.max(angle.max(o.deviation_rad));
             before_mm = before_mm.max(c.error_mm);

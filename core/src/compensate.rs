@@ -157,13 +157,7 @@ impl<'a> Compensator<'a> {
         tool: [f64; 3],
         held: &[Axis],
     ) -> Result<Compensator<'a>> {
-        if params.len() != model.n_params() {
-            return Err(Error::Model(format!(
-                "compensation needs {} parameters, got {}",
-                model.n_params(),
-                params.len()
-            )));
-        }
+        check_params(model, params)?;
         let m = model.machine();
         for h in held {
             if m.axis(*h).is_none() {
@@ -224,13 +218,7 @@ impl<'a> Compensator<'a> {
         tool: [f64; 3],
         axis: [f64; 3],
     ) -> Result<Compensator<'a>> {
-        if params.len() != model.n_params() {
-            return Err(Error::Model(format!(
-                "compensation needs {} parameters, got {}",
-                model.n_params(),
-                params.len()
-            )));
-        }
+        check_params(model, params)?;
         let m = model.machine();
         let rotary = m.axes().iter().filter(|a| a.axis.is_rotary()).count();
         if m.axes().len() != 5 || rotary != 2 {
@@ -587,21 +575,43 @@ impl<'a> Compensator<'a> {
     }
 }
 
+/// Refuses a parameter vector that is not `model`'s.
+fn check_params(model: &Model, params: &[f64]) -> Result<()> {
+    if params.len() != model.n_params() {
+        return Err(Error::Model(format!(
+            "compensation needs {} parameters, got {}",
+            model.n_params(),
+            params.len()
+        )));
+    }
+    Ok(())
+}
+
+/// The cross product `a × b`.
+pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
 /// `v` scaled to unit length.
 fn unit(v: [f64; 3]) -> [f64; 3] {
     let n = crate::problem::norm(v);
     v.map(|x| x / n)
 }
 
-/// The angle between two unit vectors (rad), accurate at small angles.
-fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let cross = [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ];
+/// The angle between two unit vectors (rad), accurate at small angles (from the cross
+/// product's length, not the dot product's).
+///
+/// ```
+/// let a = volver_core::compensate::angle_between([0.0, 0.0, 1.0], [1e-9, 0.0, 1.0]);
+/// assert!((a - 1e-9).abs() < 1e-20);
+/// ```
+pub fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
     let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    crate::problem::norm(cross).atan2(dot)
+    crate::problem::norm(cross(a, b)).atan2(dot)
 }
 
 /// One Gauss–Newton step of the five-axis compensation, split: the tool point's three

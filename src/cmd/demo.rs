@@ -7,7 +7,7 @@
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
 use volver::compensation::{reflector_centroid, write_tables};
-use volver::core::compensate::Compensator;
+use volver::core::compensate::{Compensator, angle_between, cross};
 use volver::core::machine::Commands;
 use volver::core::measure::MeasurementSet;
 use volver::core::metrics::ErrorStats;
@@ -525,13 +525,7 @@ fn compensation_five_axis(model2: &Model, id2: &Identification, out: &Synthetic)
         .iter()
         .map(|(d, t)| {
             let rd: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| r[i][j] * d[j]).sum());
-            let cross = [
-                rd[1] * t[2] - rd[2] * t[1],
-                rd[2] * t[0] - rd[0] * t[2],
-                rd[0] * t[1] - rd[1] * t[0],
-            ];
-            let dot: f64 = (0..3).map(|i| rd[i] * t[i]).sum();
-            volver::core::problem::norm(cross).atan2(dot)
+            angle_between(rd, *t)
         })
         .collect();
     let direction = DirectionCheck {
@@ -668,29 +662,16 @@ fn direction_u95_rad(model: &Model, params: &[f64], cov: &Covariance, check: &Ch
         let behind = model.tool_point_with_jacobian(q, &back, params, &mut jb);
         let d: [f64; 3] = std::array::from_fn(|c| tip[c] - behind[c]);
         // Two unit vectors across d.
-        let e1 = {
-            let a = if d[0].abs() < 0.9 {
+        let unit = |c: [f64; 3]| c.map(|x| x / volver::core::problem::norm(c));
+        let e1 = unit(cross(
+            d,
+            if d[0].abs() < 0.9 {
                 [1.0, 0.0, 0.0]
             } else {
                 [0.0, 1.0, 0.0]
-            };
-            let c = [
-                d[1] * a[2] - d[2] * a[1],
-                d[2] * a[0] - d[0] * a[2],
-                d[0] * a[1] - d[1] * a[0],
-            ];
-            let l = volver::core::problem::norm(c);
-            c.map(|x| x / l)
-        };
-        let e2 = {
-            let c = [
-                d[1] * e1[2] - d[2] * e1[1],
-                d[2] * e1[0] - d[0] * e1[2],
-                d[0] * e1[1] - d[1] * e1[0],
-            ];
-            let l = volver::core::problem::norm(c);
-            c.map(|x| x / l)
-        };
+            },
+        ));
+        let e2 = unit(cross(d, e1));
         let across = |e: [f64; 3]| -> f64 {
             let g: Vec<f64> = (0..n)
                 .map(|j| (0..3).map(|c| e[c] * (jt[c * n + j] - jb[c * n + j])).sum())
