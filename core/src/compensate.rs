@@ -112,7 +112,8 @@ pub struct OrientationResult {
     /// (the smallest singular value of the direction's Jacobian over the free rotary axes, at
     /// the compensated command): `sin` of the tilt on a machine whose two rotary axes are
     /// perpendicular. Near zero the rotary axes are nearly parallel (the tilt axis near zero):
-    /// a small direction error there needs a large turn of the other rotary axis.
+    /// meeting the direction exactly would need a large turn of the other rotary axis, which
+    /// then keeps its programmed angle while the tilt axis corrects what it can.
     pub sensitivity: f64,
     /// `sensitivity` below `sin` [`SINGULAR_TILT_DEG`]: the command passes near the singularity.
     pub near_singularity: bool,
@@ -122,9 +123,10 @@ pub struct OrientationResult {
 /// a rotary axis is reported near the singularity ([`OrientationResult::near_singularity`]).
 pub const SINGULAR_TILT_DEG: f64 = 1.0;
 
-/// The weight of a direction residual against a position residual (mm per rad) while the
-/// command is solved: 1 µrad weighs as 1 µm. It matters only where position and direction cannot
-/// both be met (at the singularity).
+/// The scale of the direction's residuals against the point's (mm per rad: 1 µrad as 1 µm), so
+/// that their rows of the Jacobian are of a size. The solution does not depend on it: the
+/// point's equations are met exactly and the direction's residual is minimised over what they
+/// leave free.
 pub const DIRECTION_LEVER_MM: f64 = 1000.0;
 
 /// Newton's iteration stops once the direction is within this angle (rad) of its target (and
