@@ -18,12 +18,11 @@
 //! words for one axis in a block, `G28`/`G30`/`G53`/`G92` with axis words (moves in another
 //! frame), scaling, mirroring and rotation of the coordinates (`G51`, `G51.1`, `G68`), canned
 //! cycles (`G72`–`G76`, `G81`–`G89`: moves the program does not state), tilted working planes
-//! (`G68.2`, `G68.3`), tool-centre-point mode (`G43.4`, `G43.5`, `G234`, `M128`, `TCPM`, `TRAORI`,
-//! `RTCP`: the control does the inverse kinematics there, see [`TOOL_CENTRE_POINT_WORDS`]), arcs
-//! whose plane axes
-//! the machine lacks or whose end is off the circle, malformed numbers. The program's
-//! coordinates are taken as the machine's axis positions (no work offset); axes not yet
-//! programmed start at their reference position.
+//! (`G68.2`, `G68.3`), tool-centre-point mode (`G43.4`, `G43.5`, `G234`, `M128`, `TCPM`,
+//! `TRAORI`, `RTCP`: the control does the inverse kinematics there, see
+//! [`TOOL_CENTRE_POINT_WORDS`]), arcs whose plane axes the machine lacks or whose end is off the
+//! circle, malformed numbers. The program's coordinates are taken as the machine's axis
+//! positions (no work offset); axes not yet programmed start at their reference position.
 //!
 //! Arcs are linearised into chords whose sagitta is at most the chord tolerance (compensation
 //! bends a path, so an arc stays an arc only on the nominal machine); long linear moves can be
