@@ -359,13 +359,6 @@ pub fn tool_axis_of(text: Option<&str>) -> Result<[f64; 3]> {
     }
 }
 
-/// Whether `model`'s machine is a five-axis machine (three linear and two rotary axes): its
-/// compensation steers the tool's direction too unless axes are held.
-pub fn five_axis(model: &Model) -> bool {
-    let axes = model.machine().axes();
-    axes.len() == 5 && axes.iter().filter(|a| a.axis.is_rotary()).count() == 2
-}
-
 /// The compensator of `model` at `params` for `tool`: with `hold` (axis letters, e.g. `"C"`),
 /// every other axis solved for the tool point; otherwise, on a five-axis machine, every axis
 /// solved for the tool point and the direction of the tool's axis `axis`
@@ -385,7 +378,8 @@ pub fn compensator<'m>(
              their programmed values: give one of them"
         );
     }
-    if hold.is_none() && (axis.is_some() || five_axis(model)) {
+    if hold.is_none() && (axis.is_some() || volver_core::compensate::is_five_axis(model.machine()))
+    {
         return Ok(volver_core::compensate::Compensator::with_orientation(
             model,
             params,

@@ -15,8 +15,9 @@ use volver_core::simulate::{Magnitudes, Simulation, Synthetic, Truth};
 pub const DEMO_SEED: u64 = 7;
 
 /// The effect hidden in the demo's data: a second harmonic in every error of the turntable C
-/// (10 µm, 20 µrad), which the paper's model (first harmonics) cannot describe.
-pub const DEMO_EFFECT: &str = "rotary-harmonics=2,10,20";
+/// (10 µm, 20 µrad), which the paper's model (first harmonics) cannot describe: the embedded
+/// XCFZ preset's ([`volver_core::presets::Preset::demo_effect`]).
+pub const DEMO_EFFECT: &str = volver_core::presets::PRESETS[0].demo_effect;
 
 /// Where the demo writes its files.
 pub const DEMO_DIR: &str = "volver-demo";

@@ -222,8 +222,8 @@ impl<'a> Compensator<'a> {
     ) -> Result<Compensator<'a>> {
         check_params(model, params)?;
         let m = model.machine();
-        let rotary = m.axes().iter().filter(|a| a.axis.is_rotary()).count();
-        if m.axes().len() != 5 || rotary != 2 {
+        if !is_five_axis(m) {
+            let rotary = m.axes().iter().filter(|a| a.axis.is_rotary()).count();
             return Err(Error::Model(format!(
                 "compensating the tool's orientation needs a five-axis machine (three linear and \
                  two rotary axes); {} has {} axes, {rotary} rotary: compensate the tool point \
@@ -328,21 +328,20 @@ impl<'a> Compensator<'a> {
     pub fn compensate(&self, programmed: &Commands) -> Result<Compensated> {
         let target = self.nominal_point(programmed);
         let target_dir = self.nominal_direction(programmed);
-        let (q, steps, error_mm) = match target_dir {
+        let (q, steps, error_mm, sensitivity) = match target_dir {
             Some(t) => self.solve_oriented(programmed, target, t)?,
-            None => self.solve_point(programmed, target)?,
+            None => {
+                let (q, steps, error_mm) = self.solve_point(programmed, target)?;
+                (q, steps, error_mm, f64::NAN)
+            }
         };
         let deviation_mm = self.deviation_mm(&q, target);
-        let orientation = target_dir.map(|t| {
-            let (_, jac) = self.residual_and_jacobian(&q, target, target_dir);
-            let sensitivity = self.rotary_sensitivity(&jac);
-            OrientationResult {
-                target: t,
-                deviation_rad: self.direction_deviation_rad(&q, t),
-                error_rad: self.direction_deviation_rad(programmed, t),
-                sensitivity,
-                near_singularity: sensitivity < SINGULAR_TILT_DEG.to_radians().sin(),
-            }
+        let orientation = target_dir.map(|t| OrientationResult {
+            target: t,
+            deviation_rad: self.direction_deviation_rad(&q, t),
+            error_rad: self.direction_deviation_rad(programmed, t),
+            sensitivity,
+            near_singularity: sensitivity < SINGULAR_TILT_DEG.to_radians().sin(),
         });
         let axes = self.model.machine().axes();
         // Rotary axes too: a trunnion beyond its range, or a turntable commanded more than a
@@ -434,13 +433,14 @@ impl<'a> Compensator<'a> {
     /// solution needs a large turn of that rotary axis (up to half a turn of a table to tilt
     /// the tool by microradians): that axis keeps its programmed value, the other four meet
     /// the point exactly and the direction as closely as the tilt axis alone can. The command,
-    /// the steps taken and the uncompensated error (mm).
+    /// the steps taken, the uncompensated error (mm) and the direction's sensitivity at the
+    /// command ([`OrientationResult::sensitivity`]).
     fn solve_oriented(
         &self,
         programmed: &Commands,
         target: [f64; 3],
         t: [f64; 3],
-    ) -> Result<(Commands, usize, f64)> {
+    ) -> Result<(Commands, usize, f64, f64)> {
         let m = self.free.len();
         // A step is judged first by the point, then by the direction: each step meets the
         // point's linearised equations, and at the singularity the direction's residual stays
@@ -518,7 +518,7 @@ impl<'a> Compensator<'a> {
                 }
             }
         }
-        Ok((q, steps, error_mm))
+        Ok((q, steps, error_mm, self.rotary_sensitivity(&jac)))
     }
 
     /// The residuals at `q` — the tool point's offset from `target` (mm) and, with a target
@@ -575,6 +575,19 @@ impl<'a> Compensator<'a> {
         let disc = (0.25 * (a - d) * (a - d) + b * b).sqrt();
         (mean - disc).max(0.0).sqrt()
     }
+}
+
+/// Whether `machine` has five axes, two of them rotary: a machine whose compensation can steer
+/// the tool's direction ([`Compensator::with_orientation`]).
+///
+/// ```
+/// let five = volver_core::presets::named("head-head").unwrap().machine().unwrap();
+/// assert!(volver_core::compensate::is_five_axis(&five));
+/// assert!(!volver_core::compensate::is_five_axis(&volver_core::machine::Machine::default_xcfz()));
+/// ```
+pub fn is_five_axis(machine: &crate::machine::Machine) -> bool {
+    let axes = machine.axes();
+    axes.len() == 5 && axes.iter().filter(|a| a.axis.is_rotary()).count() == 2
 }
 
 /// Refuses a parameter vector that is not `model`'s.

@@ -50,13 +50,9 @@ impl Setup {
         self.preset.name == "xcfz"
     }
 
-    /// The hidden effect: the preset's (the XCFZ demo's is [`DEMO_EFFECT`]).
+    /// The hidden effect: the preset's ([`DEMO_EFFECT`] on the XCFZ grinder).
     fn effect(&self) -> &'static str {
-        if self.xcfz() {
-            DEMO_EFFECT
-        } else {
-            self.preset.demo_effect
-        }
+        self.preset.demo_effect
     }
 }
 

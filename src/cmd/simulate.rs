@@ -105,12 +105,8 @@ pub struct SimulateArgs {
 
 /// Runs `volver simulate`.
 pub fn run(a: SimulateArgs) -> Result<()> {
-    let (truth, source) = truth_of(&a)?;
+    let (truth, source, preset) = truth_of(&a)?;
     let machine = truth.model.machine().clone();
-    let preset = match &a.machine {
-        Some(_) => volver::inputs::machine(a.machine.as_deref())?.1,
-        None => volver::core::presets::named("xcfz"),
-    };
     let plan = plan_of(&a, &machine, preset)?;
     let mut sim = Simulation::new(plan, truth, a.seed);
     sim.truth_source = source;
@@ -138,14 +134,21 @@ pub fn run(a: SimulateArgs) -> Result<()> {
 }
 
 /// The true errors: from `--truth`, or drawn at random in `--truth-model`'s structure (every
-/// error of the machine by default) at the `--magnitude`s; and where they come from.
-fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
+/// error of the machine by default) at the `--magnitude`s; where they come from; and the
+/// embedded machine `--machine` names (the XCFZ grinder when absent).
+fn truth_of(
+    a: &SimulateArgs,
+) -> Result<(
+    Truth,
+    TruthSource,
+    Option<&'static volver::core::presets::Preset>,
+)> {
     let (given_machine, preset) = match &a.machine {
         Some(_) => {
             let (m, preset) = volver::inputs::machine(a.machine.as_deref())?;
             (Some(m), preset)
         }
-        None => (None, None),
+        None => (None, volver::core::presets::named("xcfz")),
     };
     let (truth, source) = match &a.truth {
         Some(path) => {
@@ -208,7 +211,7 @@ fn truth_of(a: &SimulateArgs) -> Result<(Truth, TruthSource)> {
             (truth, source)
         }
     };
-    Ok((truth, source))
+    Ok((truth, source, preset))
 }
 
 /// The plan of `--plan` on `machine` (an embedded machine: `preset`), measuring the reflectors
