@@ -3,19 +3,20 @@
 //! the small dense solves of a step (damped least squares by QR, Cholesky, a pseudo-inverse).
 //!
 //! A pass runs over the points in blocks of [`BLOCK`]; the blocks are computed on every thread
-//! of rayon's pool and reduced in block order, so a pass gives the same bits whatever the number
-//! of threads. No dense Jacobian of the whole problem is held: each block's weighted rows are
-//! multiplied into its own normal matrix (or triangularised by a QR), then added (or merged by a
-//! QR of the stacked triangles) into the running total.
+//! of rayon's pool and reduced in a binary tree whose shape depends on the number of blocks
+//! only, so a pass gives the same bits whatever the number of threads. No dense Jacobian of the
+//! whole problem is held: each block's weighted rows are multiplied into its own normal matrix
+//! (or triangularised by a QR), and two halves' matrices are added (or their triangles merged
+//! by a QR of the stacked pair).
 
 use faer::linalg::matmul::triangular::{BlockStructure, matmul as triangular_matmul};
 use faer::prelude::*;
 use faer::{Accum, Mat, Par, Side};
-use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 use volver_core::problem::{Residuals, norm};
 
-/// Points per block of a pass: the unit of work given to a thread and of the reduction, which
-/// runs in block order (so the block size, not the number of threads, fixes the rounding).
+/// Points per block of a pass: the unit of work given to a thread and the leaf of the
+/// reduction's tree (so the block size, not the number of threads, fixes the rounding).
 pub const BLOCK: usize = 512;
 
 thread_local! {
@@ -24,8 +25,9 @@ thread_local! {
     /// allocation, mapped and zeroed page by page at every pass).
     static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
-    /// The calling thread's buffers for the blocks' `J_bᵀ W_b J_b` of a wave (n² each, upper
-    /// triangles zero), kept between passes: fresh ones cost a zeroing of n² per block.
+    /// A thread's buffers for the blocks' `J_bᵀ W_b J_b` (n² each), kept between passes (up to
+    /// [`POOL`]): fresh ones cost a zeroing, or the page faults of a fresh mapping, of n² per
+    /// block.
     static PARTS: std::cell::RefCell<Vec<Vec<f64>>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
@@ -58,8 +60,8 @@ pub(crate) struct Factor {
 /// Ceres' "Triggs correction"). Each block of [`BLOCK`] points forms its rows `W_i^½ J_i` and
 /// from them, with `factor` (least squares only), its triangular factor by a QR, merged into the
 /// running R by a QR of `[R; R_block]` (`H = RᵀR`), else its `J_bᵀ W_b J_b` by a rank-k update,
-/// added to H. Blocks run in parallel and are reduced in block order: the bits do not depend on
-/// the threads. `None` when a residual or Jacobian entry is not finite, or when `factor` is
+/// added to H. Blocks run in parallel and are reduced in a tree of fixed shape
+/// ([`Pass::reduce`]): the bits do not depend on the threads. `None` when a residual or Jacobian entry is not finite, or when `factor` is
 /// asked of a pass that is not plain least squares.
 pub(crate) fn accumulate(
     problem: &dyn Residuals,
@@ -90,77 +92,38 @@ pub(crate) fn accumulate_weighted(
     let np = problem.n_points();
     let nc = n + 1;
     let blocks = np.div_ceil(BLOCK);
-    let mut g = vec![vec![0.0; n]; k];
-    // The lower triangles of the H's, column-major (the blocks' parts are added as whole
-    // slices).
-    let mut hl = vec![vec![0.0; n * n]; k];
-    // With `factor`: R and the residual column (column-major, (n+1)²).
-    let mut rf: Option<Vec<f64>> = None;
-    // Blocks are computed a wave at a time (bounded memory), each wave on every thread.
-    let wave = 2 * rayon::current_num_threads().max(1);
-    // The waves' normal-matrix buffers, k per block (none for a factor, whose blocks start
-    // from zero).
-    let mut bufs = PARTS.with(|b| std::mem::take(&mut *b.borrow_mut()));
-    let (count, len) = if factor { (0, 0) } else { (wave * k, n * n) };
-    bufs.truncate(count);
-    bufs.retain(|b| b.len() == len);
-    bufs.resize_with(count, || vec![0.0; len]);
-    let mut first = 0;
-    let mut failed = false;
-    while first < blocks && !failed {
-        let last = (first + wave).min(blocks);
-        let chunks = bufs.chunks_mut(k.max(1)).map(Some);
-        let outs = chunks.chain(std::iter::repeat_with(|| None));
-        let jobs: Vec<(usize, Option<&mut [Vec<f64>]>)> = (first..last).zip(outs).collect();
-        let parts: Vec<Option<BlockPart>> = jobs
-            .into_par_iter()
-            .map(|(b, out)| {
-                SCRATCH.with(|s| {
-                    let (blk, row, tb) = &mut *s.borrow_mut();
-                    // Every entry a block reads it writes first: no zeroing needed.
-                    blk.resize(3 * BLOCK * nc, 0.0);
-                    row.resize(3 * n, 0.0);
-                    if factor {
-                        tb.resize(3 * BLOCK * nc, 0.0);
-                    }
-                    block_part(problem, p, (weight, with_design), b, (blk, row, tb), out)
-                })
-            })
-            .collect();
-        for (b, part) in parts.into_iter().enumerate() {
-            let Some(part) = part else {
-                failed = true;
-                break;
-            };
-            for (gw, pw) in g.iter_mut().zip(&part.g) {
-                for (gj, pj) in gw.iter_mut().zip(pw) {
-                    *gj += pj;
-                }
-            }
-            match (part.factor, rf.as_mut()) {
-                (Some(m), None) => rf = Some(m),
-                (Some(mut rb), Some(r)) => qr_update(r, nc, &mut rb, nc),
-                (None, _) => {
-                    // The upper triangle of a part is zero: adding it whole changes nothing.
-                    for (w, hw) in hl.iter_mut().enumerate() {
-                        for (hv, pv) in hw.iter_mut().zip(&bufs[b * k + w]) {
-                            *hv += pv;
-                        }
-                    }
-                }
-            }
+    let pass = Pass {
+        problem,
+        p,
+        weight,
+        with_design,
+        factor,
+        failed: AtomicBool::new(false),
+    };
+    let Part {
+        g,
+        h: hl,
+        factor: mut rf,
+    } = if blocks == 0 {
+        Part {
+            g: vec![vec![0.0; n]; k],
+            h: (0..if factor { 0 } else { k })
+                .map(|_| vec![0.0; n * n])
+                .collect(),
+            factor: None,
         }
-        first = last;
-    }
-    PARTS.with(|b| *b.borrow_mut() = bufs);
-    if failed {
-        return None;
-    }
-    let normals = hl
+    } else {
+        pass.reduce(0..blocks)?
+    };
+    let lower = |w: usize| {
+        hl.get(w)
+            .map(|hl| Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]))
+    };
+    let normals = g
         .into_iter()
-        .zip(g)
-        .map(|(hl, g)| {
-            let mut h = Mat::from_fn(n, n, |i, j| hl[i.min(j) * n + i.max(j)]);
+        .enumerate()
+        .map(|(w, g)| {
+            let mut h = lower(w).unwrap_or_else(|| Mat::zeros(n, n));
             let factor = factor.then(|| {
                 let rf = rf.take().unwrap_or_else(|| vec![0.0; nc * nc]);
                 let r = Mat::from_fn(n, n, |i, j| rf[j * nc + i]);
@@ -178,7 +141,138 @@ pub(crate) fn accumulate_weighted(
             Normal { h, g, factor }
         })
         .collect();
+    PARTS.with(|pool| give_back(&mut pool.borrow_mut(), hl));
     Some(normals)
+}
+
+/// The buffers a thread keeps for the blocks' normal matrices, at most.
+const POOL: usize = 16;
+
+/// `bufs` back to a thread's pool (up to [`POOL`]).
+fn give_back(pool: &mut Vec<Vec<f64>>, bufs: Vec<Vec<f64>>) {
+    for b in bufs {
+        if pool.len() < POOL {
+            pool.push(b);
+        }
+    }
+}
+
+/// One pass's inputs, shared by the blocks.
+struct Pass<'p, 'w> {
+    problem: &'p dyn Residuals,
+    p: &'p [f64],
+    weight: &'w (dyn Fn(f64) -> (f64, f64) + Sync),
+    with_design: bool,
+    factor: bool,
+    /// Set by a block whose residual or Jacobian is not finite: the blocks not begun are
+    /// skipped.
+    failed: AtomicBool,
+}
+
+/// The share of a pass of a range of blocks: the gradient under each weighting (the design's
+/// first), and the lower triangle of each weighting's `J_bᵀ W_b J_b` (n × n, column-major; the
+/// upper triangle is not read) or, for a factor, the triangular factor of the rows with the
+/// residual column ((n+1)², column-major).
+struct Part {
+    g: Vec<Vec<f64>>,
+    h: Vec<Vec<f64>>,
+    factor: Option<Vec<f64>>,
+}
+
+impl Pass<'_, '_> {
+    /// The blocks of `range` computed and reduced as a binary tree of fixed shape: a range is
+    /// split at its middle, the halves computed on either side of a `rayon::join` and the right
+    /// one added to the left (its triangle merged by a QR for a factor). The shape depends on
+    /// the number of blocks only, so the bits do not depend on the threads; no thread waits at
+    /// a barrier, and the additions run in parallel too. `None` when a block failed.
+    fn reduce(&self, range: std::ops::Range<usize>) -> Option<Part> {
+        if self.failed.load(Ordering::Relaxed) {
+            return None;
+        }
+        if range.len() == 1 {
+            let part = self.block(range.start);
+            if part.is_none() {
+                self.failed.store(true, Ordering::Relaxed);
+            }
+            return part;
+        }
+        let mid = range.start + range.len() / 2;
+        let (left, right) = rayon::join(
+            || self.reduce(range.start..mid),
+            || self.reduce(mid..range.end),
+        );
+        let (mut left, right) = (left?, right?);
+        for (gl, gr) in left.g.iter_mut().zip(&right.g) {
+            for (a, b) in gl.iter_mut().zip(gr) {
+                *a += b;
+            }
+        }
+        let n = self.p.len();
+        for (hl, hr) in left.h.iter_mut().zip(&right.h) {
+            // The lower triangle, column by column.
+            for j in 0..n {
+                for (a, b) in hl[j * n + j..(j + 1) * n]
+                    .iter_mut()
+                    .zip(&hr[j * n + j..(j + 1) * n])
+                {
+                    *a += b;
+                }
+            }
+        }
+        if let (Some(rl), Some(mut rr)) = (left.factor.as_mut(), right.factor) {
+            let nc = n + 1;
+            qr_update(rl, nc, &mut rr, nc);
+        }
+        PARTS.with(|pool| give_back(&mut pool.borrow_mut(), right.h));
+        Some(left)
+    }
+
+    /// Block `b` on the calling thread, with its scratch and pooled buffers.
+    fn block(&self, b: usize) -> Option<Part> {
+        let n = self.p.len();
+        let nc = n + 1;
+        let k = if self.with_design { 2 } else { 1 };
+        let mut h: Vec<Vec<f64>> = if self.factor {
+            Vec::new()
+        } else {
+            PARTS.with(|pool| {
+                let mut pool = pool.borrow_mut();
+                // Every entry of the lower triangle a block reads it writes first: no zeroing
+                // needed.
+                (0..k)
+                    .map(|_| match pool.iter().position(|b| b.len() == n * n) {
+                        Some(i) => pool.swap_remove(i),
+                        None => vec![0.0; n * n],
+                    })
+                    .collect()
+            })
+        };
+        let part = SCRATCH.with(|s| {
+            let (blk, row, tb) = &mut *s.borrow_mut();
+            // Every entry a block reads it writes first: no zeroing needed.
+            blk.resize(3 * BLOCK * nc, 0.0);
+            row.resize(3 * n, 0.0);
+            if self.factor {
+                tb.resize(3 * BLOCK * nc, 0.0);
+            }
+            let out = (!self.factor).then_some(h.as_mut_slice());
+            block_part(
+                self.problem,
+                self.p,
+                (self.weight, self.with_design),
+                b,
+                (blk, row, tb),
+                out,
+            )
+        });
+        match part {
+            Some(BlockPart { g, factor }) => Some(Part { g, h, factor }),
+            None => {
+                PARTS.with(|pool| give_back(&mut pool.borrow_mut(), h));
+                None
+            }
+        }
+    }
 }
 
 /// One block's share of a pass: its gradient under each weighting (the design's first) and,

@@ -10,8 +10,8 @@
 //! own.
 //!
 //! * **Passes** ([`crate::kernels`]): each pass runs over the points in blocks of
-//!   [`crate::kernels::BLOCK`] on every thread, reduced in block order (the same bits whatever
-//!   the threads); no dense Jacobian of the whole problem is kept. For Φ each block's weighted
+//!   [`crate::kernels::BLOCK`] on every thread, reduced in a tree of fixed shape (the same bits
+//!   whatever the threads); no dense Jacobian of the whole problem is kept. For Φ each block's weighted
 //!   Jacobian rows (3 per point) are multiplied into its `JᵀWJ`; for least squares (ve) they are
 //!   triangularised by a QR, with the residuals as one more column, and merged into the running
 //!   factor R by a QR of `[R; R_block]`.
@@ -417,6 +417,17 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         old - self.cost <= self.objective_tolerance() * old
     }
 
+    /// Criterion 2 for a refused step (MINPACK's `ftol` test): the decrease the model predicted,
+    /// `pred`, and the change measured, `actual`, are both within the objective-change
+    /// tolerance of the cost. The step was refused on the cost's rounding, and a more damped one
+    /// would predict less still: whatever it measured, an accepted step would stop the run on
+    /// the objective-change test (on test 4 with the demo's data: four refused steps predicting
+    /// 6e-16 of the cost while measuring ±1e-13, then one accepted).
+    fn within_rounding(&self, pred: f64, actual: f64) -> bool {
+        let tol = self.objective_tolerance() * self.cost;
+        pred <= tol && actual.abs() <= tol
+    }
+
     /// The objective-change test's tolerance: [`Options::objective_tolerance`], but for a Φ
     /// fit with scalar residuals no finer than a thousandth of the current ε's share of Φ (the
     /// smoothing moves Φ by up to ε: a stage has converged once its steps gain far less, and
@@ -769,9 +780,14 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
                 self.majorising_again();
                 return Ok(Verdict::NextPass);
             }
-            if small_step || self.damping_exhausted() {
+            let rounding = self.within_rounding(pred, self.cost - cost_new);
+            if small_step || rounding || self.damping_exhausted() {
                 if self.stage == Stage::Newton {
-                    return Err(Termination::ParameterChange);
+                    return Err(if rounding {
+                        Termination::ObjectiveChange
+                    } else {
+                        Termination::ParameterChange
+                    });
                 }
                 self.next_stage(true);
                 return Ok(Verdict::NextPass);

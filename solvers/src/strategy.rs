@@ -222,9 +222,15 @@ pub fn identify_errors(
             None,
         );
     }
+    // Whether the tracker (and stations) in p are the rigid fit to p's errors: the gauge's
+    // reference then needs no fit of its own while p's errors are at theirs.
+    let mut fitted = false;
     if strategy.init_tracker {
         match init_tracker(&problem, &p) {
-            Ok(q) => p = q,
+            Ok(q) => {
+                p = q;
+                fitted = true;
+            }
             Err(e) => {
                 let initial = evaluate(&problem, &p);
                 return done(
@@ -247,9 +253,8 @@ pub fn identify_errors(
         .count();
     let free = eligible_count.saturating_sub(model.constraints().rows.len());
     // Distinct poses only: a point measured twice adds no equation about the machine.
-    let distinct = distinct_poses(&problem);
-    let equations = 3 * distinct;
-    if equations < MIN_EQUATIONS_PER_PARAMETER * free {
+    let needed = (MIN_EQUATIONS_PER_PARAMETER * free).div_ceil(3);
+    if let Err(distinct) = distinct_poses(&problem, needed) {
         return done(
             p,
             vec![],
@@ -284,7 +289,7 @@ pub fn identify_errors(
             // where the phase holds them), the tracker's the rigid fit to that; the directions
             // are those the design cannot identify there.
             let phase_gauge = if strategy.gauge {
-                let reference = gauge_reference(&problem, &p, free);
+                let reference = gauge_reference(&problem, &p, free, fitted);
                 // A start that is the reference but for the tracker's last bits (every free
                 // error at its initial value: the usual start) starts at the reference itself,
                 // the same rigid fit, so that the engine takes the gauge's pass there as its
@@ -320,6 +325,7 @@ pub fn identify_errors(
                 break 'loops;
             }
             p = sol.params;
+            fitted = false;
         }
         let now = evaluate(&problem, &p).stats.emm_um;
         if emm - now <= 1e-9 * emm {
@@ -337,7 +343,7 @@ pub fn identify_errors(
             &p,
             "gauge",
         );
-        let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors));
+        let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors), false);
         gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
         if let Some(g) = &gauge {
             p = g.project(&p);
@@ -347,15 +353,27 @@ pub fn identify_errors(
 }
 
 /// The gauge's reference for a solve that identifies the parameters `free` accepts: those errors
-/// at their initial value (zero), the others as in `p`, and the tracker's rigid fit to that.
-fn gauge_reference(problem: &Problem, p: &[f64], free: impl Fn(&ParamInfo) -> bool) -> Vec<f64> {
+/// at their initial value (zero), the others as in `p`, and the tracker's rigid fit to that —
+/// `p` itself when its tracker is that fit already (`fitted`: the rigid fit to p's errors) and
+/// its free errors are at their initial values to the bit.
+fn gauge_reference(
+    problem: &Problem,
+    p: &[f64],
+    free: impl Fn(&ParamInfo) -> bool,
+    fitted: bool,
+) -> Vec<f64> {
     let model = problem.model();
     let initial_params = model.initial_params();
     let mut reference = p.to_vec();
+    let mut moved = false;
     for (j, info) in model.params().iter().enumerate() {
         if free(info) && info.group != Group::Tracker {
+            moved |= reference[j].to_bits() != initial_params[j].to_bits();
             reference[j] = initial_params[j];
         }
+    }
+    if fitted && !moved {
+        return reference;
     }
     init_tracker(problem, &reference).unwrap_or(reference)
 }
@@ -399,19 +417,23 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
 /// Fewest equations (3 per distinct pose and reflector) per free parameter a mesh must give.
 pub const MIN_EQUATIONS_PER_PARAMETER: usize = 3;
 
-/// Distinct (commands, reflector) pairs of a problem's data (rotary positions a turn apart are
-/// one pose).
-fn distinct_poses(problem: &Problem) -> usize {
-    use rayon::prelude::*;
+/// Whether a problem's data hold at least `needed` distinct (commands, reflector, station)
+/// keys (rotary positions a turn apart are one pose), read until they do; `Err` with how many
+/// they hold when they do not.
+fn distinct_poses(problem: &Problem, needed: usize) -> Result<(), usize> {
     let (model, data) = (problem.model(), problem.data());
-    let mut keys: Vec<Vec<i64>> = data
-        .points
-        .par_iter()
-        .map(|p| volver_core::measure::pose_key(model.machine(), p))
-        .collect();
-    keys.par_sort_unstable();
-    keys.dedup();
-    keys.len()
+    let mut keys = std::collections::HashSet::new();
+    for p in &data.points {
+        keys.insert(volver_core::measure::pose_key(model.machine(), p));
+        if keys.len() >= needed {
+            return Ok(());
+        }
+    }
+    if keys.len() >= needed {
+        Ok(())
+    } else {
+        Err(keys.len())
+    }
 }
 
 /// [`identify_errors`] with every error free: the joint method.
