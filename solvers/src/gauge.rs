@@ -264,10 +264,13 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     }
     // The null space's basis in the parameters: p = D N_s z.
     let basis = Mat::from_fn(n, nf, |j, k| scale[j] * ns.basis()[(j, k)]);
-    let mz = sandwich(metric.as_ref(), basis.as_ref());
-    let hz = sandwich(h.as_ref(), basis.as_ref());
-    // The part of the free space the metric sees: M_z = Q diag(m) Qᵀ, kept where m > 1e-12 max.
-    let evm = mz.self_adjoint_eigen(Side::Lower).ok()?;
+    // The part of the free space the metric sees: M_z = Q diag(m) Qᵀ, kept where m > 1e-12 max
+    // (decomposed while H_z is formed).
+    let (evm, hz) = rayon::join(
+        || sandwich(metric.as_ref(), basis.as_ref()).self_adjoint_eigen(Side::Lower),
+        || sandwich(h.as_ref(), basis.as_ref()),
+    );
+    let evm = evm.ok()?;
     let (mv, q) = (evm.S().column_vector(), evm.U());
     let mmax = (0..nf).map(|i| mv[i]).fold(0.0_f64, f64::max);
     if mmax <= 0.0 {

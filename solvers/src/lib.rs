@@ -352,7 +352,11 @@ pub fn share_calling_thread() -> bool {
 /// Φ, ve, EMM and EMax of a problem at `params`.
 pub fn evaluate(problem: &dyn Residuals, params: &[f64]) -> Evaluation {
     // The modules on every core, summed in point order: the same bits as one thread.
-    let norms = crate::loss::norms_of(problem, params);
+    evaluation_of(&crate::loss::norms_of(problem, params))
+}
+
+/// [`evaluate`] from the residual modules (mm), in point order.
+pub(crate) fn evaluation_of(norms: &[f64]) -> Evaluation {
     let n = norms.len() as f64;
     Evaluation {
         phi_mm: norms.iter().sum::<f64>() / n,

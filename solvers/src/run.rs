@@ -89,6 +89,9 @@ pub(crate) struct Run<'t, 'a> {
     /// Non-finite trial points met on the way.
     pub(crate) edge: FiniteEdge,
     t0: Instant,
+    /// The residual modules at the start (the initial evaluation's), until [`begin`] takes
+    /// them.
+    start_norms: Vec<f64>,
 }
 
 impl<'t, 'a> Run<'t, 'a> {
@@ -132,6 +135,7 @@ impl<'t, 'a> Run<'t, 'a> {
             },
             edge: FiniteEdge::default(),
             t0: Instant::now(),
+            start_norms: Vec::new(),
         };
         if let Err(e) = options.validate() {
             return Err(Box::new(run.finish(
@@ -147,7 +151,8 @@ impl<'t, 'a> Run<'t, 'a> {
             });
             return Err(Box::new(run.finish(start.to_vec(), t)));
         }
-        run.summary.initial = evaluate(problem, start);
+        run.start_norms = crate::loss::norms_of(problem, start);
+        run.summary.initial = crate::evaluation_of(&run.start_norms);
         run.summary.evaluations += 1;
         Ok(run)
     }
@@ -248,15 +253,31 @@ pub(crate) fn begin<'t, 'a>(
 ) -> Result<Started<'t, 'a>, Box<Solution>> {
     let run = Run::start(solver, task, start, options)?;
     let (mut run, free, start_normal) = run.free_and_normal(task, start)?;
-    let p0 = free.params(&vec![0.0; free.n_free()]);
+    // A start on the constraints (to their rounding) is taken as it is, with its evaluation;
+    // another is projected onto them.
+    let on_constraints = satisfies(&task.constraints, start);
+    let p0 = if on_constraints {
+        start.to_vec()
+    } else {
+        free.params(&vec![0.0; free.n_free()])
+    };
     if free.n_free() == 0 {
         return Err(Box::new(run.finish(p0, Termination::NoFreeParameters)));
     }
-    let Some(norms0) = norms(run.problem, &p0) else {
+    let start_norms = std::mem::take(&mut run.start_norms);
+    let norms0 = if on_constraints {
+        start_norms
+            .iter()
+            .all(|v| v.is_finite())
+            .then_some(start_norms)
+    } else {
+        run.summary.evaluations += 1;
+        norms(run.problem, &p0)
+    };
+    let Some(norms0) = norms0 else {
         let t = Termination::NumericalFailure(Failure::ResidualsNotFinite(At::Start));
         return Err(Box::new(run.finish(p0, t)));
     };
-    run.summary.evaluations += 1;
     Ok(Started {
         run,
         free,
@@ -264,4 +285,55 @@ pub(crate) fn begin<'t, 'a>(
         p0,
         norms0,
     })
+}
+
+/// Whether `p` satisfies every row of `constraints` to its rounding (64 ε of the row's terms'
+/// size; a held value exactly).
+fn satisfies(constraints: &volver_core::model::Constraints, p: &[f64]) -> bool {
+    constraints.rows.iter().all(|row| {
+        let (mut sum, mut size) = (-row.rhs, row.rhs.abs());
+        for &(j, c) in &row.coeffs {
+            let Some(&v) = p.get(j) else {
+                return false;
+            };
+            sum += c * v;
+            size += (c * v).abs();
+        }
+        match row.coeffs.as_slice() {
+            [(j, c)] => p[*j] == row.rhs / c,
+            _ => sum.abs() <= 64.0 * f64::EPSILON * size,
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::satisfies;
+    use volver_core::model::{Constraint, ConstraintKind, Constraints};
+
+    fn row(kind: ConstraintKind, coeffs: Vec<(usize, f64)>, rhs: f64) -> Constraint {
+        Constraint {
+            kind,
+            label: String::new(),
+            coeffs,
+            rhs,
+        }
+    }
+
+    #[test]
+    fn a_start_satisfies_rows_to_their_rounding_and_held_values_exactly() {
+        // 0.1 + 0.2 ≠ 0.3 in binary, by one ulp: within the rounding.
+        let c = Constraints {
+            rows: vec![
+                row(ConstraintKind::Gauge, vec![(0, 1.0), (1, 1.0)], 0.3),
+                row(ConstraintKind::Fixed, vec![(2, 2.0)], 5.0),
+            ],
+        };
+        assert!(satisfies(&c, &[0.1, 0.2, 2.5]));
+        // A row off by 1e-12 of its size, a held value off by one ulp, a missing parameter.
+        assert!(!satisfies(&c, &[0.1, 0.2 + 3e-13, 2.5]));
+        assert!(!satisfies(&c, &[0.1, 0.2, 2.5_f64.next_up()]));
+        assert!(!satisfies(&c, &[0.1, 0.2]));
+        assert!(satisfies(&Constraints::default(), &[1.0]));
+    }
 }

@@ -203,8 +203,14 @@ pub fn identify_errors(
     let model = problem.model();
     let mut p = start.to_vec();
     let mut gauge: Option<Gauge> = None;
-    let done = |p: Vec<f64>, phases: Vec<Summary>, initial, termination, gauge| Identification {
-        reached: evaluate(&problem, &p),
+    // `reached`: the evaluation at p when it is known.
+    let done = |p: Vec<f64>,
+                phases: Vec<Summary>,
+                initial,
+                termination,
+                gauge,
+                reached: Option<Evaluation>| Identification {
+        reached: reached.unwrap_or_else(|| evaluate(&problem, &p)),
         params: p,
         phases,
         initial,
@@ -219,6 +225,7 @@ pub fn identify_errors(
             vec![],
             initial,
             Termination::InvalidInput(crate::Invalid::NoSubloop),
+            None,
             None,
         );
     }
@@ -239,11 +246,16 @@ pub fn identify_errors(
                     initial,
                     Termination::InvalidInput(crate::Invalid::Refused(e)),
                     None,
+                    None,
                 );
             }
         }
     }
-    let initial = evaluate(&problem, &p);
+    // The initial evaluation: the first phase's own when it starts here (the usual case: one
+    // evaluation of the start, not two).
+    let first_start = p.clone();
+    let initial_cell = std::cell::OnceCell::new();
+    let initial = || *initial_cell.get_or_init(|| evaluate(&problem, &first_start));
     // A mesh too small for the model: fewer equations (3 per point) than free parameters (at
     // least the eligible ones less one per constraint) can identify nothing reliably.
     let eligible_count = model
@@ -258,7 +270,7 @@ pub fn identify_errors(
         return done(
             p,
             vec![],
-            initial,
+            initial(),
             Termination::InvalidInput(crate::Invalid::MeshTooSmall {
                 distinct,
                 points: problem.n_points(),
@@ -266,11 +278,15 @@ pub fn identify_errors(
                 per_parameter: MIN_EQUATIONS_PER_PARAMETER,
             }),
             None,
+            None,
         );
     }
     let mut phases = Vec::new();
     let mut termination = Termination::NoFreeParameters;
-    let mut emm = initial.stats.emm_um;
+    // EMM at the end of the previous loop (the initial one before the first), and the
+    // evaluation of p when it is known (a phase's result).
+    let mut emm: Option<f64> = None;
+    let mut at_p: Option<Evaluation> = None;
     'loops: for pass in 0..strategy.subloops {
         for groups in strategy.phasing.phases() {
             let free = |info: &ParamInfo| {
@@ -308,10 +324,17 @@ pub fn identify_errors(
             };
             // Solved under the gauge's constraints, from the start moved onto it: the engine
             // never wanders along what the data cannot see.
-            let mut sol = match &phase_gauge {
-                Some(g) => solver.solve(&g.apply(&task), &g.project(&p), options, observer),
-                None => solver.solve(&task, &p, options, observer),
+            let phase_start = match &phase_gauge {
+                Some(g) => g.project(&p),
+                None => p.clone(),
             };
+            let mut sol = match &phase_gauge {
+                Some(g) => solver.solve(&g.apply(&task), &phase_start, options, observer),
+                None => solver.solve(&task, &phase_start, options, observer),
+            };
+            if same_bits(&phase_start, &first_start) {
+                let _ = initial_cell.set(sol.summary.initial);
+            }
             if let Some(g) = phase_gauge
                 && !sol.summary.termination.failed()
             {
@@ -325,13 +348,15 @@ pub fn identify_errors(
                 break 'loops;
             }
             p = sol.params;
+            at_p = phases.last().map(|s: &Summary| s.reached);
             fitted = false;
         }
-        let now = evaluate(&problem, &p).stats.emm_um;
-        if emm - now <= 1e-9 * emm {
+        let before = emm.unwrap_or_else(|| initial().stats.emm_um);
+        let now = at_p.unwrap_or_else(|| evaluate(&problem, &p)).stats.emm_um;
+        if before - now <= 1e-9 * before {
             break;
         }
-        emm = now;
+        emm = Some(now);
     }
     // Several phases: each held its own flat combinations, and a later phase moves the tracker
     // along an earlier one's. The result goes onto the gauge of every parameter the call
@@ -347,9 +372,10 @@ pub fn identify_errors(
         gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
         if let Some(g) = &gauge {
             p = g.project(&p);
+            at_p = None;
         }
     }
-    done(p, phases, initial, termination, gauge)
+    done(p, phases, initial(), termination, gauge, at_p)
 }
 
 /// The gauge's reference for a solve that identifies the parameters `free` accepts: those errors
@@ -390,9 +416,12 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
     let mut out = sol;
     let projected = g.project(&out.params);
     if out.summary.polished {
-        // The engine polished it under these very constraints.
-        out.params = projected;
-        out.summary.reached = evaluate(problem, &out.params);
+        // The engine polished it under these very constraints (and evaluated it there, unless
+        // the projection moved it).
+        if !same_bits(&projected, &out.params) {
+            out.params = projected;
+            out.summary.reached = evaluate(problem, &out.params);
+        }
         return out;
     }
     out.params = match crate::polish::settle(
@@ -595,4 +624,9 @@ pub fn cross_validate(
     );
     after.initial = before.reached;
     after
+}
+
+/// Whether two parameter vectors are the same to the bit.
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
