@@ -57,9 +57,9 @@
 //!   an absolute value, so Φ is an L1 fit whose optimum interpolates some ranges) starts its
 //!   Newton stage at ε = 1e-2 Φ and lowers ε tenfold each time a stage converges, down to
 //!   1e-6 Φ: 80–150 steps on test 4's ranges from four stations, Φ within ~1e-5 of the L1
-//!   optimum (Clarabel's SOCP reaches it exactly). On the bench's test 4 a fit takes 11 steps
-//!   (10 of the LM, 1 of the polish, which stops once a Newton step moves the error functions by
-//!   less than 1e-10 of their size).
+//!   optimum (Clarabel's SOCP reaches it exactly). On the bench's test 4 a fit takes 10 steps
+//!   (9 of the LM, every one accepted, 1 of the polish, which stops once a Newton step moves the
+//!   error functions by less than 1e-10 of their size).
 //!
 //! ```
 //! use volver_core::machine::Machine;
