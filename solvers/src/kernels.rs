@@ -21,8 +21,9 @@ pub const BLOCK: usize = 512;
 
 thread_local! {
     /// A thread's scratch for [`block_part`]: the block's weighted rows (3 [`BLOCK`] (n+1)),
-    /// one point's Jacobian rows (3n) and, for a factor, the rows transposed, kept between passes (a fresh block buffer is a large
-    /// allocation, mapped and zeroed page by page at every pass).
+    /// one point's Jacobian rows (3n) and, for a factor, the rows transposed, kept between
+    /// passes (a fresh block buffer is a large allocation, mapped and zeroed page by page at
+    /// every pass; the first pass of a process on each thread still pays that once).
     static SCRATCH: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)> =
         const { std::cell::RefCell::new((Vec::new(), Vec::new(), Vec::new())) };
     /// A thread's buffers for the blocks' `J_bᵀ W_b J_b` (n² each), kept between passes (up to
@@ -61,8 +62,9 @@ pub(crate) struct Factor {
 /// from them, with `factor` (least squares only), its triangular factor by a QR, merged into the
 /// running R by a QR of `[R; R_block]` (`H = RᵀR`), else its `J_bᵀ W_b J_b` by a rank-k update,
 /// added to H. Blocks run in parallel and are reduced in a tree of fixed shape
-/// ([`Pass::reduce`]): the bits do not depend on the threads. `None` when a residual or Jacobian entry is not finite, or when `factor` is
-/// asked of a pass that is not plain least squares.
+/// ([`Pass::reduce`]): the bits do not depend on the threads. `None` when a residual or
+/// Jacobian entry is not finite, or when `factor` is asked of a pass that is not plain least
+/// squares.
 pub(crate) fn accumulate(
     problem: &dyn Residuals,
     p: &[f64],
@@ -288,9 +290,9 @@ struct BlockPart {
 
 /// [`accumulate_weighted`]'s work on block `b` under `weight` (after the design when
 /// `with_design`), with the scratch `blk` (3 [`BLOCK`] (n+1)), `row` (3n) and, for a factor,
-/// `tb` (3 [`BLOCK`] (n+1)); without `out` (one n × n buffer per weighting, column-major, upper
-/// triangle zero) the block forms the factor, else the lower triangle of each `J_bᵀ W_b J_b` in
-/// `out`.
+/// `tb` (3 [`BLOCK`] (n+1)); without `out` (one n × n buffer per weighting, column-major, its
+/// upper triangle neither written nor read) the block forms the factor, else the lower triangle
+/// of each `J_bᵀ W_b J_b` in `out`.
 ///
 /// The block's rows are written one after another (row ρ = 3q + c of point q at
 /// `blk[ρ (n+1)..]`, its residual last), so that each point's writes are contiguous; the block's
