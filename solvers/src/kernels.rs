@@ -241,8 +241,6 @@ impl Pass<'_, '_> {
         } else {
             PARTS.with(|pool| {
                 let mut pool = pool.borrow_mut();
-                // Every entry of the lower triangle a block reads it writes first: no zeroing
-                // needed.
                 (0..k)
                     .map(|_| match pool.iter().position(|b| b.len() == n * n) {
                         Some(i) => pool.swap_remove(i),

@@ -355,6 +355,11 @@ pub fn evaluate(problem: &dyn Residuals, params: &[f64]) -> Evaluation {
     evaluation_of(&crate::loss::norms_of(problem, params))
 }
 
+/// Whether two parameter vectors are the same to the bit.
+pub(crate) fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
 /// [`evaluate`] from the residual modules (mm), in point order.
 pub(crate) fn evaluation_of(norms: &[f64]) -> Evaluation {
     let n = norms.len() as f64;

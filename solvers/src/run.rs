@@ -170,13 +170,7 @@ impl<'t, 'a> Run<'t, 'a> {
         let known = task
             .plain
             .as_ref()
-            .filter(|k| {
-                k.at.len() == start.len()
-                    && k.at
-                        .iter()
-                        .zip(start)
-                        .all(|(a, b)| a.to_bits() == b.to_bits())
-            })
+            .filter(|k| crate::same_bits(&k.at, start))
             .map(|k| k.normal.clone());
         let first = match known {
             Some(normal) => normal,

@@ -26,7 +26,7 @@ use crate::gauge::Gauge;
 use crate::init::init_tracker;
 use crate::options::Options;
 use crate::summary::{Evaluation, Summary, Termination};
-use crate::{Observer, Solution, Solver, Task, evaluate};
+use crate::{Observer, Solution, Solver, Task, evaluate, same_bits};
 use serde::Serialize;
 use std::time::Instant;
 use volver_core::iso::Group;
@@ -324,14 +324,11 @@ pub fn identify_errors(
             };
             // Solved under the gauge's constraints, from the start moved onto it: the engine
             // never wanders along what the data cannot see.
-            let phase_start = match &phase_gauge {
-                Some(g) => g.project(&p),
-                None => p.clone(),
+            let (phase_task, phase_start) = match &phase_gauge {
+                Some(g) => (g.apply(&task), g.project(&p)),
+                None => (task.clone(), p.clone()),
             };
-            let mut sol = match &phase_gauge {
-                Some(g) => solver.solve(&g.apply(&task), &phase_start, options, observer),
-                None => solver.solve(&task, &phase_start, options, observer),
-            };
+            let mut sol = solver.solve(&phase_task, &phase_start, options, observer);
             if same_bits(&phase_start, &first_start) {
                 let _ = initial_cell.set(sol.summary.initial);
             }
@@ -624,9 +621,4 @@ pub fn cross_validate(
     );
     after.initial = before.reached;
     after
-}
-
-/// Whether two parameter vectors are the same to the bit.
-fn same_bits(a: &[f64], b: &[f64]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
 }
