@@ -33,3 +33,4 @@ pub fn tool_grid(m: &volver::core::machine::Machine) -> volver::solvers::uncerta
     let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
     volver::solvers::uncertainty::ToolGrid { commands, tool }
 }
+pub mod rs274;

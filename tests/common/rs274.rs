@@ -1,0 +1,265 @@
+//! LinuxCNC's RS274NGC interpreter `rs274` (Debian `linuxcnc-uspace`) as the judge of G-code:
+//! runs a program through it and reads the canonical machining commands it prints.
+//!
+//! `rs274` prints each canonical command with the program's position in the units in force
+//! (`USE_LENGTH_UNITS`), to 4 decimals, and the offsets apart (`SET_G5X_OFFSET`,
+//! `SET_G92_OFFSET`, `USE_TOOL_LENGTH_OFFSET`): the machine position of a point is the program
+//! position plus the work offset, the G92/G52 offset and the tool length offset (no XY rotation
+//! is used here). The standalone interpreter reads its parameter file (`-v`) and tool table
+//! (`-t`) in inches whatever the program's units (seen: `5221 100` gives a G54 X offset of
+//! 2540 mm), so the tests write those files in inches.
+
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::Command;
+
+/// One canonical command that matters to the tests, positions as machine positions in mm
+/// (linear axes) and degrees (rotary axes), in the order X Y Z A B C.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// `STRAIGHT_TRAVERSE`: a rapid move to the position.
+    Traverse([f64; 6]),
+    /// `STRAIGHT_FEED`: a feed move to the position, with the feed mode in force and the rate
+    /// (units per minute, inverse time converted by the interpreter).
+    Feed([f64; 6], FeedMode, f64),
+    /// `ARC_FEED`: an arc (or helix) ending at the position, with its centre (machine, mm, in
+    /// the plane's two axes, the third left at NaN), the feed mode and rate in force.
+    Arc([f64; 6], [f64; 3], FeedMode, f64),
+    /// `DWELL` (s).
+    Dwell(f64),
+    /// `CHANGE_TOOL` (the pocket or tool number printed).
+    ToolChange(i64),
+    /// Spindle words: `START_SPINDLE_CLOCKWISE`, `…_COUNTERCLOCKWISE`, `STOP_SPINDLE_TURNING`,
+    /// `SET_SPINDLE_SPEED`, as printed.
+    Spindle(String),
+    /// `PROGRAM_STOP`, `OPTIONAL_PROGRAM_STOP`, `PROGRAM_END`.
+    Stop(String),
+}
+
+/// The feed mode in force.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FeedMode {
+    /// Units per minute (`G94`).
+    PerMinute,
+    /// Inverse time (`G93`): the rate is 1 / minutes of the move.
+    InverseTime,
+    /// Units per revolution (`G95`).
+    PerRevolution,
+}
+
+/// What the interpreter made of a program.
+#[derive(Debug)]
+pub struct Run {
+    /// The events in order.
+    pub events: Vec<Event>,
+    /// Everything it printed (stdout), for messages.
+    pub canon: String,
+}
+
+impl Run {
+    /// The end points of every move, in order.
+    pub fn end_points(&self) -> Vec<[f64; 6]> {
+        self.events
+            .iter()
+            .filter_map(|e| match e {
+                Event::Traverse(p) | Event::Feed(p, ..) | Event::Arc(p, ..) => Some(*p),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// The dwells (s), in order.
+    pub fn dwells(&self) -> Vec<f64> {
+        self.events
+            .iter()
+            .filter_map(|e| match e {
+                Event::Dwell(t) => Some(*t),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Every event that is not a move, in order (dwells, tool changes, spindle, stops).
+    pub fn non_moves(&self) -> Vec<Event> {
+        self.events
+            .iter()
+            .filter(|e| !matches!(e, Event::Traverse(_) | Event::Feed(..) | Event::Arc(..)))
+            .cloned()
+            .collect()
+    }
+}
+
+/// Whether `rs274` is on the PATH.
+pub fn available() -> bool {
+    Command::new("rs274")
+        .arg("-h")
+        .output()
+        .map(|o| !o.stdout.is_empty() || !o.stderr.is_empty())
+        .unwrap_or(false)
+}
+
+/// Panics with how to install `rs274` when it is missing (the README's test command installs
+/// it; set `VOLVER_NO_RS274=1` to skip these tests knowingly).
+pub fn require() -> bool {
+    if available() {
+        return true;
+    }
+    if std::env::var_os("VOLVER_NO_RS274").is_some() {
+        eprintln!("rs274 missing: skipped (VOLVER_NO_RS274 is set)");
+        return false;
+    }
+    panic!(
+        "LinuxCNC's interpreter rs274 is not installed: `apt-get install linuxcnc-uspace` \
+         (scripts/test does it), or set VOLVER_NO_RS274=1 to skip the G-code judge"
+    );
+}
+
+/// Runs `program` through `rs274` with an optional tool table and parameter file (inches, see
+/// the module's docs). An interpreter error is returned as `Err` with its message and line.
+pub fn run(program: &Path, tools: Option<&Path>, vars: Option<&Path>) -> Result<Run, String> {
+    let mut cmd = Command::new("rs274");
+    cmd.arg("-g");
+    if let Some(t) = tools {
+        cmd.arg("-t").arg(t);
+    }
+    if let Some(v) = vars {
+        cmd.arg("-v").arg(v);
+    }
+    let out = cmd
+        .arg(program)
+        .output()
+        .map_err(|e| format!("rs274: {e}"))?;
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    let complaints: Vec<&str> = stderr
+        .lines()
+        .filter(|l| !l.trim().is_empty() && l.trim() != "executing")
+        .collect();
+    if !out.status.success() || !complaints.is_empty() {
+        return Err(format!(
+            "rs274 refused {} (exit {:?}): {}",
+            program.display(),
+            out.status.code(),
+            complaints.join(" | ")
+        ));
+    }
+    Ok(Run {
+        events: parse(&stdout)?,
+        canon: stdout,
+    })
+}
+
+/// The numbers between the parentheses of a canonical call (commas or spaces between them).
+fn numbers(args: &str) -> Vec<f64> {
+    args.split([',', ' '])
+        .filter_map(|t| t.trim().parse::<f64>().ok())
+        .collect()
+}
+
+/// The interpreter's state while its output is read.
+struct State {
+    mm_per_unit: f64,
+    g5x: [f64; 6],
+    g92: [f64; 6],
+    tool: [f64; 6],
+    plane: usize,
+    feed: f64,
+    mode: FeedMode,
+}
+
+impl State {
+    /// Machine position (mm, degrees) of a program position in the units in force.
+    fn machine(&self, p: &[f64]) -> [f64; 6] {
+        std::array::from_fn(|k| {
+            let v = p[k] + self.g5x[k] + self.g92[k] + self.tool[k];
+            if k < 3 { v * self.mm_per_unit } else { v }
+        })
+    }
+}
+
+/// The events of `rs274`'s output.
+pub fn parse(canon: &str) -> Result<Vec<Event>, String> {
+    let mut s = State {
+        mm_per_unit: 1.0,
+        g5x: [0.0; 6],
+        g92: [0.0; 6],
+        tool: [0.0; 6],
+        plane: 0,
+        feed: 0.0,
+        mode: FeedMode::PerMinute,
+    };
+    let mut events = Vec::new();
+    for line in canon.lines() {
+        let Some(call) = line.split("N..... ").nth(1) else {
+            continue;
+        };
+        let (name, rest) = call.split_once('(').unwrap_or((call, ""));
+        let args = rest.trim_end_matches(')');
+        let v = numbers(args);
+        match name {
+            "USE_LENGTH_UNITS" => {
+                s.mm_per_unit = if args.contains("INCHES") { 25.4 } else { 1.0 };
+            }
+            "SET_G5X_OFFSET" => s.g5x.copy_from_slice(&v[1..7]),
+            "SET_G92_OFFSET" => s.g92.copy_from_slice(&v[..6]),
+            "USE_TOOL_LENGTH_OFFSET" => s.tool.copy_from_slice(&v[..6]),
+            "SET_XY_ROTATION" if v.first().is_some_and(|r| *r != 0.0) => {
+                return Err(format!("XY rotation is not read: {line}"));
+            }
+            "SELECT_PLANE" => {
+                s.plane = match args {
+                    a if a.contains("XZ") => 1,
+                    a if a.contains("YZ") => 2,
+                    _ => 0,
+                }
+            }
+            "SET_FEED_RATE" => s.feed = v[0],
+            // The interpreter turns an inverse-time F into a rate per minute for each move
+            // (SET_FEED_RATE before it) and says which mode it is in by a comment.
+            "COMMENT" if args.contains("feed mode set to") => {
+                s.mode = if args.contains("inverse time") {
+                    FeedMode::InverseTime
+                } else if args.contains("per revolution") {
+                    FeedMode::PerRevolution
+                } else {
+                    FeedMode::PerMinute
+                }
+            }
+            "STRAIGHT_TRAVERSE" => events.push(Event::Traverse(s.machine(&v[..6]))),
+            "STRAIGHT_FEED" => events.push(Event::Feed(s.machine(&v[..6]), s.mode, s.feed)),
+            "ARC_FEED" => events.push(arc(&s, &v)),
+            "DWELL" => events.push(Event::Dwell(v[0])),
+            "CHANGE_TOOL" => events.push(Event::ToolChange(v[0] as i64)),
+            "START_SPINDLE_CLOCKWISE"
+            | "START_SPINDLE_COUNTERCLOCKWISE"
+            | "STOP_SPINDLE_TURNING"
+            | "SET_SPINDLE_SPEED" => events.push(Event::Spindle(call.to_string())),
+            "PROGRAM_STOP" | "OPTIONAL_PROGRAM_STOP" | "PROGRAM_END" => {
+                events.push(Event::Stop(name.to_string()))
+            }
+            _ => {}
+        }
+    }
+    Ok(events)
+}
+
+/// `ARC_FEED(first_end, second_end, first_axis, second_axis, rotation, axis_end, a, b, c, …)`:
+/// first and second are X, Y in G17, Z, X in G18, Y, Z in G19.
+fn arc(s: &State, v: &[f64]) -> Event {
+    let (d1, d2, d3) = [(0, 1, 2), (2, 0, 1), (1, 2, 0)][s.plane];
+    let mut p = [0.0; 6];
+    p[d1] = v[0];
+    p[d2] = v[1];
+    p[d3] = v[5];
+    p[3..6].copy_from_slice(&v[6..9]);
+    let end = s.machine(&p);
+    let mut c = [0.0; 6];
+    c[d1] = v[2];
+    c[d2] = v[3];
+    let centre = s.machine(&c);
+    let mut centre3 = [f64::NAN; 3];
+    centre3[d1] = centre[d1];
+    centre3[d2] = centre[d2];
+    Event::Arc(end, centre3, s.mode, s.feed)
+}
