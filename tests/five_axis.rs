@@ -338,7 +338,7 @@ fn tool_centre_point_programs_are_refused_naming_the_word() {
         ("N20 RTCP", "RTCP"),
         ("G68.2 X0 Y0 Z0 I0 J45 K0", "G68.2"),
     ] {
-        let text = format!("G21 G90\nG0 X0 Y0 Z100\n{line}\nG1 X10 A20\n");
+        let text = format!("G21 G90\nG0 X0 Y0 Z100 A0 C0\n{line}\nG1 X10 A20\n");
         let err = Program::parse(&text, "tcp.nc", &m, &Linearise::default())
             .unwrap_err()
             .to_string();
@@ -347,16 +347,25 @@ fn tool_centre_point_programs_are_refused_naming_the_word() {
             "{line}: {err}"
         );
     }
-    // Not those words: a comment, a longer number, another M code.
+    // Not those words: a comment, another M code; a longer number is another code, which volver
+    // does not know (refused as unknown, not as tool-centre-point mode).
     for line in [
         "(M128 would switch TCPM on)",
-        "G1 X10 M1280",
+        "G1 X10 M8",
         "G1 X12.5 ; TRAORI later",
     ] {
-        let text = format!("G21 G90\nG0 X0 Y0 Z100\n{line}\n");
+        let text = format!("G21 G90\nG0 X0 Y0 Z100 A0 C0\n{line}\n");
         let r = Program::parse(&text, "ok.nc", &m, &Linearise::default());
         assert!(r.is_ok(), "{line}: {:?}", r.err());
     }
+    let text = "G21 G90\nG0 X0 Y0 Z100 A0 C0\nG1 X10 M1280\n";
+    let e = Program::parse(text, "ok.nc", &m, &Linearise::default())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("not a code volver reads") && !e.contains("tool-centre"),
+        "{e}"
+    );
 }
 
 /// Controller tables of a five-axis machine: a hand-set location error of each rotary axis and
