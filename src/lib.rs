@@ -23,6 +23,7 @@ pub mod diagnosis;
 pub mod history;
 pub mod identification;
 pub mod inputs;
+pub mod machining;
 pub mod planning;
 pub mod plot;
 pub mod report;

@@ -8,11 +8,12 @@ use volver::compensation::{
 };
 use volver::core::compensate::Compensator;
 use volver::core::fsio::write_atomic;
-use volver::core::gcode::{Linearise, Program};
+use volver::core::gcode::{Setup, Tooling, WriteOptions};
 use volver::core::model::Model;
 use volver::core::results::ResultsFile;
 use volver::core::results::UncertaintyRecord;
 use volver::core::tables::ErrorTables;
+use volver::machining::{self, ToolPoints};
 
 /// Options of `volver compensate`.
 #[derive(clap::Args)]
@@ -80,6 +81,38 @@ pub struct CompensateArgs {
     /// Compensate even when the uncertainty exceeds --max-u-um.
     #[arg(long)]
     force: bool,
+    /// The control's offsets for --gcode: LinuxCNC's parameter file (.var: G54–G59.3, G92,
+    /// G28/G30 positions) or volver's TOML offsets file (.toml: work, g92, home and tool
+    /// tables).
+    #[arg(long, requires = "gcode")]
+    offsets: Option<PathBuf>,
+    /// The control's tool table for --gcode (LinuxCNC .tbl): G43 Hn applies its lengths, and
+    /// each tool is compensated at its own tool point (--gauge-point plus its length along the
+    /// tool axis).
+    #[arg(long, requires = "gcode")]
+    tool_table: Option<PathBuf>,
+    /// Units of the .var and .tbl files (LinuxCNC keeps them in the machine's units): mm or inch.
+    #[arg(long, default_value = "mm")]
+    offset_units: String,
+    /// The machine's position when the program starts (machine coordinates, mm and degrees,
+    /// e.g. X=0,Y=0,Z=500): every axis must be known before the first compensated move.
+    #[arg(long, value_name = "AXIS=VALUE,…", allow_hyphen_values = true)]
+    start: Option<String>,
+    /// The tool in the spindle when the program starts.
+    #[arg(long, value_name = "N")]
+    start_tool: Option<i64>,
+    /// The point tool lengths are measured from (the spindle's gauge line), mm in the frame of
+    /// the last tool-side axis; default: the tool point (--tool).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    gauge_point: Option<String>,
+    /// Without a tool table, compensate every tool of a program that changes tools at the one
+    /// tool point (--tool).
+    #[arg(long)]
+    same_tool_point: bool,
+    /// Write compensated points beyond an axis' travel, each marked on its line, instead of
+    /// refusing them.
+    #[arg(long)]
+    allow_outside_travel: bool,
 }
 
 /// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
@@ -207,6 +240,8 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         Some(a.results.as_path()),
         a.points.as_deref(),
         a.gcode.as_deref(),
+        a.offsets.as_deref(),
+        a.tool_table.as_deref(),
     ]
     .into_iter()
     .flatten()
@@ -249,7 +284,6 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         model.spec().name,
     );
     check_max_u(a.max_u_um)?;
-    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         bail!(
             "--tolerance {}: the verification tolerance must be a positive length (mm)",
@@ -257,6 +291,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         );
     }
     let done = if let Some(path) = &a.points {
+        vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
         let done = compensate_points(&comp, m, &text, &label, usize::from(a.decimals))?;
@@ -267,7 +302,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         );
         done
     } else {
-        compensate_gcode(&a, &comp, &model, tool)?
+        compensate_gcode(&a, &comp, &model, &params, record.as_ref(), tool, axis)?
     };
     println!(
         "  verified through the forward model: largest deviation {:.3e} mm as solved, {:.3e} mm as written ({} decimals)",
@@ -326,31 +361,84 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     Ok(())
 }
 
-/// The G-code program of `--gcode`, linearised and compensated.
+/// The G-code program of `--gcode`, read with the control's offsets and tools, linearised and
+/// compensated: each tool at its own tool point, each vouched for by its U.
+#[allow(clippy::too_many_arguments)]
 fn compensate_gcode(
     a: &CompensateArgs,
     comp: &Compensator,
     model: &Model,
+    params: &[f64],
+    record: Option<&UncertaintyRecord>,
     tool: [f64; 3],
+    axis: Option<[f64; 3]>,
 ) -> Result<Compensated> {
     let m = model.machine();
     let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
     let label = path.display().to_string();
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-    let lin = Linearise {
-        chord_tolerance_mm: a.chord_tolerance,
-        max_segment_mm: a.max_segment,
+    let setup = Setup {
+        lin: machining::linearise(a.chord_tolerance, a.max_segment),
+        offsets: machining::offsets(
+            a.offsets.as_deref(),
+            a.tool_table.as_deref(),
+            &a.offset_units,
+        )?,
+        start: machining::start(m, a.start.as_deref())?,
+        tool: a.start_tool,
     };
-    let prog = Program::parse(&text, &label, m, &lin)?;
+    let points = ToolPoints {
+        gauge: match &a.gauge_point {
+            Some(g) => tool_point_of(Some(g), None, model).map_err(|e| {
+                anyhow::anyhow!("{}", e.to_string().replace("--tool", "--gauge-point"))
+            })?,
+            None => tool,
+        },
+        axis: a
+            .tool_axis
+            .as_deref()
+            .map(|t| volver::compensation::tool_axis_of(Some(t)))
+            .transpose()?
+            .unwrap_or([0.0, 0.0, -1.0]),
+        same_point: a.same_tool_point,
+    };
+    let (prog, tool_points) = machining::read_program(&text, &label, m, &setup, &points)?;
+    let mut tooling = Tooling::single(comp.clone());
+    if prog
+        .tools()
+        .iter()
+        .any(|t| t.is_none_or(|t| !tool_points.contains_key(&t)))
+    {
+        vouch(model, params, record, tool, a.max_u_um, a.force)?;
+    }
+    for (t, p) in &tool_points {
+        println!("  tool T{t}: tool point {} mm", point_mm(*p));
+        vouch(model, params, record, *p, a.max_u_um, a.force)?;
+        tooling
+            .tools
+            .insert(*t, compensator(model, params, *p, a.hold.as_deref(), axis)?);
+    }
     let header = format!(
-        "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm; errors of model {}",
+        "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm{}; errors of model {}",
         env!("CARGO_PKG_VERSION"),
         a.results.display(),
         a.chord_tolerance,
         point_mm(tool),
+        if tool_points.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (tools: gauge point {} mm plus each tool's length)",
+                point_mm(points.gauge)
+            )
+        },
         model.spec().name
     );
-    let (out, rep) = prog.compensate(comp, m, usize::from(a.decimals), &header)?;
+    let options = WriteOptions {
+        decimals: usize::from(a.decimals),
+        allow_outside_travel: a.allow_outside_travel,
+    };
+    let (out, rep) = prog.compensate_with(&tooling, m, &options, &header)?;
     println!(
         "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
         rep.moves,
@@ -359,6 +447,19 @@ fn compensate_gcode(
         rep.points,
         rep.max_error_mm * 1e3
     );
+    if !rep.uncompensated.is_empty() {
+        println!(
+            "  {} reference or machine-coordinate move(s) kept as written, not compensated (lines {})",
+            rep.uncompensated.len(),
+            lines_list(&rep.uncompensated)
+        );
+    }
+    if !rep.outside_travel.is_empty() {
+        println!(
+            "  warning: compensated points beyond the travel written on lines {} (marked there; --allow-outside-travel)",
+            lines_list(&rep.outside_travel)
+        );
+    }
     Ok(Compensated {
         text: out,
         points: rep.points,
@@ -376,6 +477,15 @@ fn compensate_gcode(
                 worst_singular_rad: rep.max_singular_direction_deviation_rad,
             }),
     })
+}
+
+/// Up to ten line numbers, then how many more.
+fn lines_list(lines: &[usize]) -> String {
+    let mut s: Vec<String> = lines.iter().take(10).map(usize::to_string).collect();
+    if lines.len() > 10 {
+        s.push(format!("and {} more", lines.len() - 10));
+    }
+    s.join(", ")
 }
 
 /// Options of `volver tables`.
