@@ -428,7 +428,7 @@ fn compensate_gcode(
             String::new()
         } else {
             format!(
-                " (tools: gauge point {} mm plus each tool's length)",
+                "; each tool at the gauge point {} mm plus its length",
                 point_mm(points.gauge)
             )
         },

@@ -24,8 +24,10 @@ pub enum Event {
     /// (units per minute, inverse time converted by the interpreter).
     Feed([f64; 6], FeedMode, f64),
     /// `ARC_FEED`: an arc (or helix) ending at the position, with its centre (machine, mm, in
-    /// the plane's two axes, the third left at NaN), the feed mode and rate in force.
-    Arc([f64; 6], [f64; 3], FeedMode, f64),
+    /// the plane's two axes, the third left at NaN), its rotation (+1 counter-clockwise, −1
+    /// clockwise, more for several turns), the plane's axes (indices 0–2), the feed mode and
+    /// rate in force.
+    Arc(Arc),
     /// `DWELL` (s).
     Dwell(f64),
     /// `CHANGE_TOOL` (the pocket or tool number printed).
@@ -35,6 +37,23 @@ pub enum Event {
     Spindle(String),
     /// `PROGRAM_STOP`, `OPTIONAL_PROGRAM_STOP`, `PROGRAM_END`.
     Stop(String),
+}
+
+/// An arc of `ARC_FEED`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Arc {
+    /// Its end (machine, mm and degrees).
+    pub end: [f64; 6],
+    /// Its centre (machine, mm) in the plane's two axes, NaN in the third.
+    pub centre: [f64; 3],
+    /// +1 counter-clockwise, −1 clockwise (more for several turns).
+    pub rotation: i32,
+    /// The plane's first and second axes (0 X, 1 Y, 2 Z).
+    pub axes: (usize, usize),
+    /// The feed mode in force.
+    pub mode: FeedMode,
+    /// The rate (units per minute).
+    pub rate: f64,
 }
 
 /// The feed mode in force.
@@ -63,7 +82,8 @@ impl Run {
         self.events
             .iter()
             .filter_map(|e| match e {
-                Event::Traverse(p) | Event::Feed(p, ..) | Event::Arc(p, ..) => Some(*p),
+                Event::Traverse(p) | Event::Feed(p, ..) => Some(*p),
+                Event::Arc(a) => Some(a.end),
                 _ => None,
             })
             .collect()
@@ -84,7 +104,7 @@ impl Run {
     pub fn non_moves(&self) -> Vec<Event> {
         self.events
             .iter()
-            .filter(|e| !matches!(e, Event::Traverse(_) | Event::Feed(..) | Event::Arc(..)))
+            .filter(|e| !matches!(e, Event::Traverse(_) | Event::Feed(..) | Event::Arc(_)))
             .cloned()
             .collect()
     }
@@ -117,6 +137,10 @@ pub fn require() -> bool {
 
 /// Runs `program` through `rs274` with an optional tool table and parameter file (inches, see
 /// the module's docs). An interpreter error is returned as `Err` with its message and line.
+///
+/// rs274 writes the parameter file back when it ends (`G10`, `G92`, `G28.1` persist, as on a
+/// control, and the old file is kept as `.bak`): it is given a private copy beside the
+/// program, so that runs do not leak into each other or into the test data.
 pub fn run(program: &Path, tools: Option<&Path>, vars: Option<&Path>) -> Result<Run, String> {
     let mut cmd = Command::new("rs274");
     cmd.arg("-g");
@@ -124,7 +148,9 @@ pub fn run(program: &Path, tools: Option<&Path>, vars: Option<&Path>) -> Result<
         cmd.arg("-t").arg(t);
     }
     if let Some(v) = vars {
-        cmd.arg("-v").arg(v);
+        let copy = program.with_extension("rs274.var");
+        std::fs::copy(v, &copy).map_err(|e| format!("copying {}: {e}", v.display()))?;
+        cmd.arg("-v").arg(copy);
     }
     let out = cmd
         .arg(program)
@@ -169,12 +195,18 @@ struct State {
 }
 
 impl State {
-    /// Machine position (mm, degrees) of a program position in the units in force.
+    /// Machine position (mm, degrees) of a program position in the units in force (the
+    /// offsets are kept in mm: rs274 prints them in the units in force when they are set).
     fn machine(&self, p: &[f64]) -> [f64; 6] {
         std::array::from_fn(|k| {
-            let v = p[k] + self.g5x[k] + self.g92[k] + self.tool[k];
-            if k < 3 { v * self.mm_per_unit } else { v }
+            let unit = if k < 3 { self.mm_per_unit } else { 1.0 };
+            p[k] * unit + self.g5x[k] + self.g92[k] + self.tool[k]
         })
+    }
+
+    /// Offsets as printed (units in force) in mm and degrees.
+    fn mm(&self, v: &[f64]) -> [f64; 6] {
+        std::array::from_fn(|k| if k < 3 { v[k] * self.mm_per_unit } else { v[k] })
     }
 }
 
@@ -191,9 +223,16 @@ pub fn parse(canon: &str) -> Result<Vec<Event>, String> {
     };
     let mut events = Vec::new();
     for line in canon.lines() {
-        let Some(call) = line.split("N..... ").nth(1) else {
+        // "   21 N30    STRAIGHT_TRAVERSE(…)": a count, the block number (N….. when none), the
+        // call.
+        let mut parts = line.trim_start().splitn(3, char::is_whitespace);
+        let (Some(count), Some(n), Some(call)) = (parts.next(), parts.next(), parts.next()) else {
             continue;
         };
+        if count.parse::<u64>().is_err() || !n.starts_with('N') {
+            continue;
+        }
+        let call = call.trim();
         let (name, rest) = call.split_once('(').unwrap_or((call, ""));
         let args = rest.trim_end_matches(')');
         let v = numbers(args);
@@ -201,9 +240,9 @@ pub fn parse(canon: &str) -> Result<Vec<Event>, String> {
             "USE_LENGTH_UNITS" => {
                 s.mm_per_unit = if args.contains("INCHES") { 25.4 } else { 1.0 };
             }
-            "SET_G5X_OFFSET" => s.g5x.copy_from_slice(&v[1..7]),
-            "SET_G92_OFFSET" => s.g92.copy_from_slice(&v[..6]),
-            "USE_TOOL_LENGTH_OFFSET" => s.tool.copy_from_slice(&v[..6]),
+            "SET_G5X_OFFSET" => s.g5x = s.mm(&v[1..7]),
+            "SET_G92_OFFSET" => s.g92 = s.mm(&v[..6]),
+            "USE_TOOL_LENGTH_OFFSET" => s.tool = s.mm(&v[..6]),
             "SET_XY_ROTATION" if v.first().is_some_and(|r| *r != 0.0) => {
                 return Err(format!("XY rotation is not read: {line}"));
             }
@@ -257,9 +296,17 @@ fn arc(s: &State, v: &[f64]) -> Event {
     let mut c = [0.0; 6];
     c[d1] = v[2];
     c[d2] = v[3];
+    // The centre's third coordinate is not printed: only the plane's two are used.
     let centre = s.machine(&c);
     let mut centre3 = [f64::NAN; 3];
     centre3[d1] = centre[d1];
     centre3[d2] = centre[d2];
-    Event::Arc(end, centre3, s.mode, s.feed)
+    Event::Arc(Arc {
+        end,
+        centre: centre3,
+        rotation: v[4] as i32,
+        axes: (d1, d2),
+        mode: s.mode,
+        rate: s.feed,
+    })
 }

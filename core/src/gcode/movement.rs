@@ -427,11 +427,16 @@ impl Reader<'_> {
                     moves.push((true, at(clear)));
                 }
             }
-            850 | 890 => {
+            // As LinuxCNC 2.9's interpreter moves (seen in rs274): G85 feeds out to R and
+            // rapids to the clearance; G89 dwells and feeds out to the clearance.
+            850 => {
                 moves.push((false, at(bottom)));
-                if mode == 890 {
-                    dwell(extra, moves.len());
-                }
+                moves.push((false, at(r)));
+                moves.push((true, at(clear)));
+            }
+            890 => {
+                moves.push((false, at(bottom)));
+                dwell(extra, moves.len());
                 moves.push((false, at(clear)));
             }
             _ => unreachable!("cycle codes are checked"),
