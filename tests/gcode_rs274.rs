@@ -197,6 +197,7 @@ const CASES: &[Case] = &[
     case("29-xcfz-inches.ngc", Kind::Xcfz),
     case("30-five-axis.ngc", Kind::Five),
     case("31-five-axis-inverse-time.ngc", Kind::Five),
+    case("32-readme-part.ngc", Kind::Xcfz),
 ];
 
 /// The compensators of a results file, per tool (the mill's tools at the gauge point 0,0,0

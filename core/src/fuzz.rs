@@ -14,7 +14,7 @@
 //! ```
 
 use crate::compensate::{Compensator, read_points};
-use crate::gcode::{Linearise, Program};
+use crate::gcode::{Linearise, Program, Setup};
 use crate::machine::Machine;
 use crate::measure::MeasurementSet;
 use crate::model::{ErrorModelSpec, Model};
@@ -154,8 +154,8 @@ pub fn results_json(data: &[u8]) {
     }
 }
 
-/// G-code for the embedded XCFZ machine: parsed (arcs linearised to 0.01 mm, moves split at
-/// 50 mm), compensated with the paper model carrying a known positioning error of X (50 µm at
+/// G-code for the embedded XCFZ machine starting at its reference position: parsed (arcs
+/// linearised to 0.01 mm, moves split at 50 mm), compensated with the paper model carrying a known positioning error of X (50 µm at
 /// the end of its travel), and the compensated program must parse again and mean what volver
 /// meant: re-read by the same reader, it moves through one point per programmed point, each
 /// rapid or optional as its source, and each putting the tool (through the forward model with
@@ -169,7 +169,13 @@ pub fn gcode(data: &[u8]) {
         chord_tolerance_mm: 0.01,
         max_segment_mm: Some(50.0),
     };
-    let Ok(program) = Program::parse(text, "fuzz.nc", &machine, &lin) else {
+    // The machine starts at its reference position (every axis known), as `--start` gives it.
+    let setup = Setup {
+        lin,
+        start: std::array::from_fn(|k| machine.axes().get(k).map(|a| a.to_file_units(a.reference))),
+        ..Setup::default()
+    };
+    let Ok(program) = Program::read(text, "fuzz.nc", &machine, &setup) else {
         return;
     };
     let model = Model::default_xcfz();
@@ -185,7 +191,11 @@ pub fn gcode(data: &[u8]) {
         max_segment_mm: None,
         ..lin
     };
-    let back = match Program::parse(&out, "compensated.nc", &machine, &whole) {
+    let again = Setup {
+        lin: whole,
+        ..setup.clone()
+    };
+    let back = match Program::read(&out, "compensated.nc", &machine, &again) {
         Ok(back) => back,
         Err(e) => panic!("volver's own G-code is refused: {e}\n{out}"),
     };
