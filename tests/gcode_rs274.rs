@@ -582,6 +582,42 @@ fn scaled_run(kind: Kind, program: &Path, dir: &Path, name: &str) -> Run {
     run
 }
 
+/// The farthest an output end point is from the input's path (mm, X Y Z).
+fn stray(before: &Run, after: &Run) -> f64 {
+    let pieces = path(before);
+    let mut stray = 0.0_f64;
+    for p in after.end_points() {
+        let d = pieces
+            .iter()
+            .map(|pc| distance_to_piece([p[0], p[1], p[2]], *pc))
+            .fold(f64::INFINITY, f64::min);
+        stray = stray.max(d);
+    }
+    stray
+}
+
+/// Item 5: the scaled runs of the input and of its compensated program `out`; the largest
+/// distance (mm) of a compensated end point from volver's point compensation, checked ≤ 1e-6.
+fn precise(case: &Case, r: &Reference, idx: &[(usize, bool)], out: &Path, dir: &Path) -> f64 {
+    let input = Path::new(DATA).join(case.file);
+    let m = r.model.machine();
+    let b = scaled_run(case.kind, &input, dir, &format!("{}-in", case.file));
+    let a = scaled_run(case.kind, out, dir, &format!("{}-out", case.file));
+    let (eb, ea, tb) = (b.end_points(), a.end_points(), tools_at_moves(&b));
+    let mut worst = 0.0_f64;
+    for (i, &(k, compensated)) in idx.iter().enumerate() {
+        if compensated {
+            worst = worst.max(gap(m, &ea[k], &r.compensate(tb[i], &eb[i])));
+        }
+    }
+    assert!(
+        worst <= 1e-6,
+        "{}: end points {worst} mm from volver's point compensation",
+        case.file
+    );
+    worst
+}
+
 /// What one program's judgement measured, for the summary table.
 struct Judged {
     before: usize,
@@ -612,15 +648,7 @@ fn judge(case: &Case, r: &Reference, dir: &Path) -> Judged {
         .zip(&tools)
         .map(|(e, t)| gap(m, &r.compensate(*t, e), e))
         .fold(0.0, f64::max);
-    let pieces = path(&before);
-    let mut stray = 0.0_f64;
-    for p in after.end_points() {
-        let d = pieces
-            .iter()
-            .map(|pc| distance_to_piece([p[0], p[1], p[2]], *pc))
-            .fold(f64::INFINITY, f64::min);
-        stray = stray.max(d);
-    }
+    let stray = stray(&before, &after);
     let bound = 0.001 + largest * 3f64.sqrt() + 4.0 * res;
     assert!(
         stray <= bound,
@@ -651,23 +679,7 @@ fn judge(case: &Case, r: &Reference, dir: &Path) -> Judged {
     let cycles = ["G73", "G81", "G82", "G83", "G85", "G86", "G89"]
         .iter()
         .any(|c| text.contains(c));
-    let precise = (!cycles).then(|| {
-        let b = scaled_run(case.kind, &input, dir, &format!("{}-in", case.file));
-        let a = scaled_run(case.kind, &out, dir, &format!("{}-out", case.file));
-        let (eb, ea, tb) = (b.end_points(), a.end_points(), tools_at_moves(&b));
-        let mut worst = 0.0_f64;
-        for (i, &(k, compensated)) in idx.iter().enumerate() {
-            if compensated {
-                worst = worst.max(gap(m, &ea[k], &r.compensate(tb[i], &eb[i])));
-            }
-        }
-        assert!(
-            worst <= 1e-6,
-            "{}: end points {worst} mm from volver's point compensation",
-            case.file
-        );
-        worst
-    });
+    let precise = (!cycles).then(|| precise(case, r, &idx, &out, dir));
     Judged {
         before: before.end_points().len(),
         after: after.end_points().len(),

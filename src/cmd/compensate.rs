@@ -377,6 +377,53 @@ fn compensate_gcode(
     let path = a.gcode.as_ref().expect("clap requires --points or --gcode");
     let label = path.display().to_string();
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
+    let (setup, points) = gcode_setup(a, model, tool)?;
+    let (prog, tool_points) = machining::read_program(&text, &label, m, &setup, &points)?;
+    let mut tooling = Tooling::single(comp.clone());
+    if prog
+        .tools()
+        .iter()
+        .any(|t| t.is_none_or(|t| !tool_points.contains_key(&t)))
+    {
+        vouch(model, params, record, tool, a.max_u_um, a.force)?;
+    }
+    for (t, p) in &tool_points {
+        println!("  tool T{t}: tool point {} mm", point_mm(*p));
+        vouch(model, params, record, *p, a.max_u_um, a.force)?;
+        let c = compensator(model, params, *p, a.hold.as_deref(), axis)?;
+        tooling.tools.insert(*t, c);
+    }
+    let gauge = (!tool_points.is_empty()).then_some(points.gauge);
+    let header = gcode_header(a, &label, model, tool, gauge);
+    let options = WriteOptions {
+        decimals: usize::from(a.decimals),
+        allow_outside_travel: a.allow_outside_travel,
+    };
+    let (out, rep) = prog.compensate_with(&tooling, m, &options, &header)?;
+    gcode_summary(a, &label, &rep);
+    Ok(Compensated {
+        text: out,
+        points: rep.points,
+        max_error_mm: rep.max_error_mm,
+        worst_solved_mm: rep.max_deviation_mm,
+        worst_written_mm: rep.max_written_deviation_mm,
+        outside: rep.outside_travel.len(),
+        orientation: comp
+            .tool_axis()
+            .map(|_| volver::compensation::OrientationSummary {
+                max_error_rad: rep.max_direction_error_rad,
+                worst_solved_rad: rep.max_direction_deviation_rad,
+                worst_written_rad: rep.max_written_direction_deviation_rad,
+                near_singularity: rep.near_singularity.len(),
+                worst_singular_rad: rep.max_singular_direction_deviation_rad,
+            }),
+    })
+}
+
+/// The reading set-up of `--gcode` (linearisation, offsets, start, tool) and where the tools'
+/// points are.
+fn gcode_setup(a: &CompensateArgs, model: &Model, tool: [f64; 3]) -> Result<(Setup, ToolPoints)> {
+    let m = model.machine();
     let setup = Setup {
         lin: machining::linearise(a.chord_tolerance, a.max_segment),
         offsets: machining::offsets(
@@ -402,43 +449,35 @@ fn compensate_gcode(
             .unwrap_or([0.0, 0.0, -1.0]),
         same_point: a.same_tool_point,
     };
-    let (prog, tool_points) = machining::read_program(&text, &label, m, &setup, &points)?;
-    let mut tooling = Tooling::single(comp.clone());
-    if prog
-        .tools()
-        .iter()
-        .any(|t| t.is_none_or(|t| !tool_points.contains_key(&t)))
-    {
-        vouch(model, params, record, tool, a.max_u_um, a.force)?;
-    }
-    for (t, p) in &tool_points {
-        println!("  tool T{t}: tool point {} mm", point_mm(*p));
-        vouch(model, params, record, *p, a.max_u_um, a.force)?;
-        tooling
-            .tools
-            .insert(*t, compensator(model, params, *p, a.hold.as_deref(), axis)?);
-    }
-    let header = format!(
-        "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm{}; errors of model {}",
+    Ok((setup, points))
+}
+
+/// The compensated program's header.
+fn gcode_header(
+    a: &CompensateArgs,
+    label: &str,
+    model: &Model,
+    tool: [f64; 3],
+    gauge: Option<[f64; 3]>,
+) -> String {
+    let tools = gauge.map_or(String::new(), |g| {
+        format!(
+            "; each tool at the gauge point {} mm plus its length",
+            point_mm(g)
+        )
+    });
+    format!(
+        "compensated by volver {} from {label} with {}\nchord tolerance {} mm; tool point {} mm{tools}; errors of model {}",
         env!("CARGO_PKG_VERSION"),
         a.results.display(),
         a.chord_tolerance,
         point_mm(tool),
-        if tool_points.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; each tool at the gauge point {} mm plus its length",
-                point_mm(points.gauge)
-            )
-        },
         model.spec().name
-    );
-    let options = WriteOptions {
-        decimals: usize::from(a.decimals),
-        allow_outside_travel: a.allow_outside_travel,
-    };
-    let (out, rep) = prog.compensate_with(&tooling, m, &options, &header)?;
+    )
+}
+
+/// What the G-code compensation did, printed.
+fn gcode_summary(a: &CompensateArgs, label: &str, rep: &volver::core::gcode::Report) {
     println!(
         "  {} moves ({} arcs, linearised to {} mm) from {label} → {} points; uncompensated error up to {:.4} µm",
         rep.moves,
@@ -460,23 +499,6 @@ fn compensate_gcode(
             lines_list(&rep.outside_travel)
         );
     }
-    Ok(Compensated {
-        text: out,
-        points: rep.points,
-        max_error_mm: rep.max_error_mm,
-        worst_solved_mm: rep.max_deviation_mm,
-        worst_written_mm: rep.max_written_deviation_mm,
-        outside: rep.outside_travel.len(),
-        orientation: comp
-            .tool_axis()
-            .map(|_| volver::compensation::OrientationSummary {
-                max_error_rad: rep.max_direction_error_rad,
-                worst_solved_rad: rep.max_direction_deviation_rad,
-                worst_written_rad: rep.max_written_direction_deviation_rad,
-                near_singularity: rep.near_singularity.len(),
-                worst_singular_rad: rep.max_singular_direction_deviation_rad,
-            }),
-    })
 }
 
 /// Up to ten line numbers, then how many more.

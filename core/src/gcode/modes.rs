@@ -182,7 +182,7 @@ impl Reader<'_> {
     /// A tool number from a T, H or Q word: whole, ≥ 0, and in the tool table when one is
     /// given (0 is the empty spindle).
     fn tool_number(&self, v: f64, w: &str, place: &Place) -> Result<i64> {
-        if v.fract() != 0.0 || v < 0.0 || v > 1e9 {
+        if v.fract() != 0.0 || !(0.0..=1e9).contains(&v) {
             return Err(refuse(
                 place,
                 w,
@@ -286,9 +286,9 @@ impl Reader<'_> {
             1 => {
                 let t = self.tool_number(pn, "P", place)?;
                 let entry = self.offsets.tools.entry(t).or_insert([0.0; 6]);
-                for k in 0..6 {
+                for (k, e) in entry.iter_mut().enumerate() {
                     if let Some(v) = p.axes[k] {
-                        entry[k] = v * scale(k);
+                        *e = v * scale(k);
                     }
                 }
                 self.offsets.tool_table = true;
@@ -388,7 +388,7 @@ impl Reader<'_> {
         place: &Place,
     ) -> Result<()> {
         let mut words = Vec::new();
-        for k in 0..6 {
+        for (k, l) in LETTERS.iter().enumerate() {
             let (Some(v), Some(c)) = (p.axes[k], self.chain[k]) else {
                 continue;
             };
@@ -397,7 +397,7 @@ impl Reader<'_> {
             } else {
                 self.program_at(k, place)? + v
             };
-            words.push(format!("{}{}", LETTERS[k], number(prog)));
+            words.push(format!("{l}{}", number(prog)));
             self.pos[c] = Some(self.offsets.home[h][k]);
         }
         if words.is_empty() {

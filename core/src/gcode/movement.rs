@@ -22,6 +22,36 @@ fn motion_letters(mode: i64) -> &'static [char] {
     }
 }
 
+/// The pecks of `G73` (a small retract; `full` false) and `G83` (out to R and back down to
+/// `delta` above the last depth; `full` true) from `r` down to `bottom` in steps of `q`, as
+/// LinuxCNC's loop computes them (`depth -= q` while above the bottom).
+fn pecks(
+    full: bool,
+    q: f64,
+    [r, bottom, delta]: [f64; 3],
+    at: &dyn Fn(f64) -> [f64; 3],
+    moves: &mut Vec<(bool, [f64; 3])>,
+    place: &Place,
+) -> Result<()> {
+    let mut depth = r - q;
+    while depth > bottom {
+        moves.push((false, at(depth)));
+        if full {
+            moves.push((true, at(r)));
+        }
+        moves.push((true, at(depth + delta)));
+        depth -= q;
+        if moves.len() > 100_000 {
+            return Err(refuse(
+                place,
+                "Q",
+                "the peck depth Q makes more than 100 000 moves",
+            ));
+        }
+    }
+    Ok(())
+}
+
 impl Reader<'_> {
     /// The block's motion in the motion mode (explicit or modal), if it has axis words; words
     /// no code of the block uses are refused.
@@ -238,24 +268,7 @@ impl Reader<'_> {
         place: &Place,
     ) -> Result<()> {
         let code = super::codes::name('G', mode);
-        if self.plane != 0 || !self.absolute || self.feed == FeedMode::InverseTime {
-            return Err(refuse(
-                place,
-                &code,
-                format!(
-                    "{code} is expanded in the XY plane (G17), absolute mode (G90) and feed per \
-                     minute only: controls read cycles in other planes, incremental mode and \
-                     inverse time differently"
-                ),
-            ));
-        }
-        if p.axes[3..].iter().any(Option::is_some) {
-            return Err(refuse(
-                place,
-                &code,
-                format!("{code}: rotary axes do not move in a cycle"),
-            ));
-        }
+        self.cycle_allowed(p, &code, place)?;
         let words = self.cycle_words(p, mode, first, &code, place)?;
         let cur = [
             self.program_at(0, place)?,
@@ -310,6 +323,29 @@ impl Reader<'_> {
             old_z = clear;
         }
         self.cycle_steps(&moves, &extra, block, place)
+    }
+
+    /// Refuses a cycle outside `G17`, `G90` and feed per minute, or moving a rotary axis.
+    fn cycle_allowed(&self, p: &Parsed, code: &str, place: &Place) -> Result<()> {
+        if self.plane != 0 || !self.absolute || self.feed == FeedMode::InverseTime {
+            return Err(refuse(
+                place,
+                code,
+                format!(
+                    "{code} is expanded in the XY plane (G17), absolute mode (G90) and feed per \
+                     minute only: controls read cycles in other planes, incremental mode and \
+                     inverse time differently"
+                ),
+            ));
+        }
+        if p.axes[3..].iter().any(Option::is_some) {
+            return Err(refuse(
+                place,
+                code,
+                format!("{code}: rotary axes do not move in a cycle"),
+            ));
+        }
+        Ok(())
     }
 
     /// The cycle's R, Z, P and Q: from the block, else as last given (sticky); refused when a
@@ -385,22 +421,7 @@ impl Reader<'_> {
         match mode {
             730 | 830 => {
                 let q = w.q.expect("checked");
-                let mut depth = r - q;
-                while depth > bottom {
-                    moves.push((false, at(depth)));
-                    if mode == 830 {
-                        moves.push((true, at(r)));
-                    }
-                    moves.push((true, at(depth + delta)));
-                    depth -= q;
-                    if moves.len() > 100_000 {
-                        return Err(refuse(
-                            place,
-                            "Q",
-                            "the peck depth Q makes more than 100 000 moves",
-                        ));
-                    }
-                }
+                pecks(mode == 830, q, [r, bottom, delta], &at, moves, place)?;
                 moves.push((false, at(bottom)));
                 moves.push((true, at(clear)));
             }
