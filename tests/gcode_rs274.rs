@@ -707,7 +707,7 @@ fn the_corpus_runs_in_rs274_as_the_input_meant() {
     .map(|(n, k)| (n, Reference::load(k)))
     .collect();
     println!(
-        "| program | rs274 moves before → after | uncompensated matches | strays mm | scaled check mm |"
+        "| program | feature | rs274 moves before → after | uncompensated (reference) | strays mm | scaled check mm |"
     );
     for c in CASES {
         let r = match c.kind {
@@ -724,8 +724,13 @@ fn the_corpus_runs_in_rs274_as_the_input_meant() {
             c.file,
             j.plain
         );
+        let text = std::fs::read_to_string(Path::new(DATA).join(c.file)).unwrap();
+        let feature = text
+            .lines()
+            .find_map(|l| l.strip_prefix('(').and_then(|l| l.strip_suffix(')')))
+            .unwrap_or("");
         println!(
-            "| {} | {} → {} | {} | {:.2e} | {} |",
+            "| {} | {feature} | {} → {} | {} | {:.2e} | {} |",
             c.file,
             j.before,
             j.after,
