@@ -149,7 +149,8 @@ impl Reader<'_> {
         Ok(())
     }
 
-    /// `G43 [Hn]`: the tool length offset of tool n (default: the tool in the spindle).
+    /// `G43 [Hn]`: the tool length offset of tool n (default: the tool in the spindle); with no
+    /// tool known in the spindle yet (no `M6`, no start tool), tool n is taken to be there.
     fn g43(&mut self, p: &Parsed, block: &mut Block, place: &Place) -> Result<()> {
         if !self.offsets.tool_table {
             return Err(refuse(
@@ -176,6 +177,11 @@ impl Reader<'_> {
             }
         };
         self.tool_offset = self.offsets.tools.get(&h).copied().unwrap_or([0.0; 6]);
+        // A program that applies tool n's length with no tool change before it runs with the
+        // tool the control has loaded: tool n, whose point compensates its moves.
+        if self.tool.is_none() && h != 0 {
+            self.tool = Some(h);
+        }
         Ok(())
     }
 
