@@ -125,10 +125,22 @@ impl ErrorTables {
             // `rows` is finite here (a positive finite step over a finite travel).
             if rows > MAX_TABLE_ROWS as f64 {
                 return Err(Error::Model(format!(
-                    "a step of {step} {} over axis {}'s travel gives {rows:.3e} rows; a table \
+                    "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table \
                      has at most {MAX_TABLE_ROWS}: use a larger step",
+                    crate::error::number(step),
                     a.file_unit(),
                     a.axis
+                )));
+            }
+            if step > hi - lo && hi > lo {
+                return Err(Error::Model(format!(
+                    "a step of {} {unit} exceeds axis {}'s travel of {} {unit}: a table needs \
+                     both ends of the travel and the positions between; use a step of at most \
+                     the travel",
+                    crate::error::number(step),
+                    a.axis,
+                    hi - lo,
+                    unit = a.file_unit(),
                 )));
             }
             let mut positions = Vec::new();

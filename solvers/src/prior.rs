@@ -80,9 +80,11 @@ impl Priors {
                 return Err(Error::input(
                     Place::file("--prior").at_field(t.clone()),
                     format!(
-                        "a prior magnitude of {v} {unit} is outside {} … {} {unit}; write \
+                        "a prior magnitude of {} {unit} is outside {} … {} {unit}; write \
                          {kind}=flat for a flat prior",
-                        PRIOR_RANGE.0, PRIOR_RANGE.1
+                        volver_core::error::number(v),
+                        PRIOR_RANGE.0,
+                        PRIOR_RANGE.1
                     ),
                 ));
             }

@@ -309,10 +309,15 @@ fn compare_plans(
                         })
                     })
                     .collect::<Result<_>>()?;
+                volver::planning::check_distinct_reflectors(machine, &plan.reflectors)
+                    .with_context(|| format!("--compare {item}"))?;
             }
             plan
         };
         plans.push((item.to_string(), plan));
+    }
+    if plans.is_empty() {
+        bail!("--compare {list:?}: no plan named (comma-separated plan files or presets)");
     }
     let drift = (a.drift != "none").then_some(a.drift.as_str());
     let rows = compare(model, &plans, a.seeds, noise, tool, drift)?;

@@ -168,7 +168,7 @@ pub fn load(machine: &Machine, path: &Path) -> Result<Plan> {
 /// the file's.
 pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
     // A byte-order mark (spreadsheets write one) is not part of the first column's name.
-    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let text = crate::error::without_bom(text);
     // Comment lines are blanked (not removed) so that line numbers stay the file's.
     let body: String = text
         .lines()
