@@ -243,6 +243,15 @@ impl Profile {
         })
     }
 
+    /// The unit the profile reads lengths in: its name as written (`mm` by default) and its size
+    /// in mm.
+    pub fn length_unit(&self) -> (&str, f64) {
+        (
+            self.spec.coordinates.length_unit.as_deref().unwrap_or("mm"),
+            self.length_mm,
+        )
+    }
+
     /// Reads an export file through the profile.
     pub fn load_export(&self, machine: &Machine, path: &Path) -> Result<MeasurementSet> {
         let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
