@@ -218,7 +218,10 @@ impl Outputs {
     /// The check for a run that reads `inputs`.
     pub fn new<P: AsRef<Path>>(inputs: impl IntoIterator<Item = P>) -> Outputs {
         Outputs {
-            inputs: inputs.into_iter().map(|p| p.as_ref().to_path_buf()).collect(),
+            inputs: inputs
+                .into_iter()
+                .map(|p| p.as_ref().to_path_buf())
+                .collect(),
             claimed: Vec::new(),
         }
     }

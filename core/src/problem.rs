@@ -299,7 +299,10 @@ impl<'a> Problem<'a> {
             crate::measure::Observation::Range => predicted[0].abs(),
             crate::measure::Observation::Point => norm(predicted),
         };
-        let station = p.station.as_deref().map_or(String::new(), |s| format!(", station {s}"));
+        let station = p
+            .station
+            .as_deref()
+            .map_or(String::new(), |s| format!(", station {s}"));
         let near = if range < 1e-6 {
             ": the reflector is at the station there (a range of 0 mm has no direction); move \
              the station off the reflector's path in the machine file"

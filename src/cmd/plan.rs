@@ -140,8 +140,8 @@ pub fn run(a: PlanArgs) -> Result<()> {
     };
     let planned = plan(&model, &request)?;
     let machine = planned.model.machine();
-    let machine_out = derived_machine
-        .filter(|_| machine.reflectors().len() > model.machine().reflectors().len());
+    let machine_out =
+        derived_machine.filter(|_| machine.reflectors().len() > model.machine().reflectors().len());
     if let Some(path) = &machine_out {
         let text = toml::to_string(machine.spec()).context("writing the machine file")?;
         write_atomic(
@@ -240,7 +240,11 @@ pub fn run(a: PlanArgs) -> Result<()> {
 /// machine file derived from `--out`) against its inputs and each other before anything runs;
 /// returns the derived machine file's path.
 fn claim_outputs(a: &PlanArgs) -> Result<Option<PathBuf>> {
-    let inputs = [a.machine.as_deref(), a.model.as_deref(), a.reflectors.as_deref()];
+    let inputs = [
+        a.machine.as_deref(),
+        a.model.as_deref(),
+        a.reflectors.as_deref(),
+    ];
     let mut outputs = volver::core::fsio::Outputs::new(inputs.into_iter().flatten());
     for out in [&a.out, &a.gcode].into_iter().flatten() {
         outputs.claim(out)?;
@@ -251,14 +255,12 @@ fn claim_outputs(a: &PlanArgs) -> Result<Option<PathBuf>> {
         .filter(|_| a.reflectors.is_some())
         .map(|o| o.with_extension("machine.toml"));
     if let Some(path) = &derived {
-        outputs
-            .claim(path)
-            .with_context(|| {
-                format!(
-                    "plan writes the machine file of its candidate reflectors beside --out, as {}",
-                    path.display()
-                )
-            })?;
+        outputs.claim(path).with_context(|| {
+            format!(
+                "plan writes the machine file of its candidate reflectors beside --out, as {}",
+                path.display()
+            )
+        })?;
     }
     Ok(derived)
 }

@@ -17,8 +17,8 @@
 //! first appearance. Every error names the file, line and column.
 
 use super::{Plan, Step};
-use crate::error::{Error, Place, Result};
 use crate::chain::MAX_AXES;
+use crate::error::{Error, Place, Result};
 use crate::machine::{Commands, Machine};
 use std::collections::HashMap;
 use std::fmt::Write as _;
