@@ -256,7 +256,7 @@ mod tests {
                 });
             }
         });
-        let records = read(&path).unwrap();
+        let records = read(&path).unwrap().records;
         assert_eq!(records.len(), 200);
         for w in 0..8 {
             for i in 0..25 {
