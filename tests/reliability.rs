@@ -63,12 +63,13 @@ fn monte_carlo_counts_are_bounded_before_the_fit() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Every derived output path goes through the same check as --out: inputs (also as hard and
-/// symbolic links) and other outputs of the same run are refused, and the input is untouched.
-#[test]
-fn no_output_overwrites_an_input_or_another_output() {
-    let dir = scratch("outputs");
-    let sim = simulated(&dir);
+/// The inputs the overwrite cases name, beside a simulated test 3 in `dir/sim`: a machine file
+/// named as plan's derived `tool2.machine.toml`, candidate reflectors `r3.toml` and their copy
+/// `cand.machine.toml`, `D/machine.toml`, a hard link `hard.toml` to the machine file, a results
+/// file `T/errors.csv` named as a table, a symbolic link `link.csv` to the measurements. Returns
+/// the simulation's folder and the files that must stay untouched.
+fn overwrite_fixtures(dir: &Path) -> (PathBuf, Vec<String>) {
+    let sim = simulated(dir);
     let p = |n: &str| dir.join(n).display().to_string();
     let machine = sim.join("machine.toml");
     std::fs::copy(&machine, p("tool2.machine.toml")).unwrap();
@@ -81,31 +82,35 @@ fn no_output_overwrites_an_input_or_another_output() {
     std::fs::create_dir_all(p("D")).unwrap();
     std::fs::copy(&machine, p("D/machine.toml")).unwrap();
     std::fs::hard_link(&machine, p("hard.toml")).unwrap();
-    // A results file named as one of the tables `tables` writes into its folder.
     std::fs::create_dir_all(p("T")).unwrap();
     std::fs::copy(sim.join("truth.json"), p("T/errors.csv")).unwrap();
     #[cfg(unix)]
     std::os::unix::fs::symlink(sim.join("measurements.csv"), p("link.csv")).unwrap();
+    let watched = vec![
+        p("tool2.machine.toml"),
+        p("cand.machine.toml"),
+        p("D/machine.toml"),
+        p("T/errors.csv"),
+        sim.join("measurements.csv").display().to_string(),
+        machine.display().to_string(),
+    ];
+    (sim, watched)
+}
+
+/// The overwrite cases on [`overwrite_fixtures`]: each command and what its refusal names.
+fn overwrite_cases(dir: &Path, sim: &Path) -> Vec<(Vec<String>, &'static str)> {
+    let p = |n: &str| dir.join(n).display().to_string();
     let data = sim.join("measurements.csv").display().to_string();
     let model = format!(
         "{}/core/data/xcfz-paper-model.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    let watched = [
-        p("tool2.machine.toml"),
-        p("cand.machine.toml"),
-        p("D/machine.toml"),
-        p("T/errors.csv"),
-        data.clone(),
-        machine.display().to_string(),
-    ];
-    let before: Vec<Vec<u8>> = watched.iter().map(|f| std::fs::read(f).unwrap()).collect();
     let (tool2, r3, cand) = (
         p("tool2.machine.toml"),
         p("r3.toml"),
         p("cand.machine.toml"),
     );
-    let cases: Vec<(Vec<String>, &str)> = vec![
+    vec![
         (
             vec![
                 "plan",
@@ -186,7 +191,19 @@ fn no_output_overwrites_an_input_or_another_output() {
                 .to_vec(),
             "errors.csv is an input",
         ),
-    ];
+    ]
+}
+
+/// Every derived output path goes through the same check as --out: inputs (also as hard and
+/// symbolic links) and other outputs of the same run are refused, and the input is untouched.
+#[test]
+fn no_output_overwrites_an_input_or_another_output() {
+    let dir = scratch("outputs");
+    let (sim, watched) = overwrite_fixtures(&dir);
+    let p = |n: &str| dir.join(n).display().to_string();
+    let data = sim.join("measurements.csv").display().to_string();
+    let before: Vec<Vec<u8>> = watched.iter().map(|f| std::fs::read(f).unwrap()).collect();
+    let cases = overwrite_cases(&dir, &sim);
     for (args, what) in &cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let err = refused(&args);
@@ -516,6 +533,17 @@ fn meaningless_options_are_refused_with_the_bound() {
         assert!(err.contains(what), "{args:?}: {err}");
         assert!(err.len() < 600, "{args:?}: {err}");
     }
+    assert!(!dir.join("p.csv").exists() && !dir.join("bs").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Model files beyond their bounds: a [fixed] value of 1e300 gets its own message (not the
+/// scale check's), a ball-screw period of 1e-300 mm is refused naming the field.
+#[test]
+fn model_values_beyond_their_bounds_are_refused() {
+    let dir = scratch("models");
+    let sim = simulated(&dir);
+    let d = sim.join("measurements.csv").display().to_string();
     let fixed = data("model-fixed-huge.toml");
     let err = refused(&["identify", "--data", &d, "--model", &fixed, "--no-history"]);
     assert!(
@@ -526,7 +554,6 @@ fn meaningless_options_are_refused_with_the_bound() {
     let screw = data("model-screw-tiny.toml");
     let err = refused(&["identify", "--data", &d, "--model", &screw, "--no-history"]);
     assert!(err.contains("period_mm") && err.contains("1e-300"), "{err}");
-    assert!(!dir.join("p.csv").exists() && !dir.join("bs").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

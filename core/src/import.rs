@@ -163,30 +163,8 @@ impl Profile {
             }
             p
         };
-        let delimiter = match spec.delimiter.as_deref() {
-            None => b',',
-            Some("\\t" | "\t") => b'\t',
-            // A line end, a quote or a number's characters would split rows or numbers, not
-            // fields.
-            Some(d)
-                if d.len() == 1
-                    && d.is_ascii()
-                    && !d.bytes().any(|b| {
-                        b.is_ascii_control() || b.is_ascii_alphanumeric() || b"\".-+".contains(&b)
-                    }) =>
-            {
-                d.as_bytes()[0]
-            }
-            Some(d) => {
-                return Err(Error::input(
-                    at("delimiter"),
-                    format!(
-                        "delimiter {d:?}: one ASCII character that is not a line end, a quote, a \
-                         letter, a digit or a sign (\",\", \";\", \"\\t\", \"|\" …)"
-                    ),
-                ));
-            }
-        };
+        let delimiter = delimiter_of(spec.delimiter.as_deref())
+            .map_err(|m| Error::input(at("delimiter"), m))?;
         let c = &spec.coordinates;
         let length_mm = match c.length_unit.as_deref().unwrap_or("mm") {
             "mm" => 1.0,
@@ -324,33 +302,8 @@ impl Profile {
             .map(str::to_string)
             .collect();
         let column = |name: &str, field: &str| -> Result<usize> {
-            let found: Vec<usize> = (0..headers.len()).filter(|&i| headers[i] == name).collect();
-            match found[..] {
-                [i] => Ok(i),
-                [] => Err(Error::input(
-                    profile_at(field),
-                    format!(
-                        "column '{name}' is not in the header of {file} (line {}: {})",
-                        offset + 1,
-                        header_list(&headers)
-                    ),
-                )),
-                _ => Err(Error::input(
-                    profile_at(field),
-                    format!(
-                        "column '{name}' appears {} times in the header of {file} (line {}, \
-                         columns {}): which one to read cannot be told; rename the columns in \
-                         the export",
-                        found.len(),
-                        offset + 1,
-                        found
-                            .iter()
-                            .map(|i| (i + 1).to_string())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )),
-            }
+            column_of(&headers, name, file, offset + 1)
+                .map_err(|m| Error::input(profile_at(field), m))
         };
         let point_col = column(&spec.point, "point")?;
         let c = &spec.coordinates;
@@ -528,6 +481,57 @@ impl Profile {
         crate::measure::refuse_copies(&points, file)?;
         crate::measure::refuse_unknown_stations(machine, &points, file)?;
         Ok(MeasurementSet { points })
+    }
+}
+
+/// The byte a profile's `delimiter` names (`,` when absent; `"\\t"` or a tab for a tab): one
+/// ASCII character that is not a line end or other control character, a quote, a letter, a
+/// digit or a sign, which would split rows or numbers rather than fields.
+fn delimiter_of(text: Option<&str>) -> std::result::Result<u8, String> {
+    match text {
+        None => Ok(b','),
+        Some("\\t" | "\t") => Ok(b'\t'),
+        Some(d)
+            if d.len() == 1
+                && d.is_ascii()
+                && !d.bytes().any(|b| {
+                    b.is_ascii_control() || b.is_ascii_alphanumeric() || b"\".-+".contains(&b)
+                }) =>
+        {
+            Ok(d.as_bytes()[0])
+        }
+        Some(d) => Err(format!(
+            "delimiter {d:?}: one ASCII character that is not a line end, a quote, a letter, a \
+             digit or a sign (\",\", \";\", \"\\t\", \"|\" …)"
+        )),
+    }
+}
+
+/// The column `name` of an export's `headers`: an error when it is missing (listing the header,
+/// cut short) or repeated (which one to read cannot be told). `line` is the header's line.
+fn column_of(
+    headers: &[String],
+    name: &str,
+    file: &str,
+    line: usize,
+) -> std::result::Result<usize, String> {
+    let found: Vec<usize> = (0..headers.len()).filter(|&i| headers[i] == name).collect();
+    match found[..] {
+        [i] => Ok(i),
+        [] => Err(format!(
+            "column '{name}' is not in the header of {file} (line {line}: {})",
+            header_list(headers)
+        )),
+        _ => Err(format!(
+            "column '{name}' appears {} times in the header of {file} (line {line}, columns \
+             {}): which one to read cannot be told; rename the columns in the export",
+            found.len(),
+            found
+                .iter()
+                .map(|i| (i + 1).to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
     }
 }
 
