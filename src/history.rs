@@ -76,23 +76,47 @@ pub fn append(path: &Path, record: &Record) -> Result<()> {
     Ok(())
 }
 
-/// Reads every record; an unreadable line is an error naming the file and line.
-pub fn read(path: &Path) -> Result<Vec<Record>> {
+/// The records of a history file, and the lines that are not whole records.
+#[derive(Clone, Debug, PartialEq)]
+pub struct History {
+    /// Every whole record, in the file's order.
+    pub records: Vec<Record>,
+    /// The numbers (from 1) of the lines that are not records: a line torn by a writer that was
+    /// killed, or edited by hand. The caller says so.
+    pub skipped: Vec<usize>,
+}
+
+/// Reads every record. One torn line does not make the rest unreadable: unreadable lines are
+/// skipped and numbered in [`History::skipped`]; a file without one record is an error naming
+/// its first line.
+pub fn read(path: &Path) -> Result<History> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("reading the history file {}", path.display()))?;
-    text.lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty())
-        .map(|(i, l)| {
-            serde_json::from_str(l).with_context(|| {
-                format!(
-                    "{}, line {}: not a volver history record",
-                    path.display(),
-                    i + 1
-                )
-            })
-        })
-        .collect()
+    let mut history = History {
+        records: Vec::new(),
+        skipped: Vec::new(),
+    };
+    let mut first_error = None;
+    for (i, l) in text.lines().enumerate() {
+        if l.trim().is_empty() {
+            continue;
+        }
+        match serde_json::from_str(l) {
+            Ok(r) => history.records.push(r),
+            Err(e) => {
+                history.skipped.push(i + 1);
+                first_error.get_or_insert(e);
+            }
+        }
+    }
+    if let Some(e) = first_error.filter(|_| history.records.is_empty()) {
+        return Err(anyhow::Error::new(e).context(format!(
+            "{}, line {}: not a volver history record, and no line of the file is one",
+            path.display(),
+            history.skipped[0]
+        )));
+    }
+    Ok(history)
 }
 
 /// The history as a table.
@@ -232,7 +256,7 @@ mod tests {
                 });
             }
         });
-        let records = read(&path).unwrap();
+        let records = read(&path).unwrap().records;
         assert_eq!(records.len(), 200);
         for w in 0..8 {
             for i in 0..25 {
@@ -269,7 +293,7 @@ mod tests {
         let b = rec("paper", &["raise-axis:C"], 7.9);
         append(&path, &a).unwrap();
         append(&path, &b).unwrap();
-        let back = read(&path).unwrap();
+        let back = read(&path).unwrap().records;
         assert_eq!(back, vec![a.clone(), b]);
         let t = table(&back);
         assert!(t.contains("raise-axis:C") && t.contains("-91.6 %"), "{t}");
@@ -287,8 +311,8 @@ mod tests {
         append(&path, &a).unwrap();
         let text = std::fs::read_to_string(&path).unwrap();
         assert_eq!(text.lines().count(), 2);
-        let e = format!("{:#}", read(&path).unwrap_err());
-        assert!(e.contains("line 1"), "{e}");
+        let h = read(&path).unwrap();
+        assert_eq!((h.records, h.skipped), (vec![a.clone()], vec![1]));
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

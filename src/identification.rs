@@ -275,7 +275,17 @@ pub fn identify(
         results.uncertainty = Some(cov.to_record(&rule, held));
     }
     let implausible = implausible_sizes(&problem, &id, covariance.as_ref());
-    let refusal = refusal(&id, &implausible, settings.accept);
+    let refusal = refusal(&id, &implausible, settings.accept).map(|r| {
+        match id
+            .termination
+            .failed()
+            .then(|| problem.first_non_finite(&id.params))
+            .flatten()
+        {
+            Some(place) => format!("{r}; first at {place}"),
+            None => r,
+        }
+    });
     let unidentified = unidentified(model, &id);
     Ok(Outcome {
         engine: solver.name().to_string(),

@@ -129,14 +129,23 @@ pub fn load_with(
     import: Option<&Path>,
 ) -> Result<(Machine, Model, MeasurementSet)> {
     let (m, model) = machine_and_model(machine, model)?;
+    let mut unit: Option<(String, f64)> = None;
     let set = match import {
-        Some(profile) => volver_core::import::Profile::load(profile)
-            .context("reading the import profile")?
-            .load_export(&m, data)
-            .context("reading the measurements through the import profile")?,
+        Some(path) => {
+            let profile =
+                volver_core::import::Profile::load(path).context("reading the import profile")?;
+            let (name, mm) = profile.length_unit();
+            unit = Some((name.to_string(), mm));
+            profile
+                .load_export(&m, data)
+                .context("reading the measurements through the import profile")?
+        }
         None => MeasurementSet::load(&m, data).context("reading the measurements")?,
     };
-    Problem::new(&model, &set)?.check_scale(&data.display().to_string())?;
+    Problem::new(&model, &set)?.check_scale_in(
+        &data.display().to_string(),
+        unit.as_ref().map(|(n, mm)| (&n[..], *mm)),
+    )?;
     Ok((m, model, set))
 }
 

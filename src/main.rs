@@ -80,7 +80,7 @@ enum Command {
     Plan(plan::PlanArgs),
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
     quiet_on_broken_pipe();
     // The passes of the engines start on this thread instead of being handed over.
     volver::solvers::share_calling_thread();
@@ -89,7 +89,37 @@ fn main() -> Result<()> {
         volver::core::fsio::remove_temporaries();
         std::process::exit(130);
     });
-    match Cli::parse().command {
+    match dispatch(Cli::parse().command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{}", user_error(&e));
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// An error of the input (a file, an option) as anyhow's `Error: …` / `Caused by:` text, without
+/// the stack backtrace anyhow captures when `RUST_BACKTRACE` is set: a user error is not a bug of
+/// volver, and the backtrace only hides the message. Panics (real bugs) keep their backtrace.
+fn user_error(e: &anyhow::Error) -> String {
+    let mut text = format!("Error: {e}");
+    let causes: Vec<String> = e.chain().skip(1).map(ToString::to_string).collect();
+    if !causes.is_empty() {
+        text.push_str("\n\nCaused by:");
+        for (i, c) in causes.iter().enumerate() {
+            if causes.len() == 1 {
+                text.push_str(&format!("\n    {c}"));
+            } else {
+                text.push_str(&format!("\n    {i}: {c}"));
+            }
+        }
+    }
+    text
+}
+
+/// Runs one subcommand.
+fn dispatch(command: Command) -> Result<()> {
+    match command {
         Command::Demo(a) => demo::run(a),
         Command::Report(a) => report::run(a),
         Command::Layout(a) => layout::run(a),

@@ -329,8 +329,56 @@ impl Nominal {
     }
 }
 
+/// Refuses a reflector list that names a reflector twice (`test4/R1+R1`): a plan measures each
+/// of its reflectors at every pose once.
+pub fn check_distinct_reflectors(machine: &Machine, reflectors: &[usize]) -> Result<()> {
+    for (i, r) in reflectors.iter().enumerate() {
+        if reflectors[..i].contains(r) {
+            return Err(anyhow!(
+                "reflector {} is named twice: each reflector of a plan is measured once per pose",
+                machine.reflectors()[*r].id
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Refuses counts a plan cannot have, before anything is allocated for them: 1 … 1 000 000
+/// measurements ([`MAX_PLAN_POSITIONS`], as a plan file), at least 2 candidate positions per axis
+/// (one measures no error of an axis: the design's ratio went to 3e9), and visits of the
+/// reference pose that leave room for the design.
+///
+/// [`MAX_PLAN_POSITIONS`]: volver_core::plan::MAX_PLAN_POSITIONS
+fn check_request(request: &Request) -> Result<()> {
+    use volver_core::plan::MAX_PLAN_POSITIONS;
+    if !(1..=MAX_PLAN_POSITIONS).contains(&request.points) {
+        return Err(anyhow!(
+            "{} measurements: a plan has 1 … {MAX_PLAN_POSITIONS} (--points, or --hours × 3600 / \
+             --seconds-per-point per station)",
+            request.points
+        ));
+    }
+    if request.per_axis < 2 {
+        return Err(anyhow!(
+            "--per-axis {}: at least 2 candidate positions per axis (a single one measures no \
+             error of the axis)",
+            request.per_axis
+        ));
+    }
+    if request.repeats >= request.points {
+        return Err(anyhow!(
+            "--repeats {}: the reference pose's visits must leave room in a plan of {} \
+             measurements",
+            request.repeats,
+            request.points
+        ));
+    }
+    Ok(())
+}
+
 /// Plans a test of `request.points` measurements for `model` (see the module documentation).
 pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
+    check_request(request)?;
     let t0 = std::time::Instant::now();
     let given = model;
     let full = with_reflectors(model, &request.extra_reflectors)?;

@@ -145,6 +145,7 @@ pub fn assess(
     let solver = volver_solvers::engine(&request.engine)?;
     let problem = volver_core::problem::Problem::new(model, data)?;
     let options = volver_solvers::Options::default();
+    check_replicas(request)?;
     if request.priors.is_some() && request.monte_carlo.is_some() {
         bail!(
             "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
@@ -379,6 +380,21 @@ impl Assessment {
     }
 }
 
+/// Refuses a number of Monte Carlo replicas outside 2 … [`MAX_REPLICAS`] before the fit runs
+/// (a count from the command line is bounded before anything is allocated for it).
+///
+/// [`MAX_REPLICAS`]: volver_solvers::uncertainty::MAX_REPLICAS
+fn check_replicas(request: &Request) -> Result<()> {
+    use volver_solvers::uncertainty::MAX_REPLICAS;
+    match request.monte_carlo {
+        Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => bail!(
+            "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
+             2; {MAX_REPLICAS} replicas of test 4 take about 15 min on two cores)"
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// The Monte Carlo replicas an assessment asks for and their U95 per grid coordinate (after
 /// the transform, raw; mm); `None` when it asks for none.
 fn monte_carlo_run(
@@ -394,9 +410,6 @@ fn monte_carlo_run(
     let Some((n, seed)) = request.monte_carlo else {
         return Ok(None);
     };
-    if n == 0 {
-        bail!("--monte-carlo 0: give at least 2 replicas");
-    }
     let options = volver_solvers::Options::default();
     let base = grid.points(model, &id.params);
     let mc = monte_carlo(
@@ -413,7 +426,11 @@ fn monte_carlo_run(
         progress,
     )?;
     if mc.samples.len() < 2 {
-        bail!("Monte Carlo: {} of {n} replicas failed to solve", mc.failed);
+        bail!(
+            "Monte Carlo: {} of {n} replicas failed to solve, and a standard deviation needs \
+             2 solved",
+            mc.failed
+        );
     }
     let a = grid.monte_carlo_u95(model, &mc, &base, true);
     let r = grid.monte_carlo_u95(model, &mc, &base, false);

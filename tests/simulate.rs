@@ -559,7 +559,7 @@ fn bad_effects_and_options_get_clear_errors() {
     assert!(err("thermal-drift=1,2").contains("VX,VY,VZ"));
     assert!(err("thermal-drift=1,2,x").contains("'x' is not a finite number"));
     assert!(err("ball-screw=C,10,3").contains("C is not a linear axis of XCFZ"));
-    assert!(err("ball-screw=X,0,3").contains("must be positive"));
+    assert!(err("ball-screw=X,0,3").contains("the period 0 mm is outside 0.1 … 1e6 mm"));
     assert!(err("rotary-harmonics=1").contains("outside 2..=15"));
     assert!(err("reflector-offset=R9,1,2,3").contains("no reflector 'R9'"));
     assert!(err("range-scale=inf").contains("not a finite number"));

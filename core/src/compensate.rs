@@ -911,6 +911,8 @@ pub fn read_points(
     machine: &crate::machine::Machine,
 ) -> Result<Vec<ListedPoint>> {
     use crate::error::Place;
+    // A byte-order mark (spreadsheets write one) is not part of the first column's name.
+    let text = crate::error::without_bom(text);
     let mut lines = text
         .lines()
         .enumerate()

@@ -118,3 +118,31 @@ pub(crate) fn from_toml(file: &str, source: &str, err: toml::de::Error) -> Error
     }
     Error::input(place, err.message().trim().to_string())
 }
+
+/// `text` without a leading UTF-8 byte-order mark (spreadsheets and some editors write one); an
+/// invisible first character is not part of a file's first name or key.
+///
+/// ```
+/// assert_eq!(volver_core::error::without_bom("\u{feff}name = 1"), "name = 1");
+/// ```
+pub fn without_bom(text: &str) -> &str {
+    text.strip_prefix('\u{feff}').unwrap_or(text)
+}
+
+/// A number for a message: as written for ordinary sizes, in scientific notation when tiny or
+/// huge (`1e300`, not three hundred digits).
+///
+/// ```
+/// use volver_core::error::number;
+/// assert_eq!(number(2.5), "2.5");
+/// assert_eq!(number(1e300), "1e300");
+/// assert_eq!(number(-1e-300), "-1e-300");
+/// assert_eq!(number(0.0), "0");
+/// ```
+pub fn number(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e9).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}

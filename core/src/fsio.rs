@@ -3,8 +3,8 @@
 //! leaves a half-written results, measurement or model file: the reader sees the old file or
 //! the new one. A symbolic link is written through (the file it points to is replaced, the link
 //! stays), an existing file keeps its permissions, and a target that is not a regular file (a
-//! device, a pipe) is written directly. [`check_not_an_input`] refuses an output path that names
-//! one of the command's inputs.
+//! device, a pipe) is written directly. [`Outputs`] refuses an output path that names one of the
+//! command's inputs (the same path or a link to it) or another of its outputs.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -127,12 +127,56 @@ pub fn write_atomic(path: &Path, contents: impl AsRef<[u8]>) -> std::io::Result<
     result
 }
 
-/// `true` when `a` and `b` name the same file (links resolved), or the same path when either
-/// does not exist yet.
+/// `true` when `a` and `b` name the same file: the same path once links are resolved, or (where
+/// both exist, on Unix) the same device and inode, so a hard link to a file is that file. For a
+/// path that does not exist yet, its longest existing ancestor is resolved and the rest
+/// compared component by component.
 pub fn same_file(a: &Path, b: &Path) -> bool {
-    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
-        (Ok(x), Ok(y)) => x == y,
-        _ => a == b,
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+            return x.dev() == y.dev() && x.ino() == y.ino();
+        }
+    }
+    resolved(a) == resolved(b)
+}
+
+/// `path` with every symbolic link resolved, also where the path (or the target of a dangling
+/// link) does not exist yet: the longest existing ancestor canonicalised, the rest appended
+/// without `.` components.
+fn resolved(path: &Path) -> PathBuf {
+    let mut path = path.to_path_buf();
+    // A dangling link names the file a write through it would create (at most 40 links, as
+    // the kernel follows).
+    for _ in 0..40 {
+        match std::fs::read_link(&path) {
+            Ok(target) => path = path.parent().unwrap_or(Path::new("")).join(target),
+            Err(_) => break,
+        }
+    }
+    let mut rest = Vec::new();
+    let mut base = path.as_path();
+    loop {
+        let probe = if base.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            base
+        };
+        if let Ok(c) = std::fs::canonicalize(probe) {
+            let mut out = c;
+            for part in rest.iter().rev() {
+                out.push(part);
+            }
+            return out;
+        }
+        match (base.parent(), base.file_name()) {
+            (Some(parent), Some(name)) => {
+                rest.push(name.to_os_string());
+                base = parent;
+            }
+            _ => return path.components().collect(),
+        }
     }
 }
 
@@ -146,13 +190,85 @@ pub fn same_file(a: &Path, b: &Path) -> bool {
 /// assert!(volver_core::fsio::check_not_an_input(Path::new("o.csv"), &[Path::new("m.csv")]).is_ok());
 /// ```
 pub fn check_not_an_input(out: &Path, inputs: &[&Path]) -> std::io::Result<()> {
-    match inputs.iter().find(|i| same_file(out, i)) {
-        Some(i) => Err(std::io::Error::other(format!(
-            "{} is an input of this command: writing the output there would destroy it; \
-             choose another output path",
-            i.display()
-        ))),
-        None => Ok(()),
+    Outputs::new(inputs.iter().copied()).claim(out).map(|_| ())
+}
+
+/// The files one run of a command reads, and those it has claimed to write: the one check every
+/// command makes, before anything is written, for every file it writes (derived names such as
+/// `PLAN.machine.toml` and the files of an output folder included). An output is refused when
+/// it is an input (the same path, or a symbolic or hard link to it) or another output of the
+/// same run; the error names both paths.
+///
+/// ```
+/// use std::path::Path;
+/// use volver_core::fsio::Outputs;
+/// let mut outputs = Outputs::new([Path::new("machine.toml")]);
+/// assert!(outputs.claim(Path::new("plan.csv")).is_ok());
+/// let twice = outputs.claim(Path::new("./plan.csv")).unwrap_err().to_string();
+/// assert!(twice.contains("another output of this command"), "{twice}");
+/// assert!(outputs.claim(Path::new("machine.toml")).is_err());
+/// ```
+#[derive(Debug, Default)]
+pub struct Outputs {
+    inputs: Vec<PathBuf>,
+    claimed: Vec<PathBuf>,
+}
+
+impl Outputs {
+    /// The check for a run that reads `inputs`.
+    pub fn new<P: AsRef<Path>>(inputs: impl IntoIterator<Item = P>) -> Outputs {
+        Outputs {
+            inputs: inputs
+                .into_iter()
+                .map(|p| p.as_ref().to_path_buf())
+                .collect(),
+            claimed: Vec::new(),
+        }
+    }
+
+    /// Adds an input read by the run (a file named inside another input, such as a plan's
+    /// machine file).
+    pub fn input(&mut self, path: &Path) {
+        self.inputs.push(path.to_path_buf());
+    }
+
+    /// Claims `out` for writing: an error when it is an input of the run or an output already
+    /// claimed (a device such as `/dev/null` may take several outputs). Returns the path, for the caller's convenience.
+    pub fn claim(&mut self, out: &Path) -> std::io::Result<PathBuf> {
+        if let Some(i) = self.inputs.iter().find(|i| same_file(out, i)) {
+            return Err(std::io::Error::other(format!(
+                "{} is an input of this command{}: writing the output there would destroy it; \
+                 choose another output path",
+                i.display(),
+                link_note(out, i)
+            )));
+        }
+        // A device (`/dev/null`, a terminal) takes any number of outputs.
+        let device = std::fs::metadata(out).is_ok_and(|m| !m.is_file() && !m.is_dir());
+        if let Some(o) = self.claimed.iter().find(|o| !device && same_file(out, o)) {
+            return Err(std::io::Error::other(format!(
+                "{} is another output of this command{}: one would overwrite the other; choose \
+                 distinct output paths",
+                o.display(),
+                link_note(out, o)
+            )));
+        }
+        self.claimed.push(out.to_path_buf());
+        Ok(out.to_path_buf())
+    }
+
+    /// Claims the files `names` inside the folder `dir`; returns their paths.
+    pub fn claim_in(&mut self, dir: &Path, names: &[&str]) -> std::io::Result<Vec<PathBuf>> {
+        names.iter().map(|n| self.claim(&dir.join(n))).collect()
+    }
+}
+
+/// ` (as OUT)` when the two paths are spelled differently (a link, `./`, another folder name).
+fn link_note(out: &Path, other: &Path) -> String {
+    if out == other {
+        String::new()
+    } else {
+        format!(" (as {})", out.display())
     }
 }
 
@@ -241,6 +357,33 @@ mod tests {
         let other = d.join(".").join("m.csv");
         assert!(check_not_an_input(&other, &[&f]).is_err());
         assert!(check_not_an_input(&d.join("o.csv"), &[&f]).is_ok());
+        std::fs::remove_dir_all(&d).unwrap();
+    }
+
+    /// A hard link, a symbolic link (also a dangling one) and a folder not yet made name the
+    /// same file as their target; two outputs of one run may not be one file.
+    #[cfg(unix)]
+    #[test]
+    fn links_and_repeated_outputs_are_refused() {
+        let d = dir("outputs");
+        let input = d.join("machine.toml");
+        std::fs::write(&input, "x").unwrap();
+        std::fs::hard_link(&input, d.join("hard.toml")).unwrap();
+        std::os::unix::fs::symlink(&input, d.join("soft.toml")).unwrap();
+        std::os::unix::fs::symlink(d.join("new/plan.csv"), d.join("dangling.csv")).unwrap();
+        let mut o = Outputs::new([&input]);
+        for alias in ["hard.toml", "soft.toml", "./machine.toml"] {
+            let e = o.claim(&d.join(alias)).unwrap_err().to_string();
+            assert!(e.contains("is an input"), "{alias}: {e}");
+        }
+        o.claim(&d.join("new/plan.csv")).unwrap();
+        for alias in ["new/./plan.csv", "dangling.csv"] {
+            let e = o.claim(&d.join(alias)).unwrap_err().to_string();
+            assert!(e.contains("another output"), "{alias}: {e}");
+        }
+        o.claim(&d.join("new/plan.nc")).unwrap();
+        o.claim(Path::new("/dev/null")).unwrap();
+        o.claim(Path::new("/dev/null")).unwrap();
         std::fs::remove_dir_all(&d).unwrap();
     }
 }

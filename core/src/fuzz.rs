@@ -25,7 +25,7 @@ use crate::tables::ErrorTables;
 pub type Harness = fn(&[u8]);
 
 /// The readers with a harness, by the name of their fuzz target.
-pub const TARGETS: [(&str, Harness); 8] = [
+pub const TARGETS: [(&str, Harness); 9] = [
     ("machine_toml", machine_toml),
     ("model_toml", model_toml),
     ("measurement_csv", measurement_csv),
@@ -34,6 +34,7 @@ pub const TARGETS: [(&str, Harness); 8] = [
     ("gcode", gcode),
     ("points_csv", points_csv),
     ("tables", tables),
+    ("plan_file", plan_file),
 ];
 
 /// Evaluates `model` with `params` once per reflector, every axis at zero.
@@ -137,11 +138,19 @@ pub fn import_profile(data: &[u8]) {
     let machine = two_stations();
     if let Ok(set) = profile.read(&machine, export, "export.txt") {
         rewritten(&machine, &set);
+        // The scale check in the profile's unit refuses or accepts, without a panic.
+        let model = Model::new(machine.clone(), ErrorModelSpec::complete(&machine))
+            .expect("the complete model builds");
+        if let Ok(problem) = crate::problem::Problem::new(&model, &set) {
+            let _ = problem.check_scale_in("export.txt", Some(profile.length_unit()));
+        }
     }
 }
 
-/// Results files (JSON): parsed, then the machine, the model and the parameters are rebuilt and
-/// evaluated.
+/// Results files (JSON) with or without their covariance record: parsed, then the machine, the
+/// model and the parameters are rebuilt and evaluated; an accepted covariance record gives every
+/// parameter a finite standard uncertainty, and not all of them zero; what is accepted volver
+/// writes and reads again to the same parameters.
 pub fn results_json(data: &[u8]) {
     let Ok(text) = std::str::from_utf8(data) else {
         return;
@@ -149,8 +158,69 @@ pub fn results_json(data: &[u8]) {
     let Ok(results) = ResultsFile::from_json_str(text, "fuzz.json") else {
         return;
     };
-    if let Ok((model, params)) = results.to_model("fuzz.json") {
-        evaluate(&model, &params);
+    let Ok((model, params)) = results.to_model("fuzz.json") else {
+        return;
+    };
+    evaluate(&model, &params);
+    if let Some(u) = &results.uncertainty {
+        let variance: Vec<f64> = (0..params.len())
+            .map(|j| {
+                let data: f64 = u.data_factor.iter().map(|c| c[j] * c[j]).sum();
+                let held: f64 = u.held_factor.iter().map(|c| c[j] * c[j]).sum();
+                data + held * u.held_prior_mm * u.held_prior_mm
+            })
+            .collect();
+        assert!(
+            variance.iter().all(|v| !v.is_nan()),
+            "a NaN variance from an accepted covariance record"
+        );
+        assert!(
+            u.data_factor.iter().flatten().any(|v| *v != 0.0),
+            "an accepted covariance record claims U = 0 for every parameter"
+        );
+    }
+    let written = results.to_json();
+    match ResultsFile::from_json_str(&written, "rewritten.json").map(|r| r.to_model("rewritten")) {
+        Ok(Ok((_, again))) => assert_eq!(again, params, "{written}"),
+        Ok(Err(e)) | Err(e) => panic!("volver's own results file is refused: {e}\n{written}"),
+    }
+}
+
+/// Plan files (CSV) for the embedded XCFZ machine: what the reader accepts volver writes as a
+/// plan file (positions rounded to 1e-9 mm or degree) and reads again with the same
+/// measurements in the same order, every position within 1e-6 of its unit.
+pub fn plan_file(data: &[u8]) {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return;
+    };
+    let machine = Machine::default_xcfz();
+    let Ok(plan) = crate::plan::file::from_csv_str(&machine, text, "fuzz.csv") else {
+        return;
+    };
+    let poses = |p: &crate::plan::Plan| -> Vec<(Vec<f64>, usize)> {
+        p.steps()
+            .iter()
+            .map(|s| {
+                let c = &p.positions[s.position];
+                let v = (machine.axes().iter().enumerate())
+                    .map(|(k, ax)| ax.to_file_units(c.0[k]))
+                    .collect();
+                (v, s.reflector)
+            })
+            .collect()
+    };
+    let written = crate::plan::file::to_csv(&plan, &machine, "fuzz");
+    let again = match crate::plan::file::from_csv_str(&machine, &written, "rewritten.csv") {
+        Ok(again) => again,
+        Err(e) => panic!("volver's own plan file is refused: {e}\n{written}"),
+    };
+    let (a, b) = (poses(&plan), poses(&again));
+    assert_eq!(a.len(), b.len(), "{written}");
+    for ((p, r), (q, s)) in a.iter().zip(&b) {
+        assert_eq!(r, s, "{written}");
+        for (x, y) in p.iter().zip(q) {
+            assert!((x - y).abs() <= 1e-6, "{x} written as {y}\n{written}");
+        }
     }
 }
 

@@ -154,6 +154,7 @@ impl Profile {
 
     /// Parses and checks a profile; `file` names it in messages.
     pub fn from_toml_str(text: &str, file: &str) -> Result<Profile> {
+        let text = crate::error::without_bom(text);
         let spec: ProfileSpec = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
         let at = |field: &str| {
             let mut p = Place::file(file).at_field(field);
@@ -162,17 +163,8 @@ impl Profile {
             }
             p
         };
-        let delimiter = match spec.delimiter.as_deref() {
-            None => b',',
-            Some("\\t" | "\t") => b'\t',
-            Some(d) if d.len() == 1 && d.is_ascii() => d.as_bytes()[0],
-            Some(d) => {
-                return Err(Error::input(
-                    at("delimiter"),
-                    format!("delimiter {d:?}: one ASCII character (\",\", \";\", \"\\t\" …)"),
-                ));
-            }
-        };
+        let delimiter = delimiter_of(spec.delimiter.as_deref())
+            .map_err(|m| Error::input(at("delimiter"), m))?;
         let c = &spec.coordinates;
         let length_mm = match c.length_unit.as_deref().unwrap_or("mm") {
             "mm" => 1.0,
@@ -229,6 +221,15 @@ impl Profile {
         })
     }
 
+    /// The unit the profile reads lengths in: its name as written (`mm` by default) and its size
+    /// in mm.
+    pub fn length_unit(&self) -> (&str, f64) {
+        (
+            self.spec.coordinates.length_unit.as_deref().unwrap_or("mm"),
+            self.length_mm,
+        )
+    }
+
     /// Reads an export file through the profile.
     pub fn load_export(&self, machine: &Machine, path: &Path) -> Result<MeasurementSet> {
         let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
@@ -278,10 +279,8 @@ impl Profile {
                 "the pattern names no {reflector}, and the machine has several reflectors",
             ));
         }
-        let body: String = text
-            .split_inclusive('\n')
-            .skip(spec.skip_lines)
-            .collect::<String>();
+        let body = export_body(text, spec.skip_lines, file)
+            .map_err(|m| Error::input(profile_at("skip_lines"), m))?;
         let offset = spec.skip_lines;
         let mut rdr = csv::ReaderBuilder::new()
             .has_headers(true)
@@ -303,16 +302,8 @@ impl Profile {
             .map(str::to_string)
             .collect();
         let column = |name: &str, field: &str| -> Result<usize> {
-            headers.iter().position(|h| h == name).ok_or_else(|| {
-                Error::input(
-                    profile_at(field),
-                    format!(
-                        "column '{name}' is not in the header of {file} (line {}: {})",
-                        offset + 1,
-                        headers.join(", ")
-                    ),
-                )
-            })
+            column_of(&headers, name, file, offset + 1)
+                .map_err(|m| Error::input(profile_at(field), m))
         };
         let point_col = column(&spec.point, "point")?;
         let c = &spec.coordinates;
@@ -487,8 +478,97 @@ impl Profile {
                 "the export has a header but no rows",
             ));
         }
+        crate::measure::refuse_copies(&points, file)?;
+        crate::measure::refuse_unknown_stations(machine, &points, file)?;
         Ok(MeasurementSet { points })
     }
+}
+
+/// The byte a profile's `delimiter` names (`,` when absent; `"\\t"` or a tab for a tab): one
+/// ASCII character that is not a line end or other control character, a quote, a letter, a
+/// digit or a sign, which would split rows or numbers rather than fields.
+fn delimiter_of(text: Option<&str>) -> std::result::Result<u8, String> {
+    match text {
+        None => Ok(b','),
+        Some("\\t" | "\t") => Ok(b'\t'),
+        Some(d)
+            if d.len() == 1
+                && d.is_ascii()
+                && !d.bytes().any(|b| {
+                    b.is_ascii_control() || b.is_ascii_alphanumeric() || b"\".-+".contains(&b)
+                }) =>
+        {
+            Ok(d.as_bytes()[0])
+        }
+        Some(d) => Err(format!(
+            "delimiter {d:?}: one ASCII character that is not a line end, a quote, a letter, a \
+             digit or a sign (\",\", \";\", \"\\t\", \"|\" …)"
+        )),
+    }
+}
+
+/// The column `name` of an export's `headers`: an error when it is missing (listing the header,
+/// cut short) or repeated (which one to read cannot be told). `line` is the header's line.
+fn column_of(
+    headers: &[String],
+    name: &str,
+    file: &str,
+    line: usize,
+) -> std::result::Result<usize, String> {
+    let found: Vec<usize> = (0..headers.len()).filter(|&i| headers[i] == name).collect();
+    match found[..] {
+        [i] => Ok(i),
+        [] => Err(format!(
+            "column '{name}' is not in the header of {file} (line {line}: {})",
+            header_list(headers)
+        )),
+        _ => Err(format!(
+            "column '{name}' appears {} times in the header of {file} (line {line}, columns \
+             {}): which one to read cannot be told; rename the columns in the export",
+            found.len(),
+            found
+                .iter()
+                .map(|i| (i + 1).to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+    }
+}
+
+/// The export's text after its first `skip` lines: a byte-order mark removed, and CR LF and
+/// CR-only line ends (some exports write CR alone) read as LF, so that lines are counted as the
+/// export's viewer counts them. An error when nothing is left for the header.
+fn export_body(text: &str, skip: usize, file: &str) -> std::result::Result<String, String> {
+    let text = crate::error::without_bom(text);
+    let text = if text.contains('\r') {
+        text.replace("\r\n", "\n").replace('\r', "\n")
+    } else {
+        text.to_string()
+    };
+    let lines = text.split_inclusive('\n').count();
+    if skip >= lines {
+        return Err(format!(
+            "skip_lines = {skip}, but {file} has {lines} line(s): nothing is left for the header"
+        ));
+    }
+    Ok(text.split_inclusive('\n').skip(skip).collect())
+}
+
+/// A header's column names for a message: at most 12, each cut to 40 characters (a wrong
+/// delimiter makes the whole line one name; the export is never dumped into a message).
+fn header_list(headers: &[String]) -> String {
+    let cut = |h: &String| -> String {
+        if h.chars().count() > 40 {
+            format!("{}…", h.chars().take(40).collect::<String>())
+        } else {
+            h.clone()
+        }
+    };
+    let mut list: Vec<String> = headers.iter().take(12).map(cut).collect();
+    if headers.len() > 12 {
+        list.push(format!("… ({} columns)", headers.len()));
+    }
+    list.join(", ")
 }
 
 /// The pieces of a name pattern: literal text and `{field}`s; two fields in a row cannot be

@@ -152,6 +152,7 @@ impl StationSpec {
     /// Reads a station layout (TOML: `[[station]]` tables as in a machine file); `file` names
     /// it in messages. At least one station.
     pub fn layout_from_toml_str(text: &str, file: &str) -> Result<Vec<StationSpec>> {
+        let text = crate::error::without_bom(text);
         let layout: LayoutFile = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
         if layout.stations.is_empty() {
             return Err(Error::input(
@@ -385,6 +386,7 @@ impl Machine {
 
     /// Parses and validates machine TOML; `file` names the source in error messages.
     pub fn from_toml_str(text: &str, file: &str) -> Result<Machine> {
+        let text = crate::error::without_bom(text);
         let spec: MachineSpec = toml::from_str(text).map_err(|e| from_toml(file, text, e))?;
         Machine::from_spec_located(spec, file, Some(text))
     }

@@ -149,6 +149,97 @@ pub const MAX_COORDINATE_MM: f64 = 1e6;
 
 const POINT_COLUMNS: [&str; 3] = ["meas_x", "meas_y", "meas_z"];
 
+/// Refuses a row that repeats another exactly (commands, reflector, station, every measured
+/// coordinate to the last digit): a copy, not a second reading. Two tracker readings never agree
+/// to the file's resolution, and a copy would fake a small repeat noise. Sorting by the bits:
+/// `n log n`.
+pub(crate) fn refuse_copies(points: &[Measurement], file: &str) -> Result<()> {
+    let key = |p: &Measurement| {
+        let mut k: Vec<u64> = p.commands.0.iter().map(|v| v.to_bits()).collect();
+        k.extend(p.measured.iter().map(|v| v.to_bits()));
+        k.push(p.reflector as u64);
+        k.push(p.station_index as u64);
+        k
+    };
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by_key(|&i| (key(&points[i]), i));
+    for w in order.windows(2) {
+        let (a, b) = (&points[w[0]], &points[w[1]]);
+        if key(a) == key(b) {
+            return Err(Error::input(
+                Place::file(file).at_line(b.line),
+                format!(
+                    "this row repeats line {} exactly (same position, reflector and measured \
+                     point to the last digit): a copied row, not a second reading",
+                    a.line
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Refuses station ids a machine without `[[station]]` tables cannot place: every row would be
+/// read as the one tracker's, and two stations' points mixed as one tracker's give a wrong fit
+/// (or a misleading scale error). One id throughout is the one tracker, named.
+pub(crate) fn refuse_unknown_stations(
+    machine: &Machine,
+    points: &[Measurement],
+    file: &str,
+) -> Result<()> {
+    if machine.has_stations() {
+        return Ok(());
+    }
+    let mut ids: Vec<(&str, usize)> = Vec::new();
+    for p in points {
+        if let Some(s) = p.station.as_deref()
+            && !ids.iter().any(|(id, _)| *id == s)
+        {
+            ids.push((s, p.line));
+        }
+    }
+    if ids.len() < 2 {
+        return Ok(());
+    }
+    let names: Vec<&str> = ids.iter().take(8).map(|(id, _)| *id).collect();
+    let more = if ids.len() > 8 { ", …" } else { "" };
+    Err(Error::input(
+        Place::file(file).at_line(ids[1].1).at_field("station"),
+        format!(
+            "the station column names {} stations ({}{more}) that the machine lacks: its file \
+             has no [[station]] tables, so every row would be read as one tracker's. Pass the \
+             machine file with their [[station]] tables (`volver simulate --stations` writes one \
+             into its machine.toml)",
+            ids.len(),
+            names.join(", ")
+        ),
+    ))
+}
+
+/// Refuses a row that fills more than one observation's columns (`meas_x…` and `az_deg…`, or a
+/// point and a `range_mm` alone): which one was measured cannot be told, and reading one would
+/// silently drop the other. `filled` is the first filled column of each (point, spherical,
+/// range alone).
+fn refuse_two_observations(
+    filled: [Option<usize>; 3],
+    headers: &[String],
+    at: impl Fn(usize) -> Place,
+) -> Result<()> {
+    let given: Vec<usize> = filled.into_iter().flatten().collect();
+    if let [first, second, ..] = given[..] {
+        return Err(Error::input(
+            at(second),
+            format!(
+                "this row fills both '{}' and '{}': one observation per row (meas_x, meas_y, \
+                 meas_z; or az_deg, el_deg, range_mm; or range_mm alone), so which was measured \
+                 cannot be told; leave the other cells empty",
+                headers[first], headers[second]
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// A point from spherical coordinates in a station's frame: azimuth from x towards y and
 /// elevation above the x–y plane (rad), range (mm).
 ///
@@ -436,6 +527,15 @@ impl MeasurementSet {
             let station_index = machine
                 .station_named(station.as_deref())
                 .map_err(|m| Error::input(station_at(), m))?;
+            refuse_two_observations(
+                [
+                    xyz.map(|c| c[0]).filter(|&c| filled(Some(c))),
+                    spherical.map(|s| s.0).filter(|&c| filled(Some(c))),
+                    range_col.filter(|&c| filled(Some(c)) && !filled(spherical.map(|s| s.0))),
+                ],
+                &headers,
+                at,
+            )?;
             let (measured, observation) = if let Some(c) = xyz.filter(|c| filled(Some(c[0]))) {
                 (
                     [coordinate(c[0])?, coordinate(c[1])?, coordinate(c[2])?],
@@ -490,31 +590,8 @@ impl MeasurementSet {
                 "the file has a header but no measurement rows",
             ));
         }
-        // A row that repeats another exactly (commands, reflector, every measured coordinate to
-        // the last digit) is a copy, not a second reading: two tracker readings never agree to
-        // the file's resolution, and a copy would fake a small repeat noise.
-        let mut order: Vec<usize> = (0..points.len()).collect();
-        let key = |p: &Measurement| {
-            let mut k: Vec<u64> = p.commands.0.iter().map(|v| v.to_bits()).collect();
-            k.extend(p.measured.iter().map(|v| v.to_bits()));
-            k.push(p.reflector as u64);
-            k.push(p.station_index as u64);
-            k
-        };
-        order.sort_by_key(|&i| (key(&points[i]), i));
-        for w in order.windows(2) {
-            let (a, b) = (&points[w[0]], &points[w[1]]);
-            if key(a) == key(b) {
-                return Err(Error::input(
-                    Place::file(file).at_line(b.line),
-                    format!(
-                        "this row repeats line {} exactly (same position, reflector and \
-                         measured point to the last digit): a copied row, not a second reading",
-                        a.line
-                    ),
-                ));
-            }
-        }
+        refuse_copies(&points, file)?;
+        refuse_unknown_stations(machine, &points, file)?;
         Ok(MeasurementSet { points })
     }
 

@@ -52,8 +52,8 @@ mod spec;
 use regressors::PointRegressors;
 pub use regressors::Regressors;
 pub use spec::{
-    BallScrewSpec, EffectsSpec, ErrorModelSpec, ErrorTermSpec, OneOrMany, SquarenessRule,
-    TrackerModelSpec,
+    BallScrewSpec, EffectsSpec, ErrorModelSpec, ErrorTermSpec, MAX_FIXED, OneOrMany,
+    PERIOD_RANGE_MM, SquarenessRule, TrackerModelSpec,
 };
 use spec::{EffectSlot, FieldVar};
 
@@ -271,6 +271,7 @@ impl Model {
 
     /// Parses error-model TOML and compiles it for `machine`; `file` names it in messages.
     pub fn from_toml_str(machine: Machine, text: &str, file: &str) -> Result<Model> {
+        let text = crate::error::without_bom(text);
         let spec = ErrorModelSpec::from_toml_str(text, file)?;
         Model::build(machine, spec, file, Some(text))
     }

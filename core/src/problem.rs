@@ -208,6 +208,13 @@ impl<'a> Problem<'a> {
     /// assert!(err.to_string().starts_with("m.csv: ") && err.to_string().contains("metres"));
     /// ```
     pub fn check_scale(&self, file: &str) -> Result<()> {
+        self.check_scale_in(file, None)
+    }
+
+    /// [`Problem::check_scale`] for coordinates converted from `read_in` (the unit's name and
+    /// its size in mm, as an import profile's `length_unit` states it): the hint then names the
+    /// unit the export's lengths look like instead of the profile's.
+    pub fn check_scale_in(&self, file: &str, read_in: Option<(&str, f64)>) -> Result<()> {
         let (model, data) = (self.model, self.data);
         let n = data.points.len();
         if n < 3 {
@@ -243,7 +250,18 @@ impl<'a> Problem<'a> {
         if (0.98..=1.02).contains(&ratio) {
             return Ok(());
         }
-        let hint = if (ratio * 1000.0 - 1.0).abs() < 0.02 {
+        let hint = if let Some((unit, mm)) = read_in {
+            // The unit the export's lengths are in, if it is one of the profile's units.
+            [("mm", 1.0), ("m", 1000.0), ("in", 25.4), ("µm", 1e-3)]
+                .into_iter()
+                .find(|(_, size)| ((mm / ratio) / size - 1.0).abs() < 0.02)
+                .map_or_else(String::new, |(name, _)| {
+                    format!(
+                        " (the export's lengths look like {name}, but the import profile reads \
+                         them in {unit}: set its length_unit = \"{name}\")"
+                    )
+                })
+        } else if (ratio * 1000.0 - 1.0).abs() < 0.02 {
             " (×0.001: the coordinates look like metres)".to_string()
         } else if (ratio * 25.4 - 1.0).abs() < 0.02 {
             " (×1/25.4: the coordinates look like inches)".to_string()
@@ -261,6 +279,41 @@ impl<'a> Problem<'a> {
                  degrees; if the units are right, check the machine file's chain and reflector \
                  offsets"
             ),
+        ))
+    }
+
+    /// Where the model is not finite at `params`: the first point whose residual or Jacobian
+    /// has a non-finite entry, named by its line in the data, reflector and station, with its
+    /// distance from the station (a station at a reflector measures no direction). `None` when
+    /// every point is finite there.
+    pub fn first_non_finite(&self, params: &[f64]) -> Option<String> {
+        let mut jac = vec![0.0; 3 * self.model.n_params()];
+        let i = (0..self.data.points.len()).find(|&i| {
+            jac.iter_mut().for_each(|v| *v = 0.0);
+            let r = self.residual_and_jacobian(i, params, &mut jac);
+            !(r.iter().all(|v| v.is_finite()) && jac.iter().all(|v| v.is_finite()))
+        })?;
+        let p = &self.data.points[i];
+        let predicted = self.model.observe_cached(&self.regressors, i, p, params);
+        let range = match p.observation {
+            crate::measure::Observation::Range => predicted[0].abs(),
+            crate::measure::Observation::Point => norm(predicted),
+        };
+        let station = p
+            .station
+            .as_deref()
+            .map_or(String::new(), |s| format!(", station {s}"));
+        let near = if range < 1e-6 {
+            ": the reflector is at the station there (a range of 0 mm has no direction); move \
+             the station off the reflector's path in the machine file"
+        } else {
+            ""
+        };
+        Some(format!(
+            "line {} of the data (reflector {}{station}): the model is not finite there, \
+             {range:.6} mm from the station{near}",
+            p.line,
+            self.model.machine().reflectors()[p.reflector].id
         ))
     }
 

@@ -129,6 +129,7 @@ impl ResultsFile {
 
     /// Parses a results file; `file` names it in messages.
     pub fn from_json_str(text: &str, file: &str) -> Result<ResultsFile> {
+        let text = crate::error::without_bom(text);
         let r: ResultsFile = serde_json::from_str(text).map_err(|e| {
             let mut place = Place::file(file);
             if e.line() > 0 {
@@ -206,34 +207,73 @@ impl ResultsFile {
             values.push(rec.value);
         }
         if let Some(u) = &self.uncertainty {
-            let n = model.n_params();
-            let columns = u
-                .data_factor
-                .iter()
-                .map(|c| ("data_factor", c))
-                .chain(u.held_factor.iter().map(|c| ("held_factor", c)));
-            for (k, (field, col)) in columns.enumerate() {
-                if col.len() != n || col.iter().any(|v| !v.is_finite()) {
-                    return Err(Error::input(
-                        Place::file(file).at_field(format!("uncertainty.{field}")),
-                        format!(
-                            "column {k} must hold {n} finite values (one per parameter), it has {}",
-                            col.len()
-                        ),
-                    ));
-                }
-            }
-            if u.held.len() != u.held_factor.len() {
-                return Err(Error::input(
-                    Place::file(file).at_field("uncertainty.held"),
-                    format!(
-                        "{} names for {} held combinations",
-                        u.held.len(),
-                        u.held_factor.len()
-                    ),
-                ));
-            }
+            check_uncertainty(u, model.n_params(), file)?;
         }
         Ok((model, values))
     }
+}
+
+/// Checks a results file's covariance record against a model of `n` parameters: finite columns
+/// of `n` values, at most `n` of them, at least one data column that is not zero (an emptied
+/// record would read as "U 0"; without the record the U is honestly unknown), a non-negative σ
+/// and held prior, and one name per held combination.
+fn check_uncertainty(u: &UncertaintyRecord, n: usize, file: &str) -> Result<()> {
+    let at = |field: &str| Place::file(file).at_field(format!("uncertainty.{field}"));
+    for (field, v) in [("sigma_mm", u.sigma_mm), ("held_prior_mm", u.held_prior_mm)] {
+        if !(v.is_finite() && v >= 0.0) {
+            return Err(Error::input(
+                at(field),
+                format!("{v}: a standard deviation is a finite number ≥ 0 mm"),
+            ));
+        }
+    }
+    if u.held_prior_mm == 0.0 && !u.held_factor.is_empty() {
+        return Err(Error::input(
+            at("held_prior_mm"),
+            "0 mm for held combinations: their prior is what their U is (volver writes 0.1 mm)",
+        ));
+    }
+    if u.data_factor.len() + u.held_factor.len() > n {
+        return Err(Error::input(
+            at("data_factor"),
+            format!(
+                "{} columns for a model of {n} parameters: at most one per parameter",
+                u.data_factor.len() + u.held_factor.len()
+            ),
+        ));
+    }
+    if u.data_factor.iter().flatten().all(|v| *v == 0.0) {
+        return Err(Error::input(
+            at("data_factor"),
+            "empty or zero: a fit's covariance has a column per identified direction, so this \
+             record would claim U = 0; remove the uncertainty record to use the file without U",
+        ));
+    }
+    let columns = u
+        .data_factor
+        .iter()
+        .map(|c| ("data_factor", c))
+        .chain(u.held_factor.iter().map(|c| ("held_factor", c)));
+    for (k, (field, col)) in columns.enumerate() {
+        if col.len() != n || col.iter().any(|v| !v.is_finite()) {
+            return Err(Error::input(
+                at(field),
+                format!(
+                    "column {k} must hold {n} finite values (one per parameter), it has {}",
+                    col.len()
+                ),
+            ));
+        }
+    }
+    if u.held.len() != u.held_factor.len() {
+        return Err(Error::input(
+            at("held"),
+            format!(
+                "{} names for {} held combinations",
+                u.held.len(),
+                u.held_factor.len()
+            ),
+        ));
+    }
+    Ok(())
 }

@@ -71,6 +71,22 @@ fn is_angle(name: &str) -> bool {
         .unwrap_or(false)
 }
 
+/// Refuses a table step larger than the axis' travel `lo … hi` (file units): the table would
+/// hold the end of the travel alone.
+fn check_step(step: f64, lo: f64, hi: f64, a: &crate::machine::MachineAxis) -> Result<()> {
+    if step > hi - lo && hi > lo {
+        return Err(Error::Model(format!(
+            "a step of {} {unit} exceeds axis {}'s travel of {} {unit}: a table needs both ends of \
+             the travel and the positions between; use a step of at most the travel",
+            crate::error::number(step),
+            a.axis,
+            hi - lo,
+            unit = a.file_unit(),
+        )));
+    }
+    Ok(())
+}
+
 impl ErrorTables {
     /// Tables of `model` with errors `params`, every `linear_step` mm over a linear axis' travel
     /// and every `rotary_step` degrees over a rotary axis' (the last position is the end of the
@@ -125,12 +141,14 @@ impl ErrorTables {
             // `rows` is finite here (a positive finite step over a finite travel).
             if rows > MAX_TABLE_ROWS as f64 {
                 return Err(Error::Model(format!(
-                    "a step of {step} {} over axis {}'s travel gives {rows:.3e} rows; a table \
+                    "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table \
                      has at most {MAX_TABLE_ROWS}: use a larger step",
+                    crate::error::number(step),
                     a.file_unit(),
                     a.axis
                 )));
             }
+            check_step(step, lo, hi, a)?;
             let mut positions = Vec::new();
             let mut x = lo;
             while x < hi - 1e-9 * step {

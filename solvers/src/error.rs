@@ -70,6 +70,19 @@ pub enum Error {
         /// The name asked for.
         name: String,
     },
+    /// A count outside its bounds (Monte Carlo replicas, …): checked before anything is
+    /// allocated.
+    #[error("{what} {value}: give {min} … {max}")]
+    CountOutOfRange {
+        /// The count, in words (`--monte-carlo`).
+        what: &'static str,
+        /// The count asked for.
+        value: usize,
+        /// The smallest meaningful count.
+        min: usize,
+        /// The largest count allowed.
+        max: usize,
+    },
     /// The tracker's rigid fit cannot be made (collinear points, a rotation beyond the small
     /// angles of eq. 9, an SVD that did not converge); the text says which.
     #[error("{0}")]

@@ -28,6 +28,10 @@ use volver_core::iso::Unit;
 use volver_core::model::Model;
 use volver_core::simulate::{MAGNITUDE_KINDS, Magnitudes};
 
+/// The range of a prior magnitude in its kind's unit (µm, µrad; mm for the tracker): from 1 nm
+/// (1 nrad) to 1 m (1 rad).
+pub const PRIOR_RANGE: (f64, f64) = (1e-3, 1e6);
+
 /// Prior magnitudes per error kind (µm, µrad as in [`Magnitudes`]; `tracker` in mm). A kind
 /// whose magnitude is zero gets a flat prior.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,11 +52,41 @@ impl Priors {
     /// assert_eq!(p.magnitudes.positioning_um, 50.0); // typical
     /// assert!(Priors::parse(&["wobble=1".to_string()]).is_err());
     /// ```
+    ///
+    /// `KIND=flat` gives a kind a flat prior. A magnitude must lie within
+    /// [`PRIOR_RANGE`] of the kind's unit: zero is not a prior (it would silently mean "flat"),
+    /// and a tiny one (`angular=1e-300`) would make the precision overflow.
     pub fn parse(texts: &[String]) -> volver_core::Result<Priors> {
+        use volver_core::error::{Error, Place};
         let mut magnitudes = Magnitudes::default();
         for t in texts {
-            if t.trim() != "typical" {
-                magnitudes.set_from_option(t, "--prior")?;
+            if t.trim() == "typical" {
+                continue;
+            }
+            if let Some((kind, v)) = t.split_once('=')
+                && v.trim() == "flat"
+            {
+                magnitudes.set_from_option(&format!("{kind}=0"), "--prior")?;
+                continue;
+            }
+            magnitudes.set_from_option(t, "--prior")?;
+            let kind = t.split_once('=').map_or("", |(k, _)| k.trim());
+            let v = magnitudes.get(kind);
+            let unit = MAGNITUDE_KINDS
+                .iter()
+                .find(|k| k.0 == kind)
+                .map_or("", |k| k.1);
+            if !(PRIOR_RANGE.0..=PRIOR_RANGE.1).contains(&v) {
+                return Err(Error::input(
+                    Place::file("--prior").at_field(t.clone()),
+                    format!(
+                        "a prior magnitude of {} {unit} is outside {} … {} {unit}; write \
+                         {kind}=flat for a flat prior",
+                        volver_core::error::number(v),
+                        PRIOR_RANGE.0,
+                        PRIOR_RANGE.1
+                    ),
+                ));
             }
         }
         Ok(Priors { magnitudes })

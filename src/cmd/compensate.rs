@@ -246,7 +246,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     .into_iter()
     .flatten()
     .collect();
-    volver::core::fsio::check_not_an_input(&a.out, &inputs)?;
+    volver::core::fsio::Outputs::new(inputs).claim(&a.out)?;
     let (model, params, record) = load_results(&a.results, a.accept)?;
     let m = model.machine();
     let tool = parse_tool(&a, &model)?;
@@ -543,6 +543,15 @@ pub struct TablesArgs {
 
 /// Runs `volver tables`.
 pub fn tables_command(a: TablesArgs) -> Result<()> {
+    volver::core::fsio::Outputs::new([&a.results]).claim_in(
+        &a.out,
+        &[
+            "errors-isg.csv",
+            "errors-etalon.txt",
+            "errors.csv",
+            "errors-u95.csv",
+        ],
+    )?;
     let (model, params, record) = load_results(&a.results, a.accept)?;
     check_max_u(a.max_u_um)?;
     let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;

@@ -59,6 +59,9 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
             .clone()
             .unwrap_or_else(|| volver::history::default_path(&a.inputs.data))
     });
+    if let Some(path) = &history {
+        volver::core::fsio::Outputs::new(a.inputs.paths(&[])).claim(path)?;
+    }
     let data_name = a.inputs.data.display().to_string();
     let mut records = Vec::new();
     let (mut rounds, _) =

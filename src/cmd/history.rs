@@ -18,7 +18,20 @@ pub struct HistoryArgs {
 /// Runs `volver history`.
 pub fn run(a: HistoryArgs) -> Result<()> {
     let HistoryArgs { file, svg } = a;
-    let records = history::read(&file)?;
+    if let Some(path) = &svg {
+        volver::core::fsio::Outputs::new([&file]).claim(path)?;
+    }
+    let read = history::read(&file)?;
+    let records = read.records;
+    if !read.skipped.is_empty() {
+        let lines: Vec<String> = read.skipped.iter().map(ToString::to_string).collect();
+        eprintln!(
+            "  warning: {}: line(s) {} skipped, not whole history records (a fit killed while \
+             it wrote its line, or a hand edit)",
+            file.display(),
+            lines.join(", ")
+        );
+    }
     println!(
         "volver history — {} fits in {}\n",
         records.len(),

@@ -79,9 +79,12 @@ pub struct IdentifyArgs {
 
 /// Runs `volver identify`.
 pub fn run(a: IdentifyArgs) -> Result<()> {
-    let inputs = a.inputs.paths(&[a.truth.as_deref()]);
-    for out in [&a.out, &a.write_model, &a.history].into_iter().flatten() {
-        volver::core::fsio::check_not_an_input(out, &inputs)?;
+    let mut outputs = volver::core::fsio::Outputs::new(a.inputs.paths(&[a.truth.as_deref()]));
+    for out in [&a.out, &a.write_model].into_iter().flatten() {
+        outputs.claim(out)?;
+    }
+    if !a.no_history {
+        outputs.claim(&history_path(&a))?;
     }
     let (machine, model, data) = a.inputs.load()?;
     let model = volver::inputs::with_candidates(&machine, model, &a.add)?;
@@ -120,10 +123,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     let mut outcome = identify(&model, &data, &settings, &mut Progress { quiet: a.json })?;
     outcome.noise_error = noise;
     if !a.no_history {
-        let path = a
-            .history
-            .clone()
-            .unwrap_or_else(|| volver::history::default_path(&a.inputs.data));
+        let path = history_path(&a);
         volver::history::append(&path, &history_record(&a, &model, &outcome))?;
     }
     if let Some(out) = &a.out
@@ -179,6 +179,13 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     volver::solvers::engine(&settings.engine)?;
     settings.options.validate()?;
     Ok(settings)
+}
+
+/// The history file this fit is appended to: `--history`, or the default beside the data.
+fn history_path(a: &IdentifyArgs) -> PathBuf {
+    a.history
+        .clone()
+        .unwrap_or_else(|| volver::history::default_path(&a.inputs.data))
 }
 
 /// The history line of this fit.

@@ -84,6 +84,7 @@ pub struct PlanArgs {
 
 /// Runs `volver plan`.
 pub fn run(a: PlanArgs) -> Result<()> {
+    let derived_machine = claim_outputs(&a)?;
     let (_, model) = volver::inputs::machine_and_model(a.machine.as_deref(), a.model.as_deref())?;
     let noise = match &a.noise {
         Some(t) => TrackerNoise::from_text(t)?,
@@ -139,9 +140,8 @@ pub fn run(a: PlanArgs) -> Result<()> {
     };
     let planned = plan(&model, &request)?;
     let machine = planned.model.machine();
-    let machine_out = (machine.reflectors().len() > model.machine().reflectors().len())
-        .then(|| a.out.as_ref().map(|o| o.with_extension("machine.toml")))
-        .flatten();
+    let machine_out =
+        derived_machine.filter(|_| machine.reflectors().len() > model.machine().reflectors().len());
     if let Some(path) = &machine_out {
         let text = toml::to_string(machine.spec()).context("writing the machine file")?;
         write_atomic(
@@ -236,6 +236,35 @@ pub fn run(a: PlanArgs) -> Result<()> {
     Ok(())
 }
 
+/// Checks every file `plan` may write (`--out`, `--gcode` and, with `--reflectors`, the
+/// machine file derived from `--out`) against its inputs and each other before anything runs;
+/// returns the derived machine file's path.
+fn claim_outputs(a: &PlanArgs) -> Result<Option<PathBuf>> {
+    let inputs = [
+        a.machine.as_deref(),
+        a.model.as_deref(),
+        a.reflectors.as_deref(),
+    ];
+    let mut outputs = volver::core::fsio::Outputs::new(inputs.into_iter().flatten());
+    for out in [&a.out, &a.gcode].into_iter().flatten() {
+        outputs.claim(out)?;
+    }
+    let derived = a
+        .out
+        .as_ref()
+        .filter(|_| a.reflectors.is_some())
+        .map(|o| o.with_extension("machine.toml"));
+    if let Some(path) = &derived {
+        outputs.claim(path).with_context(|| {
+            format!(
+                "plan writes the machine file of its candidate reflectors beside --out, as {}",
+                path.display()
+            )
+        })?;
+    }
+    Ok(derived)
+}
+
 /// The candidate reflectors of a TOML file (`[[reflector]]` tables with `id` and `offset`).
 fn extra_reflectors(path: &Path) -> Result<Vec<volver::core::machine::ReflectorSpec>> {
     #[derive(serde::Deserialize)]
@@ -282,10 +311,15 @@ fn compare_plans(
                         })
                     })
                     .collect::<Result<_>>()?;
+                volver::planning::check_distinct_reflectors(machine, &plan.reflectors)
+                    .with_context(|| format!("--compare {item}"))?;
             }
             plan
         };
         plans.push((item.to_string(), plan));
+    }
+    if plans.is_empty() {
+        bail!("--compare {list:?}: no plan named (comma-separated plan files or presets)");
     }
     let drift = (a.drift != "none").then_some(a.drift.as_str());
     let rows = compare(model, &plans, a.seeds, noise, tool, drift)?;

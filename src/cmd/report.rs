@@ -42,6 +42,7 @@ pub struct ReportArgs {
 
 /// Runs `volver report`.
 pub fn run(a: ReportArgs) -> Result<()> {
+    claim_outputs(&a)?;
     let (machine, model, data) = a.inputs.load()?;
     volver::compensation::check_max_u(a.max_u_um)?;
     let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
@@ -154,6 +155,27 @@ fn cross_validation(
     }
 }
 
+/// The results file `report` writes: `--results`, or the report's path with `.json`.
+fn results_path(a: &ReportArgs) -> PathBuf {
+    a.results
+        .clone()
+        .unwrap_or_else(|| a.out.with_extension("json"))
+}
+
+/// Checks the report and its results file against the inputs and each other before anything
+/// runs.
+fn claim_outputs(a: &ReportArgs) -> Result<()> {
+    let inputs = a
+        .inputs
+        .paths(&[a.reference.as_deref(), a.truth.as_deref()]);
+    let mut outputs = volver::core::fsio::Outputs::new(inputs);
+    outputs.claim(&a.out)?;
+    outputs
+        .claim(&results_path(a))
+        .context("the results file report writes (--results, default beside --out)")?;
+    Ok(())
+}
+
 /// Writes the report and the final fit's results file.
 fn write_outputs(
     a: &ReportArgs,
@@ -161,16 +183,7 @@ fn write_outputs(
     last_model: &volver::core::model::Model,
     last_params: &[f64],
 ) -> Result<()> {
-    let results_path = a
-        .results
-        .clone()
-        .unwrap_or_else(|| a.out.with_extension("json"));
-    let inputs = a
-        .inputs
-        .paths(&[a.reference.as_deref(), a.truth.as_deref()]);
-    for out in [&a.out, &results_path] {
-        volver::core::fsio::check_not_an_input(out, &inputs)?;
-    }
+    let results_path = results_path(a);
     volver::core::fsio::write_atomic(&a.out, html)
         .with_context(|| format!("writing {}", a.out.display()))?;
     ResultsFile::from_model(last_model, last_params)?

@@ -105,6 +105,7 @@ pub struct SimulateArgs {
 
 /// Runs `volver simulate`.
 pub fn run(a: SimulateArgs) -> Result<()> {
+    claim_outputs(&a)?;
     let (truth, source, preset) = truth_of(&a)?;
     let machine = truth.model.machine().clone();
     let plan = plan_of(&a, &machine, preset)?;
@@ -130,6 +131,26 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     };
     let files = out.write_as(&a.out, columns)?;
     print_record(&out, &machine, &files);
+    Ok(())
+}
+
+/// Checks the four files `simulate` writes into `--out` against its input files (and each
+/// other) before anything runs.
+fn claim_outputs(a: &SimulateArgs) -> Result<()> {
+    let stations = a.stations.as_deref().map(std::path::Path::new);
+    let inputs = [
+        a.machine.as_deref(),
+        a.truth.as_deref(),
+        a.truth_model.as_deref(),
+        a.plan_file.as_deref(),
+        stations,
+    ];
+    let mut outputs = volver::core::fsio::Outputs::new(inputs.into_iter().flatten());
+    let f = volver::core::simulate::SimulationFiles::default();
+    outputs.claim_in(
+        &a.out,
+        &[&f.measurements, &f.truth, &f.machine, "simulation.json"],
+    )?;
     Ok(())
 }
 

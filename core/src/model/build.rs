@@ -150,10 +150,15 @@ impl Model {
             };
             for b in &fx.ball_screw {
                 let (k, ax) = axis_of_kind(&b.axis, false, "effects.ball_screw.axis")?;
-                if !(b.period_mm.is_finite() && b.period_mm > 0.0) {
+                let (lo, hi) = PERIOD_RANGE_MM;
+                if !(lo..=hi).contains(&b.period_mm) {
                     return Err(Error::input(
                         place(&b.axis, "effects.ball_screw.period_mm"),
-                        format!("the period {} mm must be positive", b.period_mm),
+                        format!(
+                            "the period {} mm is outside {lo} … {hi:e} mm (a period of a screw's \
+                             pitch error, in mm)",
+                            crate::error::number(b.period_mm)
+                        ),
                     ));
                 }
                 push(
@@ -429,6 +434,21 @@ impl Model {
                 return Err(Error::input(
                     place(name, &format!("fixed.{name}")),
                     "a fixed value must be a finite number",
+                ));
+            }
+            let unit = params[j].unit;
+            let max = match unit {
+                Unit::Rad | Unit::RadPerHour => MAX_FIXED.1,
+                _ => MAX_FIXED.0,
+            };
+            if value.abs() > max {
+                return Err(Error::input(
+                    place(name, &format!("fixed.{name}")),
+                    format!(
+                        "{} {unit} is beyond any machine's error or tracker pose (at most \
+                         {max:e} {unit}): fixed values are in the parameter's unit (mm, rad …)",
+                        crate::error::number(value)
+                    ),
                 ));
             }
             fixed.insert(j, (value, format!("{name} fixed")));

@@ -117,6 +117,15 @@ pub struct ErrorModelSpec {
     pub effects: EffectsSpec,
 }
 
+/// The range of a periodic error's period (mm): from 0.1 mm (a tenth harmonic of a 1 mm pitch)
+/// to [`crate::machine::MAX_DIMENSION`]; a shorter period is not resolved by any plan, and one
+/// of 1e-300 mm would make the phase overflow.
+pub const PERIOD_RANGE_MM: (f64, f64) = (0.1, crate::machine::MAX_DIMENSION);
+
+/// The largest magnitude of a `[fixed]` value: [`crate::machine::MAX_DIMENSION`] for a length
+/// (mm), 10 rad for an angle, beyond which no machine's error or tracker pose lies.
+pub const MAX_FIXED: (f64, f64) = (crate::machine::MAX_DIMENSION, 10.0);
+
 /// A periodic positioning error of a linear axis (e.g. a ball screw's pitch error).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -266,6 +275,7 @@ pub(super) enum EffectSlot {
 impl ErrorModelSpec {
     /// Parses error-model TOML; `file` names the source in messages.
     pub fn from_toml_str(text: &str, file: &str) -> Result<ErrorModelSpec> {
+        let text = crate::error::without_bom(text);
         toml::from_str(text).map_err(|e| from_toml(file, text, e))
     }
 

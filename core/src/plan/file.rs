@@ -17,8 +17,10 @@
 //! first appearance. Every error names the file, line and column.
 
 use super::{Plan, Step};
+use crate::chain::MAX_AXES;
 use crate::error::{Error, Place, Result};
 use crate::machine::{Commands, Machine};
+use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::Path;
 
@@ -165,6 +167,8 @@ pub fn load(machine: &Machine, path: &Path) -> Result<Plan> {
 /// Parses a plan file for `machine`; `file` names the source in messages. The plan's name is
 /// the file's.
 pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
+    // A byte-order mark (spreadsheets write one) is not part of the first column's name.
+    let text = crate::error::without_bom(text);
     // Comment lines are blanked (not removed) so that line numbers stay the file's.
     let body: String = text
         .lines()
@@ -253,6 +257,9 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
         ));
     }
     let mut positions: Vec<Commands> = Vec::new();
+    // Each distinct pose's index, by its bits (a hash lookup: a million rows read in linear
+    // time; `-0.0` is `0.0`).
+    let mut index: HashMap<[u64; MAX_AXES], usize> = HashMap::new();
     let mut sequence = Vec::new();
     let mut used = Vec::new();
     for (line, row) in lines {
@@ -302,13 +309,12 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
         let reflector = machine
             .reflector_named(id)
             .map_err(|m| Error::input(at(refl_col), m))?;
-        let position = match positions.iter().position(|p| *p == commands) {
-            Some(p) => p,
-            None => {
+        let position = *index
+            .entry(commands.0.map(|v| (v + 0.0).to_bits()))
+            .or_insert_with(|| {
                 positions.push(commands);
                 positions.len() - 1
-            }
-        };
+            });
         if !used.contains(&reflector) {
             used.push(reflector);
         }
@@ -397,5 +403,39 @@ mod tests {
         assert!(from_csv_str(&m, "X [mm],C (deg),Z,reflector\n0,0,0,R1\n", "p.csv").is_ok());
         let msg = e("X,C,Z,reflector\n0,0,R1\n");
         assert!(msg.contains("p.csv:2") && msg.contains("3 fields"), "{msg}");
+    }
+
+    /// A byte-order mark is not part of the first column's name; `-0` is the pose `0`.
+    #[test]
+    fn a_byte_order_mark_and_negative_zero_are_read() {
+        let m = Machine::default_xcfz();
+        let text = "\u{feff}order,X,C,Z,reflector\n1,0,0,0,R1\n2,-0,0,-0.0,R2\n";
+        let plan = from_csv_str(&m, text, "p.csv").unwrap();
+        assert_eq!(plan.positions.len(), 1);
+        assert_eq!(plan.steps().len(), 2);
+    }
+
+    /// A million rows of distinct poses (the documented largest plan) are read: the poses are
+    /// indexed by a hash, not searched row by row (which took ~20 min here), and every row
+    /// finds its own pose.
+    #[test]
+    fn a_million_distinct_poses_are_indexed() {
+        let m = Machine::default_xcfz();
+        let n = super::super::MAX_PLAN_POSITIONS;
+        let mut text = String::from("X,C,Z,reflector\n");
+        for i in 0..n {
+            let (x, c, z) = (i % 1000, (i / 1000) % 100, i / 100_000);
+            let _ = writeln!(text, "{}.{x:03},{c}.5,{z},R{}", x / 2, 1 + i % 2);
+        }
+        let plan = from_csv_str(&m, &text, "big.csv").unwrap();
+        assert_eq!(plan.steps().len(), n);
+        assert_eq!(plan.positions.len(), n);
+        let last = plan.steps()[n - 1];
+        assert_eq!(last.position, n - 1);
+        assert_eq!(plan.positions[last.position].0[2], 9.0);
+        // One pose more: refused with the bound named.
+        text.push_str("1,1,1,R1\n");
+        let msg = from_csv_str(&m, &text, "big.csv").unwrap_err().to_string();
+        assert!(msg.contains("1000000"), "{msg}");
     }
 }

@@ -247,6 +247,13 @@ impl Effect {
                 count(3)?;
                 let axis = letter(args[0])?;
                 let v = nums(&args[1..])?;
+                let (lo, hi) = crate::model::PERIOD_RANGE_MM;
+                if !(lo..=hi).contains(&v[0]) {
+                    return Err(bad(format!(
+                        "the period {} mm is outside {lo} … {hi:e} mm",
+                        crate::error::number(v[0])
+                    )));
+                }
                 Effect::BallScrew {
                     axis,
                     period_mm: v[0],
