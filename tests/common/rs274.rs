@@ -139,8 +139,9 @@ pub fn require() -> bool {
 /// the module's docs). An interpreter error is returned as `Err` with its message and line.
 ///
 /// rs274 writes the parameter file back when it ends (`G10`, `G92`, `G28.1` persist, as on a
-/// control, and the old file is kept as `.bak`): it is given a private copy beside the
-/// program, so that runs do not leak into each other or into the test data.
+/// control, and the old file is kept as `.bak`): it is given a private copy in a folder of its
+/// own under the system's temporary folder, so that runs do not leak into each other or into
+/// the test data.
 pub fn run(program: &Path, tools: Option<&Path>, vars: Option<&Path>) -> Result<Run, String> {
     let mut cmd = Command::new("rs274");
     cmd.arg("-g");
@@ -148,7 +149,12 @@ pub fn run(program: &Path, tools: Option<&Path>, vars: Option<&Path>) -> Result<
         cmd.arg("-t").arg(t);
     }
     if let Some(v) = vars {
-        let copy = program.with_extension("rs274.var");
+        static RUNS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let n = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let dir =
+            std::env::temp_dir().join(format!("volver-rs274-vars-{}-{n}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let copy = dir.join("params.var");
         std::fs::copy(v, &copy).map_err(|e| format!("copying {}: {e}", v.display()))?;
         cmd.arg("-v").arg(copy);
     }
