@@ -191,7 +191,11 @@ pub fn parse(canon: &str) -> Result<Vec<Event>, String> {
     };
     let mut events = Vec::new();
     for line in canon.lines() {
-        let Some(call) = line.split("N..... ").nth(1) else {
+        // `   7 N..... CALL(…)`, or `  22 N12    CALL(…)` for a block with a number.
+        let Some(call) = line
+            .split_once(" N")
+            .and_then(|(_, r)| r.find(' ').map(|k| r[k..].trim_start()))
+        else {
             continue;
         };
         let (name, rest) = call.split_once('(').unwrap_or((call, ""));
