@@ -964,4 +964,103 @@ mod tests {
             .to_string();
         assert!(e.contains("used twice"), "{e}");
     }
+
+    #[test]
+    fn clearance_tables_are_validated_and_written_only_when_set() {
+        let e = |from: &str, to: &str| {
+            let text = DEFAULT_MACHINE_TOML.replace(from, to);
+            Machine::from_toml_str(&text, "m.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        let line = DEFAULT_MACHINE_TOML
+            .lines()
+            .position(|l| l == "[clearance]")
+            .unwrap()
+            + 1;
+        let msg = e("Z = 600.0", "Z = 700.0");
+        assert!(
+            msg.starts_with(&format!("m.toml:{line}: field 'clearance.Z'"))
+                && msg.contains("outside the travel range [0, 600]"),
+            "{msg}"
+        );
+        let msg = e("Z = 600.0", "Y = 0.0");
+        assert!(
+            msg.contains("'clearance.Y'") && msg.contains("no axis Y (its axes: X, C, Z)"),
+            "{msg}"
+        );
+        let msg = e("Z = 600.0", "Z = nan");
+        assert!(msg.contains("finite"), "{msg}");
+        let msg = e("Z = 600.0", "ZZ = 1.0");
+        assert!(msg.contains("no axis ZZ"), "{msg}");
+        let msg = e("Z = 600.0", "");
+        assert!(msg.contains("names no axis"), "{msg}");
+        let msg = e("Z = 600.0", "Z = \"top\"");
+        assert!(msg.starts_with("m.toml:"), "{msg}");
+        // Written back as read, and not at all when absent.
+        let m = Machine::default_xcfz();
+        let text = toml::to_string(m.spec()).unwrap();
+        assert!(text.contains("[clearance]\nZ = 600.0"), "{text}");
+        assert_eq!(Machine::from_toml_str(&text, "back").unwrap(), m);
+        let mut spec = m.spec().clone();
+        spec.clearance = None;
+        let bare = Machine::from_spec(spec, "bare").unwrap();
+        assert!(bare.clearance().is_empty());
+        assert!(!toml::to_string(bare.spec()).unwrap().contains("clearance"));
+        assert_eq!(
+            m.clearance_from_text("Z=0, X = 1400"),
+            Ok(vec![(0, 1400.0), (2, 0.0)])
+        );
+        assert!(
+            m.clearance_from_text("C=90,C=0")
+                .unwrap_err()
+                .contains("given twice")
+        );
+        assert!(
+            m.clearance_from_text("Z=inf")
+                .unwrap_err()
+                .contains("finite")
+        );
+        assert!(
+            m.clearance_from_text("Z=x")
+                .unwrap_err()
+                .contains("not a number")
+        );
+    }
+
+    /// Every embedded machine's clearance is the end of its axis' travel that takes each
+    /// reflector highest above the workpiece side's face (its frame's z: the tables' faces are
+    /// at z = 0), the other axes at their reference.
+    #[test]
+    fn each_embedded_machines_clearance_is_its_safe_end() {
+        use crate::kinematics::{PointErrors, tool_in_workpiece};
+        for preset in crate::presets::PRESETS {
+            let m = preset.machine().unwrap();
+            assert!(!m.clearance().is_empty(), "{}", preset.name);
+            let reference = Commands(std::array::from_fn(|k| {
+                m.axes().get(k).map_or(0.0, |a| a.reference)
+            }));
+            let e = PointErrors::<f64>::zero();
+            for &(k, clear) in m.clearance() {
+                let ax = &m.axes()[k];
+                for r in m.reflectors() {
+                    let z = |v: f64| {
+                        let mut c = reference;
+                        c.0[k] = v;
+                        tool_in_workpiece(&m, &c.0, &r.offset, &e)[2]
+                    };
+                    for i in 0..=10 {
+                        let v = ax.min + (ax.max - ax.min) * i as f64 / 10.0;
+                        assert!(
+                            z(clear) >= z(v) - 1e-9,
+                            "{}: {} at {v} puts {} higher than the clearance",
+                            preset.name,
+                            ax.axis,
+                            r.id
+                        );
+                    }
+                }
+            }
+        }
+    }
 }

@@ -15,6 +15,10 @@
 //! were not sorted since they were written). Lines starting with `#` are comments. Rows with the
 //! same axis values are the same pose: the plan's positions are its distinct poses in order of
 //! first appearance. Every error names the file, line and column.
+//!
+//! [`gcode`] writes a plan's measuring program: G-code that visits the poses in the file's order
+//! through a clearance position and waits the plan's measuring time at each (see
+//! [`ProgramOptions`] and [`crate::dialect`]).
 
 use super::{Plan, Step};
 use crate::dialect::{Dialect, MAX_DWELL_S};
@@ -687,6 +691,95 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_measuring_program_retracts_moves_approaches_and_waits_in_each_dialect() {
+        let m = Machine::default_xcfz();
+        let csv = "X,C,Z,reflector\n700,90,300,R1\n700,90,300,R2\n700,90,300,R2\n\
+                   700,90,100,R1\n0,180,0,R1\n";
+        let plan = from_csv_str(&m, csv, "p.csv").unwrap();
+        let body = |o: &ProgramOptions| -> Vec<String> {
+            let nc = gcode(&plan, &m, o, "t").unwrap();
+            nc.lines()
+                .filter(|l| !l.starts_with('(') && !l.starts_with('%') && !l.starts_with('O'))
+                .skip_while(|l| !l.contains("G53"))
+                .map(str::to_string)
+                .collect()
+        };
+        let mut o = ProgramOptions::new(&m);
+        o.seconds_per_point = 7.5;
+        assert_eq!(
+            body(&o),
+            [
+                "N1 G53 G0 Z600 (clearance)",
+                "G53 G0 X700 C90",
+                "G53 G0 Z300",
+                "G4 P15 (visit 1, pose 1: measure R1 R2, plan rows 1-2)",
+                // The same pose again (R2 twice): no move; then Z alone: a direct move.
+                "G4 P7.5 (visit 2, pose 1: measure R2, plan row 3)",
+                "N3 G53 G0 Z100",
+                "G4 P7.5 (visit 3, pose 2: measure R1, plan row 4)",
+                "N4 G53 G0 Z600 (clearance)",
+                "G53 G0 X0 C180",
+                "G53 G0 Z0",
+                "G4 P7.5 (visit 4, pose 3: measure R1, plan row 5)",
+                "G53 G0 Z600 (clearance)",
+                "M30",
+            ]
+        );
+        o.dialect = Dialect::Fanuc;
+        o.wait = Wait::OptionalStop;
+        o.settle_s = 2.25;
+        o.clearance = m.clearance_from_text("Z=550").unwrap();
+        let f = body(&o);
+        assert_eq!(
+            &f[..5],
+            [
+                "N1 G53 G00 Z550. (clearance)",
+                "G53 G00 X700. C90.",
+                "G53 G00 Z300.",
+                "G04 P2250 (settle)",
+                "M01 (visit 1, pose 1: measure R1 R2, plan rows 1-2)",
+            ]
+        );
+        let nc = gcode(&plan, &m, &o, "t").unwrap();
+        assert!(
+            nc.starts_with("%\nO0001\n(volver measuring program: t)\n"),
+            "{nc}"
+        );
+        assert!(
+            nc.contains("\nG40 G49 G80\nG21 G90 G17 G94\nM05\nM09\n"),
+            "{nc}"
+        );
+        assert!(nc.ends_with("M30\n%\n"), "{nc}");
+        let e = |o: &ProgramOptions| gcode(&plan, &m, o, "t").unwrap_err().to_string();
+        let mut bad = o.clone();
+        bad.settle_s = 1e300;
+        assert!(e(&bad).contains("field 'settle_s': 1e300 s"), "{}", e(&bad));
+        bad.settle_s = 0.0;
+        bad.seconds_per_point = f64::NAN;
+        assert!(e(&bad).contains("field 'seconds_per_point'"), "{}", e(&bad));
+        bad.seconds_per_point = 3600.0;
+        bad.settle_s = 3600.0;
+        assert!(gcode(&plan, &m, &bad, "t").is_ok());
+        // 28 reflectors at one pose, an hour each: past the longest dwell a control takes.
+        let mut spec = m.spec().clone();
+        spec.reflectors = (0..28)
+            .map(|i| crate::machine::ReflectorSpec {
+                id: format!("R{}", i + 1),
+                offset: [i as f64, 0.0, 0.0],
+            })
+            .collect();
+        let many = Machine::from_spec(spec, "many").unwrap();
+        let one = Plan::parse_grid(&many, "X=0,C=0,Z=0").unwrap();
+        let mut long = ProgramOptions::new(&many);
+        (long.seconds_per_point, long.settle_s) = (3600.0, 3600.0);
+        let msg = gcode(&one, &many, &long, "t").unwrap_err().to_string();
+        assert!(
+            msg.contains("measuring 28 reflectors would wait 104400 s"),
+            "{msg}"
+        );
+    }
 
     #[test]
     fn a_shuffled_plan_round_trips_and_bad_files_name_line_and_column() {
