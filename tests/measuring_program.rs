@@ -702,12 +702,10 @@ fn the_judge_refuses_unsafe_or_short_programs() {
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// Refusals name the option and say how to fix it: no clearance anywhere (a machine file
-/// without `[clearance]`; `--clearance` then makes it work), a clearance outside the travel or
-/// on an axis the machine lacks, absurd waits (`--dwell-s 1e300`, `--seconds-per-point 1e300`),
-/// an unknown dialect or wait. Nothing is written when refused.
+/// Without a clearance anywhere (a machine file without `[clearance]`) `--gcode` is refused,
+/// saying how to give one, before any design; `--clearance` then makes it work.
 #[test]
-fn measuring_programs_are_refused_with_the_option_and_the_fix() {
+fn a_program_without_a_clearance_is_refused_with_the_fix() {
     let d = dir("refusals");
     let p = |n: &str| d.join(n).to_string_lossy().into_owned();
     let bare: String = volver::core::machine::DEFAULT_MACHINE_TOML
@@ -717,25 +715,17 @@ fn measuring_programs_are_refused_with_the_option_and_the_fix() {
         .collect();
     std::fs::write(p("bare.toml"), bare).unwrap();
     std::fs::write(p("plan.csv"), "X,C,Z,reflector\n0,0,0,R1\n700,90,300,R2\n").unwrap();
+    let (machine, plan, out) = (p("bare.toml"), p("plan.csv"), p("out.nc"));
     let base = [
         "plan",
         "--machine",
-        &p("bare.toml"),
+        &machine,
         "--plan-file",
-        &p("plan.csv"),
+        &plan,
         "--gcode",
+        &out,
     ];
-    let with = |extra: &[&str]| -> Vec<String> {
-        let mut a: Vec<String> = base.iter().map(|s| s.to_string()).collect();
-        a.push(p("out.nc"));
-        a.extend(extra.iter().map(|s| s.to_string()));
-        a
-    };
-    let refuse = |extra: &[&str]| {
-        let a = with(extra);
-        refused(&a.iter().map(String::as_str).collect::<Vec<_>>())
-    };
-    let e = refuse(&[]);
+    let e = refused(&base);
     assert!(
         e.contains("clearance") && e.contains("--clearance Z=600") && e.contains("[clearance]"),
         "{e}"
@@ -743,7 +733,7 @@ fn measuring_programs_are_refused_with_the_option_and_the_fix() {
     let e = refused(&[
         "plan",
         "--machine",
-        &p("bare.toml"),
+        &machine,
         "--model",
         "core/data/xcfz-paper-model.toml",
         "--points",
@@ -758,42 +748,51 @@ fn measuring_programs_are_refused_with_the_option_and_the_fix() {
         !Path::new(&p("x.csv")).exists(),
         "refused before the design"
     );
-    for (extra, needle) in [
-        (
-            &["--clearance", "Z=700"][..],
-            "--clearance Z=700: clearance Z = 700: 700 mm is outside the travel range [0, 600]",
-        ),
-        (&["--clearance", "Y=0"], "the machine has no axis Y"),
-        (&["--clearance", "Z=nan"], "finite"),
-        (&["--clearance", "Z"], "expected AXIS=VALUE"),
-        (
-            &["--clearance", "Z=600", "--dwell-s", "1e300"],
-            "--dwell-s 1e300: an extra settling wait of 0 to 3600 s",
-        ),
-        (
-            &["--clearance", "Z=600", "--seconds-per-point", "1e300"],
-            "--seconds-per-point 1e300",
-        ),
-        (
-            &["--clearance", "Z=600", "--dialect", "haas"],
-            "unknown G-code dialect 'haas'",
-        ),
-        (
-            &["--clearance", "Z=600", "--wait", "m2"],
-            "unknown wait 'm2'",
-        ),
-    ] {
-        let e = refuse(extra);
-        assert!(e.contains(needle), "{extra:?}: {e}");
-    }
-    assert!(!Path::new(&p("out.nc")).exists());
-    let a = with(&["--clearance", "Z=600"]);
-    ok(&a.iter().map(String::as_str).collect::<Vec<_>>());
-    let nc = std::fs::read_to_string(p("out.nc")).unwrap();
+    let e = refused(&[&base[..], &["--clearance", "Z=700"]].concat());
+    let want = "--clearance Z=700: clearance Z = 700: 700 mm is outside the travel range [0, 600]";
+    assert!(e.contains(want), "{e}");
+    assert!(!Path::new(&out).exists());
+    ok(&[&base[..], &["--clearance", "Z=600"]].concat());
+    let nc = std::fs::read_to_string(&out).unwrap();
     assert!(
         nc.contains("G53 G0 Z600 (clearance)")
             && nc.contains("G4 P10 (visit 2, pose 2: measure R2, plan row 2)"),
         "{nc}"
     );
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// Bad values of the program's options are refused naming the option and the value as given
+/// (`1e300`, not its 301 digits): a clearance on an axis the machine lacks or not a number,
+/// absurd waits, an unknown dialect or wait. Nothing is written.
+#[test]
+fn bad_program_options_are_refused_with_the_option() {
+    let d = dir("options");
+    let p = |n: &str| d.join(n).to_string_lossy().into_owned();
+    std::fs::write(p("plan.csv"), "X,C,Z,reflector\n0,0,0,R1\n700,90,300,R2\n").unwrap();
+    let (plan, out) = (p("plan.csv"), p("out.nc"));
+    for (extra, needle) in [
+        (
+            &["--clearance", "Y=0"][..],
+            "--clearance Y=0: clearance Y = 0: the machine has no axis Y",
+        ),
+        (&["--clearance", "Z=nan"], "finite"),
+        (&["--clearance", "Z"], "expected AXIS=VALUE"),
+        (
+            &["--dwell-s", "1e300"],
+            "--dwell-s 1e300: an extra settling wait of 0 to 3600 s",
+        ),
+        (&["--dwell-s=-1"], "--dwell-s -1.0"),
+        (
+            &["--seconds-per-point", "1e300"],
+            "--seconds-per-point 1e300",
+        ),
+        (&["--dialect", "haas"], "unknown G-code dialect 'haas'"),
+        (&["--wait", "m2"], "unknown wait 'm2'"),
+    ] {
+        let e = refused(&[&["plan", "--plan-file", &plan, "--gcode", &out][..], extra].concat());
+        assert!(e.contains(needle), "{extra:?}: {e}");
+    }
+    assert!(!Path::new(&out).exists());
     let _ = std::fs::remove_dir_all(&d);
 }

@@ -633,17 +633,17 @@ impl Machine {
                 observes: st.observes,
             });
         }
-        let clearance = match &spec.clearance {
-            None => Vec::new(),
-            Some(table) => clearance_of(&axes, table.iter().map(|(k, v)| (k.as_str(), *v)))
-                .map_err(|(key, m)| {
-                    let field = match key.as_str() {
-                        "" => "clearance".to_string(),
-                        k => format!("clearance.{k}"),
-                    };
-                    Error::input(place("[clearance]", &field), m)
-                })?,
-        };
+        let table = spec.clearance.iter().flatten();
+        let clearance = clearance_of(&axes, table.map(|(k, v)| (k.as_str(), *v))).or_else(
+            |(key, m)| match (key.as_str(), &spec.clearance) {
+                (_, None) => Ok(Vec::new()),
+                ("", _) => Err(Error::input(place("[clearance]", "clearance"), m)),
+                (k, _) => Err(Error::input(
+                    place("[clearance]", &format!("clearance.{k}")),
+                    m,
+                )),
+            },
+        )?;
         Ok(Machine {
             spec,
             chain,

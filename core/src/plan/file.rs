@@ -317,8 +317,6 @@ fn header(
             format!("{}{}", ax.axis, d.value(ax.to_file_units(v)))
         })
         .collect();
-    let stations = machine.stations().len();
-    let measuring_s = steps.len() as f64 * options.seconds_per_point;
     let mut lines = vec![
         format!("volver measuring program: {title}"),
         format!(
@@ -336,38 +334,41 @@ fn header(
             clearance.join(" ")
         ),
     ];
+    lines.push(wait_note(options, steps.len(), machine.stations().len()));
+    for l in lines {
+        out.push_str(&d.comment(&l));
+        out.push('\n');
+    }
+}
+
+/// The header's line on the waits of a program of `measurements` measured from `stations`.
+fn wait_note(options: &ProgramOptions, measurements: usize, stations: usize) -> String {
     let settle = if options.settle_s > 0.0 {
         format!("{} s to settle, then ", options.settle_s)
     } else {
         String::new()
     };
-    lines.push(match options.wait {
+    let spp = options.seconds_per_point;
+    match options.wait {
         Wait::Time => format!(
-            "at each pose: {settle}{} s per reflector measured there; the waits of the \
-             measurements add up to {:.4} h, the plan's duration at {} s per point{}; moves \
+            "at each pose: {settle}{spp} s per reflector measured there; the waits of the \
+             measurements add up to {:.4} h, the plan's duration at {spp} s per point{}; moves \
              and settling come on top",
-            options.seconds_per_point,
-            measuring_s / 3600.0,
-            options.seconds_per_point,
+            measurements as f64 * spp / 3600.0,
             if stations > 1 {
                 format!(" for one of its {stations} stations: run the program from each")
             } else {
                 String::new()
             }
         ),
-        Wait::Stop | Wait::OptionalStop => format!(
-            "at each pose: {settle}a program stop {}: measure the reflectors named, in order, \
-             then cycle start",
-            if options.wait == Wait::Stop {
-                "M0"
-            } else {
-                "M1, optional stop switch on"
-            }
+        Wait::Stop => format!(
+            "at each pose: {settle}a program stop M0: measure the reflectors named, in order, \
+             then cycle start"
         ),
-    });
-    for l in lines {
-        out.push_str(&d.comment(&l));
-        out.push('\n');
+        Wait::OptionalStop => format!(
+            "at each pose: {settle}an optional stop M1, the optional stop switch on: measure the \
+             reflectors named, in order, then cycle start"
+        ),
     }
 }
 
@@ -752,8 +753,14 @@ mod tests {
             "{nc}"
         );
         assert!(nc.ends_with("M30\n%\n"), "{nc}");
+    }
+
+    #[test]
+    fn measuring_program_times_out_of_bounds_name_the_field() {
+        let m = Machine::default_xcfz();
+        let plan = Plan::parse_grid(&m, "X=0:1400:700,C=0,Z=0").unwrap();
         let e = |o: &ProgramOptions| gcode(&plan, &m, o, "t").unwrap_err().to_string();
-        let mut bad = o.clone();
+        let mut bad = ProgramOptions::new(&m);
         bad.settle_s = 1e300;
         assert!(e(&bad).contains("field 'settle_s': 1e300 s"), "{}", e(&bad));
         bad.settle_s = 0.0;
