@@ -133,7 +133,7 @@ impl ProgramOptions {
     }
 
     /// The options' values checked: the message names the field at fault.
-    fn check(&self) -> Result<()> {
+    fn check(&self, machine: &Machine) -> Result<()> {
         let at = |field: &str, m: String| {
             Err(Error::input(
                 Place::file("the measuring program").at_field(field),
@@ -164,6 +164,22 @@ impl ProgramOptions {
                  the reflectors away from the workpiece) or `volver plan --clearance Z=600`"
                     .to_string(),
             );
+        }
+        for (i, &(j, v)) in self.clearance.iter().enumerate() {
+            let Some(ax) = machine.axes().get(j) else {
+                return at(
+                    "clearance",
+                    format!("axis index {j}: the machine has no such axis"),
+                );
+            };
+            let text = format!("{}={}", ax.axis, ax.to_file_units(v));
+            if self.clearance[..i].iter().any(|c| c.0 == j) || v.is_nan() {
+                return at("clearance", format!("{text}: given twice or not a number"));
+            }
+            // The machine's own check of a clearance (travel, finite).
+            if let Err(m) = machine.clearance_from_text(&text) {
+                return at("clearance", m);
+            }
         }
         Ok(())
     }
@@ -247,7 +263,7 @@ pub fn gcode(
     options: &ProgramOptions,
     title: &str,
 ) -> Result<String> {
-    options.check()?;
+    options.check(machine)?;
     let visits = visits(plan);
     let most = visits.iter().map(|v| v.reflectors.len()).max().unwrap_or(0);
     let longest = options.settle_s + options.seconds_per_point * most as f64;
@@ -769,6 +785,22 @@ mod tests {
         bad.seconds_per_point = 3600.0;
         bad.settle_s = 3600.0;
         assert!(gcode(&plan, &m, &bad, "t").is_ok());
+        for (clearance, needle) in [
+            (vec![(7, 0.0)], "axis index 7"),
+            (vec![(2, 700.0)], "outside the travel range [0, 600]"),
+            (vec![(2, f64::INFINITY)], "finite"),
+            (vec![(2, 600.0), (2, 500.0)], "given twice"),
+        ] {
+            let o = ProgramOptions {
+                clearance,
+                ..ProgramOptions::new(&m)
+            };
+            let msg = e(&o);
+            assert!(
+                msg.contains("field 'clearance'") && msg.contains(needle),
+                "{msg}"
+            );
+        }
         // 28 reflectors at one pose, an hour each: past the longest dwell a control takes.
         let mut spec = m.spec().clone();
         spec.reflectors = (0..28)
