@@ -21,6 +21,7 @@
 //! - [`problem`]: a model with its measurements: residuals, Φ, ve;
 //! - [`compensate`]: the inverse model: the command that puts the tool where it belongs;
 //! - [`gcode`]: G-code programs, read and written back compensated;
+//! - [`dialect`]: the words that differ between G-code dialects (LinuxCNC, Fanuc);
 //! - [`tables`]: controller tables of the identified errors (ISG CSV, Etalon style, plain CSV);
 //! - [`fsio`]: atomic file output;
 //! - [`fuzz`]: harnesses for fuzzing the readers.
@@ -44,6 +45,7 @@ pub mod basis;
 pub mod chain;
 pub mod compensate;
 pub mod diagnose;
+pub mod dialect;
 pub mod error;
 pub mod fsio;
 // Hidden: the fuzzing harnesses are public for the fuzz targets and tests/fuzz_seeds.rs, not as API.

@@ -28,6 +28,15 @@
 //! noise = "uniform:30,30,4,0.8"   # optional: the tracker's noise, as `--noise` reads it
 //! ```
 //!
+//! A `[clearance]` table gives the position the measuring program (`volver plan --gcode`)
+//! retracts to between poses: the axes that take the reflectors away from the workpiece and the
+//! tracker, in file units (here the tool-carrying Z at its top):
+//!
+//! ```toml
+//! [clearance]
+//! Z = 600.0                       # mm (degrees for a rotary axis); within the axis' travel
+//! ```
+//!
 //! For multilateration, `[[station]]` tables replace the tracker's pose (the `[tracker]` table
 //! then gives only the default noise); each measurement names its station:
 //!
@@ -133,6 +142,13 @@ pub struct MachineSpec {
     /// The tracker.
     #[serde(default)]
     pub tracker: TrackerSpec,
+    /// The clearance position of the measuring program (`volver plan --gcode`): axis letter =
+    /// position (mm for X, Y, Z; degrees for A, B, C) of the axes that take the reflectors away
+    /// from the workpiece and the tracker, e.g. `Z = 600.0`. Between poses the program moves
+    /// these axes there first, then the others, then these back to the pose. Optional; every
+    /// axis named must be the machine's and the value within its travel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance: Option<BTreeMap<String, f64>>,
     /// Tracker stations, for multilateration (several positions of one instrument, or several
     /// instruments): when any is given they replace the `[tracker]` table's pose, the first being
     /// the reference station, and every measurement names its station.
@@ -366,6 +382,7 @@ pub struct Machine {
     axes: Vec<MachineAxis>,
     reflectors: Vec<Reflector>,
     stations: Vec<Station>,
+    clearance: Vec<(usize, f64)>,
 }
 
 impl Machine {
@@ -618,12 +635,24 @@ impl Machine {
                 observes: st.observes,
             });
         }
+        let table = spec.clearance.iter().flatten();
+        let clearance = clearance_of(&axes, table.map(|(k, v)| (k.as_str(), *v))).or_else(
+            |(key, m)| match (key.as_str(), &spec.clearance) {
+                (_, None) => Ok(Vec::new()),
+                ("", _) => Err(Error::input(place("[clearance]", "clearance"), m)),
+                (k, _) => Err(Error::input(
+                    place("[clearance]", &format!("clearance.{k}")),
+                    m,
+                )),
+            },
+        )?;
         Ok(Machine {
             spec,
             chain,
             axes,
             reflectors,
             stations,
+            clearance,
         })
     }
 
@@ -764,6 +793,47 @@ impl Machine {
         }
     }
 
+    /// The clearance position of the machine file's `[clearance]` table: (chain index of the
+    /// axis, position in internal units: mm, rad), in chain order; empty when the file has none.
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// assert_eq!(m.clearance(), &[(2, 600.0)]); // Z (the tool) at its top
+    /// ```
+    pub fn clearance(&self) -> &[(usize, f64)] {
+        &self.clearance
+    }
+
+    /// A clearance position written as `--clearance` takes it: `AXIS=VALUE` pairs separated by
+    /// commas, values in file units (mm, degrees), e.g. `Z=600` or `Z=400,A=0`; the result as
+    /// [`Machine::clearance`], or the message naming the pair that is wrong.
+    ///
+    /// ```
+    /// let m = volver_core::machine::Machine::default_xcfz();
+    /// assert_eq!(m.clearance_from_text("Z=550"), Ok(vec![(2, 550.0)]));
+    /// assert!(m.clearance_from_text("Z=700").unwrap_err().contains("travel range [0, 600]"));
+    /// assert!(m.clearance_from_text("Y=0").unwrap_err().contains("no axis Y"));
+    /// ```
+    pub fn clearance_from_text(
+        &self,
+        text: &str,
+    ) -> std::result::Result<Vec<(usize, f64)>, String> {
+        let mut pairs = Vec::new();
+        for item in text.split(',').map(str::trim) {
+            let Some((k, v)) = item.split_once('=') else {
+                return Err(format!(
+                    "'{item}': expected AXIS=VALUE (mm or degrees), e.g. Z=600"
+                ));
+            };
+            let value = v
+                .trim()
+                .parse::<f64>()
+                .map_err(|_| format!("'{item}': '{}' is not a number (mm or degrees)", v.trim()))?;
+            pairs.push((k.trim(), value));
+        }
+        clearance_of(&self.axes, pairs.into_iter()).map_err(|(_, m)| m)
+    }
+
     /// Commands from positions in file units (mm, degrees) given in chain order.
     pub fn commands_from_file_units(&self, positions: &[f64]) -> Commands {
         let mut c = Commands::default();
@@ -772,6 +842,49 @@ impl Machine {
         }
         c
     }
+}
+
+/// A clearance position from (axis letter, value in file units) pairs: (chain index, internal
+/// units) in chain order, or the key at fault and the message. Each axis must be one of `axes`,
+/// named once, its value finite and within its travel; at least one axis is needed.
+fn clearance_of<'a>(
+    axes: &[MachineAxis],
+    pairs: impl Iterator<Item = (&'a str, f64)>,
+) -> std::result::Result<Vec<(usize, f64)>, (String, String)> {
+    let mut out: Vec<(usize, f64)> = Vec::new();
+    for (key, value) in pairs {
+        let fail = |m: String| (key.to_string(), format!("clearance {key} = {value}: {m}"));
+        let mut letters = key.chars();
+        let found = match (letters.next().and_then(Axis::from_letter), letters.next()) {
+            (Some(a), None) => axes.iter().position(|x| x.axis == a),
+            _ => None,
+        };
+        let Some(k) = found else {
+            let known: Vec<String> = axes.iter().map(|a| a.axis.to_string()).collect();
+            return Err(fail(format!(
+                "the machine has no axis {key} (its axes: {})",
+                known.join(", ")
+            )));
+        };
+        if !value.is_finite() {
+            return Err(fail(format!(
+                "a finite position ({}) is needed",
+                axes[k].file_unit()
+            )));
+        }
+        if out.iter().any(|(j, _)| *j == k) {
+            return Err(fail(format!("axis {key} is given twice")));
+        }
+        out.push((k, axes[k].position_from_file(value).map_err(fail)?));
+    }
+    if out.is_empty() {
+        return Err((
+            String::new(),
+            "the clearance names no axis: give at least one, e.g. Z = 600".to_string(),
+        ));
+    }
+    out.sort_by_key(|(k, _)| *k);
+    Ok(out)
 }
 
 /// Whether `id` can be a cell of a CSV file and a word of messages: non-empty, no comma,
@@ -852,5 +965,104 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("used twice"), "{e}");
+    }
+
+    #[test]
+    fn clearance_tables_are_validated_and_written_only_when_set() {
+        let e = |from: &str, to: &str| {
+            let text = DEFAULT_MACHINE_TOML.replace(from, to);
+            Machine::from_toml_str(&text, "m.toml")
+                .unwrap_err()
+                .to_string()
+        };
+        let line = DEFAULT_MACHINE_TOML
+            .lines()
+            .position(|l| l == "[clearance]")
+            .unwrap()
+            + 1;
+        let msg = e("Z = 600.0", "Z = 700.0");
+        assert!(
+            msg.starts_with(&format!("m.toml:{line}: field 'clearance.Z'"))
+                && msg.contains("outside the travel range [0, 600]"),
+            "{msg}"
+        );
+        let msg = e("Z = 600.0", "Y = 0.0");
+        assert!(
+            msg.contains("'clearance.Y'") && msg.contains("no axis Y (its axes: X, C, Z)"),
+            "{msg}"
+        );
+        let msg = e("Z = 600.0", "Z = nan");
+        assert!(msg.contains("finite"), "{msg}");
+        let msg = e("Z = 600.0", "ZZ = 1.0");
+        assert!(msg.contains("no axis ZZ"), "{msg}");
+        let msg = e("Z = 600.0", "");
+        assert!(msg.contains("names no axis"), "{msg}");
+        let msg = e("Z = 600.0", "Z = \"top\"");
+        assert!(msg.starts_with("m.toml:"), "{msg}");
+        // Written back as read, and not at all when absent.
+        let m = Machine::default_xcfz();
+        let text = toml::to_string(m.spec()).unwrap();
+        assert!(text.contains("[clearance]\nZ = 600.0"), "{text}");
+        assert_eq!(Machine::from_toml_str(&text, "back").unwrap(), m);
+        let mut spec = m.spec().clone();
+        spec.clearance = None;
+        let bare = Machine::from_spec(spec, "bare").unwrap();
+        assert!(bare.clearance().is_empty());
+        assert!(!toml::to_string(bare.spec()).unwrap().contains("clearance"));
+        assert_eq!(
+            m.clearance_from_text("Z=0, X = 1400"),
+            Ok(vec![(0, 1400.0), (2, 0.0)])
+        );
+        assert!(
+            m.clearance_from_text("C=90,C=0")
+                .unwrap_err()
+                .contains("given twice")
+        );
+        assert!(
+            m.clearance_from_text("Z=inf")
+                .unwrap_err()
+                .contains("finite")
+        );
+        assert!(
+            m.clearance_from_text("Z=x")
+                .unwrap_err()
+                .contains("not a number")
+        );
+    }
+
+    /// Every embedded machine's clearance is the end of its axis' travel that takes each
+    /// reflector highest above the workpiece side's face (its frame's z: the tables' faces are
+    /// at z = 0), the other axes at their reference.
+    #[test]
+    fn each_embedded_machines_clearance_is_its_safe_end() {
+        use crate::kinematics::{PointErrors, tool_in_workpiece};
+        for preset in crate::presets::PRESETS {
+            let m = preset.machine().unwrap();
+            assert!(!m.clearance().is_empty(), "{}", preset.name);
+            let reference = Commands(std::array::from_fn(|k| {
+                m.axes().get(k).map_or(0.0, |a| a.reference)
+            }));
+            let e = PointErrors::<f64>::zero();
+            for &(k, clear) in m.clearance() {
+                let ax = &m.axes()[k];
+                for r in m.reflectors() {
+                    let z = |v: f64| {
+                        let mut c = reference;
+                        c.0[k] = v;
+                        tool_in_workpiece(&m, &c.0, &r.offset, &e)[2]
+                    };
+                    for i in 0..=10 {
+                        let v = ax.min + (ax.max - ax.min) * i as f64 / 10.0;
+                        assert!(
+                            z(clear) >= z(v) - 1e-9,
+                            "{}: {} at {v} puts {} higher than the clearance",
+                            preset.name,
+                            ax.axis,
+                            r.id
+                        );
+                    }
+                }
+            }
+        }
     }
 }

@@ -5,9 +5,11 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use std::path::{Path, PathBuf};
+use volver::core::dialect::Dialect;
 use volver::core::fsio::write_atomic;
+use volver::core::machine::Machine;
 use volver::core::noise::TrackerNoise;
-use volver::core::plan::file;
+use volver::core::plan::file::{self, ProgramOptions, Wait};
 use volver::planning::{Request, compare, plan};
 
 /// Arguments of `volver plan`.
@@ -59,13 +61,32 @@ pub struct PlanArgs {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Plan file to write (CSV: order, the axes, reflector), read by `simulate --plan-file`.
-    #[arg(long, required_unless_present = "compare")]
+    #[arg(long, required_unless_present_any = ["compare", "plan_file"])]
     out: Option<PathBuf>,
-    /// Measuring program to write (G-code: a move and a dwell per pose).
+    /// Measuring program to write (G-code): between poses a rapid to the clearance position
+    /// (only the clearance axes move), the other axes, then the approach; a wait per pose.
     #[arg(long)]
     gcode: Option<PathBuf>,
-    /// Dwell at each pose for the machine and the tracker to settle (s).
-    #[arg(long, default_value_t = 2.0)]
+    /// Writes the measuring program (--gcode) of this plan file (CSV, as --out writes it)
+    /// instead of designing a plan.
+    #[arg(long, requires = "gcode", conflicts_with_all = ["out", "compare", "points", "hours"])]
+    plan_file: Option<PathBuf>,
+    /// The measuring program's clearance position, AXIS=VALUE,… in mm and degrees (e.g. Z=600);
+    /// it wins over the machine file's [clearance] table.
+    #[arg(long, value_name = "AXIS=VALUE,…", allow_hyphen_values = true)]
+    clearance: Option<String>,
+    /// How the measuring program waits at each pose: time (a dwell of --seconds-per-point per
+    /// reflector measured there), m0 (a program stop: the tracker is operated by hand) or m1
+    /// (an optional stop).
+    #[arg(long, default_value = "time")]
+    wait: String,
+    /// The measuring program's G-code dialect: linuxcnc (RS274NGC: G4 P in seconds) or fanuc
+    /// (G04 P in milliseconds, O number, decimal points on every axis value).
+    #[arg(long, default_value = "linuxcnc")]
+    dialect: String,
+    /// An extra wait at each pose for the machine and the tracker to settle, before the
+    /// measuring time or the stop (s, 0–3600; not part of the plan's duration).
+    #[arg(long, default_value_t = 0.0)]
     dwell_s: f64,
     /// Compares plans instead: comma-separated plan files or presets (test4 …; test4/R1+R2
     /// measures only those reflectors).
@@ -85,6 +106,9 @@ pub struct PlanArgs {
 /// Runs `volver plan`.
 pub fn run(a: PlanArgs) -> Result<()> {
     let derived_machine = claim_outputs(&a)?;
+    if let Some(path) = &a.plan_file {
+        return program_of_file(&a, path);
+    }
     let (_, model) = volver::inputs::machine_and_model(a.machine.as_deref(), a.model.as_deref())?;
     let noise = match &a.noise {
         Some(t) => TrackerNoise::from_text(t)?,
@@ -98,15 +122,14 @@ pub fn run(a: PlanArgs) -> Result<()> {
     if let Some(list) = &a.compare {
         return compare_plans(&a, &model, list, &noise, tool);
     }
-    if !(a.dwell_s.is_finite() && a.dwell_s >= 0.0) {
-        bail!("--dwell-s {}: a number of seconds ≥ 0", a.dwell_s);
-    }
     if !(a.seconds_per_point.is_finite() && a.seconds_per_point > 0.0) {
         bail!(
             "--seconds-per-point {}: a positive number of seconds",
             a.seconds_per_point
         );
     }
+    // Checked before the design, which takes a while.
+    let program = program_options(&a, model.machine())?;
     let points = match (a.points, a.hours) {
         (Some(n), _) => n,
         // Every station measures the plan.
@@ -161,8 +184,8 @@ pub fn run(a: PlanArgs) -> Result<()> {
         write_atomic(out, file::to_csv(&planned.plan, machine, &title))
             .with_context(|| format!("writing {}", out.display()))?;
     }
-    if let Some(path) = &a.gcode {
-        write_atomic(path, file::gcode(&planned.plan, machine, a.dwell_s, &title))
+    if let (Some(path), Some(options)) = (&a.gcode, &program) {
+        write_atomic(path, file::gcode(&planned.plan, machine, options, &title)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if a.json {
@@ -236,6 +259,82 @@ pub fn run(a: PlanArgs) -> Result<()> {
     Ok(())
 }
 
+/// The measuring program's options from the command line (`None` without `--gcode`), each
+/// checked with the option's name: the clearance (`--clearance`, else the machine file's),
+/// the waits and the dialect.
+fn program_options(a: &PlanArgs, machine: &Machine) -> Result<Option<ProgramOptions>> {
+    if !(a.dwell_s.is_finite() && (0.0..=file::MAX_SETTLE_S).contains(&a.dwell_s)) {
+        bail!(
+            "--dwell-s {:?}: an extra settling wait of 0 to {} s per pose",
+            a.dwell_s,
+            file::MAX_SETTLE_S
+        );
+    }
+    if a.gcode.is_none() {
+        return Ok(None);
+    }
+    let spp = a.seconds_per_point;
+    if !(spp.is_finite() && spp > 0.0 && spp <= file::MAX_SECONDS_PER_POINT) {
+        bail!(
+            "--seconds-per-point {spp:?}: the measuring program waits this long per reflector              measured at a pose; more than 0 and at most {} s",
+            file::MAX_SECONDS_PER_POINT
+        );
+    }
+    let clearance = match &a.clearance {
+        Some(text) => machine
+            .clearance_from_text(text)
+            .map_err(|m| anyhow::anyhow!("--clearance {text}: {m}"))?,
+        None if machine.clearance().is_empty() => bail!(
+            "--gcode: the measuring program needs a clearance position, where it retracts the              reflectors between poses: give --clearance AXIS=VALUE (e.g. --clearance Z=600:              the axis and end that take the tool away from the workpiece and the tracker) or              a [clearance] table in the machine file (`Z = 600.0`)"
+        ),
+        None => machine.clearance().to_vec(),
+    };
+    Ok(Some(ProgramOptions {
+        dialect: a
+            .dialect
+            .parse::<Dialect>()
+            .map_err(|m| anyhow::anyhow!("--dialect: {m}"))?,
+        wait: a
+            .wait
+            .parse::<Wait>()
+            .map_err(|m| anyhow::anyhow!("--wait: {m}"))?,
+        clearance,
+        seconds_per_point: spp,
+        settle_s: a.dwell_s,
+    }))
+}
+
+/// `--plan-file`: the measuring program of a plan file, without a design.
+fn program_of_file(a: &PlanArgs, path: &Path) -> Result<()> {
+    let (machine, _) = volver::inputs::machine(a.machine.as_deref())?;
+    let options = program_options(a, &machine)?.context("--plan-file needs --gcode")?;
+    let plan = file::load(&machine, path)?;
+    let out = a.gcode.as_deref().context("--plan-file needs --gcode")?;
+    let title = format!("{} (plan file {})", plan.name, path.display());
+    write_atomic(out, file::gcode(&plan, &machine, &options, &title)?)
+        .with_context(|| format!("writing {}", out.display()))?;
+    let stations = machine.stations().len();
+    let hours = plan.n_points() as f64 * a.seconds_per_point / 3600.0;
+    println!("volver plan — the measuring program of {}", path.display());
+    println!(
+        "  {} measurements at {} poses, {:.2} h at {} s per point{}; {} dialect",
+        plan.n_points(),
+        plan.positions.len(),
+        hours * stations as f64,
+        a.seconds_per_point,
+        if stations > 1 {
+            format!(
+                " ({hours:.2} h from each of {stations} stations: the program runs once from each)"
+            )
+        } else {
+            String::new()
+        },
+        options.dialect
+    );
+    println!("  measuring program: {}", out.display());
+    Ok(())
+}
+
 /// Checks every file `plan` may write (`--out`, `--gcode` and, with `--reflectors`, the
 /// machine file derived from `--out`) against its inputs and each other before anything runs;
 /// returns the derived machine file's path.
@@ -244,6 +343,7 @@ fn claim_outputs(a: &PlanArgs) -> Result<Option<PathBuf>> {
         a.machine.as_deref(),
         a.model.as_deref(),
         a.reflectors.as_deref(),
+        a.plan_file.as_deref(),
     ];
     let mut outputs = volver::core::fsio::Outputs::new(inputs.into_iter().flatten());
     for out in [&a.out, &a.gcode].into_iter().flatten() {

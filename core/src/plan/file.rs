@@ -15,9 +15,14 @@
 //! were not sorted since they were written). Lines starting with `#` are comments. Rows with the
 //! same axis values are the same pose: the plan's positions are its distinct poses in order of
 //! first appearance. Every error names the file, line and column.
+//!
+//! [`gcode`] writes a plan's measuring program: G-code that visits the poses in the file's order
+//! through a clearance position and waits the plan's measuring time at each (see
+//! [`ProgramOptions`] and [`crate::dialect`]).
 
 use super::{Plan, Step};
 use crate::chain::MAX_AXES;
+use crate::dialect::{Dialect, MAX_DWELL_S};
 use crate::error::{Error, Place, Result};
 use crate::machine::{Commands, Machine};
 use std::collections::HashMap;
@@ -59,100 +64,456 @@ pub fn to_csv(plan: &Plan, machine: &Machine, comment: &str) -> String {
     out
 }
 
-/// The measuring program of `plan` on `machine` (RS-274/NGC G-code, the machine's axis words in
-/// mm and degrees): each visit of a pose is a rapid absolute move followed by a dwell of
-/// `dwell_s` seconds (`G4 P`, seconds as RS-274/NGC reads it) for the machine and the tracker
-/// to settle, with a comment naming the reflectors to measure there and the plan file's rows
-/// they are. The header states the plan (`title`), its size, the reflectors and the order.
-///
-/// ```
-/// use volver_core::gcode::{Linearise, Program};
-/// use volver_core::machine::Machine;
-/// use volver_core::plan::{Plan, file};
-/// let m = Machine::default_xcfz();
-/// let plan = Plan::parse_grid(&m, "X=0:1400:700,C=90,Z=0:600:600").unwrap();
-/// let nc = file::gcode(&plan, &m, 2.0, "a test");
-/// assert!(nc.contains("G4 P2 (pose 1: measure R1 R2, plan rows 1-2)"));
-/// let moves = Program::parse(&nc, "plan.nc", &m, &Linearise::default()).unwrap().points();
-/// assert_eq!(moves.len(), plan.positions.len());
-/// assert_eq!(&moves[1].0[..3], &[0.0, 90.0, 600.0]);
-/// ```
-pub fn gcode(plan: &Plan, machine: &Machine, dwell_s: f64, title: &str) -> String {
-    let clean = |t: &str| t.replace(['(', ')'], "");
-    let steps = plan.steps();
-    // Visits: runs of steps at one pose.
-    let mut visits: Vec<(usize, Vec<usize>, usize)> = Vec::new(); // (position, reflectors, first row)
-    for (i, s) in steps.iter().enumerate() {
-        match visits.last_mut() {
-            Some(v) if v.0 == s.position && !v.1.contains(&s.reflector) => v.1.push(s.reflector),
-            _ => visits.push((s.position, vec![s.reflector], i)),
+/// How the measuring program waits at each pose for the tracker to measure.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Wait {
+    /// A dwell of the plan's measuring time for the reflectors measured there (`G4`/`G04`):
+    /// the tracker measures on its own (a triggered or continuous measurement).
+    #[default]
+    Time,
+    /// A program stop (`M0`) per pose: the operator measures, then presses cycle start.
+    Stop,
+    /// An optional stop (`M1`) per pose: as `Stop` with the control's optional-stop switch on.
+    OptionalStop,
+}
+
+impl std::str::FromStr for Wait {
+    type Err = String;
+
+    /// `time`, `m0` or `m1`.
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s.to_ascii_lowercase().as_str() {
+            "time" => Ok(Wait::Time),
+            "m0" => Ok(Wait::Stop),
+            "m1" => Ok(Wait::OptionalStop),
+            _ => Err(format!(
+                "unknown wait '{s}': expected time (a dwell of the plan's measuring time per \
+                 pose), m0 (a program stop per pose) or m1 (an optional stop per pose)"
+            )),
         }
     }
-    let ids = |rs: &[usize]| {
-        rs.iter()
-            .map(|&r| machine.reflectors()[r].id.as_str())
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
+}
+
+/// The longest extra settling wait per pose of a measuring program (s): an hour.
+pub const MAX_SETTLE_S: f64 = 3600.0;
+
+/// The longest measuring time per reflector measurement a measuring program takes (s): an hour.
+pub const MAX_SECONDS_PER_POINT: f64 = 3600.0;
+
+/// How [`gcode`] writes a measuring program.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProgramOptions {
+    /// The G-code dialect.
+    pub dialect: Dialect,
+    /// How the program waits at each pose.
+    pub wait: Wait,
+    /// The clearance position: (chain index, position in mm or rad) as
+    /// [`Machine::clearance`] gives it; at least one axis.
+    pub clearance: Vec<(usize, f64)>,
+    /// The measuring time of one reflector measurement (s, more than 0 and at most
+    /// [`MAX_SECONDS_PER_POINT`]): the plan's time per point, from which its duration is
+    /// computed.
+    pub seconds_per_point: f64,
+    /// An extra wait per pose for the machine and the tracker to settle (s, 0 to
+    /// [`MAX_SETTLE_S`]), before the measuring time (or the stop); not part of the plan's
+    /// duration.
+    pub settle_s: f64,
+}
+
+impl ProgramOptions {
+    /// The defaults for `machine`: LinuxCNC, timed waits of
+    /// [`crate::simulate::DEFAULT_SECONDS_PER_POINT`] per reflector, no extra settling wait, the
+    /// machine file's clearance (empty when it has none: [`gcode`] then refuses).
+    pub fn new(machine: &Machine) -> ProgramOptions {
+        ProgramOptions {
+            dialect: Dialect::LinuxCnc,
+            wait: Wait::Time,
+            clearance: machine.clearance().to_vec(),
+            seconds_per_point: crate::simulate::DEFAULT_SECONDS_PER_POINT,
+            settle_s: 0.0,
+        }
+    }
+
+    /// The options' values checked: the message names the field at fault.
+    fn check(&self, machine: &Machine) -> Result<()> {
+        let at = |field: &str, m: String| {
+            Err(Error::input(
+                Place::file("the measuring program").at_field(field),
+                m,
+            ))
+        };
+        let spp = self.seconds_per_point;
+        if !(spp.is_finite() && spp > 0.0 && spp <= MAX_SECONDS_PER_POINT) {
+            return at(
+                "seconds_per_point",
+                format!(
+                    "{spp:?} s: a measuring time per point of more than 0 and at most {MAX_SECONDS_PER_POINT} s"
+                ),
+            );
+        }
+        let settle = self.settle_s;
+        if !(settle.is_finite() && (0.0..=MAX_SETTLE_S).contains(&settle)) {
+            return at(
+                "settle_s",
+                format!("{settle:?} s: a settling wait of 0 to {MAX_SETTLE_S} s per pose"),
+            );
+        }
+        if self.clearance.is_empty() {
+            return at(
+                "clearance",
+                "no clearance position: the program retracts there between poses; give the \
+                 machine file a [clearance] table (e.g. `Z = 600.0`, the axis and end that take \
+                 the reflectors away from the workpiece) or `volver plan --clearance Z=600`"
+                    .to_string(),
+            );
+        }
+        for (i, &(j, v)) in self.clearance.iter().enumerate() {
+            let Some(ax) = machine.axes().get(j) else {
+                return at(
+                    "clearance",
+                    format!("axis index {j}: the machine has no such axis"),
+                );
+            };
+            let text = format!("{}={}", ax.axis, ax.to_file_units(v));
+            if self.clearance[..i].iter().any(|c| c.0 == j) || v.is_nan() {
+                return at("clearance", format!("{text}: given twice or not a number"));
+            }
+            // The machine's own check of a clearance (travel, finite).
+            if let Err(m) = machine.clearance_from_text(&text) {
+                return at("clearance", m);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One visit of a pose: the plan's position, the reflectors measured there in order and the
+/// plan row (0-based) of the first.
+struct Visit {
+    position: usize,
+    reflectors: Vec<usize>,
+    first_row: usize,
+}
+
+/// The visits of `plan`: runs of steps at one pose, each reflector once per run.
+fn visits(plan: &Plan) -> Vec<Visit> {
+    let mut out: Vec<Visit> = Vec::new();
+    for (i, s) in plan.steps().iter().enumerate() {
+        match out.last_mut() {
+            Some(v) if v.position == s.position && !v.reflectors.contains(&s.reflector) => {
+                v.reflectors.push(s.reflector)
+            }
+            _ => out.push(Visit {
+                position: s.position,
+                reflectors: vec![s.reflector],
+                first_row: i,
+            }),
+        }
+    }
+    out
+}
+
+/// The measuring program of `plan` on `machine` (G-code in the options' dialect, the machine's
+/// axis words in mm and degrees as machine coordinates, `G53` on every move, whatever work
+/// offset is in force).
+///
+/// - It starts with `%` (and `O0001` for Fanuc), a header naming the plan (`title`), its size,
+///   the clearance and the waits, and a start block: `G40 G49 G80` (cutter compensation, tool
+///   length offset, canned cycles off), `G21 G90 G17 G94`, `M5 M9` (spindle, coolant off).
+/// - Before the first pose it rapids to the clearance position moving only the clearance axes.
+///   Between poses it rapids to the clearance (only the clearance axes move; linear ones first,
+///   then rotary ones), then moves every other axis (rotary ones too) with the clearance axes
+///   held, then approaches (only the clearance axes move: rotary ones first, then linear ones).
+///   When no other axis changes between two poses it moves the clearance axes directly. No
+///   rapid ever moves a clearance axis and another axis at once.
+/// - At each visit of a pose it waits ([`Wait::Time`]) the options' settling time plus
+///   `seconds_per_point` for each reflector measured there, so that without settling the waits
+///   add up to the plan's duration at that time per point (per station: a plan measured from
+///   several stations is run once from each); or stops (`M0`/`M1`). The wait's comment names
+///   the reflectors to measure, in order, and the plan file's rows they are.
+/// - It ends at the clearance position with `M30` and `%`.
+///
+/// Refused when the options have no clearance or a time out of bounds (the message names the
+/// field).
+///
+/// ```
+/// use volver_core::machine::Machine;
+/// use volver_core::plan::{Plan, file};
+/// let m = Machine::default_xcfz(); // its machine file: [clearance] Z = 600.0
+/// let plan = Plan::parse_grid(&m, "X=0:1400:1400,C=90,Z=0").unwrap();
+/// let nc = file::gcode(&plan, &m, &file::ProgramOptions::new(&m), "a test").unwrap();
+/// let blocks: Vec<&str> = nc.lines().filter(|l| !l.starts_with('(')).collect();
+/// assert_eq!(
+///     blocks,
+///     [
+///         "%", "G40 G49 G80", "G21 G90 G17 G94", "M5 M9",
+///         "N1 G53 G0 Z600 (clearance)", "G53 G0 X0 C90", "G53 G0 Z0",
+///         "G4 P20 (visit 1, pose 1: measure R1 R2, plan rows 1-2)",
+///         "N2 G53 G0 Z600 (clearance)", "G53 G0 X1400", "G53 G0 Z0",
+///         "G4 P20 (visit 2, pose 2: measure R1 R2, plan rows 3-4)",
+///         "G53 G0 Z600 (clearance)", "M30", "%",
+///     ]
+/// );
+/// let mut no_clearance = file::ProgramOptions::new(&m);
+/// no_clearance.clearance.clear();
+/// let e = file::gcode(&plan, &m, &no_clearance, "a test").unwrap_err().to_string();
+/// assert!(e.contains("--clearance Z=600"), "{e}");
+/// ```
+pub fn gcode(
+    plan: &Plan,
+    machine: &Machine,
+    options: &ProgramOptions,
+    title: &str,
+) -> Result<String> {
+    options.check(machine)?;
+    let visits = visits(plan);
+    let most = visits.iter().map(|v| v.reflectors.len()).max().unwrap_or(0);
+    let longest = options.settle_s + options.seconds_per_point * most as f64;
+    if longest > MAX_DWELL_S {
+        return Err(Error::input(
+            Place::file("the measuring program").at_field("seconds_per_point"),
+            format!(
+                "a pose measuring {most} reflectors would wait {longest} s, more than the \
+                 {MAX_DWELL_S} s a dwell can hold"
+            ),
+        ));
+    }
+    let d = options.dialect;
+    let mut out = d.program_start();
+    header(&mut out, plan, machine, options, &visits, title);
+    out.push_str(d.start_blocks());
+    let mut at: Option<Commands> = None;
+    for (k, v) in visits.iter().enumerate() {
+        let pose = plan.positions[v.position];
+        let number = (k < 99_999).then_some(k + 1);
+        moves_to(&mut out, machine, options, at.as_ref(), &pose, number);
+        at = Some(pose);
+        wait(&mut out, machine, options, k, v);
+    }
+    if let Some(last) = at {
+        let mut clear = last;
+        for &(j, value) in &options.clearance {
+            clear.0[j] = value;
+        }
+        rapid(
+            &mut out,
+            machine,
+            d,
+            (&last, &clear),
+            "clearance",
+            &mut None,
+        );
+    }
+    out.push_str(d.program_end());
+    Ok(out)
+}
+
+/// The program's header comments: the plan, its size, the clearance, the waits.
+fn header(
+    out: &mut String,
+    plan: &Plan,
+    machine: &Machine,
+    options: &ProgramOptions,
+    visits: &[Visit],
+    title: &str,
+) {
+    let d = options.dialect;
+    let steps = plan.steps();
     let counts: Vec<String> = plan
         .reflectors
         .iter()
         .map(|&r| {
-            format!(
-                "{} x {}",
-                machine.reflectors()[r].id,
-                steps.iter().filter(|s| s.reflector == r).count()
-            )
+            let n = steps.iter().filter(|s| s.reflector == r).count();
+            format!("{} x {n}", machine.reflectors()[r].id)
         })
         .collect();
-    let mut out = String::from("%\n");
-    let _ = writeln!(out, "(volver plan: {})", clean(title));
-    let _ = writeln!(
-        out,
-        "({} measurements in {} visits of {} poses; reflectors {}; machine {})",
-        steps.len(),
-        visits.len(),
-        plan.positions.len(),
-        counts.join(", "),
-        clean(&machine.chain().to_string())
-    );
-    let _ = writeln!(
-        out,
-        "(at each pose: dwell {dwell_s} s for the machine and tracker to settle, then measure \
-         the reflectors named, in order; the rows are those of the plan file)"
-    );
-    let _ = writeln!(
-        out,
-        "(G4 P is in seconds as RS-274/NGC reads it: controls that read P in ms need it scaled)"
-    );
-    let _ = writeln!(out, "{}", crate::gcode::START_STATE);
-    for (k, (position, reflectors, first)) in visits.iter().enumerate() {
-        let c = &plan.positions[*position];
-        let words: Vec<String> = machine
-            .axes()
-            .iter()
-            .enumerate()
-            .map(|(j, ax)| {
-                let v = (ax.to_file_units(c.0[j]) * 1e6).round() / 1e6;
-                format!("{}{}", ax.axis, v + 0.0)
-            })
-            .collect();
-        let _ = writeln!(out, "N{} G0 {}", k + 1, words.join(" "));
-        let rows = if reflectors.len() == 1 {
-            format!("plan row {}", first + 1)
-        } else {
-            format!("plan rows {}-{}", first + 1, first + reflectors.len())
-        };
-        let _ = writeln!(
-            out,
-            "G4 P{} (pose {}: measure {}, {rows})",
-            dwell_s + 0.0,
-            k + 1,
-            clean(&ids(reflectors))
-        );
+    let clearance: Vec<String> = options
+        .clearance
+        .iter()
+        .map(|&(j, v)| {
+            let ax = &machine.axes()[j];
+            format!("{}{}", ax.axis, d.value(ax.to_file_units(v)))
+        })
+        .collect();
+    let mut lines = vec![
+        format!("volver measuring program: {title}"),
+        format!(
+            "{} measurements in {} visits of {} poses; reflectors {}; machine {}",
+            steps.len(),
+            visits.len(),
+            plan.positions.len(),
+            counts.join(", "),
+            machine.chain()
+        ),
+        format!(
+            "positions: machine coordinates G53, mm and degrees; dialect {d}; clearance {}: \
+             between poses only the clearance axes retract, then the others move, then only \
+             the clearance axes approach",
+            clearance.join(" ")
+        ),
+    ];
+    lines.push(wait_note(options, steps.len(), machine.stations().len()));
+    for l in lines {
+        out.push_str(&d.comment(&l));
+        out.push('\n');
     }
-    out.push_str("M30\n%\n");
-    out
+}
+
+/// The header's line on the waits of a program of `measurements` measured from `stations`.
+fn wait_note(options: &ProgramOptions, measurements: usize, stations: usize) -> String {
+    let settle = if options.settle_s > 0.0 {
+        format!("{} s to settle, then ", options.settle_s)
+    } else {
+        String::new()
+    };
+    let spp = options.seconds_per_point;
+    match options.wait {
+        Wait::Time => format!(
+            "at each pose: {settle}{spp} s per reflector measured there; the waits of the \
+             measurements add up to {:.4} h, the plan's duration at {spp} s per point{}; moves \
+             and settling come on top",
+            measurements as f64 * spp / 3600.0,
+            if stations > 1 {
+                format!(" for one of its {stations} stations: run the program from each")
+            } else {
+                String::new()
+            }
+        ),
+        Wait::Stop => format!(
+            "at each pose: {settle}a program stop M0: measure the reflectors named, in order, \
+             then cycle start"
+        ),
+        Wait::OptionalStop => format!(
+            "at each pose: {settle}an optional stop M1, the optional stop switch on: measure the \
+             reflectors named, in order, then cycle start"
+        ),
+    }
+}
+
+/// The moves from `from` (unknown before the first pose) to `to`, through the clearance
+/// position unless only clearance axes change; `number` is the visit's block number.
+fn moves_to(
+    out: &mut String,
+    machine: &Machine,
+    options: &ProgramOptions,
+    from: Option<&Commands>,
+    to: &Commands,
+    number: Option<usize>,
+) {
+    let d = options.dialect;
+    let is_clearance = |j: usize| options.clearance.iter().any(|c| c.0 == j);
+    let n = machine.axes().len();
+    let same = |a: &Commands, j: usize| written(machine, d, a, j) == written(machine, d, to, j);
+    let lateral = from.is_none_or(|f| (0..n).any(|j| !is_clearance(j) && !same(f, j)));
+    // Where the machine is, as far as the program knows: the first move states its axes.
+    let mut now = match from {
+        Some(f) => *f,
+        None => Commands([f64::NAN; crate::chain::MAX_AXES]),
+    };
+    let mut number = number;
+    if lateral {
+        // Retract: linear clearance axes first, then rotary ones.
+        for rotary in [false, true] {
+            let mut next = now;
+            for &(j, v) in &options.clearance {
+                if machine.axes()[j].axis.is_rotary() == rotary {
+                    next.0[j] = v;
+                }
+            }
+            rapid(out, machine, d, (&now, &next), "clearance", &mut number);
+            now = next;
+        }
+        let mut next = *to;
+        for &(j, v) in &options.clearance {
+            next.0[j] = v;
+        }
+        rapid(out, machine, d, (&now, &next), "", &mut number);
+        now = next;
+    }
+    // Approach: rotary clearance axes first, then linear ones.
+    for rotary in [true, false] {
+        let mut next = now;
+        for &(j, _) in &options.clearance {
+            if machine.axes()[j].axis.is_rotary() == rotary {
+                next.0[j] = to.0[j];
+            }
+        }
+        rapid(out, machine, d, (&now, &next), "", &mut number);
+        now = next;
+    }
+}
+
+/// The axis word's value of axis `j` at `c` as `d` writes it (file units), `None` when unknown.
+fn written(machine: &Machine, d: Dialect, c: &Commands, j: usize) -> Option<String> {
+    let v = c.0[j];
+    (!v.is_nan()).then(|| d.value(machine.axes()[j].to_file_units(v)))
+}
+
+/// A rapid in machine coordinates from `from` to `to` (NaN: unknown) naming the axes whose
+/// written value changes or was unknown, nothing when none does; `note` as a comment, and
+/// `number` (taken) as the block's `N` when the block is written.
+fn rapid(
+    out: &mut String,
+    machine: &Machine,
+    d: Dialect,
+    (from, to): (&Commands, &Commands),
+    note: &str,
+    number: &mut Option<usize>,
+) {
+    let words: Vec<String> = machine
+        .axes()
+        .iter()
+        .enumerate()
+        .filter_map(|(j, ax)| {
+            let w = written(machine, d, to, j)?;
+            (written(machine, d, from, j).as_ref() != Some(&w)).then(|| format!("{}{w}", ax.axis))
+        })
+        .collect();
+    if words.is_empty() {
+        return;
+    }
+    if let Some(n) = number.take() {
+        let _ = write!(out, "N{n} ");
+    }
+    let _ = write!(out, "G53 {} {}", d.rapid(), words.join(" "));
+    if !note.is_empty() {
+        let _ = write!(out, " {}", d.comment(note));
+    }
+    out.push('\n');
+}
+
+/// The wait of visit `k` (0-based): a dwell or a stop, with the comment naming what to measure.
+fn wait(out: &mut String, machine: &Machine, options: &ProgramOptions, k: usize, v: &Visit) {
+    let d = options.dialect;
+    let ids: Vec<&str> = v
+        .reflectors
+        .iter()
+        .map(|&r| machine.reflectors()[r].id.as_str())
+        .collect();
+    let rows = match v.reflectors.len() {
+        1 => format!("plan row {}", v.first_row + 1),
+        n => format!("plan rows {}-{}", v.first_row + 1, v.first_row + n),
+    };
+    let comment = d.comment(&format!(
+        "visit {}, pose {}: measure {}, {rows}",
+        k + 1,
+        v.position + 1,
+        ids.join(" ")
+    ));
+    match options.wait {
+        Wait::Time => {
+            let seconds = options.settle_s + options.seconds_per_point * v.reflectors.len() as f64;
+            let _ = writeln!(out, "{} {comment}", d.dwell_words(seconds));
+        }
+        stop => {
+            if options.settle_s > 0.0 {
+                let settle = d.dwell_words(options.settle_s);
+                let _ = writeln!(out, "{settle} {}", d.comment("settle"));
+            }
+            let word = d.stop(stop == Wait::OptionalStop);
+            let _ = writeln!(out, "{word} {comment}");
+        }
+    }
 }
 
 /// Reads a plan file for `machine`.
@@ -353,6 +714,117 @@ pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_measuring_program_retracts_moves_approaches_and_waits_in_each_dialect() {
+        let m = Machine::default_xcfz();
+        let csv = "X,C,Z,reflector\n700,90,300,R1\n700,90,300,R2\n700,90,300,R2\n\
+                   700,90,100,R1\n0,180,0,R1\n";
+        let plan = from_csv_str(&m, csv, "p.csv").unwrap();
+        let body = |o: &ProgramOptions| -> Vec<String> {
+            let nc = gcode(&plan, &m, o, "t").unwrap();
+            nc.lines()
+                .filter(|l| !l.starts_with('(') && !l.starts_with('%') && !l.starts_with('O'))
+                .skip_while(|l| !l.contains("G53"))
+                .map(str::to_string)
+                .collect()
+        };
+        let mut o = ProgramOptions::new(&m);
+        o.seconds_per_point = 7.5;
+        assert_eq!(
+            body(&o),
+            [
+                "N1 G53 G0 Z600 (clearance)",
+                "G53 G0 X700 C90",
+                "G53 G0 Z300",
+                "G4 P15 (visit 1, pose 1: measure R1 R2, plan rows 1-2)",
+                // The same pose again (R2 twice): no move; then Z alone: a direct move.
+                "G4 P7.5 (visit 2, pose 1: measure R2, plan row 3)",
+                "N3 G53 G0 Z100",
+                "G4 P7.5 (visit 3, pose 2: measure R1, plan row 4)",
+                "N4 G53 G0 Z600 (clearance)",
+                "G53 G0 X0 C180",
+                "G53 G0 Z0",
+                "G4 P7.5 (visit 4, pose 3: measure R1, plan row 5)",
+                "G53 G0 Z600 (clearance)",
+                "M30",
+            ]
+        );
+        o.dialect = Dialect::Fanuc;
+        o.wait = Wait::OptionalStop;
+        o.settle_s = 2.25;
+        o.clearance = m.clearance_from_text("Z=550").unwrap();
+        let f = body(&o);
+        assert_eq!(
+            &f[..5],
+            [
+                "N1 G53 G00 Z550. (clearance)",
+                "G53 G00 X700. C90.",
+                "G53 G00 Z300.",
+                "G04 P2250 (settle)",
+                "M01 (visit 1, pose 1: measure R1 R2, plan rows 1-2)",
+            ]
+        );
+        let nc = gcode(&plan, &m, &o, "t").unwrap();
+        assert!(
+            nc.starts_with("%\nO0001\n(volver measuring program: t)\n"),
+            "{nc}"
+        );
+        assert!(
+            nc.contains("\nG40 G49 G80\nG21 G90 G17 G94\nM05\nM09\n"),
+            "{nc}"
+        );
+        assert!(nc.ends_with("M30\n%\n"), "{nc}");
+    }
+
+    #[test]
+    fn measuring_program_times_out_of_bounds_name_the_field() {
+        let m = Machine::default_xcfz();
+        let plan = Plan::parse_grid(&m, "X=0:1400:700,C=0,Z=0").unwrap();
+        let e = |o: &ProgramOptions| gcode(&plan, &m, o, "t").unwrap_err().to_string();
+        let mut bad = ProgramOptions::new(&m);
+        bad.settle_s = 1e300;
+        assert!(e(&bad).contains("field 'settle_s': 1e300 s"), "{}", e(&bad));
+        bad.settle_s = 0.0;
+        bad.seconds_per_point = f64::NAN;
+        assert!(e(&bad).contains("field 'seconds_per_point'"), "{}", e(&bad));
+        bad.seconds_per_point = 3600.0;
+        bad.settle_s = 3600.0;
+        assert!(gcode(&plan, &m, &bad, "t").is_ok());
+        for (clearance, needle) in [
+            (vec![(7, 0.0)], "axis index 7"),
+            (vec![(2, 700.0)], "outside the travel range [0, 600]"),
+            (vec![(2, f64::INFINITY)], "finite"),
+            (vec![(2, 600.0), (2, 500.0)], "given twice"),
+        ] {
+            let o = ProgramOptions {
+                clearance,
+                ..ProgramOptions::new(&m)
+            };
+            let msg = e(&o);
+            assert!(
+                msg.contains("field 'clearance'") && msg.contains(needle),
+                "{msg}"
+            );
+        }
+        // 28 reflectors at one pose, an hour each: past the longest dwell a control takes.
+        let mut spec = m.spec().clone();
+        spec.reflectors = (0..28)
+            .map(|i| crate::machine::ReflectorSpec {
+                id: format!("R{}", i + 1),
+                offset: [i as f64, 0.0, 0.0],
+            })
+            .collect();
+        let many = Machine::from_spec(spec, "many").unwrap();
+        let one = Plan::parse_grid(&many, "X=0,C=0,Z=0").unwrap();
+        let mut long = ProgramOptions::new(&many);
+        (long.seconds_per_point, long.settle_s) = (3600.0, 3600.0);
+        let msg = gcode(&one, &many, &long, "t").unwrap_err().to_string();
+        assert!(
+            msg.contains("measuring 28 reflectors would wait 104400 s"),
+            "{msg}"
+        );
+    }
 
     #[test]
     fn a_shuffled_plan_round_trips_and_bad_files_name_line_and_column() {
