@@ -1111,3 +1111,60 @@ fn predict_shows_a_hand_set_error_at_its_point() {
     assert_eq!(a["points"][0]["commands"][0], 10.0);
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Fanuc-style programs (`--dialect fanuc`): `G04 X2.5` is a dwell of 2.5 s and its X no
+/// position; an axis value without a decimal point (read in the least input increment by the
+/// control) and a canned cycle (retract and peck amounts in the control's parameters) are
+/// refused; the output has a decimal point on every axis value, whatever the decimals.
+#[test]
+fn fanuc_programs_are_read_and_written_by_fanuc_rules() {
+    use volver::core::dialect::Dialect;
+    use volver::core::gcode::{Setup, Tooling, WriteOptions};
+    let t = truth(3);
+    let m = t.model.machine();
+    let setup = Setup {
+        dialect: Dialect::Fanuc,
+        ..Setup::default()
+    };
+    let text = "%\nO0001\nG21 G90 G18\nG0 X100. C0. Z50.\nG04 X2.5\nG1 Z200. F300.\nM30\n%\n";
+    let prog = Program::read(text, "f.nc", m, &setup).unwrap();
+    let pts = prog.points();
+    assert_eq!(pts.len(), 2, "the dwell's X is no move");
+    assert_eq!(&pts[1].0[..3], &[100.0, 0.0, 200.0]);
+    let comp = Compensator::new(&t.model, &t.params, [0.0; 3]).unwrap();
+    let options = WriteOptions {
+        decimals: 0,
+        dialect: Dialect::Fanuc,
+        ..WriteOptions::default()
+    };
+    let (out, _) = prog
+        .compensate_with(&Tooling::single(comp), m, &options, "fanuc")
+        .unwrap();
+    assert!(out.contains("G04 X2.5"), "{out}");
+    for line in out
+        .lines()
+        .filter(|l| l.starts_with("G0") || l.starts_with("G1"))
+    {
+        for w in line
+            .split_whitespace()
+            .filter(|w| "XYZABC".contains(&w[..1]))
+        {
+            assert!(w.contains('.'), "{w} in {line}");
+        }
+    }
+    // The same dwell under RS274NGC is refused (rs274 refuses it too), as are values without a
+    // decimal point and cycles under Fanuc rules.
+    let e = Program::read(text, "f.nc", m, &Setup::default())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("f.nc:5") && e.contains("G4"), "{e}");
+    for (bad, word) in [
+        ("G0 X100 C0. Z50.\n", "X100"),
+        ("G0 X100. C0. Z50.\nG17 G81 X10. Z5. R20. F100.\n", "G81"),
+    ] {
+        let e = Program::read(bad, "f.nc", m, &setup)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(word), "{bad}: {e}");
+    }
+}

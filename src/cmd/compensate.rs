@@ -113,6 +113,10 @@ pub struct CompensateArgs {
     /// refusing them.
     #[arg(long)]
     allow_outside_travel: bool,
+    /// The dialect of --gcode: linuxcnc (RS274NGC) or fanuc (G04 X in seconds, a decimal point
+    /// on every axis value, cycles refused).
+    #[arg(long, default_value = "linuxcnc")]
+    dialect: String,
 }
 
 /// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
@@ -398,6 +402,7 @@ fn compensate_gcode(
     let options = WriteOptions {
         decimals: usize::from(a.decimals),
         allow_outside_travel: a.allow_outside_travel,
+        dialect: setup.dialect,
     };
     let (out, rep) = prog.compensate_with(&tooling, m, &options, &header)?;
     gcode_summary(a, &label, &rep);
@@ -433,6 +438,7 @@ fn gcode_setup(a: &CompensateArgs, model: &Model, tool: [f64; 3]) -> Result<(Set
         )?,
         start: machining::start(m, a.start.as_deref())?,
         tool: a.start_tool,
+        dialect: dialect(a)?,
     };
     let points = ToolPoints {
         gauge: match &a.gauge_point {
@@ -450,6 +456,13 @@ fn gcode_setup(a: &CompensateArgs, model: &Model, tool: [f64; 3]) -> Result<(Set
         same_point: a.same_tool_point,
     };
     Ok((setup, points))
+}
+
+/// The dialect of `--dialect`.
+fn dialect(a: &CompensateArgs) -> Result<volver::core::dialect::Dialect> {
+    a.dialect
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--dialect {}: {e}", a.dialect))
 }
 
 /// The compensated program's header.

@@ -416,6 +416,18 @@ impl<'a> Reader<'a> {
     /// An axis word, refused for an axis the machine lacks, a second word for one axis, or a
     /// value beyond any machine.
     fn axis_word(&self, p: &mut Parsed, w: &Word, place: &Place) -> Result<()> {
+        if self.setup.dialect == crate::dialect::Dialect::Fanuc && !w.text.contains('.') {
+            return Err(refuse(
+                place,
+                &w.text,
+                format!(
+                    "{}: a Fanuc-style control reads a value without a decimal point in its least \
+                     input increment ({}0.001 mm on most), unless its DPI parameter is set: write \
+                     {}.",
+                    w.text, w.letter, w.text
+                ),
+            ));
+        }
         let k = LETTERS
             .iter()
             .position(|&l| l == w.letter)

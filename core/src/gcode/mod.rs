@@ -97,6 +97,11 @@ pub struct Setup {
     pub start: [Option<f64>; MAX_AXES],
     /// The tool in the spindle at the start.
     pub tool: Option<i64>,
+    /// The dialect the program is written in: Fanuc-style programs dwell with `G04 X` (seconds)
+    /// or `P` (ms), need a decimal point on every axis value (without one a Fanuc control
+    /// reads the least input increment) and get no cycle expanded (their peck and retract
+    /// amounts are control parameters).
+    pub dialect: crate::dialect::Dialect,
 }
 
 /// A compensated move's points.

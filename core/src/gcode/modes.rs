@@ -63,6 +63,11 @@ impl Reader<'_> {
             }
         }
         if p.has('G', 40) {
+            if self.fanuc_dwell(p) {
+                let (_, g) = p.g.iter().find(|(g, _)| *g == 40).expect("G4");
+                block.kept.push(format!("{g} {}", self.words_text(p)));
+                return Ok(());
+            }
             let Some((_, pw)) = p.other.get(&'P') else {
                 let hint = if p.axes[0].is_some() {
                     " (G4 X… is Fanuc's dwell in seconds, which RS274NGC controls refuse: write \
@@ -88,6 +93,15 @@ impl Reader<'_> {
             }
         }
         Ok(())
+    }
+
+    /// A Fanuc-style dwell `G04 X<seconds>` (no P): its X is the time, not a position.
+    pub(crate) fn fanuc_dwell(&self, p: &Parsed) -> bool {
+        self.setup.dialect == crate::dialect::Dialect::Fanuc
+            && p.has('G', 40)
+            && p.value('P').is_none()
+            && p.axes[0].is_some()
+            && p.axes[1..].iter().all(Option::is_none)
     }
 
     /// Tool selection and change, spindle, the tool length offset (`G43 Hn`, `G43.1`, `G49`)
@@ -219,6 +233,9 @@ impl Reader<'_> {
         block: &mut Block,
         place: &Place,
     ) -> Result<Owner> {
+        if self.fanuc_dwell(p) {
+            return Ok(Owner::Taken);
+        }
         if p.has('G', 431) {
             return Ok(Owner::Taken);
         }

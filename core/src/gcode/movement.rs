@@ -327,6 +327,17 @@ impl Reader<'_> {
 
     /// Refuses a cycle outside `G17`, `G90` and feed per minute, or moving a rotary axis.
     fn cycle_allowed(&self, p: &Parsed, code: &str, place: &Place) -> Result<()> {
+        if self.setup.dialect == crate::dialect::Dialect::Fanuc {
+            return Err(refuse(
+                place,
+                code,
+                format!(
+                    "{code}: a Fanuc-style control's cycles retract and peck by amounts its \
+                     parameters hold, which volver cannot see: expand the cycle into G0/G1 moves \
+                     (CAM output) first"
+                ),
+            ));
+        }
         if self.plane != 0 || !self.absolute || self.feed == FeedMode::InverseTime {
             return Err(refuse(
                 place,

@@ -43,6 +43,8 @@ pub struct WriteOptions {
     /// Write compensated points beyond an axis' travel (each marked by a comment on its line)
     /// instead of refusing them.
     pub allow_outside_travel: bool,
+    /// The dialect written: Fanuc-style gets a decimal point on every axis value.
+    pub dialect: crate::dialect::Dialect,
 }
 
 impl Default for WriteOptions {
@@ -50,6 +52,7 @@ impl Default for WriteOptions {
         WriteOptions {
             decimals: 4,
             allow_outside_travel: false,
+            dialect: crate::dialect::Dialect::LinuxCnc,
         }
     }
 }
@@ -258,7 +261,10 @@ impl Writer<'_, '_> {
                 };
                 let decimals = self.options.decimals + usize::from(unit != 1.0);
                 let prog = (a.to_file_units(commands.0[k]) - m.offset[k]) / unit;
-                let t = format!("{:.decimals$}", prog + 0.0);
+                let mut t = format!("{:.decimals$}", prog + 0.0);
+                if self.options.dialect == crate::dialect::Dialect::Fanuc && !t.contains('.') {
+                    t.push('.');
+                }
                 let back: f64 = t.parse().expect("a formatted number parses");
                 out.0[k] = a.from_file_units(back * unit + m.offset[k]);
                 t
