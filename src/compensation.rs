@@ -442,8 +442,8 @@ pub fn tool_point_u(
     };
     let (ua, ia) = worst(&aligned);
     let (ur, _) = worst(&raw);
-    let gauge = if record.gauge == "none" {
-        "none".to_string()
+    let gauge = if record.gauge.starts_with("none") {
+        record.gauge.clone()
     } else if record.held_factor.is_empty() {
         // A rule that leaves no combination to a separate prior: the priors of
         // `identify --prior` (maximum a posteriori), stated as recorded.

@@ -351,6 +351,9 @@ pub struct Candidate {
     /// Why it is not a finding (a size beyond the physical bound, a nearly unidentifiable
     /// direction); such a candidate is never ranked first.
     pub flag: Option<String>,
+    /// Why it could not be scored, when it could not (its figures are then absent).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
 }
 
 impl Candidate {
@@ -366,6 +369,7 @@ impl Candidate {
             added: s.added,
             equivalent: s.equivalent.clone(),
             flag: s.flag.clone(),
+            failed: s.failed.clone(),
         }
     }
 }

@@ -108,7 +108,8 @@ pub struct Outcome {
     /// The covariance the results carry (the posterior's with priors); `None` when the fit
     /// failed.
     pub covariance: Option<Covariance>,
-    /// How the values the data do not determine were chosen (`"none"` without a gauge).
+    /// How the values the data do not determine were chosen (`"none"` without a gauge, `"none
+    /// (the gauge failed: …)"` when it was asked for and could not be formed).
     pub rule: String,
     /// The combinations the data cannot identify.
     pub unidentified: Vec<Unidentified>,
@@ -215,11 +216,23 @@ pub fn noise_error(
     }
     let dir = truth_path.parent().unwrap_or(Path::new("."));
     let belongs = volver_core::fsio::same_file(&dir.join("measurements.csv"), data_path);
-    let record = belongs
-        .then(|| std::fs::read_to_string(dir.join("simulation.json")).ok())
-        .flatten()
-        .and_then(|t| serde_json::from_str::<SimulationRecord>(&t).ok())
-        .filter(|r| r.points == data.points.len());
+    let record_path = dir.join("simulation.json");
+    // A record beside these data that cannot be read is an error, not a silent fallback to
+    // the prediction (which misses what the results format cannot hold).
+    let record = match belongs.then(|| std::fs::read_to_string(&record_path).ok()).flatten() {
+        None => None,
+        Some(text) => Some(
+            serde_json::from_str::<SimulationRecord>(volver_core::error::without_bom(&text))
+                .with_context(|| {
+                    format!(
+                        "{}: not a simulation record (written by `volver simulate` beside {label}); \
+                         restore it or remove it to judge the noise from the truth's prediction",
+                        record_path.display()
+                    )
+                })?,
+        ),
+    }
+    .filter(|r| r.points == data.points.len());
     Ok(match record {
         Some(r) => r.noise_error,
         None => Problem::new(&truth.model, data)?.stats(&truth.params),
@@ -306,6 +319,36 @@ pub fn identify(
     })
 }
 
+/// The rule of the values the data do not determine, as outputs state it: the priors' rule
+/// (`priors`), the gauge's, `none`, or — when a gauge was asked for and could not be formed —
+/// `none (the gauge failed: …)`, never the same word as no gauge asked.
+///
+/// ```
+/// # use volver::identification::gauge_rule;
+/// # use volver::core::model::Model;
+/// # use volver::solvers::strategy::{fit, GAUGE_FAILED};
+/// # let model = Model::default_xcfz();
+/// # let m = model.machine();
+/// # let data = volver::core::simulate::Simulation::new(
+/// #     volver::core::plan::Plan::parse_grid(m, "X=0:1400:350,C=0:330:30,Z=0:600:150").unwrap(),
+/// #     volver::core::simulate::Truth::random(m, model.spec(), &Default::default(), 1).unwrap(),
+/// #     1).run().unwrap().measurements;
+/// let mut id = fit(volver::core::problem::Problem::new(&model, &data).unwrap());
+/// assert_eq!(gauge_rule(None, &id), volver::solvers::gauge::RULE);
+/// (id.gauge, id.gauge_failed) = (None, Some(GAUGE_FAILED.to_string()));
+/// assert!(gauge_rule(None, &id).starts_with("none (the gauge failed: "));
+/// ```
+pub fn gauge_rule(priors: Option<String>, id: &Identification) -> String {
+    match (priors, &id.gauge) {
+        (Some(p), _) => p,
+        (None, Some(_)) => volver_solvers::gauge::RULE.to_string(),
+        (None, None) => match &id.gauge_failed {
+            Some(why) => format!("none (the gauge failed: {why})"),
+            None => "none".to_string(),
+        },
+    }
+}
+
 /// The covariance the results carry and the rule of the values the data do not determine;
 /// with priors, moves the fit to the maximum a posteriori solution.
 fn uncertainty_of(
@@ -324,11 +367,7 @@ fn uncertainty_of(
             settings.noise,
         )
     };
-    let rule = match (&settings.priors, &id.gauge) {
-        (Some(p), _) => p.rule(),
-        (None, Some(_)) => volver_solvers::gauge::RULE.to_string(),
-        (None, None) => "none".to_string(),
-    };
+    let rule = gauge_rule(settings.priors.as_ref().map(|p| p.rule()), id);
     match (&settings.priors, covariance) {
         (Some(p), Some(cov)) => Ok((Some(with_priors(problem, id, &cov, p)?), rule)),
         (Some(_), None) => bail!(

@@ -700,7 +700,10 @@ fn candidates(p: &Page, s: &mut String) -> Result<()> {
                         "—".into(),
                         "—".into(),
                         "—".into(),
-                        format!("not seen in these data: {}", c.description),
+                        match &c.failed {
+                            Some(why) => format!("could not be scored ({why}): {}", c.description),
+                            None => format!("not seen in these data: {}", c.description),
+                        },
                     ]
                 }
             })

@@ -118,3 +118,66 @@ fn repeated_points_estimate_the_noise_error() {
     );
     assert!((ratio - 1.0).abs() < 0.1, "ratio {ratio}");
 }
+
+/// No silent drop: a candidate that cannot be scored is listed with the reason; when the
+/// current model's own step fails (here: a solution that is not a number), every candidate
+/// says so and the verdict says that none could be scored — not that none lowers the error.
+#[test]
+fn candidates_that_cannot_be_scored_are_reported() {
+    use volver::core::model::Model;
+    use volver::solvers::candidates::{library, rank, verdict};
+    let model = Model::default_xcfz();
+    let m = model.machine();
+    let plan = Plan::parse_grid(m, "X=0:1400:350,C=0:330:30,Z=0:600:150").unwrap();
+    let data = run(plan, truth(2), TrackerNoise::PAPER, vec![]).measurements;
+    let problem = Problem::new(&model, &data).unwrap();
+    let nan = vec![f64::NAN; model.n_params()];
+    let tolerance = volver::solvers::identifiability::RANK_TOLERANCE;
+    let ranked = rank(&problem, &nan, tolerance, None);
+    assert_eq!(
+        ranked.len(),
+        library(&model).len(),
+        "every candidate listed"
+    );
+    assert!(ranked.iter().all(|s| s.failed.is_some()));
+    let v = verdict(&ranked, 50.0);
+    assert!(v.starts_with("no candidate could be scored"), "{v}");
+    assert!(!v.contains("lowers the error"), "{v}");
+    // At a real solution every candidate is scored.
+    let id = volver::solvers::strategy::fit(problem.clone());
+    let ranked = rank(&problem, &id.params, tolerance, None);
+    assert!(ranked.iter().all(|s| s.failed.is_none()));
+}
+
+/// No silent fallback: a `simulation.json` beside the truth and the measurements that cannot be
+/// read is an error naming it (it was ignored, and the noise error silently computed another
+/// way).
+#[test]
+fn a_corrupt_simulation_record_is_an_error() {
+    let dir = std::env::temp_dir().join(format!("volver-corrupt-record-{}", std::process::id()));
+    let d = dir.display().to_string();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
+        .args([
+            "simulate",
+            "--plan",
+            "X=0:1400:350,C=0:330:30,Z=0:600:150",
+            "--out",
+            &d,
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let identify = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_volver"))
+            .args(["identify", "--data", &format!("{d}/measurements.csv")])
+            .args(["--truth", &format!("{d}/truth.json")])
+            .output()
+            .unwrap()
+    };
+    assert!(identify().status.success());
+    std::fs::write(dir.join("simulation.json"), "{\"points\": 12, \"torn").unwrap();
+    let o = identify();
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && e.contains("simulation.json"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -82,6 +82,28 @@ pub struct Score {
     /// of its kind, or evidence only along a nearly unidentifiable direction. A flagged
     /// candidate is never ranked first.
     pub flag: Option<String>,
+    /// Why it could not be scored (its model or problem cannot be built, or its step is
+    /// singular or not finite), when it could not: it is then listed last with no figures
+    /// (NaN), never dropped.
+    pub failed: Option<String>,
+}
+
+impl Score {
+    /// A candidate that could not be scored, and why.
+    fn failed(id: String, description: String, why: String) -> Score {
+        Score {
+            id,
+            description,
+            added: 0,
+            emm_um: f64::NAN,
+            delta_bic: f64::NAN,
+            size: f64::NAN,
+            size_unit: "",
+            equivalent: Vec::new(),
+            flag: None,
+            failed: Some(why),
+        }
+    }
 }
 
 fn polynomial_degree(spec: &ErrorModelSpec) -> usize {
@@ -620,86 +642,132 @@ pub fn rank(
     noise: Option<&TrackerNoise>,
 ) -> Vec<Score> {
     let model = problem.model();
-    let data = problem.data();
     let m = (3 * problem.n_points()) as f64;
     let base = Scored::new(problem.clone(), noise);
     let Some((p0, rank0)) = gauss_newton_steps(&base.task(), params, tolerance, &[None]) else {
-        return Vec::new();
+        // Nothing can be compared with a current model whose own step fails: every candidate
+        // is listed with the reason, none dropped.
+        return library(model)
+            .into_iter()
+            .map(|c| {
+                let why = "the current model's Gauss-Newton step is singular or not finite, so \
+                           no candidate can be compared with it"
+                    .to_string();
+                Score::failed(c.id, c.description, why)
+            })
+            .collect();
     };
     let rss0 = base.linear_predictions(params, &[&p0[0]])[0].0;
     // The residuals' variance per coordinate in the scoring's units: the prior's scale.
     let variance = rss0 / (m - rank0 as f64).max(1.0);
-    let mut scores: Vec<Score> = library(model)
+    let scores: Vec<Score> = library(model)
         .into_iter()
-        .filter_map(|c| {
-            let extended = Model::new(model.machine().clone(), c.spec.clone()).ok()?;
-            let ext = Scored::new(Problem::new(&extended, data).ok()?, noise);
-            let start = carry_over(model, params, &extended);
-            let ridge: Vec<f64> = extended
-                .params()
-                .iter()
-                .map(|info| match model.param_index(&info.name) {
-                    Some(_) => 0.0,
-                    None => variance / limit(info.unit).powi(2),
-                })
-                .collect();
-            let task = ext.task();
-            // The step held to plausible sizes, and the same step without the bound.
-            let (steps, rank1) =
-                gauss_newton_steps(&task, &start, tolerance, &[Some(&ridge), None])?;
-            let (q, qf) = (&steps[0], &steps[1]);
-            let predicted = ext.linear_predictions(&start, &[q, qf]);
-            let (rss1, (rss_free, emm_free)) = (predicted[0].0, predicted[1]);
-            let (size, unit) = implied_size(&c.id, model, params, &extended, q);
-            let added = rank1.saturating_sub(rank0);
-            let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
-            let delta_bic = bic(rss1);
-            let (scale, size_unit) = unit.micro();
-            let bound = limit(unit) * scale;
-            let bic_free = bic(rss_free);
-            let flag = if size > bound {
-                Some(format!(
-                    "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
-                ))
-            } else {
-                let (size_free, _) = implied_size(&c.id, model, params, &extended, qf);
-                (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
-                    format!(
-                        "nearly unidentifiable: the data support it only with a size of \
-                         {size_free:.0} {size_unit} (ΔBIC {bic_free:.0}), beyond the plausible \
-                         {bound:.0} {size_unit}"
-                    )
-                })
-            };
-            // The EMM a refit would reach is predicted by the unweighted step (the engines
-            // minimise the EMM itself, not the whitened residuals).
-            let emm_um = match &ext {
-                Scored::Plain(_) => emm_free,
-                Scored::Whitened(w) => {
-                    let plain = Scored::Plain(w.problem().clone());
-                    let (qp, _) = gauss_newton_steps(&plain.task(), &start, tolerance, &[None])?;
-                    plain.linear_predictions(&start, &[&qp[0]])[0].1
-                }
-            };
-            Some(Score {
-                id: c.id,
-                description: c.description,
-                added,
-                emm_um,
-                delta_bic,
-                size,
-                size_unit,
-                equivalent: Vec::new(),
-                flag,
-            })
+        .map(|c| {
+            let (id, description) = (c.id.clone(), c.description.clone());
+            score(
+                &c,
+                problem,
+                params,
+                tolerance,
+                noise,
+                (rank0, rss0, variance),
+            )
+            .unwrap_or_else(|why| Score::failed(id, description, why))
         })
         .collect();
-    // Candidates that add no direction the data identify cannot be seen (a period equal to the
+    sort_and_merge(scores)
+}
+
+/// The score of candidate `c` against the current model's fit (`rank0` identified directions,
+/// residual sum `rss0`, variance per coordinate `variance`), or why it cannot be scored.
+fn score(
+    c: &Candidate,
+    problem: &Problem,
+    params: &[f64],
+    tolerance: f64,
+    noise: Option<&TrackerNoise>,
+    (rank0, rss0, variance): (usize, f64, f64),
+) -> Result<Score, String> {
+    let model = problem.model();
+    let data = problem.data();
+    let m = (3 * problem.n_points()) as f64;
+    let singular = || "its Gauss-Newton step is singular or not finite".to_string();
+    let extended = Model::new(model.machine().clone(), c.spec.clone())
+        .map_err(|e| format!("its model cannot be built: {e}"))?;
+    let problem =
+        Problem::new(&extended, data).map_err(|e| format!("its problem cannot be built: {e}"))?;
+    let ext = Scored::new(problem, noise);
+    let start = carry_over(model, params, &extended);
+    let ridge: Vec<f64> = extended
+        .params()
+        .iter()
+        .map(|info| match model.param_index(&info.name) {
+            Some(_) => 0.0,
+            None => variance / limit(info.unit).powi(2),
+        })
+        .collect();
+    let task = ext.task();
+    // The step held to plausible sizes, and the same step without the bound.
+    let (steps, rank1) =
+        gauss_newton_steps(&task, &start, tolerance, &[Some(&ridge), None]).ok_or_else(singular)?;
+    let (q, qf) = (&steps[0], &steps[1]);
+    let predicted = ext.linear_predictions(&start, &[q, qf]);
+    let (rss1, (rss_free, emm_free)) = (predicted[0].0, predicted[1]);
+    let (size, unit) = implied_size(&c.id, model, params, &extended, q);
+    let added = rank1.saturating_sub(rank0);
+    let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
+    let delta_bic = bic(rss1);
+    let (scale, size_unit) = unit.micro();
+    let bound = limit(unit) * scale;
+    let bic_free = bic(rss_free);
+    let flag = if size > bound {
+        Some(format!(
+            "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
+        ))
+    } else {
+        let (size_free, _) = implied_size(&c.id, model, params, &extended, qf);
+        (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
+            format!(
+                "nearly unidentifiable: the data support it only with a size of \
+                         {size_free:.0} {size_unit} (ΔBIC {bic_free:.0}), beyond the plausible \
+                         {bound:.0} {size_unit}"
+            )
+        })
+    };
+    // The EMM a refit would reach is predicted by the unweighted step (the engines
+    // minimise the EMM itself, not the whitened residuals).
+    let emm_um = match &ext {
+        Scored::Plain(_) => emm_free,
+        Scored::Whitened(w) => {
+            let plain = Scored::Plain(w.problem().clone());
+            let (qp, _) = gauss_newton_steps(&plain.task(), &start, tolerance, &[None])
+                .ok_or_else(singular)?;
+            plain.linear_predictions(&start, &[&qp[0]])[0].1
+        }
+    };
+    Ok(Score {
+        id: c.id.clone(),
+        description: c.description.clone(),
+        added,
+        emm_um,
+        delta_bic,
+        size,
+        size_unit,
+        equivalent: Vec::new(),
+        flag,
+        failed: None,
+    })
+}
+
+/// The scores in ranking order, candidates the data cannot tell apart merged.
+fn sort_and_merge(mut scores: Vec<Score>) -> Vec<Score> {
+    // Candidates that could not be scored go last; then that add no direction the data identify cannot be seen (a period equal to the
     // mesh step, a squareness the model already carries): they go last, whatever their ΔBIC;
     // flagged ones go after every plausible one that the data see.
     scores.sort_by(|a, b| {
-        (a.added == 0)
-            .cmp(&(b.added == 0))
+        (a.failed.is_some())
+            .cmp(&b.failed.is_some())
+            .then((a.added == 0).cmp(&(b.added == 0)))
             .then(a.flag.is_some().cmp(&b.flag.is_some()))
             .then(a.delta_bic.total_cmp(&b.delta_bic))
     });
@@ -735,8 +803,48 @@ impl Score {
 }
 
 /// A one-line verdict on a ranked list (as [`rank`] returns it) for a fit of EMM `emm_um`:
-/// the candidate to add, or that none is supported.
+/// the candidate to add, or that none is supported; candidates that could not be scored are
+/// named with the reason (and when none could be, the verdict says so, not that none helps).
+///
+/// ```
+/// use volver_solvers::candidates::{Score, verdict};
+/// let failed = Score {
+///     id: "add:EXC".into(),
+///     description: "give EXC".into(),
+///     added: 0,
+///     emm_um: f64::NAN,
+///     delta_bic: f64::NAN,
+///     size: f64::NAN,
+///     size_unit: "",
+///     equivalent: vec![],
+///     flag: None,
+///     failed: Some("its step is singular".into()),
+/// };
+/// let v = verdict(&[failed], 50.0);
+/// assert!(v.starts_with("no candidate could be scored"), "{v}");
+/// ```
 pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
+    let failed: Vec<&Score> = ranked.iter().filter(|s| s.failed.is_some()).collect();
+    let Some(first) = failed.first() else {
+        return verdict_scored(ranked, emm_um);
+    };
+    let why = format!("{}: {}", first.id, first.failed.as_deref().unwrap_or(""));
+    if failed.len() == ranked.len() {
+        return format!(
+            "no candidate could be scored (EMM {} µm), so the diagnosis cannot say what is \
+             missing: {why}",
+            um(emm_um)
+        );
+    }
+    format!(
+        "{}; {} candidate(s) could not be scored ({why})",
+        verdict_scored(ranked, emm_um),
+        failed.len()
+    )
+}
+
+/// [`verdict`] over the candidates that were scored.
+fn verdict_scored(ranked: &[Score], emm_um: f64) -> String {
     if let Some(s) = ranked.first().filter(|s| s.strong())
         && let Some(vars) = s.id.strip_prefix("field:")
     {

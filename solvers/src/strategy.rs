@@ -136,7 +136,14 @@ pub struct Identification {
     /// The gauge the fit honoured ([`Strategy::gauge`]; `None` without it or when the design
     /// could not be analysed).
     pub gauge: Option<Gauge>,
+    /// Why the gauge [`Strategy::gauge`] asked for could not be formed (the fit then went on
+    /// without it, and says so): `None` when it was formed or not asked for.
+    pub gauge_failed: Option<String>,
 }
+
+/// Why [`crate::gauge::gauge`] gave nothing: its pass or its decomposition failed.
+pub const GAUGE_FAILED: &str = "the design's information at the reference could not be formed \
+    (a Jacobian that is not finite there) or decomposed";
 
 impl Identification {
     /// Final EMM as a percentage of the initial EMM.
@@ -203,12 +210,14 @@ pub fn identify_errors(
     let model = problem.model();
     let mut p = start.to_vec();
     let mut gauge: Option<Gauge> = None;
+    let mut gauge_failed: Option<String> = None;
     // `reached`: the evaluation at p when it is known.
     let done = |p: Vec<f64>,
                 phases: Vec<Summary>,
                 initial,
                 termination,
                 gauge,
+                gauge_failed,
                 reached: Option<Evaluation>| Identification {
         reached: reached.unwrap_or_else(|| evaluate(&problem, &p)),
         params: p,
@@ -217,6 +226,7 @@ pub fn identify_errors(
         termination,
         time_s: t0.elapsed().as_secs_f64(),
         gauge,
+        gauge_failed,
     };
     if strategy.subloops == 0 {
         let initial = evaluate(&problem, &p);
@@ -225,6 +235,7 @@ pub fn identify_errors(
             vec![],
             initial,
             Termination::InvalidInput(crate::Invalid::NoSubloop),
+            None,
             None,
             None,
         );
@@ -245,6 +256,7 @@ pub fn identify_errors(
                     vec![],
                     initial,
                     Termination::InvalidInput(crate::Invalid::Refused(e)),
+                    None,
                     None,
                     None,
                 );
@@ -277,6 +289,7 @@ pub fn identify_errors(
                 free,
                 per_parameter: MIN_EQUATIONS_PER_PARAMETER,
             }),
+            None,
             None,
             None,
         );
@@ -318,7 +331,11 @@ pub fn identify_errors(
                 {
                     p.clone_from(&reference);
                 }
-                crate::gauge::gauge(&task, &reference, &reference, crate::gauge::TOLERANCE)
+                let g = crate::gauge::gauge(&task, &reference, &reference, crate::gauge::TOLERANCE);
+                if g.is_none() {
+                    gauge_failed = Some(GAUGE_FAILED.to_string());
+                }
+                g
             } else {
                 None
             };
@@ -367,12 +384,15 @@ pub fn identify_errors(
         );
         let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors), false);
         gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
-        if let Some(g) = &gauge {
-            p = g.project(&p);
-            at_p = None;
+        match &gauge {
+            Some(g) => {
+                p = g.project(&p);
+                at_p = None;
+            }
+            None => gauge_failed = Some(GAUGE_FAILED.to_string()),
         }
     }
-    done(p, phases, initial(), termination, gauge, at_p)
+    done(p, phases, initial(), termination, gauge, gauge_failed, at_p)
 }
 
 /// The gauge's reference for a solve that identifies the parameters `free` accepts: those errors

@@ -277,7 +277,13 @@ fn diagnose(
     }
     let best = ranked
         .first()
-        .ok_or_else(|| anyhow::anyhow!("no candidate to rank"))?;
+        .filter(|s| s.failed.is_none())
+        .ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}",
+                volver::solvers::candidates::verdict(&ranked, id1.reached.stats.emm_um)
+            )
+        })?;
     let candidate = library(model)
         .into_iter()
         .find(|c| c.id == best.id)

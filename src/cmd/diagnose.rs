@@ -310,6 +310,10 @@ fn print_candidates(d: &Diagnosis) {
             bic,
             emm,
             match (&s.flag, s.seen) {
+                _ if s.failed.is_some() => format!(
+                    "COULD NOT BE SCORED ({}): ",
+                    s.failed.as_deref().unwrap_or("")
+                ),
                 (Some(why), _) => format!("IMPLAUSIBLE ({why}): "),
                 (None, true) => String::new(),
                 (None, false) => "not seen in these data: ".into(),
