@@ -456,6 +456,78 @@ pub fn diagnose_with(
     })
 }
 
+/// Where a fit stands against what the tracker's noise leaves: the conclusion every output
+/// states is chosen from this, never written in advance.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Standing {
+    /// Within [`ABOVE_NOISE_Z`] standard deviations of what a complete model leaves.
+    AtNoise,
+    /// Above it: something is missing.
+    Above,
+    /// Far below it: the specification overstates the noise of these data.
+    Below,
+}
+
+impl Standing {
+    /// The standing of a fit of EMM `emm_um` against `level`.
+    ///
+    /// ```
+    /// use volver::diagnosis::Standing;
+    /// use volver::core::diagnose::NoiseLevel;
+    /// let level = NoiseLevel { noise_emm_um: 50.0, fit_emm_um: 49.0, sd_um: 0.5 };
+    /// assert_eq!(Standing::of(&level, 49.4), Standing::AtNoise);
+    /// assert_eq!(Standing::of(&level, 67.0), Standing::Above);
+    /// assert_eq!(Standing::of(&level, 30.0), Standing::Below);
+    /// assert_eq!(Standing::of(&level, 67.0).conclusion(), "something is missing");
+    /// ```
+    pub fn of(level: &diagnose::NoiseLevel, emm_um: f64) -> Standing {
+        let z = level.z(emm_um);
+        if z > ABOVE_NOISE_Z {
+            Standing::Above
+        } else if z < -ABOVE_NOISE_Z {
+            Standing::Below
+        } else {
+            Standing::AtNoise
+        }
+    }
+
+    /// The conclusion in words.
+    pub fn conclusion(self) -> &'static str {
+        match self {
+            Standing::AtNoise => "the model explains everything but the noise",
+            Standing::Above => "something is missing",
+            Standing::Below => {
+                "far below what the noise leaves: the noise specification overstates the noise \
+                 of these data"
+            }
+        }
+    }
+}
+
+/// What the tracker's `noise` leaves of a fit at `params` of `problem` (its identified
+/// directions absorb part of it) and where the fit's EMM `emm_um` stands against it; `None`
+/// when the fit's identifiability cannot be analysed.
+pub fn standing(
+    problem: &Problem,
+    params: &[f64],
+    emm_um: f64,
+    noise: &TrackerNoise,
+) -> Option<(diagnose::NoiseLevel, Standing)> {
+    let ident = analyse(
+        &volver_solvers::Task::new(problem.clone()),
+        params,
+        volver_solvers::identifiability::RANK_TOLERANCE,
+        CORRELATION_LISTED,
+    )?;
+    let moments = diagnose::noise_moments(problem, noise);
+    let coordinates: usize = (0..problem.n_points())
+        .map(|i| if problem.scalar(i) { 1 } else { 3 })
+        .sum();
+    let all: Vec<usize> = (0..problem.n_points()).collect();
+    let level = diagnose::noise_level(&moments, &all, ident.rank, coordinates);
+    Some((level, Standing::of(&level, emm_um)))
+}
+
 /// The fit against the noise: overall, per bin, and the repeats (their estimate in µm and their
 /// pairs) against the specification.
 fn noise_verdict(
@@ -503,8 +575,8 @@ fn noise_verdict(
         expected_fit_um: level.fit_emm_um,
         u95_um: 2.0 * level.sd_um,
         ratio: level.ratio(emm),
-        at_noise: level.z(emm).abs() <= ABOVE_NOISE_Z,
-        below: level.z(emm) < -ABOVE_NOISE_Z,
+        at_noise: Standing::of(level, emm) == Standing::AtNoise,
+        below: Standing::of(level, emm) == Standing::Below,
         above,
         repeats,
     }

@@ -17,6 +17,7 @@ use volver::core::problem::{Problem, Residuals};
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 use volver::core::tables::ErrorTables;
+use volver::diagnosis::Standing;
 use volver::inputs::{DEMO_DIR, DEMO_EFFECT, DEMO_SEED};
 use volver::report::{self, Fit, ReportInput};
 use volver::solvers::Options;
@@ -130,7 +131,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
         },
     ];
     write_report(&setup, out_dir, &out, fits, ranked, cross, &check)?;
-    where_you_are(&setup, out_dir, &table_paths, &best.id);
+    let standing = against_noise(&Problem::new(&model2, data)?, &id2)?.0;
+    where_you_are(&setup, out_dir, &table_paths, &best.id, standing);
     Ok(())
 }
 
@@ -204,12 +206,36 @@ fn identify_first(setup: &Setup, model: &Model, data: &MeasurementSet) -> Result
     );
     if let Some((n, pairs)) = repeat {
         println!(
-            "   noise estimated from {pairs} repeated points: EMM {} µm — the fit is {:.2} × that: something is missing",
+            "   noise estimated from {pairs} repeated points: EMM {} µm — the fit is {:.2} × that",
             um(n.emm_um),
             id1.reached.stats.emm_um / n.emm_um
         );
     }
+    println!("   {}", against_noise(&p1, &id1)?.1);
     Ok(id1)
+}
+
+/// The fit `id` of `problem` against what the tracker's noise leaves (the machine file's noise,
+/// else the paper's): its standing, and a line saying it with its figures and the conclusion
+/// chosen from them.
+fn against_noise(problem: &Problem, id: &Identification) -> Result<(Standing, String)> {
+    let noise = problem
+        .model()
+        .machine()
+        .tracker()
+        .noise
+        .unwrap_or(volver::core::noise::TrackerNoise::PAPER);
+    let emm = id.reached.stats.emm_um;
+    let (level, standing) = volver::diagnosis::standing(problem, &id.params, emm, &noise)
+        .ok_or_else(|| anyhow::anyhow!("the fit's identifiability cannot be analysed"))?;
+    let line = format!(
+        "the fit is {:.2} × what the tracker's noise leaves ({} ± {} µm): {}",
+        level.ratio(emm),
+        um(level.fit_emm_um),
+        um(2.0 * level.sd_um),
+        standing.conclusion()
+    );
+    Ok((standing, line))
 }
 
 /// Step 3: Where it fails and what is missing: the candidates ranked, the best, and the model with
@@ -310,11 +336,12 @@ fn identify_with(
         anyhow::bail!("identification failed: {}", id2.termination);
     }
     println!(
-        "\n4. Identification with {}: EMM {} µm ({} parameters) — {:.3} × the noise error: the model explains everything but the noise",
+        "\n4. Identification with {}: EMM {} µm ({} parameters) — {:.3} × the noise error; {}",
         added,
         um(id2.reached.stats.emm_um),
         model2.n_params(),
-        id2.reached.stats.emm_um / noise
+        id2.reached.stats.emm_um / noise,
+        against_noise(&p2, &id2)?.1
     );
     Ok(id2)
 }
@@ -798,7 +825,13 @@ fn write_report(
 }
 
 /// Step 7, continued: What was written and what to do next.
-fn where_you_are(setup: &Setup, out_dir: &Path, table_paths: &[PathBuf], added: &str) {
+fn where_you_are(
+    setup: &Setup,
+    out_dir: &Path,
+    table_paths: &[PathBuf],
+    added: &str,
+    standing: Standing,
+) {
     println!("\n7. Written in {}/:", out_dir.display());
     println!(
         "   report.html              the HTML report (maps, vectors, error functions, diagnosis, identifiability)"
@@ -815,9 +848,20 @@ fn where_you_are(setup: &Setup, out_dir: &Path, table_paths: &[PathBuf], added: 
         "   {:<24} the measurements, the truth and the simulation record",
         format!("{dir}/")
     );
-    println!(
-        "\nWhere you are: the errors are identified and the model explains the data to the noise. Next:"
-    );
+    let state = match standing {
+        Standing::AtNoise => {
+            "the errors are identified and the model explains the data to the noise"
+        }
+        Standing::Above => {
+            "the errors are identified, but the model does not yet explain the data (the fit is \
+             above the noise): diagnose again before you compensate"
+        }
+        Standing::Below => {
+            "the errors are identified; the fit is far below the noise the specification states, \
+             so judge the model by the candidates"
+        }
+    };
+    println!("\nWhere you are: {state}. Next:");
     // The machine is named on the command line unless it is the default.
     let machine = if setup.xcfz() {
         String::new()
