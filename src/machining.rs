@@ -91,7 +91,8 @@ pub fn start(machine: &Machine, text: Option<&str>) -> Result<[Option<f64>; 6]> 
 
 /// Reads `text` (from `label`) for `machine` with `setup`, and the tool point of every tool
 /// it uses: with a tool table, `gauge` plus the tool's length (its Z entry) along `axis` (the
-/// tool's direction from the holder to the tip, in the frame of the last tool-side axis);
+/// tool's direction from the holder to the tip, in the frame of the last tool-side axis) less
+/// its X and Y offsets along that frame's x and y;
 /// without one, `single` for every move — refused when the program changes between tools
 /// unless `same_point`.
 pub fn read_program(
@@ -112,10 +113,14 @@ pub fn read_program(
     let mut out = BTreeMap::new();
     if setup.offsets.tool_table {
         for t in numbered {
-            let len = setup.offsets.tools.get(&t).map_or(0.0, |o| o[2]);
+            let o = setup.offsets.tools.get(&t).copied().unwrap_or([0.0; 6]);
+            // The controlled point is the tip plus the tool's offset (machine = program +
+            // offset): the tip is the gauge point less it, the length along the tool axis,
+            // the X and Y offsets along the frame's x and y (the machine's at the reference).
+            let side = [-o[0], -o[1], 0.0];
             out.insert(
                 t,
-                std::array::from_fn(|c| points.gauge[c] + len * points.axis[c]),
+                std::array::from_fn(|c| points.gauge[c] + o[2] * points.axis[c] + side[c]),
             );
         }
     } else if numbered.len() > 1 && !points.same_point {

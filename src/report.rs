@@ -325,7 +325,11 @@ fn stations(p: &Page, s: &mut String) -> Result<()> {
     }
     let _ = writeln!(
         s,
-        "<h2>Stations</h2><p>Each station's identified position (mm, in the frame it is mounted          in) and range offset (µm, the dead path), with U (k = 2); its measurements and the EMM          they leave. With ranges alone a station's position is determined only up to the          combinations the gauge holds (raising every station is a constant EZC, turning them          about C a constant ECC: see Identifiability); distances between stations are not.</p>"
+        "<h2>Stations</h2><p>Each station's identified position (mm, in the frame it is mounted \
+         in) and range offset (µm, the dead path), with U (k = 2); its measurements and the EMM \
+         they leave. With ranges alone a station's position is determined only up to the \
+         combinations the gauge holds (raising every station is a constant EZC, turning them \
+         about C a constant ECC: see Identifiability); distances between stations are not.</p>"
     );
     s.push_str(&table(
         &[

@@ -305,6 +305,10 @@ fn bad_gcode_names_the_place() {
         ),
         ("G0 X1\nG52 X50 Z10 G1", 2, Some("G1"), "share the block"),
         ("G0 X1\nM98 P100", 2, Some("M98"), "subprogram"),
+        ("G0 X1\nG0 X10 N5", 2, Some("N5"), "stands first"),
+        ("G0 X1\nG0 X10 D5", 2, Some("D5"), "no code of this block"),
+        ("G0 X1\nM3 S-5", 2, Some("S-5"), "spindle speed"),
+        ("G0 X1\nG0 X10 (a (nested) comment)", 2, None, "nested"),
         ("G0 X1\nG1 U3", 2, Some("U"), "secondary"),
         ("G0 X1\nG1 X#3", 2, Some("X"), "needs a number"),
         ("G0 X1\nG1 X3 $", 2, Some("$"), "expected a word"),
@@ -1126,7 +1130,8 @@ fn fanuc_programs_are_read_and_written_by_fanuc_rules() {
         dialect: Dialect::Fanuc,
         ..Setup::default()
     };
-    let text = "%\nO0001\nG21 G90 G18\nG0 X100. C0. Z50.\nG04 X2.5\nG1 Z200. F300.\nM30\n%\n";
+    let text =
+        "%\nO0001\nG21 G90 G18\nG0 X100. C0. Z50.\nG04 X2.5\nG1 Z200. F300.\nG91 G28 Z0.\nM30\n%\n";
     let prog = Program::read(text, "f.nc", m, &setup).unwrap();
     let pts = prog.points();
     assert_eq!(pts.len(), 2, "the dwell's X is no move");
@@ -1141,6 +1146,9 @@ fn fanuc_programs_are_read_and_written_by_fanuc_rules() {
         .compensate_with(&Tooling::single(comp), m, &options, "fanuc")
         .unwrap();
     assert!(out.contains("G04 X2.5"), "{out}");
+    // The reference move's intermediate point, rewritten absolute, keeps a decimal point (a
+    // Fanuc control would read G28 Z200 as 0.2 mm).
+    assert!(out.contains("G28 Z200."), "{out}");
     for line in out
         .lines()
         .filter(|l| l.starts_with("G0") || l.starts_with("G1"))

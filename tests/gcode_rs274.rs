@@ -198,6 +198,7 @@ const CASES: &[Case] = &[
     case("30-five-axis.ngc", Kind::Five),
     case("31-five-axis-inverse-time.ngc", Kind::Five),
     case("32-readme-part.ngc", Kind::Xcfz),
+    case("33-cycle-retracts.ngc", Kind::Mill),
 ];
 
 /// The compensators of a results file, per tool (the mill's tools at the gauge point 0,0,0
@@ -756,6 +757,7 @@ fn the_corpus_refusals_name_the_line_and_word() {
         ("47-tools-without-table.ngc", Kind::Five, 0, "T1, T2"),
         ("48-subprogram.ngc", Kind::Mill, 5, "M98"),
         ("49-threading.ngc", Kind::Mill, 6, "G33"),
+        ("50-block-delete.ngc", Kind::Mill, 7, "optional line 6"),
     ] {
         let c = Case {
             file,

@@ -614,3 +614,84 @@ fn user_errors_print_no_backtrace() {
         assert!(!err.to_lowercase().contains("backtrace"), "{err}");
     }
 }
+
+/// Found by the red-team pass after issue 43: a station count that exhausts memory, an effect
+/// of 1e300 µm written with exit 0 (and then a 300-digit number in the reader's message), a
+/// measuring time per point below the waits' resolution, and CR-only plan and point files read
+/// as one line.
+#[test]
+fn red_team_findings_are_refused_or_read() {
+    let dir = scratch("red-team");
+    let d = |n: &str| dir.join(n).display().to_string();
+    let e = refused(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--stations",
+        "100000",
+        "--out",
+        &d("s"),
+    ]);
+    assert!(e.contains("at most 1000 stations"), "{e}");
+    let e = refused(&[
+        "simulate",
+        "--plan",
+        "test4",
+        "--effect",
+        "ball-screw=X,10,1e300",
+        "--out",
+        &d("s"),
+    ]);
+    assert!(e.contains("1e300") && !e.contains("000000000000"), "{e}");
+    let e = refused(&[
+        "plan",
+        "--points",
+        "60",
+        "--seconds-per-point",
+        "0.0004",
+        "--out",
+        &d("p.csv"),
+        "--gcode",
+        &d("p.nc"),
+    ]);
+    assert!(
+        e.contains("seconds_per_point") || e.contains("seconds-per-point"),
+        "{e}"
+    );
+    // CR-only line ends: a plan file and a point list read as their lines.
+    let sim = simulated(&dir);
+    std::fs::write(
+        d("cr.csv"),
+        "order,X,C,Z,reflector\r1,100,0,0,R1\r2,700,90,300,R2\r",
+    )
+    .unwrap();
+    let out = volver(&[
+        "simulate",
+        "--plan-file",
+        &d("cr.csv"),
+        "--out",
+        &d("crsim"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::write(d("pts.csv"), "id,X,C,Z\rp1,100,0,100\rp2,700,90,300\r").unwrap();
+    let out = volver(&[
+        "compensate",
+        "--results",
+        &format!("{}/truth.json", sim.display()),
+        "--points",
+        &d("pts.csv"),
+        "--out",
+        &d("pts-comp.csv"),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(d("pts-comp.csv")).unwrap();
+    assert_eq!(text.lines().count(), 3, "{text}");
+}

@@ -912,7 +912,7 @@ pub fn read_points(
 ) -> Result<Vec<ListedPoint>> {
     use crate::error::Place;
     // A byte-order mark (spreadsheets write one) is not part of the first column's name.
-    let text = crate::error::without_bom(text);
+    let text = crate::error::lf_lines(crate::error::without_bom(text));
     let mut lines = text
         .lines()
         .enumerate()

@@ -129,6 +129,20 @@ pub fn without_bom(text: &str) -> &str {
     text.strip_prefix('\u{feff}').unwrap_or(text)
 }
 
+/// `text` with every line ending LF: CR LF and a lone CR (old Mac exports, some measuring
+/// software) end lines too, so that a CR-only file is not read as one line.
+///
+/// ```
+/// assert_eq!(volver_core::error::lf_lines("a\rb\r\nc"), "a\nb\nc");
+/// ```
+pub fn lf_lines(text: &str) -> std::borrow::Cow<'_, str> {
+    if text.contains('\r') {
+        std::borrow::Cow::Owned(text.replace("\r\n", "\n").replace('\r', "\n"))
+    } else {
+        std::borrow::Cow::Borrowed(text)
+    }
+}
+
 /// A number for a message: as written for ordinary sizes, in scientific notation when tiny or
 /// huge (`1e300`, not three hundred digits).
 ///

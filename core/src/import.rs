@@ -399,7 +399,10 @@ impl Profile {
                 if v.abs() > crate::measure::MAX_COORDINATE_MM {
                     return Err(Error::input(
                         at(col),
-                        format!("{v} mm is beyond any laser tracker's reach: check length_unit"),
+                        format!(
+                            "{} mm is beyond any laser tracker's reach: check length_unit",
+                            crate::error::number(v)
+                        ),
                     ));
                 }
                 Ok(v)

@@ -126,6 +126,9 @@ pub struct TrackerSpec {
     pub noise: Option<String>,
 }
 
+/// The most tracker stations a machine may have (each measures the whole plan).
+pub const MAX_STATIONS: usize = 1000;
+
 /// A machine description as written in the TOML file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -601,6 +604,14 @@ impl Machine {
                 )?,
                 observes: Observes::Point,
             });
+        } else if spec.stations.len() > MAX_STATIONS {
+            return Err(Error::input(
+                place("[[station]]", "station"),
+                format!(
+                    "{} stations: at most {MAX_STATIONS} (every station measures the whole plan)",
+                    spec.stations.len()
+                ),
+            ));
         } else if t.position != [0.0; 3] || t.orientation_deg != [0.0; 3] {
             return Err(Error::input(
                 place("[tracker]", "tracker"),

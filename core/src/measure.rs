@@ -499,8 +499,9 @@ impl MeasurementSet {
                     return Err(Error::input(
                         at(col),
                         format!(
-                            "{v} mm is beyond any laser tracker's reach ({MAX_COORDINATE_MM} mm): \
-                             coordinates are read in mm"
+                            "{} mm is beyond any laser tracker's reach ({MAX_COORDINATE_MM} mm): \
+                             coordinates are read in mm",
+                            crate::error::number(v)
                         ),
                     ));
                 }

@@ -274,9 +274,13 @@ fn program_options(a: &PlanArgs, machine: &Machine) -> Result<Option<ProgramOpti
         return Ok(None);
     }
     let spp = a.seconds_per_point;
-    if !(spp.is_finite() && spp > 0.0 && spp <= file::MAX_SECONDS_PER_POINT) {
+    if !(spp.is_finite()
+        && (file::MIN_SECONDS_PER_POINT..=file::MAX_SECONDS_PER_POINT).contains(&spp))
+    {
         bail!(
-            "--seconds-per-point {spp:?}: the measuring program waits this long per reflector              measured at a pose; more than 0 and at most {} s",
+            "--seconds-per-point {spp:?}: the measuring program waits this long per reflector \
+             measured at a pose (to the millisecond); {} to {} s",
+            file::MIN_SECONDS_PER_POINT,
             file::MAX_SECONDS_PER_POINT
         );
     }
@@ -285,7 +289,10 @@ fn program_options(a: &PlanArgs, machine: &Machine) -> Result<Option<ProgramOpti
             .clearance_from_text(text)
             .map_err(|m| anyhow::anyhow!("--clearance {text}: {m}"))?,
         None if machine.clearance().is_empty() => bail!(
-            "--gcode: the measuring program needs a clearance position, where it retracts the              reflectors between poses: give --clearance AXIS=VALUE (e.g. --clearance Z=600:              the axis and end that take the tool away from the workpiece and the tracker) or              a [clearance] table in the machine file (`Z = 600.0`)"
+            "--gcode: the measuring program needs a clearance position, where it retracts the \
+             reflectors between poses: give --clearance AXIS=VALUE (e.g. --clearance Z=600: \
+             the axis and end that take the tool away from the workpiece and the tracker) or \
+             a [clearance] table in the machine file (`Z = 600.0`)"
         ),
         None => machine.clearance().to_vec(),
     };

@@ -199,6 +199,11 @@ fn truth_of(
                 };
                 let layout = match text.parse::<usize>() {
                     Ok(0) => anyhow::bail!("--stations 0: at least one station"),
+                    Ok(n) if n > volver::core::machine::MAX_STATIONS => anyhow::bail!(
+                        "--stations {n}: at most {} stations (every station measures the whole \
+                         plan)",
+                        volver::core::machine::MAX_STATIONS
+                    ),
                     Ok(n) => volver::core::machine::StationSpec::default_layout(&m, n, observes),
                     Err(_) => {
                         let path = std::path::Path::new(text);

@@ -91,8 +91,16 @@ pub(crate) struct Reader<'a> {
     /// M3, M4 or M5 (in tenths).
     pub spindle: i64,
     pub cycle: CycleWords,
-    /// `G99`: cycles retract to R.
+    /// `G99`: cycles retract to R (RS274NGC's default, as LinuxCNC starts).
     pub retract_r: bool,
+    /// The Z (program units) where the current series of contiguous canned cycles started:
+    /// `G98` retracts there.
+    pub cycle_il: Option<f64>,
+    /// An optional (block delete) move was read and no move since makes the path the same
+    /// whether the control skipped it or not: its line.
+    pub ambiguous: Option<usize>,
+    /// The axes (chain positions) optional moves changed since then.
+    pub delete_changed: [bool; MAX_AXES],
     pub total_points: usize,
 }
 
@@ -128,7 +136,10 @@ impl<'a> Reader<'a> {
             tool: setup.tool,
             spindle: 50,
             cycle: CycleWords::default(),
-            retract_r: false,
+            retract_r: true,
+            cycle_il: None,
+            ambiguous: None,
+            delete_changed: [false; MAX_AXES],
             total_points: 0,
         }
     }
@@ -304,6 +315,14 @@ impl<'a> Reader<'a> {
                     if p.number.replace(w.text.clone()).is_some() {
                         return Err(refuse(place, &w.text, "two block numbers (N) in one block"));
                     }
+                    // RS274NGC reads a block number only first in its block.
+                    if !std::ptr::eq(w, &ws[0]) {
+                        return Err(refuse(
+                            place,
+                            &w.text,
+                            format!("{}: a block number N stands first in its block", w.text),
+                        ));
+                    }
                 }
                 'G' | 'M' => {
                     let code = self.code(w, place)?;
@@ -467,11 +486,13 @@ impl<'a> Reader<'a> {
     /// Executes a block in RS274NGC's order: modes, tools and spindle, dwell, units and
     /// offsets, the non-modal codes, the motion, and the stops last.
     fn execute(&mut self, p: &Parsed, block: &mut Block, place: &Place) -> Result<()> {
+        let start = self.pos;
         self.modes(p, block, place)?;
         self.tools(p, block, place)?;
         let owner = self.non_modal(p, block, place)?;
         if owner == Owner::Motion {
             self.movement(p, block, place)?;
+            self.block_delete(p, block, &start, place)?;
         } else if owner == Owner::Taken
             && let Some((_, w)) = p.g.iter().find(|(g, _)| codes::g_group(*g) == Some(1))
         {
@@ -488,6 +509,53 @@ impl<'a> Reader<'a> {
         for (m, w) in &p.m {
             if codes::m_group(*m) == Some(4) {
                 block.after.push(w.clone());
+            }
+        }
+        Ok(())
+    }
+
+    /// Block delete: a control skips an optional block (`/`) when its switch is on, so the
+    /// moves after an optional move must mean the same from either start. Refused until a
+    /// straight move in absolute mode states every axis the optional move changed (its end is
+    /// then the same either way); arcs, split moves, cycles and incremental moves in between are
+    /// refused with the optional block's line.
+    fn block_delete(
+        &mut self,
+        p: &Parsed,
+        block: &Block,
+        start: &[Option<f64>; MAX_AXES],
+        place: &Place,
+    ) -> Result<()> {
+        if block.steps.is_empty() {
+            return Ok(());
+        }
+        if let Some(line) = self.ambiguous {
+            let single = matches!(
+                &block.steps[..],
+                [super::Step::Move(m)] if !m.arc && m.points.len() == 1
+            );
+            let stated = (0..6).all(|k| {
+                let changed = self.chain[k].is_some_and(|c| self.delete_changed[c]);
+                !changed || p.axes[k].is_some()
+            });
+            if !(single && self.absolute && stated) {
+                return Err(Error::input(
+                    place.clone(),
+                    format!(
+                        "this move starts where optional line {line} (block delete '/') leaves \
+                         the machine, and it would not mean the same if the control skipped that \
+                         line: follow an optional move with a straight absolute move that states \
+                         every axis it changed, or remove the '/'"
+                    ),
+                ));
+            }
+            self.ambiguous = None;
+            self.delete_changed = [false; MAX_AXES];
+        }
+        if block.optional {
+            self.ambiguous = Some(block.line);
+            for (c, changed) in self.delete_changed.iter_mut().enumerate() {
+                *changed |= start[c] != self.pos[c];
             }
         }
         Ok(())

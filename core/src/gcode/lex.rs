@@ -99,6 +99,12 @@ pub(crate) fn split_comments(line: &str, place: &Place) -> Result<(String, Vec<S
     let mut current = String::new();
     for (i, c) in line.char_indices() {
         match c {
+            '(' if depth > 0 => {
+                return Err(Error::input(
+                    place.clone(),
+                    "a comment inside a comment: RS274NGC controls refuse nested comments",
+                ));
+            }
             '(' => {
                 depth += 1;
                 current.push(c);

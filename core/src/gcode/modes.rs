@@ -83,7 +83,12 @@ impl Reader<'_> {
             };
             block.kept.push(format!("G4 {pw}"));
         }
-        for letter in ['O', 'F', 'S', 'D'] {
+        if let Some((v, w)) = p.other.get(&'S')
+            && *v < 0.0
+        {
+            return Err(refuse(place, w, format!("{w}: a spindle speed is ≥ 0")));
+        }
+        for letter in ['O', 'F', 'S'] {
             if let Some((_, w)) = p.other.get(&letter) {
                 // An inverse-time F belongs to its move's points (see movement).
                 let inverse = letter == 'F' && self.feed == FeedMode::InverseTime;
@@ -420,7 +425,13 @@ impl Reader<'_> {
             } else {
                 self.program_at(k, place)? + v
             };
-            words.push(format!("{l}{}", number(prog)));
+            let mut v = number(prog);
+            // Fanuc-style controls read a value without a decimal point in their least input
+            // increment.
+            if self.setup.dialect == crate::dialect::Dialect::Fanuc && !v.contains('.') {
+                v.push('.');
+            }
+            words.push(format!("{l}{v}"));
             self.pos[c] = Some(self.offsets.home[h][k]);
         }
         if words.is_empty() {

@@ -11,6 +11,11 @@ use crate::error::{Error, Place, Result};
 /// comes back down (LinuxCNC's `G83_RAPID_DELTA`: 0.010 inch, 0.254 mm).
 pub const PECK_CLEARANCE_INCH: f64 = 0.010;
 
+/// Whether a motion mode is a canned cycle (tenths of its G code).
+fn is_cycle(mode: i64) -> bool {
+    matches!(mode, 730 | 810 | 820 | 830 | 850 | 860 | 890)
+}
+
 /// The letters a motion mode takes besides the axes (tenths of its G code).
 fn motion_letters(mode: i64) -> &'static [char] {
     match mode {
@@ -65,6 +70,17 @@ impl Reader<'_> {
             if *g == 800 {
                 self.cycle = Default::default();
             }
+            // A series of contiguous cycles starts: G98 retracts to where it started (LinuxCNC
+            // keeps that height through changes of cycle code, as rs274 shows).
+            match (is_cycle(*g), before.is_some_and(is_cycle)) {
+                (true, false) => {
+                    self.cycle_il = self.chain[2]
+                        .and_then(|c| self.pos[c])
+                        .map(|m| self.to_program(2, m));
+                }
+                (false, _) => self.cycle_il = None,
+                (true, true) => {}
+            }
         }
         self.orphans(p, place)?;
         if !p.any_axis() {
@@ -83,7 +99,8 @@ impl Reader<'_> {
             Some(800) => {
                 return Err(Error::input(
                     place.clone(),
-                    "axis words with no motion mode (G80 cancels it): RS274NGC refuses them",
+                    "axis words with no motion mode in force (G80 cancels it): a control refuses \
+                     them",
                 ));
             }
             Some(m) => m,
@@ -143,7 +160,8 @@ impl Reader<'_> {
             }
         }
         for (letter, (_, w)) in &p.other {
-            let owned = matches!(letter, 'P' | 'Q' | 'R' | 'L' | 'E' | 'H');
+            // D is taken only by cutter compensation (G41/G42), which volver refuses.
+            let owned = matches!(letter, 'P' | 'Q' | 'R' | 'L' | 'E' | 'H' | 'D');
             if owned && !used.contains(letter) {
                 return Err(refuse(
                     place,
@@ -296,7 +314,11 @@ impl Reader<'_> {
                 ));
             }
         };
-        let mut old_z = cur[2];
+        let mut old_z = if self.retract_r {
+            cur[2]
+        } else {
+            self.cycle_il.unwrap_or(cur[2])
+        };
         let mut moves: Vec<(bool, [f64; 3])> = Vec::new();
         let mut extra: Vec<(usize, String)> = Vec::new();
         if old_z < r {

@@ -100,6 +100,11 @@ pub const MAX_SETTLE_S: f64 = 3600.0;
 /// The longest measuring time per reflector measurement a measuring program takes (s): an hour.
 pub const MAX_SECONDS_PER_POINT: f64 = 3600.0;
 
+/// The shortest measuring time per reflector measurement a measuring program takes (s): a
+/// tenth of a second, so that the waits (written to the millisecond) add up to the plan's
+/// duration within 0.5 %.
+pub const MIN_SECONDS_PER_POINT: f64 = 0.1;
+
 /// How [`gcode`] writes a measuring program.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProgramOptions {
@@ -110,7 +115,7 @@ pub struct ProgramOptions {
     /// The clearance position: (chain index, position in mm or rad) as
     /// [`Machine::clearance`] gives it; at least one axis.
     pub clearance: Vec<(usize, f64)>,
-    /// The measuring time of one reflector measurement (s, more than 0 and at most
+    /// The measuring time of one reflector measurement (s, [`MIN_SECONDS_PER_POINT`] to
     /// [`MAX_SECONDS_PER_POINT`]): the plan's time per point, from which its duration is
     /// computed.
     pub seconds_per_point: f64,
@@ -143,11 +148,12 @@ impl ProgramOptions {
             ))
         };
         let spp = self.seconds_per_point;
-        if !(spp.is_finite() && spp > 0.0 && spp <= MAX_SECONDS_PER_POINT) {
+        if !(spp.is_finite() && (MIN_SECONDS_PER_POINT..=MAX_SECONDS_PER_POINT).contains(&spp)) {
             return at(
                 "seconds_per_point",
                 format!(
-                    "{spp:?} s: a measuring time per point of more than 0 and at most {MAX_SECONDS_PER_POINT} s"
+                    "{spp:?} s: a measuring time per point of {MIN_SECONDS_PER_POINT} to \
+                     {MAX_SECONDS_PER_POINT} s (waits are written to the millisecond)"
                 ),
             );
         }
@@ -529,7 +535,7 @@ pub fn load(machine: &Machine, path: &Path) -> Result<Plan> {
 /// the file's.
 pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
     // A byte-order mark (spreadsheets write one) is not part of the first column's name.
-    let text = crate::error::without_bom(text);
+    let text = crate::error::lf_lines(crate::error::without_bom(text));
     // Comment lines are blanked (not removed) so that line numbers stay the file's.
     let body: String = text
         .lines()

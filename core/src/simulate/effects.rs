@@ -3,6 +3,9 @@
 
 use super::*;
 
+/// The largest value of an effect's parameter, in its unit (µm, µm/h, µrad, ppm, mm).
+pub const MAX_EFFECT_VALUE: f64 = 1e6;
+
 /// A physical effect outside the standard model (see the module documentation for formulas).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "effect", rename_all = "kebab-case")]
@@ -192,11 +195,22 @@ impl Effect {
             .filter(|s| !s.is_empty())
             .collect();
         let bad = |why: String| Error::input(place(), format!("{why}; expected {syntax}"));
+        // Every value of an effect (µm, µm/h, µrad, ppm, mm) within 1e6 of its unit: a metre,
+        // a radian, a whole scale, beyond any machine's error.
         let num = |s: &str| -> Result<f64> {
-            s.parse::<f64>()
+            let v = s
+                .parse::<f64>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| bad(format!("'{s}' is not a finite number")))
+                .ok_or_else(|| bad(format!("'{s}' is not a finite number")))?;
+            if v.abs() > MAX_EFFECT_VALUE {
+                return Err(bad(format!(
+                    "{} is beyond any machine's error (at most {MAX_EFFECT_VALUE:e} in the \
+                     effect's unit)",
+                    crate::error::number(v)
+                )));
+            }
+            Ok(v)
         };
         let nums = |a: &[&str]| -> Result<Vec<f64>> { a.iter().map(|s| num(s)).collect() };
         let letter = |s: &str| -> Result<Axis> {
