@@ -313,7 +313,10 @@ impl Plan {
                     place(),
                     format!(
                         "axis {}: {}:{}:{} is not start ≤ end with a positive step",
-                        ax.axis, r.start, r.end, r.step
+                        ax.axis,
+                        crate::error::number(r.start),
+                        crate::error::number(r.end),
+                        crate::error::number(r.step)
                     ),
                 ));
             }
@@ -325,8 +328,8 @@ impl Plan {
                     format!(
                         "axis {}: {}..{} {} leaves the travel range [{lo}, {hi}]",
                         ax.axis,
-                        r.start,
-                        r.end,
+                        crate::error::number(r.start),
+                        crate::error::number(r.end),
                         ax.file_unit()
                     ),
                 ));
@@ -343,7 +346,10 @@ impl Plan {
                     format!(
                         "axis {}: {}:{}:{} has {count:.3e} values; a plan has at most \
                          {MAX_PLAN_POSITIONS} positions: use a larger step",
-                        ax.axis, r.start, r.end, r.step
+                        ax.axis,
+                        crate::error::number(r.start),
+                        crate::error::number(r.end),
+                        crate::error::number(r.step)
                     ),
                 ));
             }
