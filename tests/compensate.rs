@@ -405,8 +405,14 @@ fn tables_include_ball_screw_errors() {
     assert!((peak - 0.002).abs() < 1e-4, "{peak}");
 }
 
+/// How far a command written with 4 decimals may put the tool from its target (mm): half a unit
+/// of the last decimal in X and Z (5e-5 mm each) and in C (5e-5° = 8.7e-7 rad, at most 1.2e-3 mm
+/// at the 1.4 m the XCFZ volume's points lie from the C axis), with room to spare.
+const WRITTEN_MM: f64 = 2e-3;
+
 /// The commands end to end: simulate, identify, then `compensate` (points and G-code) and
-/// `tables`; every output reads back, and a bad point list is refused with its place.
+/// `tables`; every output reads back and is the library's value for the fit the CLI wrote, and
+/// a bad point list is refused with its place.
 #[test]
 fn compensate_and_tables_through_the_cli() {
     use common::volver;
@@ -460,6 +466,34 @@ fn compensate_and_tables_through_the_cli() {
     let csv = std::fs::read_to_string(d("pts-out.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3);
     assert!(csv.starts_with("line,id,X,C,Z,X_programmed"));
+    // What the CLI wrote is the library's compensation of the fit it wrote: each point's
+    // commands, put through the results file's model at the reflectors' centroid (the default
+    // tool point, computed here from the machine), reach the nominal tool point of the
+    // programmed commands, and equal the library's own solution, both within the 4 written
+    // decimals.
+    let (model, params) = volver::core::results::ResultsFile::load(std::path::Path::new(&d("fit.json")))
+        .unwrap()
+        .to_model("fit.json")
+        .unwrap();
+    let reflectors = model.machine().reflectors();
+    let tool: [f64; 3] = std::array::from_fn(|c| {
+        reflectors.iter().map(|r| r.offset[c]).sum::<f64>() / reflectors.len() as f64
+    });
+    let comp = Compensator::new(&model, &params, tool).unwrap();
+    for (line, programmed) in csv.lines().skip(1).zip([[100.0, 0.0, 50.0], [700.0, 90.0, 300.0]]) {
+        let cells: Vec<f64> = line.split(',').skip(2).take(3).map(|v| v.parse().unwrap()).collect();
+        let cmd = model.machine().commands_from_file_units(&programmed);
+        let solved = comp.compensate(&cmd).unwrap();
+        let reached = comp.actual_point(&model.machine().commands_from_file_units(&cells));
+        let off = dist(reached, comp.nominal_point(&cmd));
+        assert!(off < WRITTEN_MM, "{line}: {off} mm from the nominal tool point");
+        for (k, ax) in model.machine().axes().iter().enumerate() {
+            let lib = ax.to_file_units(solved.commands.0[k]);
+            assert!((cells[k] - lib).abs() <= 0.5e-4 + 1e-9, "{line}: {} vs {lib}", cells[k]);
+        }
+        // The compensation is not nothing: the uncompensated command misses by much more.
+        assert!(dist(comp.actual_point(&cmd), comp.nominal_point(&cmd)) > 10.0 * WRITTEN_MM);
+    }
     std::fs::write(d("part.nc"), PROGRAM).unwrap();
     let out = volver(&[
         "compensate",
@@ -477,7 +511,16 @@ fn compensate_and_tables_through_the_cli() {
     );
     let m = Machine::default_xcfz();
     let nc = std::fs::read_to_string(d("part-out.nc")).unwrap();
-    Program::parse(&nc, "part-out.nc", &m, &Linearise::default()).unwrap();
+    // Every point of the written program, in order, puts the tool where the input program's
+    // point (cut into chords as the CLI cuts them, 0.001 mm) puts it on the nominal machine.
+    let written = Program::parse(&nc, "part-out.nc", &m, &Linearise::default()).unwrap().points();
+    let input = Program::parse(PROGRAM, "part.nc", &m, &Linearise::default()).unwrap().points();
+    assert_eq!(written.len(), input.len());
+    for ((w, _, _), (p, _, _)) in written.iter().zip(&input) {
+        let (w, p) = (m.commands_from_file_units(&w[..3]), m.commands_from_file_units(&p[..3]));
+        let off = dist(comp.actual_point(&w), comp.nominal_point(&p));
+        assert!(off < WRITTEN_MM, "{w:?} for {p:?}: {off} mm");
+    }
     let out = volver(&["tables", "--results", &d("fit.json"), "--out", &d("tables")]);
     assert!(
         out.status.success(),
@@ -500,6 +543,19 @@ fn compensate_and_tables_through_the_cli() {
     )
     .unwrap();
     assert!(isg.max_difference(&eta).unwrap() < 1e-12 && isg.max_difference(&csv).unwrap() < 1e-12);
+    // The values are the fit's error functions at the default steps (10 mm, 5°).
+    let lib = ErrorTables::from_model(&model, &params, 10.0, 5.0).unwrap();
+    assert!(lib.max_difference(&isg).unwrap() < 1e-12);
+    for t in &isg.axes {
+        let (_, ax) = model.machine().axis(t.axis).unwrap();
+        for (name, vals) in &t.errors {
+            let id = name.parse().unwrap();
+            for (p, v) in t.positions.iter().zip(vals) {
+                let e = model.error_value(id, ax.from_file_units(*p), &params).unwrap();
+                assert!((e - v).abs() < 1e-12, "{name} at {p}: {v} vs {e}");
+            }
+        }
+    }
     // Bad point lists: the file, the line and the column.
     for (text, expect) in [
         ("id,X,C\na,1,2\n", ":1: field 'Z'"),
