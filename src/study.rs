@@ -739,7 +739,11 @@ mod tests {
         // 3e-8). Table 11's tests start from test 4's truth on their own meshes, and table 12
         // starts from the noisy reference: neither is scaled, so neither is compared.
         for t in &tables[..5] {
-            for r in t.rows.iter().filter(|r| !r.label.contains("with the paper's noise")) {
+            for r in t
+                .rows
+                .iter()
+                .filter(|r| !r.label.contains("with the paper's noise"))
+            {
                 let p = r.paper.expect("every row has the paper's figures");
                 assert!(
                     (r.ours.emm0_um / p.emm0_um - 1.0).abs() < 1e-6,

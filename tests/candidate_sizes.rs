@@ -103,7 +103,11 @@ fn effect_sizes(seed: u64) {
         ),
         ("range-scale=10", "range-scale", 10.0, "ppm"),
     ] {
-        let r = ranked(&model, paper_truth(seed), vec![Effect::parse(effect).unwrap()]);
+        let r = ranked(
+            &model,
+            paper_truth(seed),
+            vec![Effect::parse(effect).unwrap()],
+        );
         check(&r, id, want, unit);
     }
 }

@@ -471,25 +471,42 @@ fn compensate_and_tables_through_the_cli() {
     // tool point, computed here from the machine), reach the nominal tool point of the
     // programmed commands, and equal the library's own solution, both within the 4 written
     // decimals.
-    let (model, params) = volver::core::results::ResultsFile::load(std::path::Path::new(&d("fit.json")))
-        .unwrap()
-        .to_model("fit.json")
-        .unwrap();
+    let (model, params) =
+        volver::core::results::ResultsFile::load(std::path::Path::new(&d("fit.json")))
+            .unwrap()
+            .to_model("fit.json")
+            .unwrap();
     let reflectors = model.machine().reflectors();
     let tool: [f64; 3] = std::array::from_fn(|c| {
         reflectors.iter().map(|r| r.offset[c]).sum::<f64>() / reflectors.len() as f64
     });
     let comp = Compensator::new(&model, &params, tool).unwrap();
-    for (line, programmed) in csv.lines().skip(1).zip([[100.0, 0.0, 50.0], [700.0, 90.0, 300.0]]) {
-        let cells: Vec<f64> = line.split(',').skip(2).take(3).map(|v| v.parse().unwrap()).collect();
+    for (line, programmed) in csv
+        .lines()
+        .skip(1)
+        .zip([[100.0, 0.0, 50.0], [700.0, 90.0, 300.0]])
+    {
+        let cells: Vec<f64> = line
+            .split(',')
+            .skip(2)
+            .take(3)
+            .map(|v| v.parse().unwrap())
+            .collect();
         let cmd = model.machine().commands_from_file_units(&programmed);
         let solved = comp.compensate(&cmd).unwrap();
         let reached = comp.actual_point(&model.machine().commands_from_file_units(&cells));
         let off = dist(reached, comp.nominal_point(&cmd));
-        assert!(off < WRITTEN_MM, "{line}: {off} mm from the nominal tool point");
+        assert!(
+            off < WRITTEN_MM,
+            "{line}: {off} mm from the nominal tool point"
+        );
         for (k, ax) in model.machine().axes().iter().enumerate() {
             let lib = ax.to_file_units(solved.commands.0[k]);
-            assert!((cells[k] - lib).abs() <= 0.5e-4 + 1e-9, "{line}: {} vs {lib}", cells[k]);
+            assert!(
+                (cells[k] - lib).abs() <= 0.5e-4 + 1e-9,
+                "{line}: {} vs {lib}",
+                cells[k]
+            );
         }
         // The compensation is not nothing: the uncompensated command misses by much more.
         assert!(dist(comp.actual_point(&cmd), comp.nominal_point(&cmd)) > 10.0 * WRITTEN_MM);
@@ -513,11 +530,18 @@ fn compensate_and_tables_through_the_cli() {
     let nc = std::fs::read_to_string(d("part-out.nc")).unwrap();
     // Every point of the written program, in order, puts the tool where the input program's
     // point (cut into chords as the CLI cuts them, 0.001 mm) puts it on the nominal machine.
-    let written = Program::parse(&nc, "part-out.nc", &m, &Linearise::default()).unwrap().points();
-    let input = Program::parse(PROGRAM, "part.nc", &m, &Linearise::default()).unwrap().points();
+    let written = Program::parse(&nc, "part-out.nc", &m, &Linearise::default())
+        .unwrap()
+        .points();
+    let input = Program::parse(PROGRAM, "part.nc", &m, &Linearise::default())
+        .unwrap()
+        .points();
     assert_eq!(written.len(), input.len());
     for ((w, _, _), (p, _, _)) in written.iter().zip(&input) {
-        let (w, p) = (m.commands_from_file_units(&w[..3]), m.commands_from_file_units(&p[..3]));
+        let (w, p) = (
+            m.commands_from_file_units(&w[..3]),
+            m.commands_from_file_units(&p[..3]),
+        );
         let off = dist(comp.actual_point(&w), comp.nominal_point(&p));
         assert!(off < WRITTEN_MM, "{w:?} for {p:?}: {off} mm");
     }
@@ -551,7 +575,9 @@ fn compensate_and_tables_through_the_cli() {
         for (name, vals) in &t.errors {
             let id = name.parse().unwrap();
             for (p, v) in t.positions.iter().zip(vals) {
-                let e = model.error_value(id, ax.from_file_units(*p), &params).unwrap();
+                let e = model
+                    .error_value(id, ax.from_file_units(*p), &params)
+                    .unwrap();
                 assert!((e - v).abs() < 1e-12, "{name} at {p}: {v} vs {e}");
             }
         }

@@ -187,7 +187,12 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
             "  {name:<16} {:+.6e} (truth {size:+.6e}, on the gauge {:+.6e}): {off:.1e} of its size",
             id.params[j], want[j]
         );
-        assert!(off <= 1e-3, "{name}: {} vs {} ({off:.1e} of {size})", id.params[j], want[j]);
+        assert!(
+            off <= 1e-3,
+            "{name}: {} vs {} ({off:.1e} of {size})",
+            id.params[j],
+            want[j]
+        );
     }
     // The paper's model alone cannot.
     let plain = fit(Problem::new(&Model::default_xcfz(), &data).unwrap());

@@ -64,16 +64,31 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
     unit[ezc] = 1.0;
     let alone = moved_by(&problem, &id.params, &unit);
     let shift = moved_by(&problem, &id.params, &flat);
-    println!("EZC.d moves a residual by {alone:.3} mm per mm alone, {shift:.2e} with the tracker's shift");
-    assert!(alone > 0.5 && shift < 1e-3, "EZC.d: {alone} alone, {shift} with the tracker shift");
+    println!(
+        "EZC.d moves a residual by {alone:.3} mm per mm alone, {shift:.2e} with the tracker's shift"
+    );
+    assert!(
+        alone > 0.5 && shift < 1e-3,
+        "EZC.d: {alone} alone, {shift} with the tracker shift"
+    );
     let outside = outside_span(&a, &flat);
-    assert!(outside < 1e-3, "EZC.d with the tracker shift is {outside} outside the weak directions");
+    assert!(
+        outside < 1e-3,
+        "EZC.d with the tracker shift is {outside} outside the weak directions"
+    );
     let named: Vec<&str> = a
         .weak
         .iter()
-        .flat_map(|w| w.parameters.iter().map(|(j, _)| model.params()[*j].name.as_str()))
+        .flat_map(|w| {
+            w.parameters
+                .iter()
+                .map(|(j, _)| model.params()[*j].name.as_str())
+        })
         .collect();
-    assert!(named.contains(&"EZC.d") && named.contains(&"tracker.z"), "{named:?}");
+    assert!(
+        named.contains(&"EZC.d") && named.contains(&"tracker.z"),
+        "{named:?}"
+    );
     // (2) The gauge's held combinations, found by another algorithm (generalised eigenvectors of
     // (JᵀJ, M) at the reference, not an eigen-decomposition of the scaled normal matrix at the
     // solution): the same subspace, combination for combination. The two Jacobians differ by the
@@ -83,8 +98,15 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
     assert_eq!(gauge.held.len(), a.weak.len(), "held and weak counts");
     for h in &gauge.held {
         let outside = outside_span(&a, &h.direction);
-        let names: Vec<&str> = h.parameters.iter().map(|(j, _)| model.params()[*j].name.as_str()).collect();
-        assert!(outside < 1e-4, "held {names:?} is {outside} outside the weak directions");
+        let names: Vec<&str> = h
+            .parameters
+            .iter()
+            .map(|(j, _)| model.params()[*j].name.as_str())
+            .collect();
+        assert!(
+            outside < 1e-4,
+            "held {names:?} is {outside} outside the weak directions"
+        );
     }
 }
 
@@ -124,7 +146,11 @@ fn with_tracker_shift(problem: &Problem, params: &[f64], j: usize) -> Vec<f64> {
 fn residual_change(problem: &Problem, params: &[f64], direction: &[f64]) -> Vec<f64> {
     use volver::core::problem::Residuals;
     let at = |t: f64| {
-        let p: Vec<f64> = params.iter().zip(direction).map(|(p, d)| p + t * d).collect();
+        let p: Vec<f64> = params
+            .iter()
+            .zip(direction)
+            .map(|(p, d)| p + t * d)
+            .collect();
         problem.residuals(&p)
     };
     let (a, b) = (at(1e-3), at(-1e-3));
@@ -202,9 +228,8 @@ fn standard_uncertainties_match_the_scatter_of_identified_parameters() {
         }
         // The z-scores of one draw are correlated (R: their correlations under the analysis'
         // covariance): Var(Σ z²) = 2 tr(R²) for normal estimates, not 2 × their number.
-        let cov = |i: usize, j: usize| -> f64 {
-            a.covariance_factor.iter().map(|c| c[i] * c[j]).sum()
-        };
+        let cov =
+            |i: usize, j: usize| -> f64 { a.covariance_factor.iter().map(|c| c[i] * c[j]).sum() };
         for &i in &used {
             for &j in &used {
                 let r = cov(i, j) / (a.uncertainty[i] * a.uncertainty[j]);
@@ -221,7 +246,10 @@ fn standard_uncertainties_match_the_scatter_of_identified_parameters() {
     // isotropic σ, while the paper's tracker noise is about ten times larger across the line of sight
     // than along it (the sandwich of `uncertainty::linear` takes that in); measured 0.84 ± 0.06
     // here (0.81 for a ve fit, 0.89 for a ve fit under isotropic noise growing with distance).
-    assert!(rms <= 1.0 + 3.0 * sd, "RMS z {rms}, sampling sd {sd}: σ understated");
+    assert!(
+        rms <= 1.0 + 3.0 * sd,
+        "RMS z {rms}, sampling sd {sd}: σ understated"
+    );
     assert!(rms >= 0.75, "RMS z {rms}, sampling sd {sd}: σ overstated");
 }
 

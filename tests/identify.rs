@@ -102,9 +102,18 @@ fn noise_free_test4_is_recovered_to_1e_6_of_the_initial_error() {
         let z = common::z_from(&problem, &id, objective, &want);
         let worst = |k: usize| {
             let (j, z) = z[k];
-            format!("{} {:.3e} vs {:.3e} (z {z:.2})", model.params()[j].name, id.params[j], want[j])
+            format!(
+                "{} {:.3e} vs {:.3e} (z {z:.2})",
+                model.params()[j].name,
+                id.params[j],
+                want[j]
+            )
         };
-        println!("  largest deviations from the truth: {}; {}", worst(0), worst(1));
+        println!(
+            "  largest deviations from the truth: {}; {}",
+            worst(0),
+            worst(1)
+        );
         assert!(z[0].1.abs() <= 4.0, "{objective}: {}", worst(0));
     }
 }

@@ -303,12 +303,19 @@ fn volver_uncertainty_states_the_gauge_and_the_u_of_every_point() {
     // at the reflectors' centroid over the same grid, computed here from the solver's parts.
     let lib = library_u(&data, "X=0:1400:700,C=0:270:90,Z=0:600:300");
     let same = |cli: f64, lib: f64, what: &str| {
-        assert!((cli - lib).abs() <= 1e-9 * lib.abs().max(1e-6), "{what}: CLI {cli} vs library {lib}");
+        assert!(
+            (cli - lib).abs() <= 1e-9 * lib.abs().max(1e-6),
+            "{what}: CLI {cli} vs library {lib}"
+        );
     };
     for (k, p) in points.iter().enumerate() {
         let um = |key: &str, c: usize| p[key][c].as_f64().unwrap();
         for c in 0..3 {
-            same(um("u95_um", c), lib.aligned[k].u95_mm()[c] * 1e3, "U after the transform");
+            same(
+                um("u95_um", c),
+                lib.aligned[k].u95_mm()[c] * 1e3,
+                "U after the transform",
+            );
             same(um("u95_raw_um", c), lib.raw[k].u95_mm()[c] * 1e3, "U raw");
             same(um("tool_point_mm", c), lib.points[k][c], "tool point");
         }

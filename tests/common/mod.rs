@@ -48,7 +48,11 @@ pub fn truth_on_gauge(
     let p: Vec<f64> = model
         .params()
         .iter()
-        .map(|info| truth_model.param_index(&info.name).map_or(0.0, |k| truth[k]))
+        .map(|info| {
+            truth_model
+                .param_index(&info.name)
+                .map_or(0.0, |k| truth[k])
+        })
         .collect();
     id.gauge.as_ref().map_or(p.clone(), |g| g.project(&p))
 }
@@ -70,9 +74,15 @@ pub fn z_from(
 ) -> Vec<(usize, f64)> {
     use volver::solvers::uncertainty::{NoiseModel, linear};
     let u_at = |p: &[f64]| {
-        linear(problem, id.gauge.as_ref(), p, objective, NoiseModel::Residual)
-            .expect("the covariance of the fit")
-            .parameter_parts()
+        linear(
+            problem,
+            id.gauge.as_ref(),
+            p,
+            objective,
+            NoiseModel::Residual,
+        )
+        .expect("the covariance of the fit")
+        .parameter_parts()
     };
     let (fit, truth) = (u_at(&id.params), u_at(expected));
     let mut z: Vec<(usize, f64)> = fit
@@ -128,5 +138,8 @@ pub fn found_on_most_seeds(claim: &str, first: u64, case: impl Fn(u64)) {
     }
     let held = SEEDS - failed.len() as u64;
     println!("{claim}: holds on {held} of {SEEDS} seeds {failed:?}");
-    assert!(held >= NEEDED, "{claim}: holds on {held} of {SEEDS} seeds: {failed:?}");
+    assert!(
+        held >= NEEDED,
+        "{claim}: holds on {held} of {SEEDS} seeds: {failed:?}"
+    );
 }
