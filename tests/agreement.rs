@@ -151,39 +151,9 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
             max_evaluations: 5000,
             ..Options::default()
         };
-        let task = Task::new(problem.clone());
-        let first = LevenbergMarquardt::default().solve(&task, &start, &options, &mut Silent);
-        let gauge = hold_weak(
-            &task,
-            &first.params,
-            100.0 * volver::solvers::identifiability::RANK_TOLERANCE,
-        )
-        .unwrap();
-        let held = gauge.constraints.rows.len() - task.constraints.rows.len();
-        let initial = objective_of_initial(&first, objective);
-        println!(
-            "{label} {objective}: {held} weak directions held; start {initial:.3e}; LM without them held {:.12e} ({})",
-            objective_of(&first, objective),
-            first.summary.termination
-        );
+        let (gauge, initial) = gauged(&problem, &start, &options, label);
         // Every engine first; the best objective of the exact engines is the reference.
-        let runs: Vec<(&str, Options, Solution)> = engine_names()
-            .into_iter()
-            .map(|name| {
-                let options = if comparison_only(name) {
-                    Options {
-                        max_evaluations: 300,
-                        ..options.clone()
-                    }
-                } else {
-                    options.clone()
-                };
-                let s = engine(name)
-                    .unwrap()
-                    .solve(&gauge, &start, &options, &mut Silent);
-                (name, options, s)
-            })
-            .collect();
+        let runs = run_every_engine(&gauge, &start, &options);
         let (best_name, best) = runs
             .iter()
             .filter(|(name, _, s)| tolerance(name).is_some() && !s.summary.termination.failed())
@@ -193,12 +163,8 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
         let best_value = objective_of(best, objective);
         // Every engine starts from the start projected onto the constraints (the gauge moves it;
         // each engine projects in its own scaled metric, so this is one such projection).
-        let gauge_free = NullSpace::from_constraints(&gauge.constraints, &start)
-            .unwrap()
-            .n_free();
-        let p0 = NullSpace::from_constraints(&gauge.constraints, &start)
-            .unwrap()
-            .expand(&vec![0.0; gauge_free]);
+        let ns = NullSpace::from_constraints(&gauge.constraints, &start).unwrap();
+        let p0 = ns.expand(&vec![0.0; ns.n_free()]);
         let projected_start = match objective {
             Objective::Phi => problem.phi(&p0),
             Objective::Ve => problem.ve(&p0),
@@ -236,42 +202,126 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
                 viol_model < 1e-9 && viol_gauge < 1e-9,
                 "{tag}: constraints violated"
             );
-            let Some(tol) = tolerance(name) else {
-                // Comparison only: finite, honest (checked above), and no worse than the start.
-                check!(
-                    errors,
-                    value <= initial.max(projected_start) * (1.0 + 1e-9),
-                    "{tag}: the objective rose above the start"
-                );
-                continue;
+            let case = Case {
+                objective,
+                noisy,
+                scalar: problem.scalar(0),
+                initial,
+                projected_start,
+                best_value,
+                best_name,
             };
-            // Relative to the best, or to the start when the fit is exact (noise-free data only:
-            // the optimum is then at the rounding of the measurement file, where relative
-            // differences mean nothing); ve is a square, hence the squared floor. A noisy fit is
-            // judged relative to the best alone.
-            let floor = match (noisy, objective) {
-                (true, _) => 0.0,
-                (false, Objective::Phi) => tol.floor * initial,
-                (false, Objective::Ve) => tol.floor * tol.floor * initial,
-            };
-            let rel = match objective {
-                Objective::Phi if problem.scalar(0) => tol.phi_scalar,
-                Objective::Phi => tol.phi,
-                Objective::Ve => tol.ve,
-            };
-            check!(
-                errors,
-                value - best_value <= rel * best_value + floor,
-                "{tag}: objective {value} vs best {best_value} ({best_name})"
-            );
-            check!(
-                errors,
-                dr < tol.residual_mm,
-                "{tag}: residuals differ from the best's by {dr} mm"
-            );
+            judge(&mut errors, &tag, name, &case, value, dr);
         }
     }
     errors
+}
+
+/// `problem`'s task with the weak directions of a first LM fit from `start` held (gauge
+/// fixing), and the objective at the start; printed under `label`.
+fn gauged<'a>(
+    problem: &Problem<'a>,
+    start: &[f64],
+    options: &Options,
+    label: &str,
+) -> (Task<'a>, f64) {
+    let objective = options.objective;
+    let task = Task::new(problem.clone());
+    let first = LevenbergMarquardt::default().solve(&task, start, options, &mut Silent);
+    let gauge = hold_weak(
+        &task,
+        &first.params,
+        100.0 * volver::solvers::identifiability::RANK_TOLERANCE,
+    )
+    .unwrap();
+    let held = gauge.constraints.rows.len() - task.constraints.rows.len();
+    let initial = objective_of_initial(&first, objective);
+    println!(
+        "{label} {objective}: {held} weak directions held; start {initial:.3e}; LM without them held {:.12e} ({})",
+        objective_of(&first, objective),
+        first.summary.termination
+    );
+    (gauge, initial)
+}
+
+/// Every engine of the build on `task` from `start` under `options` (300 evaluations for the
+/// engines run for comparison only): (name, options, solution).
+fn run_every_engine<'a>(
+    task: &Task,
+    start: &[f64],
+    options: &Options,
+) -> Vec<(&'a str, Options, Solution)> {
+    engine_names()
+        .into_iter()
+        .map(|name| {
+            let options = if comparison_only(name) {
+                Options {
+                    max_evaluations: 300,
+                    ..options.clone()
+                }
+            } else {
+                options.clone()
+            };
+            let s = engine(name)
+                .unwrap()
+                .solve(task, start, &options, &mut Silent);
+            (name, options, s)
+        })
+        .collect()
+}
+
+/// What one engine's run is judged against: the case and the best exact engine's objective.
+struct Case<'a> {
+    objective: Objective,
+    noisy: bool,
+    /// Scalar residuals (ranges alone: Φ is an L1 fit).
+    scalar: bool,
+    /// The objective at the start.
+    initial: f64,
+    /// The objective at the start projected onto the constraints.
+    projected_start: f64,
+    best_value: f64,
+    best_name: &'a str,
+}
+
+/// Judges engine `name`'s objective `value` and largest residual difference from the best's
+/// `dr` (mm) by its tolerance (see the module documentation), recording failures under `tag`.
+fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, dr: f64) {
+    let Some(tol) = tolerance(name) else {
+        // Comparison only: finite, honest (checked by the caller), and no worse than the start.
+        check!(
+            errors,
+            value <= c.initial.max(c.projected_start) * (1.0 + 1e-9),
+            "{tag}: the objective rose above the start"
+        );
+        return;
+    };
+    // Relative to the best, or to the start when the fit is exact (noise-free data only:
+    // the optimum is then at the rounding of the measurement file, where relative
+    // differences mean nothing); ve is a square, hence the squared floor. A noisy fit is
+    // judged relative to the best alone.
+    let floor = match (c.noisy, c.objective) {
+        (true, _) => 0.0,
+        (false, Objective::Phi) => tol.floor * c.initial,
+        (false, Objective::Ve) => tol.floor * tol.floor * c.initial,
+    };
+    let rel = match c.objective {
+        Objective::Phi if c.scalar => tol.phi_scalar,
+        Objective::Phi => tol.phi,
+        Objective::Ve => tol.ve,
+    };
+    check!(
+        errors,
+        value - c.best_value <= rel * c.best_value + floor,
+        "{tag}: objective {value} vs best {} ({})",
+        c.best_value,
+        c.best_name
+    );
+    check!(
+        errors,
+        dr < tol.residual_mm,
+        "{tag}: residuals differ from the best's by {dr} mm"
+    );
 }
 
 /// How close an engine must come to the best engine.

@@ -148,6 +148,24 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
         id.initial.stats.emm_um, id.reached.stats.emm_um, id.termination
     );
     assert!(id.reached.stats.emm_um < 1e-5 * id.initial.stats.emm_um);
+    effects_recovered(&model, &id, &out.truth);
+    // The paper's model alone cannot.
+    let plain = fit(Problem::new(&Model::default_xcfz(), &data).unwrap());
+    assert!(
+        plain.reached.stats.emm_um > 1.0,
+        "{}",
+        plain.reached.stats.emm_um
+    );
+    // Thermal drift needs time stamps.
+    let mut no_time = data.clone();
+    no_time.points[3].t_s = None;
+    let e = Problem::new(&model, &no_time).unwrap_err().to_string();
+    assert!(e.contains("no t_s"), "{e}");
+}
+
+/// The fit `id` of [`model_with_effects`] to the data of `truth` with the effects of
+/// `a_model_with_the_effects_recovers_data_made_with_them` holds their values.
+fn effects_recovered(model: &Model, id: &volver::solvers::strategy::Identification, truth: &Truth) {
     // Recovered: each effect's parameters are the values the generator used (in the model's
     // units: mm, mm/h, rad/h, ppm, ppm/h; the screw's sine term is its amplitude, the other
     // screw and reflector nothing), moved onto the fit's gauge (the reflector offsets and the
@@ -171,15 +189,15 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
         ("trackerdrift.ry", -5e-6),
         ("trackerdrift.rz", 12e-6),
     ];
-    let truth: Vec<f64> = model
+    let values: Vec<f64> = model
         .params()
         .iter()
-        .map(|p| match out.truth.model.param_index(&p.name) {
-            Some(k) => out.truth.params[k],
+        .map(|p| match truth.model.param_index(&p.name) {
+            Some(k) => truth.params[k],
             None => effects.iter().find(|e| e.0 == p.name).map_or(0.0, |e| e.1),
         })
         .collect();
-    let want = common::truth_on_gauge(&model, &id, &model, &truth);
+    let want = common::truth_on_gauge(model, id, model, &values);
     for (name, size) in effects {
         let j = model.param_index(name).unwrap();
         let off = (id.params[j] - want[j]).abs() / size.abs();
@@ -194,18 +212,6 @@ fn a_model_with_the_effects_recovers_data_made_with_them() {
             want[j]
         );
     }
-    // The paper's model alone cannot.
-    let plain = fit(Problem::new(&Model::default_xcfz(), &data).unwrap());
-    assert!(
-        plain.reached.stats.emm_um > 1.0,
-        "{}",
-        plain.reached.stats.emm_um
-    );
-    // Thermal drift needs time stamps.
-    let mut no_time = data.clone();
-    no_time.points[3].t_s = None;
-    let e = Problem::new(&model, &no_time).unwrap_err().to_string();
-    assert!(e.contains("no t_s"), "{e}");
 }
 
 #[test]

@@ -50,20 +50,31 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
     );
     // σ per coordinate matches the noise: EMM of a 3-D normal ≈ 1.6 σ for this anisotropy.
     assert!(a.sigma_mm > 0.02 && a.sigma_mm < 0.06, "σ {}", a.sigma_mm);
+    names_checked(&problem, &id, &a);
+}
+
+/// The names of the analysis' weak directions, against two values it does not compute: the
+/// physics of EZC.d and the tracker, and the gauge's held combinations.
+fn names_checked(
+    problem: &Problem,
+    id: &volver::solvers::strategy::Identification,
+    a: &volver::solvers::identifiability::Identifiability,
+) {
+    let model = problem.model();
     // The names, against two values the analysis does not compute. (1) Physics: EZC's constant
     // moves the table along z, as a shift of the tracker does (along the machine's z, which the
     // tilted tracker's frame turns by its small angles), so EZC.d with the right tracker shift
     // leaves every residual unchanged (found and checked here on the residuals themselves), and
     // the analysis must report it: inside the span of its weak directions, named by both.
     let ezc = model.param_index("EZC.d").unwrap();
-    let flat = with_tracker_shift(&problem, &id.params, ezc);
+    let flat = with_tracker_shift(problem, &id.params, ezc);
     // Flat to the table's tilt errors (EAC, EBC: ~1e-4 rad at these magnitudes), which turn
     // the direction EZC.d moves the table along by as much; EZC.d alone moves a residual by
     // ~1 mm per mm.
     let mut unit = vec![0.0; model.n_params()];
     unit[ezc] = 1.0;
-    let alone = moved_by(&problem, &id.params, &unit);
-    let shift = moved_by(&problem, &id.params, &flat);
+    let alone = moved_by(problem, &id.params, &unit);
+    let shift = moved_by(problem, &id.params, &flat);
     println!(
         "EZC.d moves a residual by {alone:.3} mm per mm alone, {shift:.2e} with the tracker's shift"
     );
@@ -71,7 +82,7 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
         alone > 0.5 && shift < 1e-3,
         "EZC.d: {alone} alone, {shift} with the tracker shift"
     );
-    let outside = outside_span(&a, &flat);
+    let outside = outside_span(a, &flat);
     assert!(
         outside < 1e-3,
         "EZC.d with the tracker shift is {outside} outside the weak directions"
@@ -97,7 +108,7 @@ fn the_papers_model_on_test_4_has_inseparable_parameters_named() {
     let gauge = id.gauge.as_ref().unwrap();
     assert_eq!(gauge.held.len(), a.weak.len(), "held and weak counts");
     for h in &gauge.held {
-        let outside = outside_span(&a, &h.direction);
+        let outside = outside_span(a, &h.direction);
         let names: Vec<&str> = h
             .parameters
             .iter()

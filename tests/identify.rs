@@ -436,23 +436,8 @@ fn phases_hold_the_other_groups_and_sub_loops_approach_the_joint_fit() {
 
 #[test]
 fn combined_independent_and_cross_validation_methods() {
-    use volver::solvers::strategy::{combined, cross_validate, independent};
-    let m = Machine::default_xcfz();
-    let truth = Truth::random(
-        &m,
-        &ErrorModelSpec::complete(&m),
-        &Magnitudes::default(),
-        13,
-    )
-    .unwrap();
-    let sets: Vec<MeasurementSet> = ["test1", "test2", "test3", "test4"]
-        .iter()
-        .map(|plan| {
-            let mut sim = Simulation::new(Plan::preset(&m, plan).unwrap(), truth.clone(), 13);
-            sim.noise = TrackerNoise::NONE;
-            sim.run().unwrap().measurements
-        })
-        .collect();
+    use volver::solvers::strategy::cross_validate;
+    let sets = noise_free_tests(13);
     let model = Model::default_xcfz();
     let pr: Vec<Problem> = sets
         .iter()
@@ -492,11 +477,54 @@ fn combined_independent_and_cross_validation_methods() {
         joint.reached.stats.emm_um
     );
     // Test 5: linear errors from test 1, rotary errors from test 3 with them held.
+    let c = reference(&combined_method(&model, &pr, &p0));
+    // Tests 1 + 2: each group alone.
+    let ind = independent_method(&model, &pr, &p0);
+    let i = reference(&ind);
+    println!(
+        "reference test 4: uncompensated {} µm; joint {} µm; combined {} µm ({:.2} %); independent {} µm ({:.2} %)",
+        c.initial.stats.emm_um,
+        cv.reached.stats.emm_um,
+        c.reached.stats.emm_um,
+        c.residual_percent(),
+        i.reached.stats.emm_um,
+        i.residual_percent()
+    );
+    assert!(c.reached.stats.emm_um < 0.5 * c.initial.stats.emm_um);
+    assert!(cv.reached.stats.emm_um < c.reached.stats.emm_um);
+    // On the reference, the independent method compensates most of the error but leaves what
+    // neither test sees (how the axes' errors combine away from X = Z = 0 and C = 0): worse than
+    // the combined method, better than none (measured 8.46 µm against 0.039 and 153 µm).
+    assert!(i.reached.stats.emm_um < 0.1 * i.initial.stats.emm_um);
+    assert!(i.reached.stats.emm_um > 10.0 * c.reached.stats.emm_um);
+    assert!((i.initial.stats.emm_um / c.initial.stats.emm_um - 1.0).abs() < 1e-9);
+}
+
+/// Noise-free data of tests 1–4 from one random truth of the complete model (`seed`).
+fn noise_free_tests(seed: u64) -> Vec<MeasurementSet> {
+    let m = Machine::default_xcfz();
+    let spec = ErrorModelSpec::complete(&m);
+    let truth = Truth::random(&m, &spec, &Magnitudes::default(), seed).unwrap();
+    ["test1", "test2", "test3", "test4"]
+        .iter()
+        .map(|plan| {
+            let mut sim = Simulation::new(Plan::preset(&m, plan).unwrap(), truth.clone(), seed);
+            sim.noise = TrackerNoise::NONE;
+            sim.run().unwrap().measurements
+        })
+        .collect()
+}
+
+/// The combined method (test 5: linear errors from test 1, rotary errors from test 3 with them
+/// held) on `pr` from `p0`; returns its parameters, checked to hold the linear errors.
+fn combined_method(model: &Model, pr: &[Problem], p0: &[f64]) -> Vec<f64> {
+    use volver::solvers::strategy::combined;
+    let (s, o) = (Strategy::default(), Options::default());
     let (lin, rot) = combined(
         &LevenbergMarquardt::default(),
         pr[0].clone(),
         pr[2].clone(),
-        &p0,
+        p0,
         &s,
         &o,
         &mut Silent,
@@ -512,18 +540,23 @@ fn combined_independent_and_cross_validation_methods() {
             );
         }
     }
-    let c = reference(&rot.params);
-    // Tests 1 + 2: each group alone.
+    rot.params
+}
+
+/// The independent method (tests 1 + 2, each group alone) on the noise-free problems `pr`
+/// from `p0`, its result checked against its two fits; returns it.
+fn independent_method(model: &Model, pr: &[Problem], p0: &[f64]) -> Vec<f64> {
+    use volver::solvers::strategy::independent;
+    let (s, o) = (Strategy::default(), Options::default());
     let (ind, ia, ib) = independent(
         &LevenbergMarquardt::default(),
         pr[0].clone(),
         pr[1].clone(),
-        &p0,
+        p0,
         &s,
         &o,
         &mut Silent,
     );
-    let i = reference(&ind);
     println!(
         "independent: test 1 {} → {} µm, test 2 {} → {} µm",
         ia.initial.stats.emm_um,
@@ -543,23 +576,7 @@ fn combined_independent_and_cross_validation_methods() {
     }
     assert!(ia.reached.stats.emm_um < 1e-3 * ia.initial.stats.emm_um);
     assert!(ib.reached.stats.emm_um < 1e-5 * ib.initial.stats.emm_um);
-    println!(
-        "reference test 4: uncompensated {} µm; joint {} µm; combined {} µm ({:.2} %); independent {} µm ({:.2} %)",
-        c.initial.stats.emm_um,
-        cv.reached.stats.emm_um,
-        c.reached.stats.emm_um,
-        c.residual_percent(),
-        i.reached.stats.emm_um,
-        i.residual_percent()
-    );
-    assert!(c.reached.stats.emm_um < 0.5 * c.initial.stats.emm_um);
-    assert!(cv.reached.stats.emm_um < c.reached.stats.emm_um);
-    // On the reference, the independent method compensates most of the error but leaves what
-    // neither test sees (how the axes' errors combine away from X = Z = 0 and C = 0): worse than
-    // the combined method, better than none (measured 8.46 µm against 0.039 and 153 µm).
-    assert!(i.reached.stats.emm_um < 0.1 * i.initial.stats.emm_um);
-    assert!(i.reached.stats.emm_um > 10.0 * c.reached.stats.emm_um);
-    assert!((i.initial.stats.emm_um / c.initial.stats.emm_um - 1.0).abs() < 1e-9);
+    ind
 }
 
 #[test]
