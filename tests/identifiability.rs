@@ -102,20 +102,21 @@ fn names_checked(
     );
     // (2) The gauge's held combinations, found by another algorithm (generalised eigenvectors of
     // (JᵀJ, M) at the reference, not an eigen-decomposition of the scaled normal matrix at the
-    // solution): the same subspace, combination for combination. The two Jacobians differ by the
-    // model's nonlinearity over the identified errors (tens of µm, µrad: ~1e-5 relative), so a
-    // direction may tilt by that much.
+    // solution): the same subspace, combination for combination. The two Jacobians differ by
+    // the identified errors' tilts (~1e-4 rad at these magnitudes), which turn a direction by as
+    // much (measured 4e-5 … 1e-4); a combination of other parameters would be outside by ~1.
     let gauge = id.gauge.as_ref().unwrap();
     assert_eq!(gauge.held.len(), a.weak.len(), "held and weak counts");
     for h in &gauge.held {
         let outside = outside_span(a, &h.direction);
+        println!("held combination {outside:.1e} outside the weak directions");
         let names: Vec<&str> = h
             .parameters
             .iter()
             .map(|(j, _)| model.params()[*j].name.as_str())
             .collect();
         assert!(
-            outside < 1e-4,
+            outside < 1e-3,
             "held {names:?} is {outside} outside the weak directions"
         );
     }
