@@ -731,23 +731,35 @@ mod tests {
             for r in &t.rows {
                 assert!(r.converged, "{}: {} did not converge", t.title, r.label);
                 assert!(r.ours.emm_um.is_finite() && r.ours.emm0_um > 0.0);
-                // Each table's truth is scaled to the paper's initial EMM of its noise-free
-                // mesh (its first row's; table 11's tests start from test 4's truth).
-                if let Some(p) = r.paper
-                    && !t.title.starts_with("Table 11")
-                    && !r.label.contains("noise")
-                    && !t.title.starts_with("Table 5")
-                {
-                    assert!(
-                        (r.ours.emm0_um / p.emm0_um - 1.0).abs() < 0.01,
-                        "{}: {} starts at {} µm, the paper at {}",
-                        t.title,
-                        r.label,
-                        r.ours.emm0_um,
-                        p.emm0_um
-                    );
-                }
             }
+        }
+        // Each table's truth is scaled to the paper's initial EMM on its noise-free mesh, so
+        // those rows start there by construction (`scaled_to`); what is checked is its second
+        // pass, which takes out the initial EMM's nonlinearity in the scale (measured: within
+        // 3e-8). Table 11's tests start from test 4's truth on their own meshes, and table 12
+        // starts from the noisy reference: neither is scaled, so neither is compared.
+        for t in &tables[..5] {
+            for r in t
+                .rows
+                .iter()
+                .filter(|r| !r.label.contains("with the paper's noise"))
+            {
+                let p = r.paper.expect("every row has the paper's figures");
+                assert!(
+                    (r.ours.emm0_um / p.emm0_um - 1.0).abs() < 1e-6,
+                    "{}: {} starts at {} µm, scaled to the paper's {}",
+                    t.title,
+                    r.label,
+                    r.ours.emm0_um,
+                    p.emm0_um
+                );
+            }
+        }
+        // Table 12 compensates one reference with each method's errors: every row starts from
+        // it (its tracker refitted from the same start), to the rounding.
+        let start = tables[6].rows[0].ours.emm0_um;
+        for r in &tables[6].rows {
+            assert!((r.ours.emm0_um / start - 1.0).abs() < 1e-12, "{}", r.label);
         }
         // Tables 9–10: with noise the final EMM sits at the noise error (within 10 %), which is
         // the paper's within 15 %.
@@ -765,8 +777,9 @@ mod tests {
         assert!(fin(0, 0) < 1e-3 && fin(0, 1) < 1e-3);
         // Table 6: one phase is the best any phasing reaches.
         assert!(fin(1, 0) <= fin(1, 1) && fin(1, 0) <= fin(1, 2));
-        // Table 8: monomial and Legendre of one degree reach the same Φ.
-        assert!((fin(2, 0) / fin(2, 3) - 1.0).abs() < 1e-2);
+        // Table 8: monomial and Legendre of one degree reach the same Φ (the mean error module:
+        // EMM / 1000) to 0.1 %, as its note says (measured 5e-14 on seed 1).
+        assert!((fin(2, 0) / fin(2, 3) - 1.0).abs() < 1e-3);
         // Table 12: the reference's own fit is best, combined and test 3 next, test 2 diverges.
         let uncompensated = tables[6].rows[0].ours.emm0_um;
         assert!(fin(6, 4) <= fin(6, 5) && fin(6, 4) <= fin(6, 3));

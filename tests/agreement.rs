@@ -5,9 +5,9 @@
 //! axes, first harmonics for C; tests 1 and 2 with only the axes they move), and test 4 with
 //! the linear axes in monomial and Chebyshev bases; each noise-free (the truth is inside the model) and with the
 //! paper's tracker noise; and ranges alone from four stations (an L1 fit under Φ: measured,
-//! Clarabel's SOCP reaches its optimum, the native LM's continuation in ε stops 1.3e-5 above
-//! it, within the suite's floor of 1e-6 of the start); each objective. Every engine starts from the same point (errors
-//! zero, tracker by a rigid fit).
+//! Clarabel's SOCP reaches its optimum, the native LM's continuation in ε stops 1.27e-5 above
+//! it on the noisy ranges, within its bound of 3e-5 there); each objective. Every engine
+//! starts from the same point (errors zero, tracker by a rigid fit).
 //!
 //! The paper's model is not fully identifiable on these plans (test 1 never turns C; on test 4
 //! six combinations have a curvature below 1e-10 of the largest). Along such flat directions
@@ -20,17 +20,22 @@
 //! Every engine runs; the best objective among the exact engines is the reference, and each
 //! engine is judged against it (measured on this suite, release build: Clarabel, Ceres, SLSQP
 //! and the polished LM agree with each other to ~1e-11 on noisy Φ):
-//! * `clarabel`, `lm+clarabel`, `ceres`: the objective within 1e-6 relative, or within 1e-6 of
-//!   its start for Φ (1e-12 for ve, a square) when the fit is exact — noise-free optima sit at
-//!   the rounding of the 9-decimal measurement file (Φ ≈ 1e-7 … 1e-12 mm), where relative
-//!   differences mean nothing; every residual within 1 µm of the best's (the noise is ~50 µm);
-//! * `lm`: as the exact engines, Φ within 1e-6 relative or 1e-6 of the start, ve within 1e-6;
-//!   the optimum of Φ interpolates some points (an L1-type kink where a residual vanishes),
-//!   where the damped steps stall (3.4e-4 above it on test 1 noise-free): the Newton polish
-//!   after convergence closes the gap (measured 5.7e-9 there). Residuals within 1 µm;
-//! * `nlopt-lbfgs`, `nlopt-slsqp` (a smoothed Φ, quasi-Newton): they stall on the same kinks;
-//!   Φ within 1e-2 relative (L-BFGS: 4.4e-4 and 5.9e-3 on test 1 noisy, depending on the last
-//!   bits of the held values), ve within 1e-4, or 1e-5 of the start; residuals within 20 µm;
+//! * the floor: a noise-free fit is exact, its optimum at the rounding of the 9-decimal
+//!   measurement file (Φ ≈ 1e-7 … 1e-12 mm), where relative differences mean nothing; there an
+//!   objective within a fraction `floor` of its start passes (Φ; its square for ve). Noisy fits
+//!   get no floor: they are judged relative to the best alone;
+//! * `clarabel`, `lm+clarabel`, `ceres`: the objective within 1e-6 relative, floor 1e-6; every
+//!   residual within 1 µm of the best's (the noise is ~50 µm);
+//! * `lm`: as the exact engines; the optimum of Φ interpolates some points (an L1-type kink
+//!   where a residual vanishes), where the damped steps stall (3.4e-4 above it on test 1
+//!   noise-free): the Newton polish after convergence closes the gap (measured 5.7e-9 there).
+//!   On ranges alone (one scalar residual per point) Φ is an L1 fit, where the LM's
+//!   continuation in ε stops above the SOCP's optimum: measured 1.27e-5 noisy, so 3e-5 there;
+//! * `nlopt-lbfgs`, `nlopt-slsqp` (a smoothed Φ, quasi-Newton) stall on the same kinks, each
+//!   bound twice the largest excess measured over this suite's noisy fits (debug build, every
+//!   case): L-BFGS Φ 7.4e-3 (test 1; 4.4e-4 … 5.9e-3 on earlier builds, depending on the last
+//!   bits of the held values) and 3.9e-3 on ranges, residuals 17 µm (test 1), ve 3e-13;
+//!   SLSQP Φ 3.1e-9 (6.2e-5 on ranges), residuals 24 nm (ranges), ve 9e-13; floor 1e-5;
 //! * constraints (the model's and the gauge) hold to 1e-9 in their own units;
 //! * terminations are honest: a limit is claimed only when the count reached it; a failure is
 //!   never accepted.
@@ -135,7 +140,7 @@ fn check_honest(errors: &mut Vec<String>, name: &str, s: &Solution, options: &Op
     );
 }
 
-fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> {
+fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) -> Vec<String> {
     let mut errors = Vec::new();
     let problem = Problem::new(model, data).unwrap();
     let start = init_tracker(&problem, &model.initial_params()).unwrap();
@@ -146,39 +151,9 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
             max_evaluations: 5000,
             ..Options::default()
         };
-        let task = Task::new(problem.clone());
-        let first = LevenbergMarquardt::default().solve(&task, &start, &options, &mut Silent);
-        let gauge = hold_weak(
-            &task,
-            &first.params,
-            100.0 * volver::solvers::identifiability::RANK_TOLERANCE,
-        )
-        .unwrap();
-        let held = gauge.constraints.rows.len() - task.constraints.rows.len();
-        let initial = objective_of_initial(&first, objective);
-        println!(
-            "{label} {objective}: {held} weak directions held; start {initial:.3e}; LM without them held {:.12e} ({})",
-            objective_of(&first, objective),
-            first.summary.termination
-        );
+        let (gauge, initial) = gauged(&problem, &start, &options, label);
         // Every engine first; the best objective of the exact engines is the reference.
-        let runs: Vec<(&str, Options, Solution)> = engine_names()
-            .into_iter()
-            .map(|name| {
-                let options = if comparison_only(name) {
-                    Options {
-                        max_evaluations: 300,
-                        ..options.clone()
-                    }
-                } else {
-                    options.clone()
-                };
-                let s = engine(name)
-                    .unwrap()
-                    .solve(&gauge, &start, &options, &mut Silent);
-                (name, options, s)
-            })
-            .collect();
+        let runs = run_every_engine(&gauge, &start, &options);
         let (best_name, best) = runs
             .iter()
             .filter(|(name, _, s)| tolerance(name).is_some() && !s.summary.termination.failed())
@@ -188,12 +163,8 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
         let best_value = objective_of(best, objective);
         // Every engine starts from the start projected onto the constraints (the gauge moves it;
         // each engine projects in its own scaled metric, so this is one such projection).
-        let gauge_free = NullSpace::from_constraints(&gauge.constraints, &start)
-            .unwrap()
-            .n_free();
-        let p0 = NullSpace::from_constraints(&gauge.constraints, &start)
-            .unwrap()
-            .expand(&vec![0.0; gauge_free]);
+        let ns = NullSpace::from_constraints(&gauge.constraints, &start).unwrap();
+        let p0 = ns.expand(&vec![0.0; ns.n_free()]);
         let projected_start = match objective {
             Objective::Phi => problem.phi(&p0),
             Objective::Ve => problem.ve(&p0),
@@ -231,48 +202,137 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet) -> Vec<String> 
                 viol_model < 1e-9 && viol_gauge < 1e-9,
                 "{tag}: constraints violated"
             );
-            let Some(tol) = tolerance(name) else {
-                // Comparison only: finite, honest (checked above), and no worse than the start.
-                check!(
-                    errors,
-                    value <= initial.max(projected_start) * (1.0 + 1e-9),
-                    "{tag}: the objective rose above the start"
-                );
-                continue;
+            let case = Case {
+                objective,
+                noisy,
+                scalar: problem.scalar(0),
+                initial,
+                projected_start,
+                best_value,
+                best_name,
             };
-            // Relative to the best, or to the start when the fit is exact (noise-free data: the
-            // optimum is then at the rounding of the measurement file, where relative
-            // differences mean nothing); ve is a square, hence the squared floor.
-            let floor = match objective {
-                Objective::Phi => tol.floor * initial,
-                Objective::Ve => tol.floor * tol.floor * initial,
-            };
-            let rel = match objective {
-                Objective::Phi => tol.phi,
-                Objective::Ve => tol.ve,
-            };
-            check!(
-                errors,
-                value - best_value <= rel * best_value + floor,
-                "{tag}: objective {value} vs best {best_value} ({best_name})"
-            );
-            check!(
-                errors,
-                dr < tol.residual_mm,
-                "{tag}: residuals differ from the best's by {dr} mm"
-            );
+            judge(&mut errors, &tag, name, &case, value, dr);
         }
     }
     errors
+}
+
+/// `problem`'s task with the weak directions of a first LM fit from `start` held (gauge
+/// fixing), and the objective at the start; printed under `label`.
+fn gauged<'a>(
+    problem: &Problem<'a>,
+    start: &[f64],
+    options: &Options,
+    label: &str,
+) -> (Task<'a>, f64) {
+    let objective = options.objective;
+    let task = Task::new(problem.clone());
+    let first = LevenbergMarquardt::default().solve(&task, start, options, &mut Silent);
+    let gauge = hold_weak(
+        &task,
+        &first.params,
+        100.0 * volver::solvers::identifiability::RANK_TOLERANCE,
+    )
+    .unwrap();
+    let held = gauge.constraints.rows.len() - task.constraints.rows.len();
+    let initial = objective_of_initial(&first, objective);
+    println!(
+        "{label} {objective}: {held} weak directions held; start {initial:.3e}; LM without them held {:.12e} ({})",
+        objective_of(&first, objective),
+        first.summary.termination
+    );
+    (gauge, initial)
+}
+
+/// Every engine of the build on `task` from `start` under `options` (300 evaluations for the
+/// engines run for comparison only): (name, options, solution).
+fn run_every_engine<'a>(
+    task: &Task,
+    start: &[f64],
+    options: &Options,
+) -> Vec<(&'a str, Options, Solution)> {
+    engine_names()
+        .into_iter()
+        .map(|name| {
+            let options = if comparison_only(name) {
+                Options {
+                    max_evaluations: 300,
+                    ..options.clone()
+                }
+            } else {
+                options.clone()
+            };
+            let s = engine(name)
+                .unwrap()
+                .solve(task, start, &options, &mut Silent);
+            (name, options, s)
+        })
+        .collect()
+}
+
+/// What one engine's run is judged against: the case and the best exact engine's objective.
+struct Case<'a> {
+    objective: Objective,
+    noisy: bool,
+    /// Scalar residuals (ranges alone: Φ is an L1 fit).
+    scalar: bool,
+    /// The objective at the start.
+    initial: f64,
+    /// The objective at the start projected onto the constraints.
+    projected_start: f64,
+    best_value: f64,
+    best_name: &'a str,
+}
+
+/// Judges engine `name`'s objective `value` and largest residual difference from the best's
+/// `dr` (mm) by its tolerance (see the module documentation), recording failures under `tag`.
+fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, dr: f64) {
+    let Some(tol) = tolerance(name) else {
+        // Comparison only: finite, honest (checked by the caller), and no worse than the start.
+        check!(
+            errors,
+            value <= c.initial.max(c.projected_start) * (1.0 + 1e-9),
+            "{tag}: the objective rose above the start"
+        );
+        return;
+    };
+    // Relative to the best, or to the start when the fit is exact (noise-free data only:
+    // the optimum is then at the rounding of the measurement file, where relative
+    // differences mean nothing); ve is a square, hence the squared floor. A noisy fit is
+    // judged relative to the best alone.
+    let floor = match (c.noisy, c.objective) {
+        (true, _) => 0.0,
+        (false, Objective::Phi) => tol.floor * c.initial,
+        (false, Objective::Ve) => tol.floor * tol.floor * c.initial,
+    };
+    let rel = match c.objective {
+        Objective::Phi if c.scalar => tol.phi_scalar,
+        Objective::Phi => tol.phi,
+        Objective::Ve => tol.ve,
+    };
+    check!(
+        errors,
+        value - c.best_value <= rel * c.best_value + floor,
+        "{tag}: objective {value} vs best {} ({})",
+        c.best_value,
+        c.best_name
+    );
+    check!(
+        errors,
+        dr < tol.residual_mm,
+        "{tag}: residuals differ from the best's by {dr} mm"
+    );
 }
 
 /// How close an engine must come to the best engine.
 struct Tolerance {
     /// Relative excess of Φ.
     phi: f64,
+    /// Relative excess of Φ on scalar residuals (ranges alone: an L1 fit).
+    phi_scalar: f64,
     /// Relative excess of ve.
     ve: f64,
-    /// Excess as a fraction of the start (exact fits): Φ, and its square for ve.
+    /// Excess as a fraction of the start (noise-free fits only): Φ, and its square for ve.
     floor: f64,
     /// Largest difference of a residual from the best's (mm).
     residual_mm: f64,
@@ -284,23 +344,38 @@ fn comparison_only(name: &str) -> bool {
 
 /// The tolerances per engine (see the module documentation); `None`: comparison only.
 fn tolerance(name: &str) -> Option<Tolerance> {
+    let exact = Tolerance {
+        phi: 1e-6,
+        phi_scalar: 1e-6,
+        ve: 1e-6,
+        floor: 1e-6,
+        residual_mm: 1e-3,
+    };
     match name {
-        // The SOCP and Ceres reach the exact optimum; the native LM, polished by Newton steps
-        // at the kinks of Φ, and the LM polished by the SOCP too.
-        "clarabel" | "lm+clarabel" | "ceres" | "lm" => Some(Tolerance {
-            phi: 1e-6,
-            ve: 1e-6,
-            floor: 1e-6,
-            residual_mm: 1e-3,
+        // The SOCP and Ceres reach the exact optimum, and the LM polished by the SOCP.
+        "clarabel" | "lm+clarabel" | "ceres" => Some(exact),
+        // The native LM, polished by Newton steps at the kinks of Φ; on ranges alone its
+        // continuation in ε stops 1.27e-5 above the L1 optimum (measured).
+        "lm" => Some(Tolerance {
+            phi_scalar: 3e-5,
+            ..exact
         }),
-        // Quasi-Newton and SQP on a smoothed Φ: the optimum of Φ interpolates some points
-        // (an L1-type kink where a residual vanishes), on which both stall: 4.4e-4 and 5.9e-3
-        // above it on test 1 noisy (L-BFGS), depending on the last bits of the held values.
-        "nlopt-lbfgs" | "nlopt-slsqp" => Some(Tolerance {
-            phi: 1e-2,
-            ve: 1e-4,
+        // Quasi-Newton on a smoothed Φ, stalling on its kinks: twice the largest excess
+        // measured on the noisy fits (7.4e-3 on test 1, 3.9e-3 on ranges; residuals 17 µm).
+        "nlopt-lbfgs" => Some(Tolerance {
+            phi: 1.5e-2,
+            phi_scalar: 1e-2,
+            ve: 1e-9,
             floor: 1e-5,
-            residual_mm: 2e-2,
+            residual_mm: 3.5e-2,
+        }),
+        // SQP on the smoothed Φ: 3.1e-9 on points, 6.2e-5 on ranges, residuals 24 nm.
+        "nlopt-slsqp" => Some(Tolerance {
+            phi: 1e-8,
+            phi_scalar: 1.5e-4,
+            ve: 1e-9,
+            floor: 1e-5,
+            residual_mm: 5e-5,
         }),
         _ => None,
     }
@@ -327,7 +402,7 @@ fn check_plan(plan: &str, seed: u64) {
     let mut errors = Vec::new();
     for noisy in [false, true] {
         let label = format!("{plan} {}", if noisy { "noisy" } else { "noise-free" });
-        errors.extend(check_case(&label, &model, &data(plan, noisy, seed)));
+        errors.extend(check_case(&label, &model, &data(plan, noisy, seed), noisy));
     }
     assert!(errors.is_empty(), "{}", errors.join("\n"));
 }
@@ -370,7 +445,7 @@ fn engines_agree_in_monomial_and_chebyshev_bases() {
                 "test4 {basis} {}",
                 if noisy { "noisy" } else { "noise-free" }
             );
-            errors.extend(check_case(&label, &model, &data("test4", noisy, 26)));
+            errors.extend(check_case(&label, &model, &data("test4", noisy, 26), noisy));
         }
     }
     assert!(errors.is_empty(), "{}", errors.join("\n"));
@@ -505,7 +580,7 @@ fn engines_agree_on_ranges_from_four_stations() {
         sim.observe = Observation::Range;
         let data = sim.run().unwrap().measurements;
         let label = format!("ranges {}", if noisy { "noisy" } else { "noise-free" });
-        errors.extend(check_case(&label, &model, &data));
+        errors.extend(check_case(&label, &model, &data, noisy));
     }
     assert!(errors.is_empty(), "{}", errors.join("\n"));
 }

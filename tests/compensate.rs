@@ -409,8 +409,14 @@ fn tables_include_ball_screw_errors() {
     assert!((peak - 0.002).abs() < 1e-4, "{peak}");
 }
 
+/// How far a command written with 4 decimals may put the tool from its target (mm): half a unit
+/// of the last decimal in X and Z (5e-5 mm each) and in C (5e-5° = 8.7e-7 rad, at most 1.2e-3 mm
+/// at the 1.4 m the XCFZ volume's points lie from the C axis), with room to spare.
+const WRITTEN_MM: f64 = 2e-3;
+
 /// The commands end to end: simulate, identify, then `compensate` (points and G-code) and
-/// `tables`; every output reads back, and a bad point list is refused with its place.
+/// `tables`; every output reads back and is the library's value for the fit the CLI wrote, and
+/// a bad point list is refused with its place.
 #[test]
 fn compensate_and_tables_through_the_cli() {
     use common::volver;
@@ -418,16 +424,7 @@ fn compensate_and_tables_through_the_cli() {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let d = |n: &str| dir.join(n).display().to_string();
-    let out = volver(&[
-        "simulate",
-        "--plan",
-        "test3",
-        "--seed",
-        "2",
-        "--out",
-        &d("sim"),
-    ]);
-    assert!(out.status.success());
+    common::simulate(&d("sim"), &["--plan", "test3", "--seed", "2"]);
     let out = volver(&[
         "identify",
         "--data",
@@ -464,6 +461,9 @@ fn compensate_and_tables_through_the_cli() {
     let csv = std::fs::read_to_string(d("pts-out.csv")).unwrap();
     assert_eq!(csv.lines().count(), 3);
     assert!(csv.starts_with("line,id,X,C,Z,X_programmed"));
+    let (model, params) = fitted(&d("fit.json"));
+    let comp = Compensator::new(&model, &params, reflector_centroid(&model)).unwrap();
+    points_are_the_library_s(&csv, &comp, model.machine());
     std::fs::write(d("part.nc"), PROGRAM).unwrap();
     let out = volver(&[
         "compensate",
@@ -479,32 +479,132 @@ fn compensate_and_tables_through_the_cli() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let m = Machine::default_xcfz();
     let nc = std::fs::read_to_string(d("part-out.nc")).unwrap();
-    Program::parse(&nc, "part-out.nc", &m, &Linearise::default()).unwrap();
+    program_is_the_library_s(&nc, &comp);
     let out = volver(&["tables", "--results", &d("fit.json"), "--out", &d("tables")]);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    tables_are_the_fit_s(&dir.join("tables"), &model, &params);
+    bad_point_lists_are_refused(&dir);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The model and parameters of the results file `path`.
+fn fitted(path: &str) -> (Model, Vec<f64>) {
+    volver::core::results::ResultsFile::load(std::path::Path::new(path))
+        .unwrap()
+        .to_model("fit.json")
+        .unwrap()
+}
+
+/// The reflectors' centroid (the CLI's default tool point), from the machine's offsets.
+fn reflector_centroid(model: &Model) -> [f64; 3] {
+    let r = model.machine().reflectors();
+    std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64)
+}
+
+/// What `compensate --points` wrote (`csv`, for the points (100, 0, 50) and (700, 90, 300)) is
+/// `comp`'s compensation: each point's commands reach the nominal tool point of the programmed
+/// ones through the results file's model, at the reflectors' centroid, and equal the
+/// library's own solution, both within the 4 written decimals.
+fn points_are_the_library_s(csv: &str, comp: &Compensator, m: &Machine) {
+    for (line, programmed) in csv
+        .lines()
+        .skip(1)
+        .zip([[100.0, 0.0, 50.0], [700.0, 90.0, 300.0]])
+    {
+        let cells: Vec<f64> = line
+            .split(',')
+            .skip(2)
+            .take(3)
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let cmd = m.commands_from_file_units(&programmed);
+        let solved = comp.compensate(&cmd).unwrap();
+        let reached = comp.actual_point(&m.commands_from_file_units(&cells));
+        let off = dist(reached, comp.nominal_point(&cmd));
+        assert!(
+            off < WRITTEN_MM,
+            "{line}: {off} mm from the nominal tool point"
+        );
+        for (k, ax) in m.axes().iter().enumerate() {
+            let lib = ax.to_file_units(solved.commands.0[k]);
+            assert!(
+                (cells[k] - lib).abs() <= 0.5e-4 + 1e-9,
+                "{line}: {} vs {lib}",
+                cells[k]
+            );
+        }
+        // The compensation is not nothing: the uncompensated command misses by much more.
+        assert!(dist(comp.actual_point(&cmd), comp.nominal_point(&cmd)) > 10.0 * WRITTEN_MM);
+    }
+}
+
+/// Every point of the program `compensate --gcode` wrote (`nc`), in order, puts the tool,
+/// through `comp`'s model, where [`PROGRAM`]'s point (cut into chords as the CLI cuts them,
+/// 0.001 mm) puts it on the nominal machine.
+fn program_is_the_library_s(nc: &str, comp: &Compensator) {
+    let m = Machine::default_xcfz();
+    let written = Program::parse(nc, "part-out.nc", &m, &Linearise::default())
+        .unwrap()
+        .points();
+    let input = Program::parse(PROGRAM, "part.nc", &m, &Linearise::default())
+        .unwrap()
+        .points();
+    assert_eq!(written.len(), input.len());
+    for ((w, _, _), (p, _, _)) in written.iter().zip(&input) {
+        let (w, p) = (
+            m.commands_from_file_units(&w[..3]),
+            m.commands_from_file_units(&p[..3]),
+        );
+        let off = dist(comp.actual_point(&w), comp.nominal_point(&p));
+        assert!(off < WRITTEN_MM, "{w:?} for {p:?}: {off} mm");
+    }
+}
+
+/// The tables `tables` wrote into `dir` read back alike in every format, and are the fit's
+/// error functions at the default steps (10 mm, 5°).
+fn tables_are_the_fit_s(dir: &std::path::Path, model: &Model, params: &[f64]) {
     let isg = ErrorTables::from_isg_csv(
-        &std::fs::read_to_string(d("tables/errors-isg.csv")).unwrap(),
+        &std::fs::read_to_string(dir.join("errors-isg.csv")).unwrap(),
         "i",
     )
     .unwrap();
     let eta = ErrorTables::from_etalon(
-        &std::fs::read_to_string(d("tables/errors-etalon.txt")).unwrap(),
+        &std::fs::read_to_string(dir.join("errors-etalon.txt")).unwrap(),
         "e",
     )
     .unwrap();
     let csv = ErrorTables::from_plain_csv(
-        &std::fs::read_to_string(d("tables/errors.csv")).unwrap(),
+        &std::fs::read_to_string(dir.join("errors.csv")).unwrap(),
         "c",
     )
     .unwrap();
     assert!(isg.max_difference(&eta).unwrap() < 1e-12 && isg.max_difference(&csv).unwrap() < 1e-12);
-    // Bad point lists: the file, the line and the column.
+    // The values are the fit's error functions at the default steps (10 mm, 5°).
+    let lib = ErrorTables::from_model(model, params, 10.0, 5.0).unwrap();
+    assert!(lib.max_difference(&isg).unwrap() < 1e-12);
+    for t in &isg.axes {
+        let (_, ax) = model.machine().axis(t.axis).unwrap();
+        for (name, vals) in &t.errors {
+            let id = name.parse().unwrap();
+            for (p, v) in t.positions.iter().zip(vals) {
+                let e = model
+                    .error_value(id, ax.from_file_units(*p), params)
+                    .unwrap();
+                assert!((e - v).abs() < 1e-12, "{name} at {p}: {v} vs {e}");
+            }
+        }
+    }
+}
+
+/// `compensate --points` refuses bad point lists naming the file, the line and the column.
+fn bad_point_lists_are_refused(dir: &std::path::Path) {
+    use common::volver;
+    let d = |n: &str| dir.join(n).display().to_string();
     for (text, expect) in [
         ("id,X,C\na,1,2\n", ":1: field 'Z'"),
         ("X,C,Z\n1,2,abc\n", ":2: field 'Z'"),
@@ -526,7 +626,6 @@ fn compensate_and_tables_through_the_cli() {
         assert!(!out.status.success() && !err.contains("panicked"), "{err}");
         assert!(err.contains(&format!("bad.csv{expect}")), "{text:?}: {err}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// `volver report` writes one self-contained HTML file: inline SVG, no scripts, no network,

@@ -141,7 +141,7 @@ fn weak_priors_leave_the_data_estimate() {
 /// gradient vanishes: `Σ J_iᵀ r_i / σ² + M_w (p − p₀)` projected on the model's constraint set,
 /// computed here from the residuals and the prior's metric, not by the formula under test.
 /// Measured in the data's standard deviations, it falls from the data estimate's value (where
-/// only the prior pulls) to below 2 % of it (the linearisation's remainder: the model is not
+/// only the prior pulls) to below 1e-3 of it (the linearisation's remainder: the model is not
 /// linear in the tracker's angles).
 #[test]
 fn the_map_point_is_where_the_posterior_gradient_vanishes() {
@@ -197,7 +197,9 @@ fn the_map_point_is_where_the_posterior_gradient_vanishes() {
             "seed {seed} {texts:?}: |grad| {g0:.3e} at the data estimate, {g1:.3e} at the MAP, shift {:.2}",
             post.shift
         );
-        assert!(g1 < 0.02 * g0, "seed {seed}: gradient {g0:.3e} → {g1:.3e}");
+        // Measured: it falls by 2e-5 … 1.9e-4 (the README's "1e-4"); 1e-3 leaves five times the
+        // largest, while a MAP point off by a step of the prior's pull leaves it near 1.
+        assert!(g1 < 1e-3 * g0, "seed {seed}: gradient {g0:.3e} → {g1:.3e}");
     }
 }
 
@@ -214,7 +216,9 @@ fn priors_narrow_the_raw_intervals_and_still_cover_the_truth() {
     let noise = NoiseModel::Tracker(TrackerNoise::PAPER);
     let (mut inside, mut total) = (0usize, 0usize);
     let (mut u_gauge, mut u_map) = (0.0_f64, 0.0_f64);
-    let mut worst = (0.0_f64, 0.0_f64);
+    // Largest ratio of a U with the priors to the gauge's, raw and after the set-up's transform,
+    // and the largest change of an aligned U either way.
+    let mut worst = (0.0_f64, 0.0_f64, 0.0_f64);
     for r in 0..8u64 {
         let (truth, data) = replica(300 + r, &Magnitudes::default());
         let problem = Problem::new(&model, &data).unwrap();
@@ -229,7 +233,8 @@ fn priors_narrow_the_raw_intervals_and_still_cover_the_truth() {
                 let (a, b) = (ug[k].u95_mm()[c], um[k].u95_mm()[c]);
                 worst.0 = worst.0.max(b / a);
                 let (a, b) = (uga[k].u95_mm()[c], uma[k].u95_mm()[c]);
-                worst.1 = worst.1.max((b - a).abs() / a);
+                worst.1 = worst.1.max(b / a);
+                worst.2 = worst.2.max((b - a).abs() / a);
             }
         }
         u_gauge = u_gauge.max(ug.iter().map(|p| p.u95_max_mm()).fold(0.0, f64::max));
@@ -248,10 +253,14 @@ fn priors_narrow_the_raw_intervals_and_still_cover_the_truth() {
         u_map * 1e3
     );
     println!(
-        "largest raw U ratio {:.3}, largest aligned U change {:.3}",
-        worst.0, worst.1
+        "largest U ratio raw {:.3}, after the transform {:.3}; largest aligned U change {:.3}",
+        worst.0, worst.1, worst.2
     );
+    // Prior information only adds to the data's: the posterior variance of any linear function
+    // of the parameters (a tool point's coordinate, raw or after the set-up's transform, which
+    // is a linear projection) is at most the gauge's, to the rounding of the factorisations.
     assert!(worst.0 <= 1.0 + 1e-6, "a raw U grew by {}", worst.0);
+    assert!(worst.1 <= 1.0 + 1e-6, "an aligned U grew by {}", worst.1);
     assert!(coverage >= 0.9, "coverage {coverage}");
     assert!(u_map < 0.5 * u_gauge, "{u_map} against {u_gauge}");
 }

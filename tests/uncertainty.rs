@@ -19,7 +19,9 @@ use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver::solvers::candidates::rank;
 use volver::solvers::lm::LevenbergMarquardt;
 use volver::solvers::strategy::{Identification, Strategy, fit, identify};
-use volver::solvers::uncertainty::{K, NoiseModel, ToolGrid, linear, monte_carlo};
+use volver::solvers::uncertainty::{
+    K, NoiseModel, PointUncertainty, ToolGrid, linear, monte_carlo,
+};
 use volver::solvers::{Options, Silent};
 
 fn grid(m: &Machine) -> ToolGrid {
@@ -296,19 +298,34 @@ fn volver_uncertainty_states_the_gauge_and_the_u_of_every_point() {
     assert!(!v["combinations"].as_array().unwrap().is_empty());
     let points = v["points"].as_array().unwrap();
     assert_eq!(points.len(), 3 * 4 * 3);
-    for p in points {
-        let u: Vec<f64> = p["u95_um"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect();
-        // At the reflectors' centroid the data determine the tool point to tens of µm.
-        assert!(u.iter().all(|x| *x > 0.1 && *x < 50.0), "{u:?}");
+    // The CLI's U is the library's, to 1e-9 relative: the fit (native LM, default strategy and
+    // options), its linearised covariance under the paper's tracker noise, and the tool point
+    // at the reflectors' centroid over the same grid, computed here from the solver's parts.
+    let lib = library_u(&data, "X=0:1400:700,C=0:270:90,Z=0:600:300");
+    let same = |cli: f64, lib: f64, what: &str| {
+        assert!(
+            (cli - lib).abs() <= 1e-9 * lib.abs().max(1e-6),
+            "{what}: CLI {cli} vs library {lib}"
+        );
+    };
+    for (k, p) in points.iter().enumerate() {
+        let um = |key: &str, c: usize| p[key][c].as_f64().unwrap();
+        for c in 0..3 {
+            same(
+                um("u95_um", c),
+                lib.aligned[k].u95_mm()[c] * 1e3,
+                "U after the transform",
+            );
+            same(um("u95_raw_um", c), lib.raw[k].u95_mm()[c] * 1e3, "U raw");
+            same(um("tool_point_mm", c), lib.points[k][c], "tool point");
+        }
         assert_eq!(p["commands"].as_array().unwrap().len(), 3);
     }
     let params = v["parameters"].as_array().unwrap();
-    assert!(params.iter().all(|p| p["u"].as_f64().unwrap() >= 0.0));
+    assert_eq!(params.len(), lib.u.len());
+    for (p, u) in params.iter().zip(&lib.u) {
+        same(p["u"].as_f64().unwrap(), *u, p["name"].as_str().unwrap());
+    }
     // A noise-free tracker cannot give an uncertainty.
     let out = volver(&[
         "uncertainty",
@@ -454,4 +471,43 @@ fn tables_state_the_u_of_every_error_and_refuse_an_undetermined_tool() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("--max-u-um"));
     assert!(compensate("-30,75,-100", true).status.success());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The library's figures for `volver uncertainty --noise paper --grid GRID` on `data`.
+struct LibraryU {
+    aligned: Vec<PointUncertainty>,
+    raw: Vec<PointUncertainty>,
+    points: Vec<[f64; 3]>,
+    u: Vec<f64>,
+}
+
+/// The fit of `data` (the paper's model on the XCFZ grinder) with the native LM under the
+/// default strategy and options, its linearised covariance under the paper's tracker noise,
+/// and the tool point at the reflectors' centroid over `grid`.
+fn library_u(data: &std::path::Path, grid: &str) -> LibraryU {
+    let model = Model::default_xcfz();
+    let m = model.machine();
+    let set = MeasurementSet::load(m, data).unwrap();
+    let problem = Problem::new(&model, &set).unwrap();
+    let id = fit(problem.clone());
+    let cov = linear(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        volver::solvers::Objective::Phi,
+        NoiseModel::Tracker(TrackerNoise::PAPER),
+    )
+    .unwrap();
+    let r = m.reflectors();
+    let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
+    let g = ToolGrid {
+        commands: Plan::parse_grid(m, grid).unwrap().positions,
+        tool,
+    };
+    LibraryU {
+        aligned: g.uncertainty(&model, &id.params, &cov, true),
+        raw: g.uncertainty(&model, &id.params, &cov, false),
+        points: g.points(&model, &id.params),
+        u: cov.parameters(),
+    }
 }
