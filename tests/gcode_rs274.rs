@@ -200,6 +200,7 @@ const CASES: &[Case] = &[
     case("32-readme-part.ngc", Kind::Xcfz),
     case("33-cycle-retracts.ngc", Kind::Mill),
     case("34-stored-position.ngc", Kind::Mill),
+    case("35-inverse-time-g53.ngc", Kind::Mill),
 ];
 
 /// The compensators of a results file, per tool (the mill's tools at the gauge point 0,0,0

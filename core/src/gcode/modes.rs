@@ -90,9 +90,13 @@ impl Reader<'_> {
         }
         for letter in ['O', 'F', 'S'] {
             if let Some((_, w)) = p.other.get(&letter) {
-                // An inverse-time F belongs to its move's points (see movement).
+                // An inverse-time F belongs to its compensated move's points (see movement);
+                // a block whose axis words a non-modal code takes (G53, G28 …) keeps it.
                 let inverse = letter == 'F' && self.feed == FeedMode::InverseTime;
-                if !inverse || !p.any_axis() {
+                let taken =
+                    p.g.iter()
+                        .any(|(g, _)| matches!(g, 100 | 280 | 300 | 431 | 520 | 530 | 920));
+                if !inverse || !p.any_axis() || taken {
                     block.kept.push(w.clone());
                 }
             }
