@@ -59,29 +59,24 @@ pub fn start(machine: &Machine, text: Option<&str>) -> Result<[Option<f64>; 6]> 
     let Some(text) = text else {
         return Ok(out);
     };
-    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
-        let Some((letter, value)) = part.split_once('=') else {
-            bail!("--start {text}: expected AXIS=VALUE pairs, such as X=0,Z=600");
-        };
-        let axis = volver_core::iso::Axis::from_letter(letter.trim().chars().next().unwrap_or(' '))
-            .filter(|_| letter.trim().len() == 1);
+    let pairs = volver_core::machine::axis_value_pairs(text)
+        .map_err(|m| anyhow::anyhow!("--start {text}: {m}"))?;
+    for (letter, v) in pairs {
+        let axis = volver_core::iso::Axis::from_letter(letter.chars().next().unwrap_or(' '))
+            .filter(|_| letter.chars().count() == 1);
         let Some((k, a)) = axis.and_then(|a| machine.axis(a)) else {
             bail!(
                 "--start {text}: '{letter}' is not an axis of the machine ({})",
                 machine.chain()
             );
         };
-        let v: f64 = value
-            .trim()
-            .parse()
-            .ok()
-            .filter(|v: &f64| v.is_finite() && v.abs() <= volver_core::gcode::MAX_AXIS_VALUE)
-            .ok_or_else(|| {
-                anyhow::anyhow!(
-                    "--start {text}: '{value}' is not a position in {}",
-                    a.file_unit()
-                )
-            })?;
+        if !(v.is_finite() && v.abs() <= volver_core::gcode::MAX_AXIS_VALUE) {
+            bail!(
+                "--start {text}: {} is not a position in {}",
+                volver_core::error::number(v),
+                a.file_unit()
+            );
+        }
         if out[k].replace(v).is_some() {
             bail!("--start {text}: axis {letter} is given twice");
         }

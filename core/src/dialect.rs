@@ -67,11 +67,22 @@ impl Dialect {
     /// An axis value (mm or degrees, rounded to 1e-6) as this dialect reads it: the shortest
     /// decimal for LinuxCNC, always with a decimal point for Fanuc (`100.`, `-0.5`).
     pub fn value(self, v: f64) -> String {
-        let s = format!("{}", (v * 1e6).round() / 1e6 + 0.0);
-        match self {
-            Dialect::Fanuc if !s.contains('.') => s + ".",
-            _ => s,
+        self.decimal_point(format!("{}", (v * 1e6).round() / 1e6 + 0.0))
+    }
+
+    /// A number as written (`100`, `-0.5`) as this dialect needs it: with a decimal point for
+    /// Fanuc, which reads a value without one in its least input increment (`100.`).
+    ///
+    /// ```
+    /// use volver_core::dialect::Dialect;
+    /// assert_eq!(Dialect::Fanuc.decimal_point("100".into()), "100.");
+    /// assert_eq!(Dialect::LinuxCnc.decimal_point("100".into()), "100");
+    /// ```
+    pub fn decimal_point(self, mut text: String) -> String {
+        if self == Dialect::Fanuc && !text.contains('.') {
+            text.push('.');
         }
+        text
     }
 
     /// The rapid-move word: `G0` or `G00`.

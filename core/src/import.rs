@@ -542,12 +542,7 @@ fn column_of(
 /// CR-only line ends (some exports write CR alone) read as LF, so that lines are counted as the
 /// export's viewer counts them. An error when nothing is left for the header.
 fn export_body(text: &str, skip: usize, file: &str) -> std::result::Result<String, String> {
-    let text = crate::error::without_bom(text);
-    let text = if text.contains('\r') {
-        text.replace("\r\n", "\n").replace('\r', "\n")
-    } else {
-        text.to_string()
-    };
+    let text = crate::error::lf_lines(crate::error::without_bom(text));
     let lines = text.split_inclusive('\n').count();
     if skip >= lines {
         return Err(format!(

@@ -829,20 +829,7 @@ impl Machine {
         &self,
         text: &str,
     ) -> std::result::Result<Vec<(usize, f64)>, String> {
-        let mut pairs = Vec::new();
-        for item in text.split(',').map(str::trim) {
-            let Some((k, v)) = item.split_once('=') else {
-                return Err(format!(
-                    "'{item}': expected AXIS=VALUE (mm or degrees), e.g. Z=600"
-                ));
-            };
-            let value = v
-                .trim()
-                .parse::<f64>()
-                .map_err(|_| format!("'{item}': '{}' is not a number (mm or degrees)", v.trim()))?;
-            pairs.push((k.trim(), value));
-        }
-        clearance_of(&self.axes, pairs.into_iter()).map_err(|(_, m)| m)
+        clearance_of(&self.axes, axis_value_pairs(text)?.into_iter()).map_err(|(_, m)| m)
     }
 
     /// Commands from positions in file units (mm, degrees) given in chain order.
@@ -853,6 +840,33 @@ impl Machine {
         }
         c
     }
+}
+
+/// The `AXIS=VALUE` pairs of an option such as `--clearance Z=600,A=0` or `--start X=0,Z=600`
+/// (comma-separated; values in file units, not yet checked against any machine), or the
+/// message naming the pair at fault.
+///
+/// ```
+/// use volver_core::machine::axis_value_pairs;
+/// assert_eq!(axis_value_pairs("Z=600, A=0").unwrap(), vec![("Z", 600.0), ("A", 0.0)]);
+/// assert!(axis_value_pairs("Z").unwrap_err().contains("expected AXIS=VALUE"));
+/// ```
+pub fn axis_value_pairs(text: &str) -> std::result::Result<Vec<(&str, f64)>, String> {
+    text.split(',')
+        .map(str::trim)
+        .map(|item| {
+            let Some((k, v)) = item.split_once('=') else {
+                return Err(format!(
+                    "'{item}': expected AXIS=VALUE (mm or degrees), e.g. Z=600"
+                ));
+            };
+            let value = v
+                .trim()
+                .parse::<f64>()
+                .map_err(|_| format!("'{item}': '{}' is not a number (mm or degrees)", v.trim()))?;
+            Ok((k.trim(), value))
+        })
+        .collect()
 }
 
 /// A clearance position from (axis letter, value in file units) pairs: (chain index, internal

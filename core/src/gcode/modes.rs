@@ -429,13 +429,10 @@ impl Reader<'_> {
             } else {
                 self.program_at(k, place)? + v
             };
-            let mut v = number(prog);
-            // Fanuc-style controls read a value without a decimal point in their least input
-            // increment.
-            if self.setup.dialect == crate::dialect::Dialect::Fanuc && !v.contains('.') {
-                v.push('.');
-            }
-            words.push(format!("{l}{v}"));
+            words.push(format!(
+                "{l}{}",
+                self.setup.dialect.decimal_point(number(prog))
+            ));
             self.pos[c] = Some(self.offsets.home[h][k]);
         }
         if words.is_empty() {

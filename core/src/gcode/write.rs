@@ -261,10 +261,7 @@ impl Writer<'_, '_> {
                 };
                 let decimals = self.options.decimals + usize::from(unit != 1.0);
                 let prog = (a.to_file_units(commands.0[k]) - m.offset[k]) / unit;
-                let mut t = format!("{:.decimals$}", prog + 0.0);
-                if self.options.dialect == crate::dialect::Dialect::Fanuc && !t.contains('.') {
-                    t.push('.');
-                }
+                let t = (self.options.dialect).decimal_point(format!("{:.decimals$}", prog + 0.0));
                 let back: f64 = t.parse().expect("a formatted number parses");
                 out.0[k] = a.from_file_units(back * unit + m.offset[k]);
                 t
