@@ -102,6 +102,79 @@ pub fn table_uncertainty(
     Ok(sq)
 }
 
+/// What the tables leave of a model's tool point smaller than this (mm) is rounding: 0.1 µm.
+pub const CARRY_TOLERANCE_MM: f64 = 1e-4;
+
+/// What per-axis tables carry of a model's tool point over the machine's travel (5 positions per
+/// axis), computed through the tables as a control applies them
+/// ([`ErrorTables::tool_point`]) and part by part ([`volver_core::tables::uncarried`]).
+#[derive(Clone, Debug, serde::Serialize)]
+#[non_exhaustive]
+pub struct Carry {
+    /// The commands judged, file units.
+    pub commands: Vec<Vec<f64>>,
+    /// The largest distance between the model's tool point and the tables' (mm), at the test's
+    /// start.
+    pub departure_mm: f64,
+    /// Index of the command where it is largest.
+    pub departure_at: usize,
+    /// The machine's parts the tables cannot carry, each with the error it leaves.
+    pub uncarried: Vec<volver_core::tables::Uncarried>,
+}
+
+impl Carry {
+    /// The parts that leave more than [`CARRY_TOLERANCE_MM`]: what refuses the export.
+    pub fn significant(&self) -> Vec<&volver_core::tables::Uncarried> {
+        self.uncarried
+            .iter()
+            .filter(|u| u.largest_mm > CARRY_TOLERANCE_MM)
+            .collect()
+    }
+
+    /// One line per significant part: its name, size and where.
+    pub fn lines(&self) -> Vec<String> {
+        self.significant()
+            .into_iter()
+            .map(|u| {
+                let when = match u.role {
+                    volver_core::model::Role::Thermal => " one hour after the test's start",
+                    _ => "",
+                };
+                format!(
+                    "{} ({} parameters): moves the tool point by up to {:.2} µm{when} (at {:?})",
+                    u.name,
+                    u.parameters.len(),
+                    u.largest_mm * 1e3,
+                    self.commands[u.at]
+                )
+            })
+            .collect()
+    }
+}
+
+/// [`Carry`] of `tables` made from `model` at `params` for the tool point `tool`.
+pub fn carry(model: &Model, params: &[f64], tables: &ErrorTables, tool: [f64; 3]) -> Result<Carry> {
+    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
+    let mut departure = (0.0, 0);
+    for (i, c) in plan.positions.iter().enumerate() {
+        let a = model.tool_point(&c.0, &tool, params);
+        let b = tables.tool_point(model, c, &tool)?;
+        let d = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+        if d > departure.0 {
+            departure = (d, i);
+        }
+    }
+    let commands = (0..plan.positions.len())
+        .map(|k| crate::uncertainty::Assessment::commands(model, &plan, k))
+        .collect();
+    Ok(Carry {
+        commands,
+        departure_mm: departure.0,
+        departure_at: departure.1,
+        uncarried: volver_core::tables::uncarried(model, params, &tool, &plan.positions),
+    })
+}
+
 /// The tool point from `--tool X,Y,Z` (mm, in the frame of the last tool-side axis) or
 /// `--tool-reflector ID`; the reflectors' centroid when neither is given.
 pub fn tool_point_of(

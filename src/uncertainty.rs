@@ -380,6 +380,36 @@ impl Assessment {
     }
 }
 
+/// The mean ratio of Monte Carlo's U to the linearised data part of `us` over every coordinate
+/// of every grid command (`mc`: three values per command, the same order) where the linearised U
+/// exceeds 0.1 % of its largest: where it vanishes (the tool point at the reference of every
+/// error, raw) the ratio would be Monte Carlo's rounding over zero. `NaN` when there is none.
+///
+/// ```
+/// use volver_solvers::uncertainty::PointUncertainty;
+/// let lin = |u: f64| PointUncertainty {
+///     tool_point_mm: [0.0; 3],
+///     u95_data_mm: [u; 3],
+///     u95_held_mm: [0.0; 3],
+///     worst_held: None,
+/// };
+/// // The first command's U vanishes: its Monte Carlo rounding does not count.
+/// let us = [lin(0.0), lin(0.010)];
+/// let mc = [1e-15, 1e-15, 1e-15, 0.011, 0.011, 0.011];
+/// assert!((volver::uncertainty::monte_carlo_ratio(&us, &mc) - 1.1).abs() < 1e-12);
+/// ```
+pub fn monte_carlo_ratio(us: &[volver_solvers::uncertainty::PointUncertainty], mc: &[f64]) -> f64 {
+    let largest = us.iter().flat_map(|u| u.u95_data_mm).fold(0.0, f64::max);
+    let ratios: Vec<f64> = us
+        .iter()
+        .enumerate()
+        .flat_map(|(i, u)| (0..3).map(move |c| (3 * i + c, u.u95_data_mm[c])))
+        .filter(|&(_, l)| l > 1e-3 * largest)
+        .map(|(i, l)| mc[i] / l)
+        .collect();
+    ratios.iter().sum::<f64>() / ratios.len() as f64
+}
+
 /// Refuses a number of Monte Carlo replicas outside 2 … [`MAX_REPLICAS`] before the fit runs
 /// (a count from the command line is bounded before anything is allocated for it).
 ///

@@ -99,6 +99,28 @@ pub enum Owner {
     Effect(usize),
 }
 
+/// What a parameter describes ([`Model::role`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Role {
+    /// A geometric error of the machine that per-axis controller tables carry: an ISO 230 term
+    /// (a component error as a function of its axis, a location or squareness constant) or a
+    /// ball-screw error (added to the positioning error it belongs to).
+    Geometry,
+    /// A displacement of the tool point over the machine's axes that is not a function of one
+    /// axis' position in the ISO sense (a `field` over axes): the machine's, but per-axis
+    /// tables cannot carry it.
+    Field,
+    /// Machine geometry that changes with time (a scale growing, a rotary axis' line drifting, a
+    /// field over an axis and `t`): zero at the test's start, where the tool point is taken;
+    /// static tables cannot carry its growth.
+    Thermal,
+    /// The measurement, not the machine: the tracker's and stations' poses, reflector offsets,
+    /// the range scale, a drift of the tool point, the tracker or a station over the test, a
+    /// field over time alone.
+    Measurement,
+}
+
 /// One parameter of the layout.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParamInfo {
@@ -328,6 +350,47 @@ impl Model {
             self.params[j].owner,
             Owner::Tracker(_) | Owner::Station { .. }
         )
+    }
+
+    /// What parameter `j` describes ([`Role`]): whether it belongs to the machine or to the
+    /// measurement, and whether per-axis controller tables can carry it. Every output that uses
+    /// part of a model decides by this one rule (tables, their list of what they cannot carry,
+    /// the tool point's time-independent part).
+    ///
+    /// ```
+    /// use volver_core::model::{Model, Role};
+    /// let m = Model::default_xcfz();
+    /// assert_eq!(m.role(m.param_index("EXX.c1").unwrap()), Role::Geometry);
+    /// assert_eq!(m.role(m.param_index("tracker.x").unwrap()), Role::Measurement);
+    /// ```
+    pub fn role(&self, j: usize) -> Role {
+        match self.params[j].owner {
+            Owner::Term { .. } => Role::Geometry,
+            Owner::Tracker(_) | Owner::Station { .. } => Role::Measurement,
+            Owner::Effect(i) => self.effects[i].0.role(),
+        }
+    }
+
+    /// The name of the effect (or error, or station) that parameter `j` belongs to, as outputs
+    /// group parameters: `field X*Z`, `thermal scale of X`, `EXX`, `tracker pose` …
+    ///
+    /// ```
+    /// use volver_core::model::Model;
+    /// let m = Model::default_xcfz();
+    /// assert_eq!(m.part_name(m.param_index("EXX.c1").unwrap()), "EXX");
+    /// ```
+    pub fn part_name(&self, j: usize) -> String {
+        match self.params[j].owner {
+            Owner::Term { term, .. } => self.terms[term].id.to_string(),
+            Owner::Tracker(_) => "tracker pose".to_string(),
+            Owner::Station { station, .. } => {
+                format!("station {}", self.machine.stations()[station].id)
+            }
+            Owner::Effect(i) => {
+                // `field.X*Z.x_1_1` → `field X*Z`: the three components are one field.
+                self.effects[i].0.label(&self.machine, &self.params[j].name)
+            }
+        }
     }
 
     /// The linear equality constraints.

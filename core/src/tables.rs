@@ -14,6 +14,10 @@
 //! is kept: with the paper's rule the squareness sits in the straightness' slope and the
 //! squareness constants are zero, so a controller that applies both gets it once.
 //!
+//! What the tables carry is computed, not assumed: [`ErrorTables::tool_point`] is the tool point
+//! as a control applies them, and [`uncarried`] lists every machine part the tables cannot
+//! express (a field over the axes, a part that grows with time) with the error it leaves.
+//!
 //! Formats:
 //! - **ISG CSV** ([`ErrorTables::to_isg_csv`]), the tabular format of ISG-kernel volumetric
 //!   compensation: `//` comments; blocks separated by `#`; each block a header of argument and
@@ -41,6 +45,9 @@ use crate::error::{Error, Place, Result};
 use crate::iso::{Axis, ErrorId};
 use crate::machine::Commands;
 use crate::model::Model;
+
+mod carry;
+pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
 
 /// The most rows of one axis' table (compensation tables have tens to thousands).
 pub const MAX_TABLE_ROWS: usize = 100_000;

@@ -549,9 +549,46 @@ pub struct TablesArgs {
     /// travel, after the set-up's rigid transform, exceeds this (µm).
     #[arg(long, default_value_t = 25.0)]
     max_u_um: f64,
-    /// Write the tables even when the uncertainty exceeds --max-u-um.
+    /// Write the tables even when the uncertainty exceeds --max-u-um, or when the model has
+    /// parts per-axis tables cannot carry (a field over the axes, a part that grows with time).
     #[arg(long)]
     force: bool,
+}
+
+/// Prints how closely the tables give the model's tool point and every part of the model they
+/// cannot carry with the error it leaves; refuses when one leaves more than
+/// [`volver::compensation::CARRY_TOLERANCE_MM`] unless `force`.
+fn judge_carry(
+    model: &Model,
+    params: &[f64],
+    tables: &ErrorTables,
+    tool: [f64; 3],
+    force: bool,
+) -> Result<()> {
+    let c = volver::compensation::carry(model, params, tables, tool)?;
+    println!(
+        "  the tables against the model's tool point {} mm over {} commands of the travel: up to \
+         {:.3} µm apart (at {:?})",
+        point_mm(tool),
+        c.commands.len(),
+        c.departure_mm * 1e3,
+        c.commands[c.departure_at]
+    );
+    let lines = c.lines();
+    if lines.is_empty() {
+        return Ok(());
+    }
+    let msg = format!(
+        "per-axis tables cannot carry {} part(s) of the model: {}; a control given these tables \
+         leaves that error (`volver compensate` applies the whole model)",
+        lines.len(),
+        lines.join("; ")
+    );
+    if !force {
+        bail!("{msg}; --force writes the tables anyway");
+    }
+    println!("  warning: {msg} (written anyway: --force)");
+    Ok(())
 }
 
 /// Runs `volver tables`.
@@ -574,6 +611,7 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         a.results.display()
     );
     vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
+    judge_carry(&model, &params, &tables, tool, a.force)?;
     let mut paths = write_tables(&tables, &a.out)?;
     if let Some(r) = &record {
         // The formats have no place for U: a companion in errors.csv's layout whose values are

@@ -203,17 +203,12 @@ fn print_tool_point(a: &Assessment, model: &Model, request: &Request) {
         if let (Some(m), Some(mc)) = (mcu, mc)
             && us.iter().any(|u| u.u95_data_mm.iter().any(|v| *v > 0.0))
         {
-            let ratio: Vec<f64> = us
-                .iter()
-                .enumerate()
-                .flat_map(|(i, u)| (0..3).map(move |c| m[3 * i + c] / u.u95_data_mm[c]))
-                .filter(|r| r.is_finite())
-                .collect();
-            let mean = ratio.iter().sum::<f64>() / ratio.len().max(1) as f64;
+            let mean = volver::uncertainty::monte_carlo_ratio(us, m);
             let mmax = m.iter().copied().fold(0.0, f64::max);
             println!(
                 "    Monte Carlo ({} replicas, {:.1} s): U95 up to {:.2} µm; Monte Carlo / \
-                 linearised (data) {:.3} on average",
+                 linearised (data) {:.3} on average (where the linearised U exceeds 0.1 % of its \
+                 largest)",
                 mc.samples.len(),
                 mc.time_s,
                 mmax * 1e3,

@@ -407,9 +407,11 @@ pub fn predict_with_errors_jacobian(
     (x, out)
 }
 
-/// [`super::tool_in_workpiece`] in `f64` and ∂(tool point)/∂(every error value), exactly. The
-/// measurement's fields (tracker, tool shift, reflector offset, range scale) take no part: their
-/// values are ignored and their columns are zero.
+/// [`super::tool_in_workpiece`] in `f64` and ∂(tool point)/∂(every error value), exactly, as
+/// [`crate::model::Model::tool_point`] uses it: the measurement's values (tracker pose,
+/// reflector offset, range scale) take no part (their values are ignored, their columns are
+/// zero); the tool shift does, since a field over the axes is the machine's (a drift, also a
+/// tool shift, is zero at the test's start where the model takes the tool point).
 ///
 /// ```
 /// use volver_core::kinematics::{tool_in_workpiece, tool_in_workpiece_with_errors_jacobian, PointErrors};
@@ -429,7 +431,6 @@ pub fn tool_in_workpiece_with_errors_jacobian(
     errors: &PointErrors<f64>,
 ) -> ([f64; 3], ErrorsJacobian) {
     let mut e = *errors;
-    e.tool_shift = [0.0; 3];
     e.reflector_delta = [0.0; 3];
     let mut out = ErrorsJacobian::zero();
     let x = chain_with_jacobian(
@@ -441,7 +442,6 @@ pub fn tool_in_workpiece_with_errors_jacobian(
         |p, _| (p, IDENTITY),
         &mut out,
     );
-    out.tool_shift = [[0.0; 3]; 3];
     out.reflector_delta = [[0.0; 3]; 3];
     (x, out)
 }
@@ -597,7 +597,6 @@ mod tests {
                 let (t, tj) = tool_in_workpiece_with_errors_jacobian(&machine, &cmd, &refl, &e);
                 let mut e0 = seeded(&e);
                 let zero = DualSVec64::<N>::from_re(0.0);
-                e0.tool_shift = [zero; 3];
                 e0.reflector_delta = [zero; 3];
                 let cmd_d = cmd.0.map(DualSVec64::<N>::from_re);
                 let td = tool_in_workpiece(&machine, &cmd_d, &refl, &e0);

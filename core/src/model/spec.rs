@@ -272,6 +272,54 @@ pub(super) enum EffectSlot {
     },
 }
 
+impl EffectSlot {
+    /// What the slot's parameters describe. Exhaustive on purpose: a new effect must say
+    /// whether it is the machine's (and whether tables carry it) before anything compiles.
+    pub(super) fn role(self) -> super::Role {
+        use super::Role;
+        match self {
+            EffectSlot::Screw { .. } => Role::Geometry,
+            EffectSlot::ThermalScale { .. } | EffectSlot::LocationDrift { .. } => Role::Thermal,
+            EffectSlot::Field { vars, pair, .. } => {
+                let time = vars[0] == FieldVar::Time || (pair && vars[1] == FieldVar::Time);
+                let axis = vars[0] != FieldVar::Time || (pair && vars[1] != FieldVar::Time);
+                match (axis, time) {
+                    (true, false) => Role::Field,
+                    (true, true) => Role::Thermal,
+                    (false, _) => Role::Measurement,
+                }
+            }
+            EffectSlot::Drift(_)
+            | EffectSlot::Reflector { .. }
+            | EffectSlot::RangeScale
+            | EffectSlot::TrackerDrift(_)
+            | EffectSlot::StationDrift { .. } => Role::Measurement,
+        }
+    }
+
+    /// The effect's name in outputs (`param`: the name of one of its parameters).
+    pub(super) fn label(self, machine: &Machine, param: &str) -> String {
+        let axis = |k: usize| machine.axes()[k].axis;
+        match self {
+            EffectSlot::Drift(_) => "thermal drift of the tool point".to_string(),
+            EffectSlot::Reflector { reflector, .. } => {
+                format!("offset of reflector {}", machine.reflectors()[reflector].id)
+            }
+            EffectSlot::RangeScale => "range scale".to_string(),
+            EffectSlot::Screw { k, .. } => format!("ball screw of {}", axis(k)),
+            EffectSlot::ThermalScale { k, .. } => format!("thermal scale of {}", axis(k)),
+            EffectSlot::LocationDrift { k, .. } => format!("location drift of {}", axis(k)),
+            EffectSlot::TrackerDrift(_) => "tracker drift".to_string(),
+            EffectSlot::StationDrift { station, .. } => {
+                format!("drift of station {}", machine.stations()[station].id)
+            }
+            EffectSlot::Field { .. } => {
+                format!("field {}", param.split('.').nth(1).unwrap_or(param))
+            }
+        }
+    }
+}
+
 impl ErrorModelSpec {
     /// Parses error-model TOML; `file` names the source in messages.
     pub fn from_toml_str(text: &str, file: &str) -> Result<ErrorModelSpec> {

@@ -1,0 +1,421 @@
+//! The consistency matrix: every kind of parameter a model can have × every output that uses
+//! the identified machine. One function gives the tool point of an identified machine
+//! ([`Model::tool_point`], with its exact Jacobian `tool_point_with_jacobian`); `predict`,
+//! `compensate`, the uncertainty of the tool point (linearised and Monte Carlo), the report's
+//! maps and the tables' check all go through it. Here, for each kind:
+//!
+//! - **Jacobian**: the tool point's exact Jacobian against central differences of the tool point
+//!   (relative 1e-6), at commands over the travel and two tool offsets; the columns of the
+//!   measurement's parameters and of what grows with time are exactly zero (the tool point is
+//!   the machine's, at the test's start), those of the machine's geometry are not all zero.
+//! - **predict = compensation's forward model**: a compensated command's tool point, computed
+//!   by `predict`'s function, is the nominal machine's tool point of the programmed command
+//!   (1e-9 mm).
+//! - **tables**: the tool point as a control applies the per-axis tables equals `predict`'s at
+//!   the tables' positions, less exactly the parts tables cannot carry (1e-9 mm); the plain CSV
+//!   written and read back gives the same; [`uncarried`] names exactly those parts.
+//! - **uncertainty** (release only): the linearised U of the tool point against Monte Carlo's
+//!   on test 4 of the XCFZ machine, within 15 % on average over the grid.
+//!
+//! Every field of [`EffectsSpec`] must appear in a case: the coverage check destructures it
+//! without `..`, so a new effect does not compile here until it is added to the matrix, and the
+//! matrix fails until every output handles it.
+
+use volver::core::machine::{Commands, Machine, Observes, StationSpec};
+use volver::core::model::{DEFAULT_MODEL_TOML, EffectsSpec, Model, Role};
+use volver::core::tables::{ErrorTables, uncarried};
+
+/// A small deterministic generator (xorshift) so the test needs no dependency.
+struct Rng(u64);
+impl Rng {
+    /// Uniform on −1 … 1.
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
+/// One row of the matrix: a model with one kind of parameter, and the parts tables cannot carry.
+struct Case {
+    name: String,
+    model: Model,
+    uncarried: Vec<&'static str>,
+}
+
+/// The paper's XCFZ model with `effects` (TOML lines of an `[effects]` table) on `machine`.
+fn xcfz_with(name: &str, machine: Machine, effects: &str, uncarried: Vec<&'static str>) -> Case {
+    let text = format!("{DEFAULT_MODEL_TOML}\n[effects]\n{effects}\n");
+    Case {
+        name: name.to_string(),
+        model: Model::from_toml_str(machine, &text, name).unwrap(),
+        uncarried,
+    }
+}
+
+/// Every case: the ISO 230 kinds (the paper's model, the five-axis presets with their location
+/// errors), stations, and each effect and field shape.
+fn cases() -> Vec<Case> {
+    let xcfz = Machine::default_xcfz();
+    let stations = xcfz
+        .with_stations(StationSpec::default_layout(&xcfz, 3, Observes::Point))
+        .unwrap();
+    let mut out = vec![Case {
+        name: "ISO terms: the paper's XCFZ model".into(),
+        model: Model::default_xcfz(),
+        uncarried: vec![],
+    }];
+    for name in volver::core::presets::names() {
+        let p = volver::core::presets::named(name).unwrap();
+        out.push(Case {
+            name: format!("ISO terms with location errors: preset {name}"),
+            model: p.model().unwrap(),
+            uncarried: vec![],
+        });
+    }
+    let effects: [(&str, Machine, &str, Vec<&'static str>); 15] = [
+        (
+            "thermal drift",
+            xcfz.clone(),
+            "thermal_drift = true",
+            vec![],
+        ),
+        (
+            "reflector offset",
+            xcfz.clone(),
+            "reflector_offset = [\"R1\"]",
+            vec![],
+        ),
+        ("range scale", xcfz.clone(), "range_scale = true", vec![]),
+        (
+            "ball screw",
+            xcfz.clone(),
+            "[[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 700.0",
+            vec![],
+        ),
+        (
+            "thermal scale",
+            xcfz.clone(),
+            "thermal_scale = [\"X\"]",
+            vec!["thermal scale of X"],
+        ),
+        (
+            "location drift",
+            xcfz.clone(),
+            "location_drift = [\"C\"]",
+            vec!["location drift of C"],
+        ),
+        (
+            "tracker drift",
+            xcfz.clone(),
+            "tracker_drift = true",
+            vec![],
+        ),
+        (
+            "stations with their drift",
+            stations.clone(),
+            "station_drift = true",
+            vec![],
+        ),
+        (
+            "field over a linear axis",
+            xcfz.clone(),
+            "field = [\"X\"]",
+            vec!["field X"],
+        ),
+        (
+            "field over a rotary axis",
+            xcfz.clone(),
+            "field = [\"C\"]",
+            vec!["field C"],
+        ),
+        ("field over time", xcfz.clone(), "field = [\"t\"]", vec![]),
+        (
+            "field over two axes",
+            xcfz.clone(),
+            "field = [\"X*Z\"]",
+            vec!["field X*Z"],
+        ),
+        (
+            "field over a rotary and a linear axis",
+            xcfz.clone(),
+            "field = [\"C*Z\"]",
+            vec!["field C*Z"],
+        ),
+        (
+            "field over an axis and time",
+            xcfz.clone(),
+            "field = [\"X*t\"]",
+            vec!["field X*t"],
+        ),
+        (
+            "every effect at once",
+            stations,
+            "thermal_drift = true\nreflector_offset = [\"R2\"]\nrange_scale = true\n\
+             thermal_scale = [\"Z\"]\nlocation_drift = [\"C\"]\ntracker_drift = true\n\
+             station_drift = true\nfield = [\"X*Z\", \"C\"]\n\
+             [[effects.ball_screw]]\naxis = \"Z\"\nperiod_mm = 300.0",
+            vec![
+                "thermal scale of Z",
+                "location drift of C",
+                "field X*Z",
+                "field C",
+            ],
+        ),
+    ];
+    for (name, machine, text, unc) in effects {
+        out.push(xcfz_with(name, machine, text, unc));
+    }
+    out
+}
+
+/// Every field of [`EffectsSpec`] is set in some case. Destructured without `..`: a new effect
+/// does not compile here until the matrix covers it.
+#[test]
+fn the_matrix_covers_every_effect() {
+    let mut seen = [false; 9];
+    for c in cases() {
+        let EffectsSpec {
+            thermal_drift,
+            reflector_offset,
+            range_scale,
+            ball_screw,
+            thermal_scale,
+            location_drift,
+            tracker_drift,
+            station_drift,
+            field,
+        } = &c.model.spec().effects;
+        let set = [
+            *thermal_drift,
+            !reflector_offset.is_empty(),
+            *range_scale,
+            !ball_screw.is_empty(),
+            !thermal_scale.is_empty(),
+            !location_drift.is_empty(),
+            *tracker_drift,
+            *station_drift,
+            !field.is_empty(),
+        ];
+        for (s, v) in seen.iter_mut().zip(set) {
+            *s |= v;
+        }
+    }
+    assert!(seen.iter().all(|s| *s), "effects without a case: {seen:?}");
+}
+
+/// Random parameter values of every kind, sized as a machine's errors are.
+fn params_of(model: &Model, rng: &mut Rng) -> Vec<f64> {
+    use volver::core::iso::Unit;
+    let mut p = model.initial_params();
+    for (j, info) in model.params().iter().enumerate() {
+        let scale = match info.unit {
+            _ if info.name.contains(".phi") => 3.0,
+            Unit::Mm => 0.02,
+            Unit::Rad => 3e-5,
+            Unit::MmPerHour => 0.01,
+            Unit::RadPerHour => 1e-5,
+            Unit::Ppm | Unit::PpmPerHour => 5.0,
+        };
+        p[j] += scale * rng.next();
+    }
+    p
+}
+
+/// Commands spread over the travel (a rotary axis of a full turn over it).
+fn commands_of(model: &Model, rng: &mut Rng, n: usize) -> Vec<Commands> {
+    (0..n)
+        .map(|_| {
+            let mut c = Commands::default();
+            for (k, ax) in model.machine().axes().iter().enumerate() {
+                c.0[k] = ax.min + (ax.max - ax.min) * 0.5 * (1.0 + rng.next());
+            }
+            c
+        })
+        .collect()
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// The Jacobian cell of every case.
+#[test]
+fn the_tool_points_jacobian_is_exact_for_every_kind() {
+    for (i, case) in cases().iter().enumerate() {
+        let model = &case.model;
+        let mut rng = Rng(0x9e37_79b9 + i as u64);
+        let p = params_of(model, &mut rng);
+        let n = model.n_params();
+        let mut jac = vec![0.0; 3 * n];
+        let mut moved = vec![false; n];
+        for c in commands_of(model, &mut rng, 4) {
+            for tool in [[0.0, 0.0, -120.0], [35.0, -20.0, 60.0]] {
+                let t = model.tool_point_with_jacobian(&c, &tool, &p, &mut jac);
+                assert_eq!(t, model.tool_point(&c.0, &tool, &p), "{}: value", case.name);
+                for j in 0..n {
+                    let info = &model.params()[j];
+                    let h = if info.name.contains(".phi") {
+                        1e-5
+                    } else if info.unit == volver::core::iso::Unit::Rad {
+                        1e-6
+                    } else {
+                        1e-4
+                    };
+                    let (mut pp, mut pm) = (p.clone(), p.clone());
+                    pp[j] += h;
+                    pm[j] -= h;
+                    let a = model.tool_point(&c.0, &tool, &pp);
+                    let b = model.tool_point(&c.0, &tool, &pm);
+                    for r in 0..3 {
+                        let fd = (a[r] - b[r]) / (2.0 * h);
+                        let ad = jac[r * n + j];
+                        assert!(
+                            (fd - ad).abs() <= 1e-6 * fd.abs().max(ad.abs()).max(1.0),
+                            "{}: {} coordinate {r}: exact {ad} against central difference {fd}",
+                            case.name,
+                            info.name
+                        );
+                        moved[j] |= ad != 0.0;
+                    }
+                }
+            }
+        }
+        for (j, moves) in moved.iter().enumerate() {
+            let info = &model.params()[j];
+            match model.role(j) {
+                Role::Measurement | Role::Thermal => assert!(
+                    !moves,
+                    "{}: {} is not the machine at the test's start but moves the tool point",
+                    case.name, info.name
+                ),
+                Role::Geometry | Role::Field => {
+                    // A coefficient held at zero by a constraint (a linear error's value at
+                    // the reference) may move nothing; every other one must.
+                    let held = model
+                        .constraints()
+                        .rows
+                        .iter()
+                        .any(|r| r.coeffs.len() == 1 && r.coeffs[0].0 == j);
+                    assert!(
+                        *moves || held,
+                        "{}: {} is the machine's but does not move the tool point",
+                        case.name,
+                        info.name
+                    );
+                }
+                role => panic!(
+                    "{}: {}: a role the matrix does not know: {role:?}",
+                    case.name, info.name
+                ),
+            }
+        }
+    }
+}
+
+/// The compensation cell: the command `compensate` finds puts `predict`'s tool point on the
+/// nominal machine's.
+#[test]
+fn predict_is_the_compensations_forward_model_for_every_kind() {
+    for (i, case) in cases().iter().enumerate() {
+        let model = &case.model;
+        let mut rng = Rng(0x5151 + i as u64);
+        let p = params_of(model, &mut rng);
+        let tool = volver::compensation::reflector_centroid(model);
+        let comp = volver::compensation::compensator(model, &p, tool, None, None).unwrap();
+        for c in commands_of(model, &mut rng, 3) {
+            let mut inner = c;
+            for (k, ax) in model.machine().axes().iter().enumerate() {
+                // Away from the ends, so the compensated command stays on the travel.
+                inner.0[k] = ax.min + 0.1 * (ax.max - ax.min) + 0.8 * (c.0[k] - ax.min);
+            }
+            let out = comp.compensate(&inner).unwrap();
+            let nominal = comp.nominal_point(&inner);
+            let predicted = model.tool_point(&out.commands.0, &tool, &p);
+            assert!(
+                distance(predicted, nominal) < 1e-9,
+                "{}: predict at the compensated command is {:.3e} mm off the nominal point",
+                case.name,
+                distance(predicted, nominal)
+            );
+            assert!(
+                out.error_mm > 1e-6,
+                "{}: the errors must move the tool point for this check to mean anything",
+                case.name
+            );
+        }
+    }
+}
+
+/// The tables cell: what tables carry is `predict`'s tool point less exactly the parts they
+/// cannot carry, and those parts are named.
+#[test]
+fn tables_carry_the_tool_point_and_name_what_they_cannot() {
+    for (i, case) in cases().iter().enumerate() {
+        let model = &case.model;
+        let mut rng = Rng(0x7777 + i as u64);
+        let p = params_of(model, &mut rng);
+        let tables = ErrorTables::from_model(model, &p, 50.0, 10.0).unwrap();
+        let back = ErrorTables::from_plain_csv(&tables.to_plain_csv(), "errors.csv").unwrap();
+        // The parameters of the parts tables cannot carry at the test's start: the fields.
+        let mut carried = p.clone();
+        for (j, v) in carried.iter_mut().enumerate() {
+            if model.role(j) == Role::Field {
+                *v = 0.0;
+            }
+        }
+        let tool = [10.0, -25.0, -90.0];
+        for _ in 0..6 {
+            // A command at the tables' positions: each axis at one of its table's rows.
+            let mut c = commands_of(model, &mut rng, 1)[0];
+            for t in &tables.axes {
+                let k = model
+                    .machine()
+                    .axes()
+                    .iter()
+                    .position(|a| a.axis == t.axis)
+                    .unwrap();
+                let row = ((rng.next() + 1.0) * 0.5 * (t.positions.len() - 1) as f64).round();
+                c.0[k] = model.machine().axes()[k].from_file_units(t.positions[row as usize]);
+            }
+            let from_tables = tables.tool_point(model, &c, &tool).unwrap();
+            let expected = model.tool_point(&c.0, &tool, &carried);
+            assert!(
+                distance(from_tables, expected) < 1e-9,
+                "{}: the tables' tool point is {:.3e} mm off predict's without the fields",
+                case.name,
+                distance(from_tables, expected)
+            );
+            // The plain CSV's resolution: 1e-12 rad (µrad to 6 decimals) on levers of ~2 m.
+            let reread = back.tool_point(model, &c, &tool).unwrap();
+            assert!(
+                distance(reread, from_tables) < 1e-8,
+                "{}: the plain CSV read back moves the tool point by {:.3e} mm",
+                case.name,
+                distance(reread, from_tables)
+            );
+        }
+        let grid = commands_of(model, &mut rng, 20);
+        let parts = uncarried(model, &p, &tool, &grid);
+        let names: Vec<&str> = parts.iter().map(|u| u.name.as_str()).collect();
+        let mut expected = case.uncarried.clone();
+        expected.sort_unstable();
+        let mut got = names.clone();
+        got.sort_unstable();
+        assert_eq!(
+            got, expected,
+            "{}: the parts tables cannot carry",
+            case.name
+        );
+        for u in &parts {
+            assert!(
+                u.largest_mm > 1e-6,
+                "{}: {} sized {} mm",
+                case.name,
+                u.name,
+                u.largest_mm
+            );
+        }
+    }
+}
