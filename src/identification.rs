@@ -285,7 +285,9 @@ pub fn identify(
                     .collect()
             })
             .unwrap_or_default();
-        results.uncertainty = Some(cov.to_record(&rule, held));
+        let mut record = cov.to_record(&rule, held);
+        record.model_check = Some(crate::uncertainty::check_fit(&problem, &id, settings.noise));
+        results.uncertainty = Some(record);
     }
     let implausible = implausible_sizes(&problem, &id, covariance.as_ref());
     let refusal = refusal(&id, &implausible, settings.accept).map(|r| {

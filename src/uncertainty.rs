@@ -121,6 +121,8 @@ pub struct Assessment {
     pub rule: Option<String>,
     /// Whether priors decided them.
     pub with_priors: bool,
+    /// The fit against the noise: the intervals hold only for a complete model.
+    pub model_check: volver_core::results::ModelCheck,
 }
 
 /// Fits `model` to `data` with the gauge stated, and assesses the uncertainty `request` asks
@@ -189,7 +191,9 @@ pub fn assess(
             .as_ref()
             .map(|_| volver_solvers::gauge::RULE.to_string()),
     };
+    let model_check = check_fit(&problem, &id, request.noise);
     Ok(Assessment {
+        model_check,
         id,
         covariance,
         aligned,
@@ -226,6 +230,10 @@ pub struct Report {
     pub points: Vec<PointU>,
     /// The Monte Carlo run.
     pub monte_carlo: Option<MonteCarloRun>,
+    /// The fit against the noise, and what it means for these intervals.
+    pub model_check: volver_core::results::ModelCheck,
+    /// [`volver_core::results::ModelCheck::statement`].
+    pub model_statement: String,
 }
 
 /// A parameter's value and standard uncertainties.
@@ -368,6 +376,8 @@ impl Assessment {
                         .map(|m| [m[3 * k] * 1e3, m[3 * k + 1] * 1e3, m[3 * k + 2] * 1e3]),
                 })
                 .collect(),
+            model_check: self.model_check.clone(),
+            model_statement: self.model_check.statement(),
             monte_carlo: self.monte_carlo.as_ref().zip(request.monte_carlo).map(
                 |((mc, _, _), (_, seed))| MonteCarloRun {
                     replicas: mc.samples.len(),
@@ -378,6 +388,87 @@ impl Assessment {
             ),
         }
     }
+}
+
+/// The fewest pairs of repeated points the check of a fit against their noise takes.
+pub const MIN_REPEAT_PAIRS: usize = 5;
+
+/// How far above the noise its repeated points show a fit's EMM may lie before the model is
+/// reported incomplete (× what the noise leaves a complete model): the repeats' own estimate of
+/// the noise varies by some 10 % with tens of pairs.
+pub const REPEAT_MARGIN: f64 = 1.2;
+
+/// The fit of `problem` (EMM `emm_um`, `free` identified directions) against what the tracker's
+/// noise leaves a complete model ([`ModelCheck`]): judged from the specification `noise` when
+/// there is one ([`crate::diagnosis::ABOVE_NOISE_Z`] standard deviations above it), else from
+/// the repeated points ([`REPEAT_MARGIN`] above the noise they show, at least
+/// [`MIN_REPEAT_PAIRS`] pairs), else unknown.
+///
+/// [`ModelCheck`]: volver_core::results::ModelCheck
+pub fn model_check(
+    problem: &volver_core::problem::Problem,
+    emm_um: f64,
+    free: usize,
+    noise: Option<&TrackerNoise>,
+) -> volver_core::results::ModelCheck {
+    use volver_core::diagnose;
+    use volver_core::problem::Residuals;
+    use volver_core::results::ModelCheck;
+    let points = problem.data().points.len();
+    let coordinates: usize = (0..points)
+        .map(|i| if problem.scalar(i) { 1 } else { 3 })
+        .sum();
+    let keep = (1.0 - free as f64 / coordinates.max(1) as f64)
+        .max(0.0)
+        .sqrt();
+    if let Some(n) = noise.filter(|n| !n.is_none()) {
+        let moments = diagnose::noise_moments(problem, n);
+        let all: Vec<usize> = (0..points).collect();
+        let level = diagnose::noise_level(&moments, &all, free, coordinates);
+        return ModelCheck {
+            emm_um,
+            expected_um: Some(level.fit_emm_um),
+            basis: format!("the tracker's specification {n}"),
+            above_noise: level.z(emm_um) > crate::diagnosis::ABOVE_NOISE_Z,
+        };
+    }
+    match diagnose::repeat_noise(problem) {
+        Some((stats, pairs)) if pairs >= MIN_REPEAT_PAIRS => {
+            let expected = stats.emm_um * keep;
+            ModelCheck {
+                emm_um,
+                expected_um: Some(expected),
+                basis: format!("{pairs} pairs of repeated points"),
+                above_noise: emm_um > REPEAT_MARGIN * expected,
+            }
+        }
+        _ => ModelCheck {
+            emm_um,
+            expected_um: None,
+            basis: "no noise specification and fewer than 5 pairs of repeated points".into(),
+            above_noise: false,
+        },
+    }
+}
+
+/// [`model_check`] of a fit `id` of `problem`, with the noise the rule of one noise source
+/// gives: `noise` when it is the tracker's, else the machine file's `[tracker] noise`, else the
+/// repeated points.
+pub fn check_fit(
+    problem: &volver_core::problem::Problem,
+    id: &volver_solvers::strategy::Identification,
+    noise: NoiseModel,
+) -> volver_core::results::ModelCheck {
+    let model = problem.model();
+    let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
+    let free = model
+        .n_params()
+        .saturating_sub(model.constraints().rows.len() + held);
+    let spec = match noise {
+        NoiseModel::Tracker(n) => Some(n),
+        NoiseModel::Residual => model.machine().tracker().noise,
+    };
+    model_check(problem, id.reached.stats.emm_um, free, spec.as_ref())
 }
 
 /// The mean ratio of Monte Carlo's U to the linearised data part of `us` over every coordinate

@@ -419,3 +419,79 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
         }
     }
 }
+
+mod common;
+
+/// The uncertainty cell where the model is wrong: a fit above the noise (test 4 with a second
+/// harmonic of C the paper's model lacks) records it; `tables` (and `compensate`, through the
+/// same gate) refuse its U unless forced; `uncertainty` and `identify` say the intervals do not
+/// hold. The same test without the hidden effect is at the noise and passes the gate.
+#[test]
+fn u_is_refused_where_the_fit_is_above_the_noise() {
+    let dir = std::env::temp_dir().join(format!("volver-consistency-u-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    for (name, hidden, above) in [("wrong", true, true), ("right", false, false)] {
+        let sim = dir.join(name);
+        let sim_s = sim.to_str().unwrap();
+        let mut args = vec!["--plan", "test4", "--seed", "7", "--noise", "paper"];
+        if hidden {
+            args.extend(["--effect", "rotary-harmonics=2,10,20"]);
+        }
+        common::simulate(sim_s, &args);
+        let data = sim.join("measurements.csv");
+        let fit = sim.join("fit.json");
+        let o = common::volver(&[
+            "identify",
+            "--data",
+            data.to_str().unwrap(),
+            "--noise",
+            "paper",
+            "--out",
+            fit.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let said = String::from_utf8_lossy(&o.stdout).to_string();
+        assert_eq!(
+            said.contains("WARNING: the uncertainty it carries"),
+            above,
+            "{said}"
+        );
+        let file = volver::core::results::ResultsFile::load(&fit).unwrap();
+        let check = file.uncertainty.unwrap().model_check.unwrap();
+        assert_eq!(check.above_noise, above, "{check:?}");
+        let ratio = check.ratio().unwrap();
+        assert!(
+            if above { ratio > 1.2 } else { ratio < 1.1 },
+            "{name}: ratio {ratio}"
+        );
+        let tables = sim.join("tables");
+        let run = |force: bool| {
+            let mut a = vec![
+                "tables",
+                "--results",
+                fit.to_str().unwrap(),
+                "--out",
+                tables.to_str().unwrap(),
+                "--max-u-um",
+                "10000",
+            ];
+            if force {
+                a.push("--force");
+            }
+            common::volver(&a)
+        };
+        let o = run(false);
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert_eq!(!o.status.success(), above, "{name}: {err}");
+        if above {
+            assert!(
+                err.contains("U is not valid here") && err.contains("volver diagnose"),
+                "{err}"
+            );
+            let o = run(true);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            assert!(String::from_utf8_lossy(&o.stdout).contains("warning: U is not valid here"));
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

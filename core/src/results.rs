@@ -79,6 +79,74 @@ pub struct UncertaintyRecord {
     pub data_factor: Vec<Vec<f64>>,
     /// Columns of `H`, one per held combination.
     pub held_factor: Vec<Vec<f64>>,
+    /// Whether the fit was at the tracker's noise when the covariance was computed: the
+    /// intervals assume a complete model, and say nothing where the fit is above the noise.
+    /// Absent in files written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_check: Option<ModelCheck>,
+}
+
+/// The fit against what the tracker's noise leaves a complete model: the condition under which
+/// an uncertainty means anything ([`UncertaintyRecord::model_check`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelCheck {
+    /// The fit's EMM (µm).
+    pub emm_um: f64,
+    /// What the noise leaves a complete model's fit (µm); `None` when nothing says what the
+    /// noise is (no specification, no repeated points).
+    pub expected_um: Option<f64>,
+    /// What the noise was judged from, in words.
+    pub basis: String,
+    /// `true` when the fit lies above what the noise explains: a part of the machine is missing
+    /// from the model, and intervals computed as if it were complete do not hold.
+    pub above_noise: bool,
+}
+
+impl ModelCheck {
+    /// The fit's EMM over what the noise leaves, when that is known.
+    pub fn ratio(&self) -> Option<f64> {
+        self.expected_um.map(|e| self.emm_um / e)
+    }
+
+    /// One sentence for every output that states an uncertainty.
+    ///
+    /// ```
+    /// use volver_core::results::ModelCheck;
+    /// let c = ModelCheck {
+    ///     emm_um: 20.0,
+    ///     expected_um: Some(10.0),
+    ///     basis: "the tracker's specification".into(),
+    ///     above_noise: true,
+    /// };
+    /// assert!(c.statement().contains("2.00 × what the noise leaves"));
+    /// assert!(c.statement().contains("volver diagnose"));
+    /// ```
+    pub fn statement(&self) -> String {
+        match (self.above_noise, self.ratio()) {
+            (true, Some(r)) => format!(
+                "the fit (EMM {:.2} µm) is {r:.2} × what the noise leaves a complete model \
+                 ({:.2} µm, from {}): something the model lacks is in the data, and the \
+                 intervals, which assume a complete model, do not hold; `volver diagnose` \
+                 finds what is missing",
+                self.emm_um,
+                self.expected_um.unwrap_or(f64::NAN),
+                self.basis
+            ),
+            (false, Some(r)) => format!(
+                "the fit (EMM {:.2} µm) is at the noise ({r:.2} × what it leaves a complete \
+                 model, from {}): the intervals assume the model complete, and the data do not \
+                 contradict it",
+                self.emm_um, self.basis
+            ),
+            (_, None) => format!(
+                "whether the fit (EMM {:.2} µm) is at the noise is unknown ({}): the intervals \
+                 assume a complete model; state the tracker's noise (`[tracker] noise` or \
+                 --noise) or measure repeated points to check it",
+                self.emm_um, self.basis
+            ),
+        }
+    }
 }
 
 impl ResultsFile {

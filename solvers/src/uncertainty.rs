@@ -161,6 +161,7 @@ impl Covariance {
             held,
             data_factor: cols(&self.data),
             held_factor: cols(&self.held),
+            model_check: None,
         }
     }
 

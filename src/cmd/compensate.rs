@@ -122,7 +122,8 @@ pub struct CompensateArgs {
 /// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
 /// machine's travel (5 positions per axis), printed after the set-up's rigid transform and raw;
 /// refused when the former exceeds `max_u_um` unless `force`, with the held combination that
-/// makes it and the measurement that would identify it. Returns (after the transform, raw) in
+/// makes it and the measurement that would identify it; refused as well (unless `force`) when
+/// the record says the fit was above the noise, where no interval holds. Returns (after the transform, raw) in
 /// mm, `None` when the results carry no uncertainty (a simulation's truth, an older file).
 pub fn vouch(
     model: &Model,
@@ -139,6 +140,13 @@ pub fn vouch(
         );
         return Ok(None);
     };
+    if let Some(check) = record.model_check.as_ref().filter(|c| c.above_noise) {
+        let msg = format!("U is not valid here: {}", check.statement());
+        if !force {
+            bail!("{msg}; --force uses the errors anyway");
+        }
+        println!("  warning: {msg} (used anyway: --force)");
+    }
     let u = tool_point_u(model, params, record, tool)?;
     let (ua, ur) = (u.aligned_mm, u.raw_mm);
     println!(

@@ -112,7 +112,10 @@ pub fn run(a: DemoArgs) -> Result<()> {
         compensation_five_axis(&model2, &id2, &out)?
     };
     let cov = vouch(&model2, data, &id2, &check)?;
-    let table_paths = write_results(out_dir, &model2, &id2, &cov)?;
+    let noise =
+        volver::solvers::uncertainty::NoiseModel::Tracker(volver::core::noise::TrackerNoise::PAPER);
+    let fit_check = volver::uncertainty::check_fit(&Problem::new(&model2, data)?, &id2, noise);
+    let table_paths = write_results(out_dir, &model2, &id2, &cov, fit_check)?;
     let first_label = if setup.xcfz() {
         "paper model"
     } else {
@@ -718,6 +721,7 @@ fn write_results(
     model2: &Model,
     id2: &Identification,
     cov: &Covariance,
+    fit_check: volver::core::results::ModelCheck,
 ) -> Result<Vec<PathBuf>> {
     let mut results = ResultsFile::from_model(model2, &id2.params)?;
     let held = id2
@@ -729,7 +733,9 @@ fn write_results(
                 .collect()
         })
         .unwrap_or_default();
-    results.uncertainty = Some(cov.to_record(volver::solvers::gauge::RULE, held));
+    let mut record = cov.to_record(volver::solvers::gauge::RULE, held);
+    record.model_check = Some(fit_check);
+    results.uncertainty = Some(record);
     let fit_path = out_dir.join("fit.json");
     results.save(&fit_path)?;
     let tables = ErrorTables::from_model(model2, &id2.params, 10.0, 5.0)?;

@@ -306,5 +306,18 @@ fn print_verdict(outcome: &Outcome, out: Option<&std::path::Path>) {
         && outcome.refusal.is_none()
     {
         println!("  parameters written to {}", out.display());
+        if let Some(check) = outcome
+            .results
+            .uncertainty
+            .as_ref()
+            .and_then(|u| u.model_check.as_ref())
+        {
+            let label = if check.above_noise {
+                "WARNING: the uncertainty it carries"
+            } else {
+                "the uncertainty it carries"
+            };
+            println!("  {label}: {}", check.statement());
+        }
     }
 }

@@ -95,6 +95,13 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     print_gauge(&assessment, &model, &request, data.points.len());
     print_parameters(&assessment, &model);
     print_tool_point(&assessment, &model, &request);
+    let check = &assessment.model_check;
+    let label = if check.above_noise {
+        "WARNING"
+    } else {
+        "model check"
+    };
+    println!("\n  {label}: {}", check.statement());
     Ok(())
 }
 
