@@ -266,15 +266,25 @@ pub fn linear(
         a += jz.transpose() * (&ea * &jz);
         b += jz.transpose() * (&eb * &jz);
     }
-    // Cov_z = A⁺ B A⁺ = (A⁺ L)(A⁺ L)ᵀ with B = L Lᵀ.
-    let ea = a.self_adjoint_eigen(Side::Lower).ok()?;
+    // Cov_z = A⁺ B A⁺ = (A⁺ L)(A⁺ L)ᵀ with B = L Lᵀ, A's pseudo-inverse taken after Jacobi
+    // scaling (D = √diag A): in the parameters' own units (mm, rad, ppm/h side by side) a
+    // weak but identified direction can fall below any relative threshold and would get no
+    // variance at all; scaled, the threshold measures redundancy alone.
+    let d: Vec<f64> = (0..nf)
+        .map(|k| {
+            let v = a[(k, k)].max(0.0).sqrt();
+            if v > 0.0 { v } else { 1.0 }
+        })
+        .collect();
+    let a_scaled = Mat::from_fn(nf, nf, |r, c| a[(r, c)] / (d[r] * d[c]));
+    let ea = a_scaled.self_adjoint_eigen(Side::Lower).ok()?;
     let (sa, va) = (ea.S().column_vector(), ea.U());
     let amax = (0..nf).map(|i| sa[i].abs()).fold(0.0_f64, f64::max);
     let eb = b.self_adjoint_eigen(Side::Lower).ok()?;
     let (sb, vb) = (eb.S().column_vector(), eb.U());
-    let l = Mat::from_fn(nf, nf, |r, c| vb[(r, c)] * sb[c].max(0.0).sqrt());
-    // A⁺ L = V diag(1/s) Vᵀ L, directions below 1e-15 of the largest left out (exactly
-    // redundant: they carry no information and the gauge should have held them).
+    let l = Mat::from_fn(nf, nf, |r, c| vb[(r, c)] * sb[c].max(0.0).sqrt() / d[r]);
+    // A⁺ L = D⁻¹ V diag(1/s) Vᵀ D⁻¹ L, directions below 1e-15 of the largest left out
+    // (exactly redundant: they carry no information and the gauge should have held them).
     let vtl = va.transpose() * &l;
     let scaled = Mat::from_fn(nf, nf, |r, c| {
         if sa[r] > 1e-15 * amax {
@@ -283,7 +293,8 @@ pub fn linear(
             0.0
         }
     });
-    let fz = va * &scaled;
+    let vz = va * &scaled;
+    let fz = Mat::from_fn(nf, nf, |r, c| vz[(r, c)] / d[r]);
     let data = basis * &fz;
     let held = match gauge {
         Some(g) => Mat::from_fn(n, g.held.len(), |j, c| {
