@@ -61,6 +61,33 @@ impl CrossRow {
     }
 }
 
+/// What the measurement's parameters of `model` are ([`Model::is_measurement_param`]), in
+/// words, in the order of the layout: what cross-validation fits on a reference set.
+pub fn measurement_parts(model: &Model) -> Vec<&'static str> {
+    let mut out: Vec<&'static str> = Vec::new();
+    for j in (0..model.n_params()).filter(|&j| model.is_measurement_param(j)) {
+        let name = &model.params()[j].name;
+        let word = match name.split('.').next().unwrap_or("") {
+            "tracker" => "tracker pose",
+            "station" if name.ends_with(".offset") => "range offsets",
+            "station" => "station poses",
+            "drift" => "tool drift",
+            "reflector" => "reflector offsets",
+            "range" => "range scale",
+            "thermal" => "scale growth",
+            "locdrift" => "location drift",
+            "trackerdrift" => "tracker drift",
+            "stationdrift" => "station drift",
+            "field" => "fields over time",
+            _ => "other terms of the test",
+        };
+        if !out.contains(&word) {
+            out.push(word);
+        }
+    }
+    out
+}
+
 /// Everything the report shows.
 pub struct ReportInput<'a> {
     /// Title.
@@ -837,11 +864,12 @@ fn identifiability(p: &Page, s: &mut String) -> Result<()> {
 
 /// Cross-validation on a reference test.
 fn cross_validation(p: &Page, s: &mut String) -> Result<()> {
-    let Page { input, .. } = p;
+    let Page { input, model, .. } = p;
     if !input.cross.is_empty() {
         let _ = writeln!(
             s,
-            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test: only the measurement's parameters (tracker and station poses, reflector offsets, range scale, the test's own drift terms) are fitted there, never the machine's geometry. EMM before: the uncompensated machine with the tracker fitted rigidly, the initial EMM an identification of the reference prints. Residual % = EMM after / EMM before.</p>"
+            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test: only the measurement's parameters ({}) are fitted there, never the machine's geometry. EMM before: the uncompensated machine with the tracker fitted rigidly, the initial EMM an identification of the reference prints. Residual % = EMM after / EMM before.</p>",
+            escape(&measurement_parts(model).join(", "))
         );
         let rows: Vec<Vec<String>> = input
             .cross

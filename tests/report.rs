@@ -107,6 +107,10 @@ fn cross_validation_refits_only_the_measurement() {
     assert!(!field.is_empty() && !drift.is_empty());
     assert!(field.iter().all(|&j| !model.is_measurement_param(j)));
     assert!(drift.iter().all(|&j| model.is_measurement_param(j)));
+    assert_eq!(
+        volver::report::measurement_parts(&model),
+        ["tracker pose", "tool drift"]
+    );
 
     let effects = ["coupling=X,Z,Y,20", "thermal-drift=5,3,2"];
     let data = simulate(&m, "mpe:15,6", &effects, 3).measurements;
