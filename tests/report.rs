@@ -289,3 +289,55 @@ fn the_maps_cover_every_plane_of_the_linear_axes() {
     assert_eq!(page.matches("Error module in the ").count(), 1);
     assert!(page.contains("Error module in the X–Z plane"));
 }
+
+/// The one rule of what belongs to the measurement ([`Model::is_measurement_param`]) is what
+/// the tool point leaves out: over a grid of each machine's volume, a step of any measurement
+/// parameter leaves [`Model::tool_point`] unchanged to the bit, and a step of any other moves
+/// it somewhere, with every kind of effect the model files offer (on the gantry: drift,
+/// reflector offset, range scale, scale growth, the tracker's drift, ball screw, fields over
+/// axes and over time; on the XCFZ grinder: the location drift of C and a field over C and t).
+#[test]
+fn the_measurement_is_what_the_tool_point_leaves_out() {
+    let gantry = Model::from_toml_str(
+        gantry(),
+        &model_toml(
+            "[effects]\nthermal_drift = true\nreflector_offset = [\"R1\"]\nrange_scale = true\n\
+             thermal_scale = [\"X\"]\ntracker_drift = true\nfield = [\"X*Y\", \"Y*t\", \"Z\"]\n\
+             [[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 700.0\n",
+        ),
+        "gantry-model.toml",
+    )
+    .unwrap();
+    let xcfz = Model::from_toml_str(
+        Machine::default_xcfz(),
+        &format!(
+            "{}\n[effects]\nlocation_drift = [\"C\"]\nfield = [\"C*t\"]\n",
+            volver::core::model::DEFAULT_MODEL_TOML
+        ),
+        "xcfz-model.toml",
+    )
+    .unwrap();
+    for model in [&gantry, &xcfz] {
+        let n = model.n_params();
+        // Every parameter away from zero, so that no step meets a zero factor.
+        let params: Vec<f64> = (0..n)
+            .map(|j| model.initial_params()[j] + 1e-5 * (1.0 + (j % 7) as f64))
+            .collect();
+        let grid = volver::uncertainty::default_grid(model.machine(), 3).unwrap();
+        let tool = volver::compensation::reflector_centroid(model);
+        for (j, info) in model.params().iter().enumerate() {
+            let mut q = params.clone();
+            q[j] += 1e-3;
+            let moves = grid.positions.iter().any(|c| {
+                model.tool_point(&c.0, &tool, &q) != model.tool_point(&c.0, &tool, &params)
+            });
+            assert_eq!(
+                moves,
+                !model.is_measurement_param(j),
+                "{}: moves the tool point {moves}, measurement {}",
+                info.name,
+                model.is_measurement_param(j)
+            );
+        }
+    }
+}
