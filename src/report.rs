@@ -2,10 +2,11 @@
 //! machine, the model, the summary tables, the plots, the diagnosis and the identifiability.
 
 mod figures;
+mod truth;
 
 use crate::plot::{self, escape};
 use anyhow::Result;
-use figures::{cells, function_panels, micro, plotted_axes, table, tool_point_uncertainty};
+use figures::{cells, function_panels, measured_planes, micro, table, tool_point_uncertainty};
 use std::collections::BTreeMap;
 use std::fmt::Write;
 use volver_core::diagnose;
@@ -19,6 +20,8 @@ use volver_solvers::identifiability::analyse;
 use volver_solvers::init::init_tracker;
 use volver_solvers::strategy::Identification;
 use volver_solvers::uncertainty::{Covariance, K, PointUncertainty};
+
+pub use truth::{TruthInModel, truth_in_model};
 
 /// One fitted model revision shown in the report.
 pub struct Fit<'a> {
@@ -34,7 +37,8 @@ pub struct Fit<'a> {
 pub struct CrossRow {
     /// What the errors were identified on (and with which model).
     pub label: String,
-    /// EMM of the reference before compensation (tracker pose fitted), µm.
+    /// EMM of the reference before compensation (every error zero, the tracker's rigid fit: the
+    /// initial EMM of an identification of the reference), µm.
     pub emm_before_um: f64,
     /// EMM after compensation, µm.
     pub emm_after_um: f64,
@@ -55,6 +59,33 @@ impl CrossRow {
             residual_percent: cv.residual_percent(),
         }
     }
+}
+
+/// What the measurement's parameters of `model` are ([`Model::is_measurement_param`]), in
+/// words, in the order of the layout: what cross-validation fits on a reference set.
+pub fn measurement_parts(model: &Model) -> Vec<&'static str> {
+    let mut out: Vec<&'static str> = Vec::new();
+    for j in (0..model.n_params()).filter(|&j| model.is_measurement_param(j)) {
+        let name = &model.params()[j].name;
+        let word = match name.split('.').next().unwrap_or("") {
+            "tracker" => "tracker pose",
+            "station" if name.ends_with(".offset") => "range offsets",
+            "station" => "station poses",
+            "drift" => "tool drift",
+            "reflector" => "reflector offsets",
+            "range" => "range scale",
+            "thermal" => "scale growth",
+            "locdrift" => "location drift",
+            "trackerdrift" => "tracker drift",
+            "stationdrift" => "station drift",
+            "field" => "fields over time",
+            _ => "other terms of the test",
+        };
+        if !out.contains(&word) {
+            out.push(word);
+        }
+    }
+    out
 }
 
 /// Everything the report shows.
@@ -150,6 +181,10 @@ pub fn html(input: &ReportInput) -> Result<String> {
         options.objective,
         volver_solvers::uncertainty::NoiseModel::Residual,
     );
+    let truth = input
+        .truth
+        .map(|t| truth_in_model(model, input.data, t))
+        .transpose()?;
     let mut s = String::new();
     let page = Page {
         input,
@@ -163,6 +198,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
         before_params,
         ident,
         cov,
+        truth,
     };
     head(&page, &mut s)?;
     machine_and_model(&page, &mut s)?;
@@ -196,6 +232,8 @@ struct Page<'a> {
     before_params: Vec<f64>,
     ident: Option<volver_solvers::identifiability::Identifiability>,
     cov: Option<Covariance>,
+    /// The truth in the last fit's parameters, when known.
+    truth: Option<TruthInModel>,
 }
 
 /// The document head, the title and the notes.
@@ -491,20 +529,28 @@ fn maps(p: &Page, s: &mut String) -> Result<()> {
         cov,
         ..
     } = p;
-    // Maps and vectors.
-    if let Some((ka, kb)) = plotted_axes(problem) {
-        let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
-        let dirs = (la.direction(), lb.direction());
-        let mb = diagnose::to_machine_frame(problem, before_params, before);
-        let ma = diagnose::to_machine_frame(problem, params, after);
-        let (map_b, vec_b) = cells(problem, (ka, kb), &mb, dirs);
-        let (map_a, vec_a) = cells(problem, (ka, kb), &ma, dirs);
+    // Maps and vectors, in each plane of the linear axes the data move.
+    let planes = measured_planes(problem);
+    if !planes.is_empty() {
+        let names: Vec<String> = planes
+            .iter()
+            .map(|&(a, b)| format!("{}–{}", m.axes()[a].axis, m.axes()[b].axis))
+            .collect();
         let _ = writeln!(
             s,
-            "<h2>Error over the measured volume</h2><p>Mean error module per {la}–{lb} position (over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.</p>"
+            "<h2>Error over the measured volume</h2><p>Mean error module per position in each plane of the linear axes ({}; over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.</p>",
+            names.join(", ")
         );
+    }
+    let mb = diagnose::to_machine_frame(problem, before_params, before);
+    let ma = diagnose::to_machine_frame(problem, params, after);
+    for (ka, kb) in planes {
+        let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
+        let dirs = (la.direction(), lb.direction());
+        let (map_b, vec_b) = cells(problem, (ka, kb), &mb, dirs);
+        let (map_a, vec_a) = cells(problem, (ka, kb), &ma, dirs);
         s.push_str(&plot::colour_maps(
-            "Error module (µm)",
+            &format!("Error module in the {la}–{lb} plane (µm)"),
             &format!("{la} (mm)"),
             &format!("{lb} (mm)"),
             &[
@@ -539,21 +585,26 @@ fn maps(p: &Page, s: &mut String) -> Result<()> {
 /// The identified error functions with their U bands, the constants and the implied squareness.
 fn error_functions(p: &Page, s: &mut String) -> Result<()> {
     let Page {
-        input,
         last,
         model,
         params,
         cov,
+        truth,
         ..
     } = p;
     // Error functions.
     let _ = writeln!(
         s,
         "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is its expanded uncertainty U (k = 2): the data's (linearised, σ from the residuals) and a prior of 100 µm or 100 µrad RMS on each combination the data cannot identify (held by the gauge at the reference){}. A panel titled \"not determined\" shows a function the data do not fix: its value is the gauge's choice, not a measurement.</p>",
-        if input.truth.is_some() {
-            "; the dashed line is the truth"
-        } else {
-            ""
+        match truth {
+            Some(t) => format!(
+                "; the dashed line is the truth in this model's parameters (its squareness rule \
+                 \"{}\", reference and gauge: the model fitted to the truth's noise-free points at \
+                 these commands; what the model cannot express of the truth: EMM {:.3} µm)",
+                model.spec().squareness,
+                t.misfit_um
+            ),
+            None => String::new(),
         }
     );
     s.push_str(&plot::error_functions(
@@ -563,7 +614,7 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
             params,
             cov.as_ref(),
             last.id.gauge.as_ref(),
-            input.truth,
+            truth.as_ref().map(|t| (*model, t.params.as_slice())),
         ),
     ));
     let consts: Vec<Vec<String>> = model
@@ -594,8 +645,13 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
 /// The squareness the model implies, with U (k = 2).
 fn squareness(p: &Page, s: &mut String) -> Result<()> {
     let Page {
-        model, params, cov, ..
+        model,
+        params,
+        cov,
+        truth,
+        ..
     } = p;
+    let true_sq = truth.as_ref().map(|t| model.squareness(&t.params));
     // Each implied squareness is linear in the parameters: its standard uncertainty from the
     // gradient (one unit step per parameter) and the covariance.
     let implied = model.squareness(params);
@@ -618,10 +674,18 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
                     .collect();
                 K * c.u(&g)
             });
-            vec![
+            let mut row = vec![
                 id.to_string(),
                 format!("{:.3} ± {:.3} µrad", v * 1e6, u * 1e6),
-            ]
+            ];
+            if let Some(t) = &true_sq {
+                row.push(
+                    t.iter()
+                        .find(|(i, _)| i == id)
+                        .map_or("–".into(), |(_, w)| format!("{:.3} µrad", w * 1e6)),
+                );
+            }
+            row
         })
         .collect();
     if !sq.is_empty() {
@@ -630,7 +694,12 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
             "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}):</p>",
             model.spec().squareness
         );
-        s.push_str(&table(&["squareness", "value ± U (k = 2)"], &sq));
+        let head: &[&str] = if true_sq.is_some() {
+            &["squareness", "value ± U (k = 2)", "truth (in this model)"]
+        } else {
+            &["squareness", "value ± U (k = 2)"]
+        };
+        s.push_str(&table(head, &sq));
     }
     Ok(())
 }
@@ -795,11 +864,12 @@ fn identifiability(p: &Page, s: &mut String) -> Result<()> {
 
 /// Cross-validation on a reference test.
 fn cross_validation(p: &Page, s: &mut String) -> Result<()> {
-    let Page { input, .. } = p;
+    let Page { input, model, .. } = p;
     if !input.cross.is_empty() {
         let _ = writeln!(
             s,
-            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test; only the tracker pose is fitted there. Residual % = EMM after / EMM before.</p>"
+            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test: only the measurement's parameters ({}) are fitted there, never the machine's geometry. EMM before: the uncompensated machine with the tracker fitted rigidly, the initial EMM an identification of the reference prints. Residual % = EMM after / EMM before.</p>",
+            escape(&measurement_parts(model).join(", "))
         );
         let rows: Vec<Vec<String>> = input
             .cross

@@ -393,6 +393,28 @@ impl Model {
         }
     }
 
+    /// Whether parameter `j` describes the measurement, not the machine: what
+    /// [`Model::tool_point`] leaves out or takes at the test's start. The set-up (the tracker's
+    /// and every station's pose and range offset, the reflectors' offsets, the range scale) and
+    /// every term that changes with time during one test (tool drift, scale growth, location
+    /// drift, the tracker's and stations' drift, a field over `t`: each zero at the start).
+    /// The machine's geometry is the rest: the ISO 230 errors, ball-screw errors and fields over
+    /// axes alone. Cross-validation refits exactly these on a reference test, and compensation
+    /// uses exactly the others.
+    ///
+    /// ```
+    /// let model = volver_core::model::Model::default_xcfz();
+    /// let t = model.tracker_start();
+    /// assert!(model.is_measurement_param(t));
+    /// assert!(!model.is_measurement_param(0));
+    /// ```
+    ///
+    /// # Panics
+    /// When `j >= n_params()`.
+    pub fn is_measurement_param(&self, j: usize) -> bool {
+        matches!(self.role(j), Role::Measurement | Role::Thermal)
+    }
+
     /// The linear equality constraints.
     pub fn constraints(&self) -> &Constraints {
         &self.constraints

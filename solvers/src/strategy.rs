@@ -173,13 +173,19 @@ pub enum ErrorScope {
     Linear,
     /// Errors of rotary axes.
     Rotary,
-    /// None: only the tracker pose (and `other` effects).
+    /// None: only the measurement's parameters ([`Model::is_measurement_param`]: the tracker's
+    /// and stations' poses, reflector offsets, range scale, the test's drift terms), never the
+    /// machine's geometry.
     None,
 }
 
-/// Whether parameter `info` of `model` is an error of the given kind of axis; the tracker and
-/// `other` parameters are always eligible.
-fn eligible(model: &Model, info: &ParamInfo, errors: ErrorScope) -> bool {
+/// Whether parameter `j` (`info`) of `model` is an error of the given kind of axis; the tracker
+/// and `other` parameters are always eligible, but for [`ErrorScope::None`], which takes the
+/// measurement's parameters alone ([`Model::is_measurement_param`]).
+fn eligible(model: &Model, j: usize, info: &ParamInfo, errors: ErrorScope) -> bool {
+    if errors == ErrorScope::None {
+        return model.is_measurement_param(j);
+    }
     if matches!(info.group, Group::Tracker | Group::Other) {
         return true;
     }
@@ -273,7 +279,8 @@ pub fn identify_errors(
     let eligible_count = model
         .params()
         .iter()
-        .filter(|info| eligible(model, info, errors))
+        .enumerate()
+        .filter(|(j, info)| eligible(model, *j, info, errors))
         .count();
     let free = eligible_count.saturating_sub(model.constraints().rows.len());
     // Distinct poses only: a point measured twice adds no equation about the machine.
@@ -302,8 +309,8 @@ pub fn identify_errors(
     let mut at_p: Option<Evaluation> = None;
     'loops: for pass in 0..strategy.subloops {
         for groups in strategy.phasing.phases() {
-            let free = |info: &ParamInfo| {
-                eligible(model, info, errors)
+            let free = |j: usize, info: &ParamInfo| {
+                eligible(model, j, info, errors)
                     && (matches!(info.group, Group::Tracker | Group::Other)
                         || groups.contains(&info.group))
             };
@@ -313,7 +320,7 @@ pub fn identify_errors(
             } else {
                 names.join("+")
             };
-            let task = Task::holding(problem.clone(), |_, info| !free(info), &p, &label);
+            let task = Task::holding(problem.clone(), |j, info| !free(j, info), &p, &label);
             // The phase's own gauge: its free errors' reference is zero (the held ones stay
             // where the phase holds them), the tracker's the rigid fit to that; the directions
             // are those the design cannot identify there.
@@ -378,11 +385,16 @@ pub fn identify_errors(
     if phases.len() > 1 && !termination.failed() && gauge.is_some() {
         let base = Task::holding(
             problem.clone(),
-            |_, info| !eligible(model, info, errors),
+            |j, info| !eligible(model, j, info, errors),
             &p,
             "gauge",
         );
-        let reference = gauge_reference(&problem, &p, |info| eligible(model, info, errors), false);
+        let reference = gauge_reference(
+            &problem,
+            &p,
+            |j, info| eligible(model, j, info, errors),
+            false,
+        );
         gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
         match &gauge {
             Some(g) => {
@@ -402,7 +414,7 @@ pub fn identify_errors(
 fn gauge_reference(
     problem: &Problem,
     p: &[f64],
-    free: impl Fn(&ParamInfo) -> bool,
+    free: impl Fn(usize, &ParamInfo) -> bool,
     fitted: bool,
 ) -> Vec<f64> {
     let model = problem.model();
@@ -410,7 +422,7 @@ fn gauge_reference(
     let mut reference = p.to_vec();
     let mut moved = false;
     for (j, info) in model.params().iter().enumerate() {
-        if free(info) && info.group != Group::Tracker {
+        if free(j, info) && info.group != Group::Tracker {
             moved |= reference[j].to_bits() != initial_params[j].to_bits();
             reference[j] = initial_params[j];
         }
@@ -563,8 +575,8 @@ pub fn independent(
         .iter()
         .enumerate()
         .map(|(j, info)| {
-            if eligible(model, info, ErrorScope::Linear)
-                && !eligible(model, info, ErrorScope::Rotary)
+            if eligible(model, j, info, ErrorScope::Linear)
+                && !eligible(model, j, info, ErrorScope::Rotary)
             {
                 a.params[j]
             } else {
@@ -608,8 +620,12 @@ pub fn combined(
 }
 
 /// Table 12: the error left in a reference set when the machine is compensated with `params`.
-/// Only the tracker pose is fitted on the reference set (rigid fit, then identified with every
-/// error held); `initial` is the uncompensated machine (every error zero) seen the same way.
+/// Only the measurement's parameters ([`Model::is_measurement_param`]: the tracker's and
+/// stations' poses, reflector offsets, range scale, the reference test's own drift terms) are
+/// fitted on the reference set, from the model's initial values; the machine's geometry keeps
+/// `params`' values to the bit. The result's `initial` is the uncompensated machine as
+/// [`identify`] first sees the reference set (every error zero, the tracker's rigid fit), so
+/// that the baseline is the initial EMM an identification of the reference would print.
 pub fn cross_validate(
     solver: &dyn Solver,
     reference: Problem,
@@ -617,28 +633,28 @@ pub fn cross_validate(
     options: &Options,
     observer: &mut dyn Observer,
 ) -> Identification {
-    let strategy = Strategy::default();
-    let mut uncompensated = reference.model().initial_params();
-    let t = reference.model().tracker_start();
-    uncompensated[t..t + 6].copy_from_slice(&params[t..t + 6]);
-    let before = identify_errors(
-        solver,
-        reference.clone(),
-        &uncompensated,
-        ErrorScope::None,
-        &strategy,
-        options,
-        observer,
-    );
+    let model = reference.model();
+    let initial = model.initial_params();
+    let uncompensated = init_tracker(&reference, &initial).unwrap_or_else(|_| initial.clone());
+    let before = evaluate(&reference, &uncompensated);
+    let start: Vec<f64> = (0..params.len())
+        .map(|j| {
+            if model.is_measurement_param(j) {
+                initial[j]
+            } else {
+                params[j]
+            }
+        })
+        .collect();
     let mut after = identify_errors(
         solver,
         reference,
-        params,
+        &start,
         ErrorScope::None,
-        &strategy,
+        &Strategy::default(),
         options,
         observer,
     );
-    after.initial = before.reached;
+    after.initial = before;
     after
 }

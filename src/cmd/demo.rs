@@ -380,12 +380,13 @@ fn cross_validation(
         cross.push(report::CrossRow::new(label.to_string(), &problem, &cv));
     }
     println!(
-        "\n5. Cross-validation on an independent {} (new noise), tracker pose fitted only:",
+        "\n5. Cross-validation on an independent {} (new noise), only the measurement fitted ({}):",
         if setup.xcfz() {
             "test 4"
         } else {
             "run of the same plan"
-        }
+        },
+        report::measurement_parts(model2).join(", ")
     );
     for c in &cross {
         println!(

@@ -51,28 +51,39 @@ pub(super) fn cells(
     (map, arrows)
 }
 
-/// The two linear axes with the most distinct positions in the data (chain positions).
-pub(super) fn plotted_axes(problem: &Problem) -> Option<(usize, usize)> {
-    let m = problem.model().machine();
-    let mut counts: Vec<(usize, usize)> = (0..m.axes().len())
-        .filter(|&k| !m.axes()[k].axis.is_rotary())
-        .map(|k| {
-            let mut v: Vec<i64> = problem
-                .data()
-                .points
-                .iter()
-                .map(|p| (p.commands.0[k] * 1e3).round() as i64)
-                .collect();
-            v.sort_unstable();
-            v.dedup();
-            (v.len(), k)
-        })
+/// Every plane of two linear axes that `moved` accepts (chain indices `(a, b)`), ordered by
+/// the axes' names: X–Y, X–Z, Y–Z as the machine has them.
+pub(super) fn planes(
+    m: &volver_core::machine::Machine,
+    moved: impl Fn(usize) -> bool,
+) -> Vec<(usize, usize)> {
+    let mut linear: Vec<usize> = (0..m.axes().len())
+        .filter(|&k| !m.axes()[k].axis.is_rotary() && moved(k))
         .collect();
-    counts.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
-    match counts[..] {
-        [(_, a), (_, b), ..] => Some((a.min(b), a.max(b))),
-        _ => None,
+    linear.sort_by_key(|&k| m.axes()[k].axis);
+    let mut out = Vec::new();
+    for (i, &a) in linear.iter().enumerate() {
+        for &b in &linear[i + 1..] {
+            out.push((a, b));
+        }
     }
+    out
+}
+
+/// The planes of the linear axes the data move (at least two distinct positions of each).
+pub(super) fn measured_planes(problem: &Problem) -> Vec<(usize, usize)> {
+    let m = problem.model().machine();
+    planes(m, |k| {
+        let mut v: Vec<i64> = problem
+            .data()
+            .points
+            .iter()
+            .map(|p| (p.commands.0[k] * 1e3).round() as i64)
+            .collect();
+        v.sort_unstable();
+        v.dedup();
+        v.len() > 1
+    })
 }
 
 /// The error functions of a fit against their axis positions, with bands of their expanded
@@ -175,7 +186,7 @@ pub(super) fn table(head: &[&str], rows: &[Vec<String>]) -> String {
 
 /// The section on the uncertainty of the compensated tool point: U (k = 2, the largest of its
 /// three coordinates) over the default grid of the volume (5 positions per axis), after the
-/// set-up's rigid transform and raw, as colour maps over the two most-measured linear axes
+/// set-up's rigid transform and raw, as colour maps in each plane of the linear axes
 /// (the largest U over the other axes' positions), with the worst held combination named.
 pub(super) fn tool_point_uncertainty(
     s: &mut String,
@@ -258,8 +269,8 @@ pub(super) fn u_verdict(
     }
 }
 
-/// Colour maps of the tool point's U over the two most-measured linear axes (the largest over
-/// the other axes' positions), after the transform and raw.
+/// Colour maps of the tool point's U in each plane of the linear axes that have a travel (the
+/// largest over the other axes' positions), after the transform and raw.
 pub(super) fn u_maps(
     s: &mut String,
     m: &volver_core::machine::Machine,
@@ -267,40 +278,36 @@ pub(super) fn u_maps(
     aligned: &[PointUncertainty],
     raw: &[PointUncertainty],
 ) {
-    let Some((ka, kb)) = (0..m.axes().len())
-        .filter(|&k| !m.axes()[k].axis.is_rotary() && m.axes()[k].max > m.axes()[k].min)
-        .collect::<Vec<_>>()
-        .get(..2)
-        .map(|v| (v[0], v[1]))
-    else {
-        return;
-    };
-    let cells = |v: &[PointUncertainty]| {
-        let mut out: Vec<Cell> = Vec::new();
-        for (c, p) in commands.iter().zip(v) {
-            let (x, y) = (
-                m.axes()[ka].to_file_units(c.0[ka]),
-                m.axes()[kb].to_file_units(c.0[kb]),
-            );
-            let u = p.u95_max_mm() * 1e3;
-            match out
-                .iter_mut()
-                .find(|q| (q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9)
-            {
-                Some(q) => q.a = q.a.max(u),
-                None => out.push(Cell { x, y, a: u, b: 0.0 }),
+    for (ka, kb) in planes(m, |k| m.axes()[k].max > m.axes()[k].min) {
+        let cells = |v: &[PointUncertainty]| {
+            let mut out: Vec<Cell> = Vec::new();
+            for (c, p) in commands.iter().zip(v) {
+                let (x, y) = (
+                    m.axes()[ka].to_file_units(c.0[ka]),
+                    m.axes()[kb].to_file_units(c.0[kb]),
+                );
+                let u = p.u95_max_mm() * 1e3;
+                match out
+                    .iter_mut()
+                    .find(|q| (q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9)
+                {
+                    Some(q) => q.a = q.a.max(u),
+                    None => out.push(Cell { x, y, a: u, b: 0.0 }),
+                }
             }
-        }
-        out
-    };
-    let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
-    s.push_str(&plot::colour_maps(
-        "U (k = 2) of the compensated tool point, largest over the other axes (µm)",
-        &format!("{la} (mm)"),
-        &format!("{lb} (mm)"),
-        &[
-            ("after the set-up's rigid transform", cells(aligned)),
-            ("raw, workpiece frame", cells(raw)),
-        ],
-    ));
+            out
+        };
+        let (la, lb) = (m.axes()[ka].axis, m.axes()[kb].axis);
+        s.push_str(&plot::colour_maps(
+            &format!(
+                "U (k = 2) of the compensated tool point in the {la}–{lb} plane, largest over the other axes (µm)"
+            ),
+            &format!("{la} (mm)"),
+            &format!("{lb} (mm)"),
+            &[
+                ("after the set-up's rigid transform", cells(aligned)),
+                ("raw, workpiece frame", cells(raw)),
+            ],
+        ));
+    }
 }
