@@ -246,6 +246,7 @@ fn head(p: &Page, s: &mut String) -> Result<()> {
          h1{{font-size:1.6em}} h2{{border-bottom:1px solid #ccc;margin-top:2em}}\
          table{{border-collapse:collapse;margin:0.6em 0}} td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
          th{{background:#eef2f7}} td:first-child{{text-align:left}} .note{{background:#f6f8fa;padding:0.6em 1em;border-left:4px solid #4a7ab5}}\
+         .warning{{background:#fdf3f2;padding:0.6em 1em;border-left:4px solid #c0392b}}\
          svg{{max-width:100%;height:auto}}</style></head><body>\n<h1>{}</h1>\n",
         escape(&input.title),
         escape(&input.title)
@@ -590,9 +591,15 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
         params,
         cov,
         truth,
+        problem,
         ..
     } = p;
-    // Error functions.
+    // Whether the bands mean anything: the fit against the noise.
+    let check = crate::uncertainty::check_fit(
+        problem,
+        &last.id,
+        volver_solvers::uncertainty::NoiseModel::Residual,
+    );
     let _ = writeln!(
         s,
         "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is its expanded uncertainty U (k = 2): the data's (linearised, σ from the residuals) and a prior of 100 µm or 100 µrad RMS on each combination the data cannot identify (held by the gauge at the reference){}. A panel titled \"not determined\" shows a function the data do not fix: its value is the gauge's choice, not a measurement.</p>",
@@ -606,6 +613,21 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
             ),
             None => String::new(),
         }
+    );
+    let _ = writeln!(
+        s,
+        "<p{}>{}{}</p>",
+        if check.above_noise {
+            " class=\"warning\""
+        } else {
+            ""
+        },
+        if check.above_noise {
+            "<strong>These bands do not hold:</strong> "
+        } else {
+            ""
+        },
+        plot::escape(&check.statement())
     );
     s.push_str(&plot::error_functions(
         "Component errors",

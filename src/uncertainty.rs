@@ -471,6 +471,42 @@ pub fn check_fit(
     model_check(problem, id.reached.stats.emm_um, free, spec.as_ref())
 }
 
+/// The results file of the fit `id` of `model` to `data`, carrying its linearised uncertainty
+/// (the gauge's rule, σ from the residuals or `noise`) and its check against the noise, as
+/// `identify --out` writes it: what `compensate` and `tables` vouch for the errors with.
+pub fn results_with_uncertainty(
+    model: &Model,
+    data: &volver_core::measure::MeasurementSet,
+    id: &volver_solvers::strategy::Identification,
+    noise: NoiseModel,
+) -> Result<volver_core::results::ResultsFile> {
+    let problem = volver_core::problem::Problem::new(model, data)?;
+    let mut results = volver_core::results::ResultsFile::from_model(model, &id.params)?;
+    let cov = volver_solvers::uncertainty::linear(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        volver_solvers::Options::default().objective,
+        noise,
+    );
+    if let Some(cov) = cov {
+        let held = id
+            .gauge
+            .as_ref()
+            .map(|g| {
+                (0..g.held.len())
+                    .map(|c| combination_text(model, g, c))
+                    .collect()
+            })
+            .unwrap_or_default();
+        let rule = crate::identification::gauge_rule(None, id);
+        let mut record = cov.to_record(&rule, held);
+        record.model_check = Some(check_fit(&problem, id, noise));
+        results.uncertainty = Some(record);
+    }
+    Ok(results)
+}
+
 /// The mean ratio of Monte Carlo's U to the linearised data part of `us` over every coordinate
 /// of every grid command (`mc`: three values per command, the same order) where the linearised U
 /// exceeds 0.1 % of its largest: where it vanishes (the tool point at the reference of every

@@ -484,6 +484,21 @@ fn u_is_refused_where_the_fit_is_above_the_noise() {
         let err = String::from_utf8_lossy(&o.stderr).to_string();
         assert_eq!(!o.status.success(), above, "{name}: {err}");
         if above {
+            // The report's results file carries the same uncertainty and check: `tables`
+            // refuses it alike, and the report says the bands do not hold.
+            let html = sim.join("report.html");
+            let o = common::volver(&[
+                "report",
+                "--data",
+                data.to_str().unwrap(),
+                "--out",
+                html.to_str().unwrap(),
+            ]);
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let page = std::fs::read_to_string(&html).unwrap();
+            assert!(page.contains("These bands do not hold"));
+            let r = volver::core::results::ResultsFile::load(&sim.join("report.json")).unwrap();
+            assert!(r.uncertainty.unwrap().model_check.unwrap().above_noise);
             assert!(
                 err.contains("U is not valid here") && err.contains("volver diagnose"),
                 "{err}"

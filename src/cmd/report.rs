@@ -86,7 +86,13 @@ pub fn run(a: ReportArgs) -> Result<()> {
             id,
         });
     }
-    let (last_model, last_params) = (last_model.clone(), last_params.clone());
+    let last_id = id2.as_ref().unwrap_or(&id1);
+    let results = volver::uncertainty::results_with_uncertainty(
+        last_model,
+        &data,
+        last_id,
+        volver::solvers::uncertainty::NoiseModel::Residual,
+    )?;
     let input = volver::report::ReportInput {
         title: format!("volver report — {}", a.inputs.data.display()),
         data_label: a.inputs.data.display().to_string(),
@@ -102,7 +108,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         max_u_um: a.max_u_um,
     };
     let html = volver::report::html(&input)?;
-    write_outputs(&a, html, &last_model, &last_params)
+    write_outputs(&a, html, &results)
 }
 
 /// `model` fitted to `data` with the native engine; `Err` naming `what` when the fit fails.
@@ -177,16 +183,11 @@ fn claim_outputs(a: &ReportArgs) -> Result<()> {
 }
 
 /// Writes the report and the final fit's results file.
-fn write_outputs(
-    a: &ReportArgs,
-    html: String,
-    last_model: &volver::core::model::Model,
-    last_params: &[f64],
-) -> Result<()> {
+fn write_outputs(a: &ReportArgs, html: String, results: &ResultsFile) -> Result<()> {
     let results_path = results_path(a);
     volver::core::fsio::write_atomic(&a.out, html)
         .with_context(|| format!("writing {}", a.out.display()))?;
-    ResultsFile::from_model(last_model, last_params)?
+    results
         .save(&results_path)
         .context("writing the results file")?;
     println!(
