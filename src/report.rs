@@ -597,7 +597,7 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
     // Whether the bands mean anything: the fit against the noise.
     let check = crate::uncertainty::check_fit(
         problem,
-        &last.id,
+        last.id,
         volver_solvers::uncertainty::NoiseModel::Residual,
     );
     let _ = writeln!(
