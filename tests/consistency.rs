@@ -25,17 +25,8 @@ use volver::core::machine::{Commands, Machine, Observes, StationSpec};
 use volver::core::model::{DEFAULT_MODEL_TOML, EffectsSpec, Model, Role};
 use volver::core::tables::{ErrorTables, uncarried};
 
-/// A small deterministic generator (xorshift) so the test needs no dependency.
-struct Rng(u64);
-impl Rng {
-    /// Uniform on −1 … 1.
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
-}
+mod common;
+use common::Rng;
 
 /// One row of the matrix: a model with one kind of parameter, and the parts tables cannot carry.
 struct Case {
@@ -419,8 +410,6 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
         }
     }
 }
-
-mod common;
 
 /// The uncertainty cell where the model is wrong: a fit above the noise (test 4 with a second
 /// harmonic of C the paper's model lacks) records it; `tables` (and `compensate`, through the

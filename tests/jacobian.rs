@@ -10,16 +10,8 @@ use volver::core::iso::ErrorId;
 use volver::core::machine::{Commands, Machine};
 use volver::core::model::Model;
 
-/// A small deterministic generator (xorshift) so the test needs no dependency.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
-}
+mod common;
+use common::Rng;
 
 /// An error model listing every component error of every axis with bases taken in turn, plus
 /// every location/squareness error.

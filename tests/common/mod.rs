@@ -8,6 +8,21 @@ pub fn volver(args: &[&str]) -> std::process::Output {
         .expect("volver runs")
 }
 
+/// A small deterministic generator (xorshift) so the tests need no dependency.
+#[allow(dead_code)]
+pub struct Rng(pub u64);
+
+#[allow(dead_code)]
+impl Rng {
+    /// Uniform on −1 … 1.
+    pub fn next(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+}
+
 /// Runs `volver simulate --out OUT ARGS…` and checks it succeeded (not every test uses it).
 #[allow(dead_code)]
 pub fn simulate(out: &str, args: &[&str]) {
