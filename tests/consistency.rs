@@ -241,6 +241,7 @@ fn the_tool_points_jacobian_is_exact_for_every_kind() {
         let n = model.n_params();
         let mut jac = vec![0.0; 3 * n];
         let mut moved = vec![false; n];
+        let mut worst: f64 = 0.0;
         for c in commands_of(model, &mut rng, 4) {
             for tool in [[0.0, 0.0, -120.0], [35.0, -20.0, 60.0]] {
                 let t = model.tool_point_with_jacobian(&c, &tool, &p, &mut jac);
@@ -262,6 +263,7 @@ fn the_tool_points_jacobian_is_exact_for_every_kind() {
                     for r in 0..3 {
                         let fd = (a[r] - b[r]) / (2.0 * h);
                         let ad = jac[r * n + j];
+                        worst = worst.max((fd - ad).abs() / fd.abs().max(ad.abs()).max(1.0));
                         assert!(
                             (fd - ad).abs() <= 1e-6 * fd.abs().max(ad.abs()).max(1.0),
                             "{}: {} coordinate {r}: exact {ad} against central difference {fd}",
@@ -302,6 +304,10 @@ fn the_tool_points_jacobian_is_exact_for_every_kind() {
                 ),
             }
         }
+        println!(
+            "jacobian | {}: largest relative departure from central differences {worst:.1e}",
+            case.name
+        );
     }
 }
 
@@ -315,6 +321,7 @@ fn predict_is_the_compensations_forward_model_for_every_kind() {
         let p = params_of(model, &mut rng);
         let tool = volver::compensation::reflector_centroid(model);
         let comp = volver::compensation::compensator(model, &p, tool, None, None).unwrap();
+        let mut worst: f64 = 0.0;
         for c in commands_of(model, &mut rng, 3) {
             let mut inner = c;
             for (k, ax) in model.machine().axes().iter().enumerate() {
@@ -324,6 +331,7 @@ fn predict_is_the_compensations_forward_model_for_every_kind() {
             let out = comp.compensate(&inner).unwrap();
             let nominal = comp.nominal_point(&inner);
             let predicted = model.tool_point(&out.commands.0, &tool, &p);
+            worst = worst.max(distance(predicted, nominal));
             assert!(
                 distance(predicted, nominal) < 1e-9,
                 "{}: predict at the compensated command is {:.3e} mm off the nominal point",
@@ -336,6 +344,10 @@ fn predict_is_the_compensations_forward_model_for_every_kind() {
                 case.name
             );
         }
+        println!(
+            "compensate | {}: predict at the compensated commands {worst:.1e} mm off the nominal",
+            case.name
+        );
     }
 }
 
@@ -357,6 +369,7 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
             }
         }
         let tool = [10.0, -25.0, -90.0];
+        let mut worst: f64 = 0.0;
         for _ in 0..6 {
             // A command at the tables' positions: each axis at one of its table's rows.
             let mut c = commands_of(model, &mut rng, 1)[0];
@@ -372,6 +385,7 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
             }
             let from_tables = tables.tool_point(model, &c, &tool).unwrap();
             let expected = model.tool_point(&c.0, &tool, &carried);
+            worst = worst.max(distance(from_tables, expected));
             assert!(
                 distance(from_tables, expected) < 1e-9,
                 "{}: the tables' tool point is {:.3e} mm off predict's without the fields",
@@ -408,6 +422,16 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
                 u.largest_mm
             );
         }
+        let sizes: Vec<String> = parts
+            .iter()
+            .map(|u| format!("{} {:.1} µm", u.name, u.largest_mm * 1e3))
+            .collect();
+        println!(
+            "tables | {}: the tables' tool point {worst:.1e} mm off predict's less the fields; \
+             not carried: [{}]",
+            case.name,
+            sizes.join(", ")
+        );
     }
 }
 
