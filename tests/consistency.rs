@@ -65,101 +65,97 @@ fn cases() -> Vec<Case> {
             uncarried: vec![],
         });
     }
-    let effects: [(&str, Machine, &str, Vec<&'static str>); 15] = [
-        (
-            "thermal drift",
-            xcfz.clone(),
-            "thermal_drift = true",
-            vec![],
-        ),
-        (
-            "reflector offset",
-            xcfz.clone(),
-            "reflector_offset = [\"R1\"]",
-            vec![],
-        ),
-        ("range scale", xcfz.clone(), "range_scale = true", vec![]),
-        (
-            "ball screw",
-            xcfz.clone(),
-            "[[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 700.0",
-            vec![],
-        ),
-        (
-            "thermal scale",
-            xcfz.clone(),
-            "thermal_scale = [\"X\"]",
-            vec!["thermal scale of X"],
-        ),
-        (
-            "location drift",
-            xcfz.clone(),
-            "location_drift = [\"C\"]",
-            vec!["location drift of C"],
-        ),
-        (
-            "tracker drift",
-            xcfz.clone(),
-            "tracker_drift = true",
-            vec![],
-        ),
-        (
-            "stations with their drift",
-            stations.clone(),
-            "station_drift = true",
-            vec![],
-        ),
-        (
-            "field over a linear axis",
-            xcfz.clone(),
-            "field = [\"X\"]",
-            vec!["field X"],
-        ),
-        (
-            "field over a rotary axis",
-            xcfz.clone(),
-            "field = [\"C\"]",
-            vec!["field C"],
-        ),
-        ("field over time", xcfz.clone(), "field = [\"t\"]", vec![]),
-        (
-            "field over two axes",
-            xcfz.clone(),
-            "field = [\"X*Z\"]",
-            vec!["field X*Z"],
-        ),
-        (
-            "field over a rotary and a linear axis",
-            xcfz.clone(),
-            "field = [\"C*Z\"]",
-            vec!["field C*Z"],
-        ),
-        (
-            "field over an axis and time",
-            xcfz.clone(),
-            "field = [\"X*t\"]",
-            vec!["field X*t"],
-        ),
-        (
-            "every effect at once",
-            stations,
-            "thermal_drift = true\nreflector_offset = [\"R2\"]\nrange_scale = true\n\
-             thermal_scale = [\"Z\"]\nlocation_drift = [\"C\"]\ntracker_drift = true\n\
-             station_drift = true\nfield = [\"X*Z\", \"C\"]\n\
-             [[effects.ball_screw]]\naxis = \"Z\"\nperiod_mm = 300.0",
-            vec![
-                "thermal scale of Z",
-                "location drift of C",
-                "field X*Z",
-                "field C",
-            ],
-        ),
-    ];
-    for (name, machine, text, unc) in effects {
-        out.push(xcfz_with(name, machine, text, unc));
+    for &(name, on_stations, text, unc) in EFFECT_ROWS {
+        let machine = if on_stations { &stations } else { &xcfz };
+        out.push(xcfz_with(name, machine.clone(), text, unc.to_vec()));
     }
     out
 }
+
+/// The effect rows: a name, whether the machine has stations (else the XCFZ tracker), the
+/// `[effects]` lines and the parts tables cannot carry.
+type EffectRow = (&'static str, bool, &'static str, &'static [&'static str]);
+
+const EFFECT_ROWS: &[EffectRow] = &[
+    ("thermal drift", false, "thermal_drift = true", &[]),
+    (
+        "reflector offset",
+        false,
+        "reflector_offset = [\"R1\"]",
+        &[],
+    ),
+    ("range scale", false, "range_scale = true", &[]),
+    (
+        "ball screw",
+        false,
+        "[[effects.ball_screw]]\naxis = \"X\"\nperiod_mm = 700.0",
+        &[],
+    ),
+    (
+        "thermal scale",
+        false,
+        "thermal_scale = [\"X\"]",
+        &["thermal scale of X"],
+    ),
+    (
+        "location drift",
+        false,
+        "location_drift = [\"C\"]",
+        &["location drift of C"],
+    ),
+    ("tracker drift", false, "tracker_drift = true", &[]),
+    (
+        "stations with their drift",
+        true,
+        "station_drift = true",
+        &[],
+    ),
+    (
+        "field over a linear axis",
+        false,
+        "field = [\"X\"]",
+        &["field X"],
+    ),
+    (
+        "field over a rotary axis",
+        false,
+        "field = [\"C\"]",
+        &["field C"],
+    ),
+    ("field over time", false, "field = [\"t\"]", &[]),
+    (
+        "field over two axes",
+        false,
+        "field = [\"X*Z\"]",
+        &["field X*Z"],
+    ),
+    (
+        "field over a rotary and a linear axis",
+        false,
+        "field = [\"C*Z\"]",
+        &["field C*Z"],
+    ),
+    (
+        "field over an axis and time",
+        false,
+        "field = [\"X*t\"]",
+        &["field X*t"],
+    ),
+    (
+        "every effect at once",
+        true,
+        "thermal_drift = true\nreflector_offset = [\"R2\"]\nrange_scale = true\n\
+             thermal_scale = [\"Z\"]\nlocation_drift = [\"C\"]\ntracker_drift = true\n\
+             station_drift = true\nfield = [\"X*Z\", \"C\"]\n\
+             [[effects.ball_screw]]\naxis = \"Z\"\nperiod_mm = 300.0",
+        &[
+            "thermal scale of Z",
+            "location drift of C",
+            "field X*Z",
+            "field C",
+        ],
+    ),
+];
 
 /// Every field of [`EffectsSpec`] is set in some case. Destructured without `..`: a new effect
 /// does not compile here until the matrix covers it.
@@ -497,21 +493,7 @@ fn u_is_refused_where_the_fit_is_above_the_noise() {
         let err = String::from_utf8_lossy(&o.stderr).to_string();
         assert_eq!(!o.status.success(), above, "{name}: {err}");
         if above {
-            // The report's results file carries the same uncertainty and check: `tables`
-            // refuses it alike, and the report says the bands do not hold.
-            let html = sim.join("report.html");
-            let o = common::volver(&[
-                "report",
-                "--data",
-                data.to_str().unwrap(),
-                "--out",
-                html.to_str().unwrap(),
-            ]);
-            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            let page = std::fs::read_to_string(&html).unwrap();
-            assert!(page.contains("These bands do not hold"));
-            let r = volver::core::results::ResultsFile::load(&sim.join("report.json")).unwrap();
-            assert!(r.uncertainty.unwrap().model_check.unwrap().above_noise);
+            report_refuses_too(&sim, &data);
             assert!(
                 err.contains("U is not valid here") && err.contains("volver diagnose"),
                 "{err}"
@@ -522,6 +504,24 @@ fn u_is_refused_where_the_fit_is_above_the_noise() {
         }
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The report's results file carries the same uncertainty and check as `identify`'s: its
+/// page says the bands do not hold, and its file records the fit above the noise.
+fn report_refuses_too(sim: &std::path::Path, data: &std::path::Path) {
+    let html = sim.join("report.html");
+    let o = common::volver(&[
+        "report",
+        "--data",
+        data.to_str().unwrap(),
+        "--out",
+        html.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let page = std::fs::read_to_string(&html).unwrap();
+    assert!(page.contains("These bands do not hold"));
+    let r = volver::core::results::ResultsFile::load(&sim.join("report.json")).unwrap();
+    assert!(r.uncertainty.unwrap().model_check.unwrap().above_noise);
 }
 
 /// The uncertainty cell: for each kind a single tracker measures on test 4 of the XCFZ machine,

@@ -266,10 +266,29 @@ pub fn linear(
         a += jz.transpose() * (&ea * &jz);
         b += jz.transpose() * (&eb * &jz);
     }
-    // Cov_z = A⁺ B A⁺ = (A⁺ L)(A⁺ L)ᵀ with B = L Lᵀ, A's pseudo-inverse taken after Jacobi
-    // scaling (D = √diag A): in the parameters' own units (mm, rad, ppm/h side by side) a
-    // weak but identified direction can fall below any relative threshold and would get no
-    // variance at all; scaled, the threshold measures redundancy alone.
+    let fz = sandwich_factor(&a, &b)?;
+    let data = basis * &fz;
+    let held = match gauge {
+        Some(g) => Mat::from_fn(n, g.held.len(), |j, c| {
+            g.held[c].direction[j] * HELD_PRIOR_MM
+        }),
+        None => Mat::zeros(n, 0),
+    };
+    Some(Covariance {
+        data,
+        held,
+        sigma_mm,
+        noise,
+    })
+}
+
+/// A factor `F` of the sandwich `A⁺ B A⁺ = F Fᵀ` (both `nf × nf`, symmetric, `B` positive
+/// semi-definite): `F = A⁺ L` with `B = L Lᵀ`. `A`'s pseudo-inverse is taken after Jacobi
+/// scaling (D = √diag A): in the parameters' own units (mm, rad, ppm/h side by side) a weak but
+/// identified direction can fall below any relative threshold and would get no variance at
+/// all; scaled, the threshold measures redundancy alone. `None` when a decomposition fails.
+fn sandwich_factor(a: &Mat<f64>, b: &Mat<f64>) -> Option<Mat<f64>> {
+    let nf = a.nrows();
     let d: Vec<f64> = (0..nf)
         .map(|k| {
             let v = a[(k, k)].max(0.0).sqrt();
@@ -294,20 +313,7 @@ pub fn linear(
         }
     });
     let vz = va * &scaled;
-    let fz = Mat::from_fn(nf, nf, |r, c| vz[(r, c)] / d[r]);
-    let data = basis * &fz;
-    let held = match gauge {
-        Some(g) => Mat::from_fn(n, g.held.len(), |j, c| {
-            g.held[c].direction[j] * HELD_PRIOR_MM
-        }),
-        None => Mat::zeros(n, 0),
-    };
-    Some(Covariance {
-        data,
-        held,
-        sigma_mm,
-        noise,
-    })
+    Some(Mat::from_fn(nf, nf, |r, c| vz[(r, c)] / d[r]))
 }
 
 /// [`expectations`] for a range alone measured at `range` (mm): only the first coordinate is a
