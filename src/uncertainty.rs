@@ -398,41 +398,49 @@ pub const MIN_REPEAT_PAIRS: usize = 5;
 /// the noise varies by some 10 % with tens of pairs.
 pub const REPEAT_MARGIN: f64 = 1.2;
 
-/// The fit of `problem` (EMM `emm_um`, `free` identified directions) against what the tracker's
-/// noise leaves a complete model ([`ModelCheck`]): judged from the specification `noise` when
-/// there is one ([`crate::diagnosis::ABOVE_NOISE_Z`] standard deviations above it), else from
-/// the repeated points ([`REPEAT_MARGIN`] above the noise they show, at least
-/// [`MIN_REPEAT_PAIRS`] pairs), else unknown.
+/// The fit `id` of `problem` against what the tracker's noise leaves a complete model
+/// ([`ModelCheck`]), with the noise the rule of one noise source gives: `noise` when it is the
+/// tracker's, else the machine file's `[tracker] noise` — judged as the diagnosis judges it
+/// ([`crate::diagnosis::standing`]: more than [`crate::diagnosis::ABOVE_NOISE_Z`] standard
+/// deviations above) — else from the repeated points ([`REPEAT_MARGIN`] above the noise they
+/// show, at least [`MIN_REPEAT_PAIRS`] pairs), else unknown.
 ///
 /// [`ModelCheck`]: volver_core::results::ModelCheck
-pub fn model_check(
+pub fn check_fit(
     problem: &volver_core::problem::Problem,
-    emm_um: f64,
-    free: usize,
-    noise: Option<&TrackerNoise>,
+    id: &volver_solvers::strategy::Identification,
+    noise: NoiseModel,
 ) -> volver_core::results::ModelCheck {
-    use volver_core::diagnose;
     use volver_core::problem::Residuals;
     use volver_core::results::ModelCheck;
-    let points = problem.data().points.len();
-    let coordinates: usize = (0..points)
+    let model = problem.model();
+    let emm_um = id.reached.stats.emm_um;
+    let spec = match noise {
+        NoiseModel::Tracker(n) => Some(n),
+        NoiseModel::Residual => model.machine().tracker().noise,
+    }
+    .filter(|n| !n.is_none());
+    if let Some(n) = spec
+        && let Some((level, standing)) = crate::diagnosis::standing(problem, &id.params, emm_um, &n)
+    {
+        return ModelCheck {
+            emm_um,
+            expected_um: Some(level.fit_emm_um),
+            basis: format!("the tracker's specification {n}"),
+            above_noise: standing == crate::diagnosis::Standing::Above,
+        };
+    }
+    let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
+    let free = model
+        .n_params()
+        .saturating_sub(model.constraints().rows.len() + held);
+    let coordinates: usize = (0..problem.n_points())
         .map(|i| if problem.scalar(i) { 1 } else { 3 })
         .sum();
     let keep = (1.0 - free as f64 / coordinates.max(1) as f64)
         .max(0.0)
         .sqrt();
-    if let Some(n) = noise.filter(|n| !n.is_none()) {
-        let moments = diagnose::noise_moments(problem, n);
-        let all: Vec<usize> = (0..points).collect();
-        let level = diagnose::noise_level(&moments, &all, free, coordinates);
-        return ModelCheck {
-            emm_um,
-            expected_um: Some(level.fit_emm_um),
-            basis: format!("the tracker's specification {n}"),
-            above_noise: level.z(emm_um) > crate::diagnosis::ABOVE_NOISE_Z,
-        };
-    }
-    match diagnose::repeat_noise(problem) {
+    match volver_core::diagnose::repeat_noise(problem) {
         Some((stats, pairs)) if pairs >= MIN_REPEAT_PAIRS => {
             let expected = stats.emm_um * keep;
             ModelCheck {
@@ -449,26 +457,6 @@ pub fn model_check(
             above_noise: false,
         },
     }
-}
-
-/// [`model_check`] of a fit `id` of `problem`, with the noise the rule of one noise source
-/// gives: `noise` when it is the tracker's, else the machine file's `[tracker] noise`, else the
-/// repeated points.
-pub fn check_fit(
-    problem: &volver_core::problem::Problem,
-    id: &volver_solvers::strategy::Identification,
-    noise: NoiseModel,
-) -> volver_core::results::ModelCheck {
-    let model = problem.model();
-    let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
-    let free = model
-        .n_params()
-        .saturating_sub(model.constraints().rows.len() + held);
-    let spec = match noise {
-        NoiseModel::Tracker(n) => Some(n),
-        NoiseModel::Residual => model.machine().tracker().noise,
-    };
-    model_check(problem, id.reached.stats.emm_um, free, spec.as_ref())
 }
 
 /// The results file of the fit `id` of `model` to `data`, carrying its linearised uncertainty
