@@ -140,12 +140,19 @@ pub fn vouch(
         );
         return Ok(None);
     };
-    if let Some(check) = record.model_check.as_ref().filter(|c| c.above_noise) {
-        let msg = format!("U is not valid here: {}", check.statement());
-        if !force {
-            bail!("{msg}; --force uses the errors anyway");
+    match record.model_check.as_ref() {
+        Some(check) if check.above_noise => {
+            let msg = format!("U is not valid here: {}", check.statement());
+            if !force {
+                bail!("{msg}; --force uses the errors anyway");
+            }
+            println!("  warning: {msg} (used anyway: --force)");
         }
-        println!("  warning: {msg} (used anyway: --force)");
+        Some(check) => println!("  model check: {}", check.statement()),
+        None => println!(
+            "  model check: the results file does not say whether the fit was at the noise (it \
+             predates the check); the U below assumes a complete model"
+        ),
     }
     let u = tool_point_u(model, params, record, tool)?;
     let (ua, ur) = (u.aligned_mm, u.raw_mm);
