@@ -762,22 +762,24 @@ fn score(
         let new = expressible
             .novelty((model, &extended), &jac, (&start, q), tolerance)
             .ok_or_else(singular)?;
-        let own: Vec<usize> = extended
-            .terms()
-            .iter()
-            .filter(|t| model.term(t.id).is_none_or(|old| old.basis != t.basis))
-            .flat_map(|t| t.params.clone())
-            .collect();
-        Ok::<_, String>(if c.id.starts_with("field:") {
-            (new.peak_um, Unit::Mm)
-        } else if own.is_empty() {
-            implied_size(&c.id, model, params, &extended, &new.representative)
-        } else {
-            let q = new
-                .own_functions(&extended, &jac, &start, (&own, &new.fresh))
-                .ok_or_else(singular)?;
-            implied_size(&c.id, model, params, &extended, &q)
-        })
+        if c.id.starts_with("field:") {
+            return Ok((new.peak_um, Unit::Mm));
+        }
+        // Each added or raised function's lower coefficients take what they express of its
+        // new ones (one function at a time: no swap between functions).
+        let mut own = new.representative.clone();
+        for t in extended.terms() {
+            if model.term(t.id).is_none_or(|old| old.basis != t.basis) {
+                let coefficients: Vec<usize> = t.params.clone().collect();
+                let q = new
+                    .own_functions(&extended, &jac, &start, (&coefficients, &new.fresh))
+                    .ok_or_else(singular)?;
+                for k in coefficients {
+                    own[k] = q[k];
+                }
+            }
+        }
+        Ok::<_, String>(implied_size(&c.id, model, params, &extended, &own))
     };
     let (size, unit) = new_size(q)?;
     let added = rank1.saturating_sub(rank0);
@@ -1150,5 +1152,118 @@ pub fn axis_of(id: &str) -> Option<Axis> {
     match (c.next().and_then(Axis::from_letter), c.next()) {
         (Some(a), None) => Some(a),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scored(id: &str, delta_bic: f64, emm_um: f64) -> Score {
+        Score {
+            id: id.into(),
+            description: format!("{id} in words"),
+            added: 3,
+            emm_um,
+            delta_bic,
+            size: 5.0,
+            size_unit: "µm",
+            equivalent: Vec::new(),
+            flag: None,
+            failed: None,
+        }
+    }
+
+    /// The `--add` a verdict recommends, if any.
+    fn added(verdict: &str) -> Option<&str> {
+        let (_, rest) = verdict.split_once("--add ")?;
+        rest.split(['`', ' ']).next()
+    }
+
+    /// The issue's case: the candidate with the strongest evidence would bring the EMM from
+    /// 18.568 to 18.725 µm. It is never recommended; the verdict says why and recommends the
+    /// next that lowers the EMM, or none. Whatever it recommends lowers the EMM.
+    #[test]
+    fn the_verdict_never_recommends_an_addition_that_raises_the_emm() {
+        let emm = 18.568;
+        let raising = scored("raise:EZX", -1510.0, 18.725);
+        let flat = scored("raise:EXX", -300.0, emm * (1.0 - EMM_GAIN / 2.0));
+        let lowering = scored("ball-screw:X:700", -120.0, 17.9);
+        let weak = scored("add:EAC", -4.0, 18.0);
+        let cases: [Vec<Score>; 4] = [
+            vec![raising.clone(), lowering.clone(), weak.clone()],
+            vec![raising.clone(), flat.clone(), lowering.clone()],
+            vec![raising.clone(), weak.clone()],
+            vec![lowering.clone(), raising.clone()],
+        ];
+        for ranked in &cases {
+            let v = verdict(ranked, emm);
+            println!("{v}");
+            if let Some(id) = added(&v) {
+                let s = ranked
+                    .iter()
+                    .find(|s| s.id == id)
+                    .expect("a ranked candidate");
+                assert!(
+                    s.emm_um < emm,
+                    "{id} is recommended but does not lower the EMM: {v}"
+                );
+            }
+            if ranked[0].id == "raise:EZX" {
+                assert!(
+                    v.starts_with(
+                        "raise:EZX has the strongest evidence (ΔBIC -1510) but would \
+                                   not lower the EMM of the Φ fit (18.568 → about 18.725 µm)"
+                    ),
+                    "{v}"
+                );
+            }
+        }
+        assert_eq!(added(&verdict(&cases[0], emm)), Some("ball-screw:X:700"));
+        assert_eq!(added(&verdict(&cases[1], emm)), Some("ball-screw:X:700"));
+        let none = verdict(&cases[2], emm);
+        assert!(added(&none).is_none(), "{none}");
+        assert!(
+            none.contains("no candidate with strong evidence lowers the EMM"),
+            "{none}"
+        );
+        assert_eq!(added(&verdict(&cases[3], emm)), Some("ball-screw:X:700"));
+        assert!(!verdict(&cases[3], emm).contains("would not lower"));
+        assert_eq!(
+            recommended(&cases[1], emm).map(|s| s.id.as_str()),
+            Some("ball-screw:X:700")
+        );
+        assert!(recommended(&cases[2], emm).is_none());
+    }
+
+    /// A field is shown with the physical candidates over its variables, and only those.
+    #[test]
+    fn a_field_is_shown_with_the_physical_candidates_over_its_variables() {
+        let ranked = vec![
+            scored("field:X*Z", -1220.0, 8.5),
+            scored("raise-axis:X", -630.0, 10.3),
+            scored("thermal-scale:X", -200.0, 10.6),
+            scored("ball-screw:Z:200", -50.0, 10.7),
+            scored("range-scale", -40.0, 10.7),
+            scored("add:EAC", -30.0, 10.7),
+        ];
+        let shared: Vec<&str> = sharing(&ranked, "field:X*Z")
+            .iter()
+            .map(|s| s.id.as_str())
+            .collect();
+        assert_eq!(shared, ["raise-axis:X", "ball-screw:Z:200"]);
+        let v = verdict(&ranked, 10.8);
+        assert!(
+            v.contains(
+                "the physical candidates over X and Z are raise-axis:X (ΔBIC -630), \
+                        ball-screw:Z:200 (ΔBIC -50), each of one variable: none couples X with Z"
+            ),
+            "{v}"
+        );
+        let over_time: Vec<&str> = sharing(&ranked, "field:X*t")
+            .iter()
+            .map(|s| s.id.as_str())
+            .collect();
+        assert_eq!(over_time, ["raise-axis:X", "thermal-scale:X"]);
     }
 }

@@ -34,8 +34,8 @@ pub(super) struct Novelty {
 }
 
 impl Novelty {
-    /// [`Novelty::representative`] with the lower coefficients of the error functions a
-    /// candidate adds to or raises (`own`: every coefficient of those functions; those among
+    /// [`Novelty::representative`] with the lower coefficients of an error function a
+    /// candidate adds to or raises (`own`: every coefficient of that function; those among
     /// `fresh` are the new ones, already moved) changed by what they express of the new
     /// ones: the least-squares change at the data points, under the model's constraints
     /// among them (a function held to zero at its reference stays so). The function's change is
@@ -53,7 +53,14 @@ impl Novelty {
         if lower.is_empty() {
             return Some(out);
         }
-        let x = Mat::from_fn(start.len(), 1, |k, _| out[k] - start[k]);
+        // The function's own new coefficients' change.
+        let x = Mat::from_fn(start.len(), 1, |k, _| {
+            if own.contains(&k) {
+                out[k] - start[k]
+            } else {
+                0.0
+            }
+        });
         // The constraints among these functions' coefficients: C_lower a = −C_new x.
         let rows: Vec<&volver_core::model::Constraint> = extended
             .constraints()
