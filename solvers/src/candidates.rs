@@ -750,36 +750,16 @@ fn score(
             None => variance / limit(info.unit).powi(2),
         })
         .collect();
-    let task = ext.task();
     // The step held to plausible sizes, and the same step without the bound.
-    let (steps, rank1) =
-        gauss_newton_steps(&task, &start, tolerance, &[Some(&ridge), None]).ok_or_else(singular)?;
+    let (steps, rank1) = gauss_newton_steps(&ext.task(), &start, tolerance, &[Some(&ridge), None])
+        .ok_or_else(singular)?;
     let (q, qf) = (&steps[0], &steps[1]);
     let predicted = ext.linear_predictions(&start, &[q, qf]);
     let (rss1, rss_free) = (predicted[0].0, predicted[1].0);
     let jac = novelty::jacobian(ext.problem(), &start);
+    let (on, models) = ((expressible, &jac), (model, &extended));
     let new_size = |q: &[f64]| {
-        let new = expressible
-            .novelty((model, &extended), &jac, (&start, q), tolerance)
-            .ok_or_else(singular)?;
-        if c.id.starts_with("field:") {
-            return Ok((new.peak_um, Unit::Mm));
-        }
-        // Each added or raised function's lower coefficients take what they express of its
-        // new ones (one function at a time: no swap between functions).
-        let mut own = new.representative.clone();
-        for t in extended.terms() {
-            if model.term(t.id).is_none_or(|old| old.basis != t.basis) {
-                let coefficients: Vec<usize> = t.params.clone().collect();
-                let q = new
-                    .own_functions(&extended, &jac, &start, (&coefficients, &new.fresh))
-                    .ok_or_else(singular)?;
-                for k in coefficients {
-                    own[k] = q[k];
-                }
-            }
-        }
-        Ok::<_, String>(implied_size(&c.id, model, params, &extended, &own))
+        size_of_new(&c.id, models, params, on, (&start, q), tolerance).ok_or_else(singular)
     };
     let (size, unit) = new_size(q)?;
     let added = rank1.saturating_sub(rank0);
@@ -815,6 +795,36 @@ fn score(
         flag,
         failed: None,
     })
+}
+
+/// The size of what candidate `id` adds beyond `model` (fitted at `params`) when its
+/// `extended` model steps from `start` to `q` ([`Score::size`]), `jac` the extended model's
+/// Jacobian at `start` over the data points; `None` when not finite.
+fn size_of_new(
+    id: &str,
+    (model, extended): (&Model, &Model),
+    params: &[f64],
+    (expressible, jac): (&Expressible, &faer::Mat<f64>),
+    (start, q): (&[f64], &[f64]),
+    tolerance: f64,
+) -> Option<(f64, Unit)> {
+    let new = expressible.novelty((model, extended), jac, (start, q), tolerance)?;
+    if id.starts_with("field:") {
+        return Some((new.peak_um, Unit::Mm));
+    }
+    // Each added or raised function's lower coefficients take what they express of its new
+    // ones (one function at a time: no swap between functions).
+    let mut own = new.representative.clone();
+    for t in extended.terms() {
+        if model.term(t.id).is_none_or(|old| old.basis != t.basis) {
+            let coefficients: Vec<usize> = t.params.clone().collect();
+            let q = new.own_functions(extended, jac, start, (&coefficients, &new.fresh))?;
+            for k in coefficients {
+                own[k] = q[k];
+            }
+        }
+    }
+    Some(implied_size(id, model, params, extended, &own))
 }
 
 /// The EMM (µm) a refit of `problem`'s model from `start` would reach, predicted to first
