@@ -32,7 +32,7 @@ use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::problem::{Problem, Residuals};
-use volver_solvers::candidates::{Score, rank, um, verdict};
+use volver_solvers::candidates::{Score, rank, sharing, um, verdict};
 use volver_solvers::identifiability::{Identifiability, analyse};
 
 /// Parameter pairs correlated above this (absolute value) are listed by the identifiability
@@ -86,11 +86,18 @@ pub struct Diagnosis {
 }
 
 impl Diagnosis {
-    /// The best candidate when it is a finding: seen, plausible, with strong evidence.
+    /// The candidate the verdict recommends, when there is one: the first seen, plausible, with
+    /// strong evidence, that lowers the EMM of the fit
+    /// ([`volver_solvers::candidates::recommended`]).
     pub fn finding(&self) -> Option<&Candidate> {
-        self.candidates
-            .first()
-            .filter(|c| c.seen && c.flag.is_none() && c.delta_bic.is_some_and(|b| b < -10.0))
+        let floor = self.emm_um * (1.0 - volver_solvers::candidates::EMM_GAIN);
+        self.candidates.iter().find(|c| {
+            c.seen
+                && c.flag.is_none()
+                && c.failed.is_none()
+                && c.delta_bic.is_some_and(|b| b < -10.0)
+                && c.emm_um.is_some_and(|e| e < floor)
+        })
     }
 
     /// `true` when the loop has nothing left to add: the fit is at the noise (when its
@@ -354,10 +361,14 @@ pub struct Candidate {
     /// Why it could not be scored, when it could not (its figures are then absent).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub failed: Option<String>,
+    /// For a field, the physical candidates over its variables, best first
+    /// ([`volver_solvers::candidates::sharing`]): the physical effects it may be.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub physical: Vec<String>,
 }
 
 impl Candidate {
-    fn of(s: &Score) -> Candidate {
+    fn of(s: &Score, ranked: &[Score]) -> Candidate {
         Candidate {
             id: s.id.clone(),
             description: s.description.clone(),
@@ -370,6 +381,14 @@ impl Candidate {
             equivalent: s.equivalent.clone(),
             flag: s.flag.clone(),
             failed: s.failed.clone(),
+            physical: if s.id.starts_with("field:") {
+                sharing(ranked, &s.id)
+                    .iter()
+                    .map(|p| p.id.clone())
+                    .collect()
+            } else {
+                Vec::new()
+            },
         }
     }
 }
@@ -451,7 +470,7 @@ pub fn diagnose_with(
         identifiability: ident.as_ref().map(|a| identifiability(model, a)),
         verdict: overall_verdict(&ranked, emm, verdict_noise.as_ref()),
         noise: verdict_noise,
-        candidates: ranked.iter().map(Candidate::of).collect(),
+        candidates: ranked.iter().map(|s| Candidate::of(s, &ranked)).collect(),
         fit: id,
     })
 }

@@ -12,11 +12,13 @@
 //! | a scale growing with time | [`MAX_SCALE_GROWTH_PPM_PER_H`] = 100 ppm/h (steel at 9 K/h) |
 //! | a location drifting with time | 1 mm/h |
 //! | the tracker's orientation drifting with time | 1 mrad/h |
-//! | a generic field's coefficients | [`MAX_TRANSLATION_MM`] = 1 mm |
+//! | a generic field's coefficients (in the diagnosis: the largest displacement it adds beyond what the rest of the model expresses, `volver_solvers::candidates`) | [`MAX_TRANSLATION_MM`] = 1 mm |
 //! | the tracker's pose against its rigid fit to the measurements (errors zero) | [`MAX_TRACKER_SHIFT_MM`] = 25 mm, 5 mrad |
 //! | the EMM the fit leaves | [`MAX_TRANSLATION_MM`] = 1 mm |
 //!
-//! Parameters read from a results file are checked against ten times these limits
+//! The diagnosis applies these limits to what a candidate adds beyond the current model, not to
+//! its raw coefficients (which may trade metres against the model's own parameters along
+//! directions the model already expresses). Parameters read from a results file are checked against ten times these limits
 //! ([`Context::relaxed`]). A value is implausible only when it exceeds its limit by more than its expanded uncertainty
 //! (k = 2) when the covariance is given: a value the data barely determine is not evidence of
 //! a wrong input. Values along directions the data do not determine at all mean nothing and

@@ -9,6 +9,22 @@
 //! (Δk the extra identified directions): below −10 is strong evidence. Candidates are ranked by
 //! ΔBIC, most negative first.
 //!
+//! **Sizes are of what is new.** The step changes the model's own parameters too, and a
+//! candidate's raw coefficients include what the model already expresses (a field over X and
+//! Z carries the products the angular errors of X make with the lever arm of Z: metres of
+//! coefficients against metres of those errors for a few hundred µm of new displacement). A
+//! candidate's size and plausibility are therefore measured on the part of its change of the
+//! measured points that the current model cannot make (the projection out of the span of its
+//! Jacobian's identified directions): a field's size is the largest displacement
+//! of that part at a measured point; every other kind's is its own quantity (µm/h, ppm, µrad …)
+//! of the smallest change of its new parameters alone that adds the same.
+//!
+//! **The EMM predicted** is the EMM a refit (Φ: the mean module) would reach to first order,
+//! never above the current one; the verdict recommends only a candidate
+//! with strong evidence that lowers it ([`recommended`]) and says why when the candidate with
+//! the strongest evidence does not. A significant field is shown with the physical candidates
+//! over its variables ([`sharing`]).
+//!
 //! Candidate ids (stable):
 //!
 //! | id | what it adds |
@@ -28,9 +44,12 @@
 //! | `location-drift:C` | the line of rotary axis C drifting with time: X0C, Y0C += v·t (`[effects] location_drift`) |
 //! | `field:X`, `field:X*Z`, `field:X*t` | a generic displacement of the tool point over one variable or jointly over two (axes and time `t`; `[effects] field`): names what the misfit depends on when no physical candidate explains it |
 
+mod novelty;
+
 use crate::Task;
-use crate::coordinates::{Reduced, reduced_normal};
+use crate::coordinates::{Reduced, reduced_normal_under};
 use faer::Side;
+use novelty::Expressible;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
 use volver_core::iso::{Axis, ErrorId};
 use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
@@ -66,10 +85,13 @@ pub struct Score {
     pub emm_um: f64,
     /// ΔBIC against the current model (negative: the data support it).
     pub delta_bic: f64,
-    /// Size of the implied effect, by kind: the norm of a new effect's parameters (a drift in
-    /// µm/h, a periodic error's amplitude in µm, a reflector offset in µm, a range scale in
-    /// ppm), the tilt `tracker-tilt` frees (µrad), or the largest change over the travel of an
-    /// added or raised error function (µm or µrad).
+    /// Size of what the candidate adds beyond what the current model expresses (see the module
+    /// documentation), by kind: for a field the largest displacement of that new part at a
+    /// measured point (µm); for the others, of the smallest change of the new parameters alone
+    /// that adds it, the norm of a new effect's parameters (a drift in µm/h, a periodic error's
+    /// amplitude in µm, a reflector offset in µm, a range scale in ppm), the tilt
+    /// `tracker-tilt` frees (µrad), or the largest value over the travel of the added part of
+    /// an added or raised error function (µm or µrad).
     pub size: f64,
     /// Unit of `size` (`µm`, `µrad`, `µm/h` or `ppm`).
     pub size_unit: &'static str,
@@ -458,8 +480,20 @@ fn gauss_newton_steps(
     tolerance: f64,
     ridges: &[Option<&[f64]>],
 ) -> Option<(Vec<Vec<f64>>, usize)> {
+    weighted_steps(task, params, tolerance, ridges, &|_| (1.0, 0.0))
+}
+
+/// [`gauss_newton_steps`] of the least squares weighted per point by `weight(‖r_i‖)` (as
+/// [`crate::kernels::accumulate`] takes it).
+fn weighted_steps(
+    task: &Task,
+    params: &[f64],
+    tolerance: f64,
+    ridges: &[Option<&[f64]>],
+    weight: &(dyn Fn(f64) -> (f64, f64) + Sync),
+) -> Option<(Vec<Vec<f64>>, usize)> {
     let n = params.len();
-    let Reduced { d, ns, hz, gz } = reduced_normal(task, params)?;
+    let Reduced { d, ns, hz, gz } = reduced_normal_under(task, params, weight)?;
     let nf = ns.n_free();
     if nf == 0 {
         return Some((vec![params.to_vec(); ridges.len()], 0));
@@ -634,7 +668,8 @@ fn implied_size(
 /// ([`volver_core::plausibility::limit`]) by a prior at that size, so a direction the data
 /// barely see cannot carry a step of metres. A candidate is flagged ([`Score::flag`]) and never
 /// ranked first when its size still exceeds the bound, or when its evidence needs a size beyond
-/// the bound (nearly unidentifiable: the bound costs more than 10 in ΔBIC).
+/// the bound (nearly unidentifiable: the bound costs more than 10 in ΔBIC); both sizes are of
+/// what the candidate adds beyond the current model ([`Score::size`]).
 pub fn rank(
     problem: &Problem,
     params: &[f64],
@@ -660,10 +695,17 @@ pub fn rank(
     let rss0 = base.linear_predictions(params, &[&p0[0]])[0].0;
     // The residuals' variance per coordinate in the scoring's units: the prior's scale.
     let variance = rss0 / (m - rank0 as f64).max(1.0);
+    let expressible = Expressible::new(problem, params, tolerance);
     let scores: Vec<Score> = library(model)
         .into_iter()
         .map(|c| {
             let (id, description) = (c.id.clone(), c.description.clone());
+            let Some(expressible) = &expressible else {
+                let why = "the current model's Jacobian is not finite, so what a candidate adds \
+                           beyond it cannot be measured"
+                    .to_string();
+                return Score::failed(id, description, why);
+            };
             score(
                 &c,
                 problem,
@@ -671,6 +713,7 @@ pub fn rank(
                 tolerance,
                 noise,
                 (rank0, rss0, variance),
+                expressible,
             )
             .unwrap_or_else(|why| Score::failed(id, description, why))
         })
@@ -687,6 +730,7 @@ fn score(
     tolerance: f64,
     noise: Option<&TrackerNoise>,
     (rank0, rss0, variance): (usize, f64, f64),
+    expressible: &Expressible,
 ) -> Result<Score, String> {
     let model = problem.model();
     let data = problem.data();
@@ -706,14 +750,18 @@ fn score(
             None => variance / limit(info.unit).powi(2),
         })
         .collect();
-    let task = ext.task();
     // The step held to plausible sizes, and the same step without the bound.
-    let (steps, rank1) =
-        gauss_newton_steps(&task, &start, tolerance, &[Some(&ridge), None]).ok_or_else(singular)?;
+    let (steps, rank1) = gauss_newton_steps(&ext.task(), &start, tolerance, &[Some(&ridge), None])
+        .ok_or_else(singular)?;
     let (q, qf) = (&steps[0], &steps[1]);
     let predicted = ext.linear_predictions(&start, &[q, qf]);
-    let (rss1, (rss_free, emm_free)) = (predicted[0].0, predicted[1]);
-    let (size, unit) = implied_size(&c.id, model, params, &extended, q);
+    let (rss1, rss_free) = (predicted[0].0, predicted[1].0);
+    let jac = novelty::jacobian(ext.problem(), &start);
+    let (on, models) = ((expressible, &jac), (model, &extended));
+    let new_size = |q: &[f64]| {
+        size_of_new(&c.id, models, params, on, (&start, q), tolerance).ok_or_else(singular)
+    };
+    let (size, unit) = new_size(q)?;
     let added = rank1.saturating_sub(rank0);
     let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
     let delta_bic = bic(rss1);
@@ -725,7 +773,7 @@ fn score(
             "its size, {size:.0} {size_unit}, exceeds the plausible {bound:.0} {size_unit}"
         ))
     } else {
-        let (size_free, _) = implied_size(&c.id, model, params, &extended, qf);
+        let (size_free, _) = new_size(qf)?;
         (size_free > bound && bic_free < -10.0 && delta_bic - bic_free > 10.0).then(|| {
             format!(
                 "nearly unidentifiable: the data support it only with a size of \
@@ -734,17 +782,7 @@ fn score(
             )
         })
     };
-    // The EMM a refit would reach is predicted by the unweighted step (the engines
-    // minimise the EMM itself, not the whitened residuals).
-    let emm_um = match &ext {
-        Scored::Plain(_) => emm_free,
-        Scored::Whitened(w) => {
-            let plain = Scored::Plain(w.problem().clone());
-            let (qp, _) = gauss_newton_steps(&plain.task(), &start, tolerance, &[None])
-                .ok_or_else(singular)?;
-            plain.linear_predictions(&start, &[&qp[0]])[0].1
-        }
-    };
+    let emm_um = predicted_emm(ext.problem(), &start, tolerance).ok_or_else(singular)?;
     Ok(Score {
         id: c.id.clone(),
         description: c.description.clone(),
@@ -757,6 +795,61 @@ fn score(
         flag,
         failed: None,
     })
+}
+
+/// The size of what candidate `id` adds beyond `model` (fitted at `params`) when its
+/// `extended` model steps from `start` to `q` ([`Score::size`]), `jac` the extended model's
+/// Jacobian at `start` over the data points; `None` when not finite.
+fn size_of_new(
+    id: &str,
+    (model, extended): (&Model, &Model),
+    params: &[f64],
+    (expressible, jac): (&Expressible, &faer::Mat<f64>),
+    (start, q): (&[f64], &[f64]),
+    tolerance: f64,
+) -> Option<(f64, Unit)> {
+    let new = expressible.novelty((model, extended), jac, (start, q), tolerance)?;
+    if id.starts_with("field:") {
+        return Some((new.peak_um, Unit::Mm));
+    }
+    // Each added or raised function's lower coefficients take what they express of its new
+    // ones (one function at a time: no swap between functions).
+    let mut own = new.representative.clone();
+    for t in extended.terms() {
+        if model.term(t.id).is_none_or(|old| old.basis != t.basis) {
+            let coefficients: Vec<usize> = t.params.clone().collect();
+            let q = new.own_functions(extended, jac, start, (&coefficients, &new.fresh))?;
+            for k in coefficients {
+                own[k] = q[k];
+            }
+        }
+    }
+    Some(implied_size(id, model, params, extended, &own))
+}
+
+/// The EMM (µm) a refit of `problem`'s model from `start` would reach, predicted to first
+/// order. The engines minimise the EMM itself (Φ, the mean error module), not the squares the
+/// evidence is scored on: the prediction is the lower of the linearised EMM after the
+/// unweighted Gauss–Newton step and after one majorise–minimise step of Φ (least squares
+/// weighted by `1/‖r_i‖`, which majorises `Σ‖r_i + J_i δ‖` and so never raises the linearised
+/// EMM above the current one). A refit can reach at least as low; a candidate is never
+/// predicted to raise the EMM of the Φ fit it extends.
+fn predicted_emm(problem: &Problem, start: &[f64], tolerance: f64) -> Option<f64> {
+    let plain = Scored::Plain(problem.clone());
+    let task = plain.task();
+    let modules: Vec<f64> = problem
+        .residuals(start)
+        .iter()
+        .map(|r| volver_core::problem::norm(*r))
+        .collect();
+    let mean = modules.iter().sum::<f64>() / modules.len().max(1) as f64;
+    // A module at rounding level must not take every weight.
+    let floor = (1e-6 * mean).max(f64::MIN_POSITIVE);
+    let (ls, _) = gauss_newton_steps(&task, start, tolerance, &[None])?;
+    let weight = move |r: f64| (1.0 / r.max(floor), 0.0);
+    let (mm, _) = weighted_steps(&task, start, tolerance, &[None], &weight)?;
+    let p = plain.linear_predictions(start, &[&ls[0], &mm[0]]);
+    Some(p[0].1.min(p[1].1))
 }
 
 /// The scores in ranking order, candidates the data cannot tell apart merged.
@@ -843,41 +936,168 @@ pub fn verdict(ranked: &[Score], emm_um: f64) -> String {
     )
 }
 
-/// [`verdict`] over the candidates that were scored.
-fn verdict_scored(ranked: &[Score], emm_um: f64) -> String {
-    if let Some(s) = ranked.first().filter(|s| s.strong())
-        && let Some(vars) = s.id.strip_prefix("field:")
-    {
-        let depends = match vars.split_once('*') {
-            Some((a, b)) => format!(
-                "the misfit depends jointly on {a} and {b}: a non-rigid effect the rigid-body \
-                 model cannot express"
-            ),
-            None => {
-                format!("the misfit depends on {vars} in a way no physical candidate describes")
-            }
-        };
-        let physical = ranked
-            .iter()
-            .find(|p| !p.id.starts_with("field:") && p.seen() && p.flag.is_none())
-            .map_or(String::new(), |p| {
-                format!(
-                    " (the best physical candidate, {}, has ΔBIC {:.0})",
-                    p.id, p.delta_bic
-                )
-            });
+/// The smallest relative drop of the EMM that counts as lowering it (0.1 %).
+pub const EMM_GAIN: f64 = 1e-3;
+
+/// `true` when adding `s` is predicted to lower the EMM `emm_um` of the Φ fit it extends by at
+/// least [`EMM_GAIN`].
+pub fn lowers(s: &Score, emm_um: f64) -> bool {
+    s.emm_um < emm_um * (1.0 - EMM_GAIN)
+}
+
+/// The candidate the verdict recommends adding to a fit of EMM `emm_um`: the first of the
+/// ranked list with strong evidence ([`Score::strong`]) that lowers the EMM ([`lowers`]). Strong
+/// evidence is a drop of the squared residuals; the Φ fit minimises the mean module, and a
+/// candidate that only reshapes the residuals (a few large ones smaller, many small ones larger)
+/// has the first without the second: it is never recommended.
+pub fn recommended(ranked: &[Score], emm_um: f64) -> Option<&Score> {
+    ranked
+        .iter()
+        .filter(|s| s.failed.is_none())
+        .find(|s| s.strong() && lowers(s, emm_um))
+}
+
+/// The variables a candidate depends on, by its id: the axis of an ISO error or of a
+/// per-axis effect, `t` for an effect that grows with time, a field's own variables; none for a
+/// candidate of the measurement (a reflector's offset, the tracker's range or tilt).
+///
+/// ```
+/// use volver_solvers::candidates::variables;
+/// assert_eq!(variables("raise:EZX"), vec!["X"]);
+/// assert_eq!(variables("thermal-scale:X"), vec!["X", "t"]);
+/// assert_eq!(variables("field:X*Z"), vec!["X", "Z"]);
+/// assert!(variables("range-scale").is_empty());
+/// ```
+pub fn variables(id: &str) -> Vec<String> {
+    if let Some(vars) = id.strip_prefix("field:") {
+        return vars.split('*').map(str::to_string).collect();
+    }
+    let axis = axis_of(id).or_else(|| {
+        let (kind, rest) = id.split_once(':')?;
+        (kind == "ball-screw").then(|| rest.chars().next().and_then(Axis::from_letter))?
+    });
+    let mut out: Vec<String> = axis.map(|a: Axis| a.to_string()).into_iter().collect();
+    let kind = id.split(':').next().unwrap_or(id);
+    if matches!(
+        kind,
+        "thermal-drift" | "thermal-scale" | "location-drift" | "tracker-drift" | "station-drift"
+    ) {
+        out.push("t".into());
+    }
+    out
+}
+
+/// The physical candidates (not fields) seen in the data whose variables are among those of the
+/// field `field` (`field:X*Z`: errors of X or of Z, a periodic error of either …), best first:
+/// the physical effects the field may be.
+pub fn sharing<'a>(ranked: &'a [Score], field: &str) -> Vec<&'a Score> {
+    let vars = variables(field);
+    ranked
+        .iter()
+        .filter(|p| !p.id.starts_with("field:") && p.seen() && p.failed.is_none())
+        .filter(|p| {
+            let own = variables(&p.id);
+            !own.is_empty() && own.iter().all(|v| vars.contains(v))
+        })
+        .collect()
+}
+
+/// What the physical candidates over a field's variables say of it, in words.
+fn physical_of_field(ranked: &[Score], field: &str) -> String {
+    let vars = variables(field);
+    let shared = sharing(ranked, field);
+    let listed: Vec<String> = shared
+        .iter()
+        .take(3)
+        .map(|p| {
+            let flag = if p.flag.is_some() {
+                ", implausible"
+            } else {
+                ""
+            };
+            format!("{} (ΔBIC {:.0}{flag})", p.id, p.delta_bic)
+        })
+        .collect();
+    if listed.is_empty() {
         return format!(
-            "{depends}{physical}. Add {} (ΔBIC {:.0}) to bring the EMM from {} to about {} µm \
-             while you look for the cause — `volver identify … --add {}`",
-            s.id,
-            s.delta_bic,
-            um(emm_um),
-            um(s.emm_um),
-            s.id
+            "; no physical candidate of the library depends on {} alone",
+            vars.join(" or ")
         );
     }
-    match ranked.first() {
-        Some(s) if s.strong() => format!(
+    let joint = shared.iter().any(|p| variables(&p.id).len() == vars.len());
+    let which = if joint || vars.len() == 1 {
+        String::new()
+    } else {
+        format!(
+            ", each of one variable: none couples {} (a coupling of the two is what the field \
+             describes)",
+            vars.join(" with ")
+        )
+    };
+    format!(
+        "; the physical candidates over {} are {}{which}",
+        vars.join(" and "),
+        listed.join(", ")
+    )
+}
+
+/// Why the candidate with the strongest evidence is not the one recommended, when it is not.
+fn not_lowering(ranked: &[Score], emm_um: f64) -> Option<String> {
+    let best = ranked
+        .first()
+        .filter(|s| s.strong() && !lowers(s, emm_um))?;
+    Some(format!(
+        "{} has the strongest evidence (ΔBIC {:.0}) but would not lower the EMM of the Φ fit \
+         ({} → about {} µm): its evidence is a drop of the squared residuals, which the Φ fit \
+         (the mean module) does not minimise, so it would reshape the residuals rather than \
+         shrink them",
+        best.id,
+        best.delta_bic,
+        um(emm_um),
+        um(best.emm_um)
+    ))
+}
+
+/// [`verdict`] over the candidates that were scored.
+fn verdict_scored(ranked: &[Score], emm_um: f64) -> String {
+    let aside = not_lowering(ranked, emm_um);
+    let chosen = recommended(ranked, emm_um);
+    let text = match chosen {
+        Some(s) => recommendation(ranked, s, emm_um),
+        None if aside.is_some() => {
+            return format!(
+                "{}; no candidate with strong evidence lowers the EMM ({} µm): what is left is \
+                 noise, outliers or an effect no candidate describes",
+                aside.unwrap_or_default(),
+                um(emm_um)
+            );
+        }
+        None => match ranked.first() {
+            Some(s) if s.seen() && s.delta_bic < 0.0 => format!(
+                "no candidate has strong evidence; the best, {} (ΔBIC {:.1}), would bring the \
+                 EMM from {} to about {} µm",
+                s.id,
+                s.delta_bic,
+                um(emm_um),
+                um(s.emm_um)
+            ),
+            _ => format!(
+                "no candidate of the library lowers the error (EMM {} µm): what is left is noise \
+                 or an effect no candidate describes",
+                um(emm_um)
+            ),
+        },
+    };
+    match aside {
+        Some(a) => format!("{a}. Instead, {text}"),
+        None => text,
+    }
+}
+
+/// The recommendation of `s` (strong evidence, lowers the EMM `emm_um`), in words.
+fn recommendation(ranked: &[Score], s: &Score, emm_um: f64) -> String {
+    let Some(vars) = s.id.strip_prefix("field:") else {
+        return format!(
             "add {} (ΔBIC {:.0}, strong evidence): {}; it would bring the EMM from {} to about \
              {} µm — `volver identify … --add {}`",
             s.id,
@@ -886,21 +1106,36 @@ fn verdict_scored(ranked: &[Score], emm_um: f64) -> String {
             um(emm_um),
             um(s.emm_um),
             s.id
+        );
+    };
+    let depends = match vars.split_once('*') {
+        Some((a, b)) => format!(
+            "the misfit depends jointly on {a} and {b}: a non-rigid effect the rigid-body model \
+             cannot express"
         ),
-        Some(s) if s.seen() && s.delta_bic < 0.0 => format!(
-            "no candidate has strong evidence; the best, {} (ΔBIC {:.1}), would bring the EMM \
-             from {} to about {} µm",
-            s.id,
-            s.delta_bic,
-            um(emm_um),
-            um(s.emm_um)
-        ),
-        _ => format!(
-            "no candidate of the library lowers the error (EMM {} µm): what is left is noise or \
-             an effect no candidate describes",
-            um(emm_um)
-        ),
-    }
+        None => format!("the misfit depends on {vars} in a way no physical candidate describes"),
+    };
+    let physical = ranked
+        .iter()
+        .find(|p| !p.id.starts_with("field:") && p.seen() && p.flag.is_none())
+        .map_or(String::new(), |p| {
+            format!(
+                " (the best physical candidate, {}, has ΔBIC {:.0})",
+                p.id, p.delta_bic
+            )
+        });
+    format!(
+        "{depends}{physical}. Add {} (ΔBIC {:.0}, {} µm beyond what the model expresses) to \
+         bring the EMM from {} to about {} µm while you look for the cause — `volver identify … \
+         --add {}`{}",
+        s.id,
+        s.delta_bic,
+        um(s.size),
+        um(emm_um),
+        um(s.emm_um),
+        s.id,
+        physical_of_field(ranked, &s.id)
+    )
 }
 
 /// A length in µm with three significant figures (`0.178`, `1.86e-4`, `49.3`).
@@ -927,5 +1162,118 @@ pub fn axis_of(id: &str) -> Option<Axis> {
     match (c.next().and_then(Axis::from_letter), c.next()) {
         (Some(a), None) => Some(a),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scored(id: &str, delta_bic: f64, emm_um: f64) -> Score {
+        Score {
+            id: id.into(),
+            description: format!("{id} in words"),
+            added: 3,
+            emm_um,
+            delta_bic,
+            size: 5.0,
+            size_unit: "µm",
+            equivalent: Vec::new(),
+            flag: None,
+            failed: None,
+        }
+    }
+
+    /// The `--add` a verdict recommends, if any.
+    fn added(verdict: &str) -> Option<&str> {
+        let (_, rest) = verdict.split_once("--add ")?;
+        rest.split(['`', ' ']).next()
+    }
+
+    /// The issue's case: the candidate with the strongest evidence would bring the EMM from
+    /// 18.568 to 18.725 µm. It is never recommended; the verdict says why and recommends the
+    /// next that lowers the EMM, or none. Whatever it recommends lowers the EMM.
+    #[test]
+    fn the_verdict_never_recommends_an_addition_that_raises_the_emm() {
+        let emm = 18.568;
+        let raising = scored("raise:EZX", -1510.0, 18.725);
+        let flat = scored("raise:EXX", -300.0, emm * (1.0 - EMM_GAIN / 2.0));
+        let lowering = scored("ball-screw:X:700", -120.0, 17.9);
+        let weak = scored("add:EAC", -4.0, 18.0);
+        let cases: [Vec<Score>; 4] = [
+            vec![raising.clone(), lowering.clone(), weak.clone()],
+            vec![raising.clone(), flat.clone(), lowering.clone()],
+            vec![raising.clone(), weak.clone()],
+            vec![lowering.clone(), raising.clone()],
+        ];
+        for ranked in &cases {
+            let v = verdict(ranked, emm);
+            println!("{v}");
+            if let Some(id) = added(&v) {
+                let s = ranked
+                    .iter()
+                    .find(|s| s.id == id)
+                    .expect("a ranked candidate");
+                assert!(
+                    s.emm_um < emm,
+                    "{id} is recommended but does not lower the EMM: {v}"
+                );
+            }
+            if ranked[0].id == "raise:EZX" {
+                assert!(
+                    v.starts_with(
+                        "raise:EZX has the strongest evidence (ΔBIC -1510) but would \
+                                   not lower the EMM of the Φ fit (18.568 → about 18.725 µm)"
+                    ),
+                    "{v}"
+                );
+            }
+        }
+        assert_eq!(added(&verdict(&cases[0], emm)), Some("ball-screw:X:700"));
+        assert_eq!(added(&verdict(&cases[1], emm)), Some("ball-screw:X:700"));
+        let none = verdict(&cases[2], emm);
+        assert!(added(&none).is_none(), "{none}");
+        assert!(
+            none.contains("no candidate with strong evidence lowers the EMM"),
+            "{none}"
+        );
+        assert_eq!(added(&verdict(&cases[3], emm)), Some("ball-screw:X:700"));
+        assert!(!verdict(&cases[3], emm).contains("would not lower"));
+        assert_eq!(
+            recommended(&cases[1], emm).map(|s| s.id.as_str()),
+            Some("ball-screw:X:700")
+        );
+        assert!(recommended(&cases[2], emm).is_none());
+    }
+
+    /// A field is shown with the physical candidates over its variables, and only those.
+    #[test]
+    fn a_field_is_shown_with_the_physical_candidates_over_its_variables() {
+        let ranked = vec![
+            scored("field:X*Z", -1220.0, 8.5),
+            scored("raise-axis:X", -630.0, 10.3),
+            scored("thermal-scale:X", -200.0, 10.6),
+            scored("ball-screw:Z:200", -50.0, 10.7),
+            scored("range-scale", -40.0, 10.7),
+            scored("add:EAC", -30.0, 10.7),
+        ];
+        let shared: Vec<&str> = sharing(&ranked, "field:X*Z")
+            .iter()
+            .map(|s| s.id.as_str())
+            .collect();
+        assert_eq!(shared, ["raise-axis:X", "ball-screw:Z:200"]);
+        let v = verdict(&ranked, 10.8);
+        assert!(
+            v.contains(
+                "the physical candidates over X and Z are raise-axis:X (ΔBIC -630), \
+                        ball-screw:Z:200 (ΔBIC -50), each of one variable: none couples X with Z"
+            ),
+            "{v}"
+        );
+        let over_time: Vec<&str> = sharing(&ranked, "field:X*t")
+            .iter()
+            .map(|s| s.id.as_str())
+            .collect();
+        assert_eq!(over_time, ["raise-axis:X", "thermal-scale:X"]);
     }
 }

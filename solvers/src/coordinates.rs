@@ -165,7 +165,17 @@ pub(crate) fn reduce(
 /// [`Reduced`] normal equations; `None` when the Jacobian is not finite or the constraints
 /// cannot be eliminated.
 pub(crate) fn reduced_normal(task: &crate::Task, params: &[f64]) -> Option<Reduced> {
-    let normal = accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
+    reduced_normal_under(task, params, &|_| (1.0, 0.0))
+}
+
+/// [`reduced_normal`] of the least squares weighted per point by `weight(‖r_i‖)`, as
+/// [`accumulate`] takes it (the constraints' scaling still from those weighted equations).
+pub(crate) fn reduced_normal_under(
+    task: &crate::Task,
+    params: &[f64],
+    weight: &(dyn Fn(f64) -> (f64, f64) + Sync),
+) -> Option<Reduced> {
+    let normal = accumulate(&*task.problem, params, weight, false)?;
     let (d, ns) = scaled_null_space(&normal.h, &task.constraints, params);
     let ns = ns.ok()?;
     let (hz, gz) = reduce(&d, ns.basis(), &normal.h, Some(&normal.g));

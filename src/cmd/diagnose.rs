@@ -1,7 +1,7 @@
 //! `volver diagnose`: where the fit fails and what it most likely misses.
 
 use super::{Inputs, um};
-use anyhow::Result;
+use anyhow::{Context, Result};
 use volver::diagnosis::Diagnosis;
 
 /// Options of `volver diagnose`.
@@ -31,6 +31,15 @@ pub struct DiagnoseArgs {
     /// With --iterate: do not append the rounds to any history file.
     #[arg(long, conflicts_with = "history")]
     no_history: bool,
+    /// With --iterate: write the final error model (every addition of the loop) as TOML, for
+    /// `volver identify --model`.
+    #[arg(long, requires = "iterate")]
+    write_model: Option<std::path::PathBuf>,
+    /// With --iterate: write the final model's fit as a results file (JSON), as `volver identify
+    /// --out` writes it; a fit `identify` would refuse (implausible sizes, a limit reached) is
+    /// not written and the command fails with the reason.
+    #[arg(long, requires = "iterate")]
+    out: Option<std::path::PathBuf>,
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
@@ -59,12 +68,13 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
             .clone()
             .unwrap_or_else(|| volver::history::default_path(&a.inputs.data))
     });
-    if let Some(path) = &history {
-        volver::core::fsio::Outputs::new(a.inputs.paths(&[])).claim(path)?;
+    let mut outputs = volver::core::fsio::Outputs::new(a.inputs.paths(&[]));
+    for path in [&history, &a.write_model, &a.out].into_iter().flatten() {
+        outputs.claim(path)?;
     }
     let data_name = a.inputs.data.display().to_string();
     let mut records = Vec::new();
-    let (mut rounds, _) =
+    let (mut rounds, last_model) =
         volver::diagnosis::iterate(&model, &set, noise.as_ref(), a.max_added, |r| {
             records.push(
                 r.diagnosis
@@ -79,6 +89,7 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
             volver::history::append(path, record)?;
         }
     }
+    write_final(&a, &last_model, &set)?;
     if let Some(last) = rounds.last_mut() {
         last.diagnosis.candidates.truncate(a.top);
     }
@@ -113,10 +124,49 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
             path.display()
         );
     }
+    if let Some(path) = &a.write_model {
+        println!(
+            "the final model is written to {} (`volver identify --model` reads it)",
+            path.display()
+        );
+    }
+    if let Some(path) = &a.out {
+        println!("its fit is written to {}", path.display());
+    }
     Ok(())
 }
 
 /// One round of `diagnose --iterate`, in a line or two.
+/// The final model of the loop as TOML (`--write-model`) and its fit as a results file
+/// (`--out`, as `volver identify --out` writes it: the same fit, with its uncertainty).
+fn write_final(
+    a: &DiagnoseArgs,
+    model: &volver::core::model::Model,
+    set: &volver::core::measure::MeasurementSet,
+) -> Result<()> {
+    if let Some(path) = &a.write_model {
+        let text = toml::to_string(model.spec()).context("writing the error model")?;
+        volver::core::fsio::write_atomic(path, text)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &a.out {
+        let settings = volver::identification::Settings::default();
+        let outcome =
+            volver::identification::identify(model, set, &settings, &mut volver::solvers::Silent)?;
+        if let Some(why) = &outcome.refusal {
+            anyhow::bail!(
+                "the final model's fit is not written to {}: {why}",
+                path.display()
+            );
+        }
+        outcome
+            .results
+            .save(path)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
 fn print_round(k: usize, r: &volver::diagnosis::Round) {
     let d = &r.diagnosis;
     let noise = d.noise.as_ref().map_or(String::new(), |n| {
