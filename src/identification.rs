@@ -273,6 +273,7 @@ pub fn identify(
     );
     let (covariance, rule) = uncertainty_of(&problem, &mut id, settings)?;
     let mut results = ResultsFile::from_model(model, &id.params)?;
+    results.time_origin_s = model.needs_time().then_some(data.time_origin_s);
     if let Some(cov) = &covariance {
         // One name per column of the held factor: none when the priors decided them.
         let held = id

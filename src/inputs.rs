@@ -142,6 +142,9 @@ pub fn load_with(
         }
         None => MeasurementSet::load(&m, data).context("reading the measurements")?,
     };
+    if let Some(w) = set.time_unit_warning(&data.display().to_string()) {
+        eprintln!("  warning: {w}");
+    }
     Problem::new(&model, &set)?.check_scale_in(
         &data.display().to_string(),
         unit.as_ref().map(|(n, mm)| (&n[..], *mm)),

@@ -549,7 +549,10 @@ impl Simulation {
             files: SimulationFiles::default(),
         };
         Ok(Synthetic {
-            measurements: MeasurementSet { points },
+            measurements: MeasurementSet {
+                points,
+                time_origin_s: 0.0,
+            },
             noise_free,
             truth,
             record,

@@ -678,6 +678,25 @@ pub fn rank(
     sort_and_merge(scores)
 }
 
+/// The plausible size of parameter `j` of `model` (in `unit`, [`limit`]); for a rate over time
+/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] × 1 h^p
+/// over the data's span `T` (h): `limit / Tᵖ`, so that the diagnosis does not depend on the
+/// unit of the time stamps (over a test of one hour, the bound of the rate itself).
+fn plausible(
+    model: &Model,
+    data: &volver_core::measure::MeasurementSet,
+    j: usize,
+    unit: Unit,
+) -> f64 {
+    let span_h = data.time_span_s().filter(|&t| t > 0.0).map(|t| t / 3600.0);
+    match (span_h, j < model.n_params()) {
+        (Some(t), true) if model.time_power(j) > 0 => {
+            limit(unit) / t.powi(model.time_power(j) as i32)
+        }
+        _ => limit(unit),
+    }
+}
+
 /// The score of candidate `c` against the current model's fit (`rank0` identified directions,
 /// residual sum `rss0`, variance per coordinate `variance`), or why it cannot be scored.
 fn score(
@@ -701,9 +720,10 @@ fn score(
     let ridge: Vec<f64> = extended
         .params()
         .iter()
-        .map(|info| match model.param_index(&info.name) {
+        .enumerate()
+        .map(|(j, info)| match model.param_index(&info.name) {
             Some(_) => 0.0,
-            None => variance / limit(info.unit).powi(2),
+            None => variance / plausible(&extended, data, j, info.unit).powi(2),
         })
         .collect();
     let task = ext.task();
@@ -718,7 +738,10 @@ fn score(
     let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
     let delta_bic = bic(rss1);
     let (scale, size_unit) = unit.micro();
-    let bound = limit(unit) * scale;
+    let first_new = (0..extended.n_params())
+        .find(|&j| model.param_index(&extended.params()[j].name).is_none())
+        .unwrap_or(usize::MAX);
+    let bound = plausible(&extended, data, first_new, unit) * scale;
     let bic_free = bic(rss_free);
     let flag = if size > bound {
         Some(format!(
