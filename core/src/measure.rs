@@ -781,7 +781,9 @@ mod tests {
         assert!((p.commands.0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
         assert_eq!(p.reflector, 0);
         assert_eq!(p.measured, [950.0, 75.0, 1450.0]);
-        assert_eq!(p.t_s, Some(12.5));
+        // Times count from the earliest stamp, which the set keeps.
+        assert_eq!(p.t_s, Some(0.0));
+        assert_eq!(s.time_origin_s, 12.5);
         assert_eq!(p.station.as_deref(), Some("S1"));
         assert_eq!(p.line, 2);
         assert_eq!(s.points[1].t_s, None);
@@ -790,6 +792,10 @@ mod tests {
             MeasurementSet::from_csv_str(&m(), &s.to_csv_string(&m()), "again.csv").unwrap();
         assert_eq!(again.points.len(), 2);
         assert_eq!(again.points[0].commands, p.commands);
+        assert_eq!(
+            (again.time_origin_s, again.points[0].t_s),
+            (12.5, Some(0.0))
+        );
     }
 
     fn err(csv: &str) -> String {

@@ -1,0 +1,153 @@
+//! One noise source (issue 44, item 5), through the binary: `simulate` uses the machine file's
+//! `[tracker] noise` unless `--noise` is given (and then says both), its three files state the
+//! same noise, and `identify --truth` names the field where the truth's machine differs.
+
+mod common;
+use common::volver;
+
+use std::path::{Path, PathBuf};
+use volver::core::noise::TrackerNoise;
+
+/// A small FYXZ gantry whose machine file states the tracker's noise as `mpe:15,6`.
+const GANTRY: &str = r#"name = "FYXZ gantry"
+chain = "FYXZ"
+[axes.Y]
+range = [0.0, 2000.0]
+[axes.X]
+range = [0.0, 3000.0]
+[axes.Z]
+range = [0.0, 800.0]
+offset = [0.0, 0.0, 1200.0]
+[[reflector]]
+id = "R1"
+offset = [0.0, 0.0, -150.0]
+[[reflector]]
+id = "R2"
+offset = [80.0, 0.0, -250.0]
+[tracker]
+mount = "workpiece"
+position = [1500.0, 1000.0, 0.0]
+noise = "mpe:15,6"
+"#;
+
+/// A fresh folder with the gantry's machine file, named after `name`.
+fn folder(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("volver-noise-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("gantry.toml"), GANTRY).unwrap();
+    dir
+}
+
+/// `volver simulate` of the gantry into `dir/sim` with `extra` arguments; its standard output.
+fn simulate(dir: &Path, extra: &[&str]) -> String {
+    let (machine, out) = (dir.join("gantry.toml"), dir.join("sim"));
+    let mut args = vec![
+        "simulate",
+        "--machine",
+        machine.to_str().unwrap(),
+        "--plan",
+        "X=0:3000:1000,Y=0:2000:1000,Z=0:800:400",
+        "--seed",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let o = volver(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8(o.stdout).unwrap()
+}
+
+/// The noise each file written by `simulate` into `dir/sim` states: simulation.json's,
+/// machine.toml's `[tracker] noise`, truth.json's machine's.
+fn stated(dir: &Path) -> [TrackerNoise; 3] {
+    let sim = dir.join("sim");
+    let read = |f: &str| std::fs::read_to_string(sim.join(f)).unwrap();
+    let record: serde_json::Value = serde_json::from_str(&read("simulation.json")).unwrap();
+    let record: TrackerNoise = serde_json::from_value(record["noise"].clone()).unwrap();
+    let machine: toml::Value = toml::from_str(&read("machine.toml")).unwrap();
+    let machine = TrackerNoise::from_text(machine["tracker"]["noise"].as_str().unwrap()).unwrap();
+    let truth: serde_json::Value = serde_json::from_str(&read("truth.json")).unwrap();
+    let truth =
+        TrackerNoise::from_text(truth["machine"]["tracker"]["noise"].as_str().unwrap()).unwrap();
+    [record, machine, truth]
+}
+
+#[test]
+fn simulate_uses_the_machine_files_noise_and_its_files_agree() {
+    let dir = folder("file");
+    let text = simulate(&dir, &[]);
+    assert!(
+        text.contains("from the machine file's [tracker] noise"),
+        "the output says where the noise comes from:\n{text}"
+    );
+    let want = TrackerNoise::from_text("mpe:15,6").unwrap();
+    for (file, n) in ["simulation.json", "machine.toml", "truth.json"]
+        .iter()
+        .zip(stated(&dir))
+    {
+        assert_eq!(n, want, "{file} states the machine file's noise");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_explicit_noise_wins_says_both_and_every_file_states_it() {
+    let dir = folder("given");
+    let text = simulate(&dir, &["--noise", "paper"]);
+    assert!(
+        text.contains("from --noise, over the machine file's [tracker] noise"),
+        "the output names both noises:\n{text}"
+    );
+    for (file, n) in ["simulation.json", "machine.toml", "truth.json"]
+        .iter()
+        .zip(stated(&dir))
+    {
+        assert_eq!(n, TrackerNoise::PAPER, "{file} states --noise");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_truths_machine_agrees_and_a_different_one_is_named_by_its_field() {
+    let dir = folder("truth");
+    simulate(&dir, &[]);
+    let sim = dir.join("sim");
+    let model = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mill/cubic.toml");
+    let identify = |machine: &Path| {
+        volver(&[
+            "identify",
+            "--machine",
+            machine.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--data",
+            sim.join("measurements.csv").to_str().unwrap(),
+            "--truth",
+            sim.join("truth.json").to_str().unwrap(),
+            "--no-history",
+            "--accept",
+        ])
+    };
+    // The files simulate wrote belong together, and the original machine file (its noise as
+    // written, mpe:15,6) is the same machine.
+    for machine in [sim.join("machine.toml"), dir.join("gantry.toml")] {
+        let o = identify(&machine);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let other = dir.join("longer.toml");
+    std::fs::write(
+        &other,
+        GANTRY.replace("range = [0.0, 3000.0]", "range = [0.0, 3100.0]"),
+    )
+    .unwrap();
+    let o = identify(&other);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("axes.X.range: [0.0,3000.0] against [0.0,3100.0]"),
+        "the message names the field and both values: {err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
