@@ -151,3 +151,74 @@ fn the_truths_machine_agrees_and_a_different_one_is_named_by_its_field() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A small error model for the gantry: quadratic positioning errors and the squareness.
+const SMALL_MODEL: &str = r#"name = "positioning and squareness"
+squareness = "separate"
+[[error]]
+name = ["EXX", "EYY", "EZZ"]
+basis = "legendre"
+degree = 2
+[[error]]
+name = ["A0Z", "B0Z", "C0Y"]
+"#;
+
+#[test]
+fn identify_and_uncertainty_say_which_noise_they_used() {
+    let dir = folder("used");
+    simulate(&dir, &[]);
+    std::fs::write(dir.join("model.toml"), SMALL_MODEL).unwrap();
+    let (machine, model) = (dir.join("gantry.toml"), dir.join("model.toml"));
+    let data = dir.join("sim/measurements.csv");
+    let run = |command: &str, extra: &[&str]| {
+        let mut args = vec![
+            command,
+            "--machine",
+            machine.to_str().unwrap(),
+            "--model",
+            model.to_str().unwrap(),
+            "--data",
+            data.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        let o = volver(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout).unwrap()
+    };
+    let file_noise = TrackerNoise::from_text("mpe:15,6").unwrap();
+    // identify --json: the machine file's noise, stated with its source.
+    let json: serde_json::Value =
+        serde_json::from_str(&run("identify", &["--no-history", "--accept", "--json"])).unwrap();
+    let used = &json["noise_used"];
+    assert_eq!(
+        used["source"], "the machine file's [tracker] noise",
+        "{used}"
+    );
+    assert_eq!(used["model"], format!("tracker {file_noise}"), "{used}");
+    // identify with --noise: it wins, and the statement names the file's too.
+    let text = run(
+        "identify",
+        &["--no-history", "--accept", "--noise", "paper"],
+    );
+    assert!(
+        text.contains(&format!(
+            "  noise: tracker {}, from --noise, over the machine file's [tracker] noise {file_noise}",
+            TrackerNoise::PAPER
+        )),
+        "{text}"
+    );
+    // uncertainty, text and --json.
+    let text = run("uncertainty", &[]);
+    assert!(
+        text.contains(&format!(
+            "  noise: tracker {file_noise}, from the machine file's [tracker] noise"
+        )),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&run("uncertainty", &["--json"])).unwrap();
+    assert_eq!(
+        json["noise_used"]["source"], "the machine file's [tracker] noise",
+        "{json}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
