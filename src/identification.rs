@@ -499,6 +499,11 @@ fn implausible_sizes(
                 .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
             emm_um: Some(id.reached.stats.emm_um),
             relaxed: false,
+            time_span_h: problem
+                .data()
+                .time_span_s()
+                .filter(|&t| t > 0.0)
+                .map(|t| t / 3600.0),
         },
     )
 }

@@ -679,9 +679,9 @@ pub fn rank(
 }
 
 /// The plausible size of parameter `j` of `model` (in `unit`, [`limit`]); for a rate over time
-/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] × 1 h^p
-/// over the data's span `T` (h): `limit / Tᵖ`, so that the diagnosis does not depend on the
-/// unit of the time stamps (over a test of one hour, the bound of the rate itself).
+/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] × 1 hᵖ
+/// over the data's span `T` (h), `limit / Tᵖ`, so that the diagnosis does not depend on the
+/// unit of the time stamps (the rule of [`volver_core::plausibility::Context::time_span_h`]).
 fn plausible(
     model: &Model,
     data: &volver_core::measure::MeasurementSet,
