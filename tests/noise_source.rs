@@ -220,5 +220,35 @@ fn identify_and_uncertainty_say_which_noise_they_used() {
         json["noise_used"]["source"], "the machine file's [tracker] noise",
         "{json}"
     );
+    // compensate states the noise of the U it vouches with, as identify recorded it.
+    let fit = dir.join("fit.json");
+    run(
+        "identify",
+        &["--no-history", "--accept", "--out", fit.to_str().unwrap()],
+    );
+    let points = dir.join("points.csv");
+    std::fs::write(
+        &points,
+        "id,Y,X,Z
+a,1000,1500,400
+",
+    )
+    .unwrap();
+    let o = volver(&[
+        "compensate",
+        "--results",
+        fit.to_str().unwrap(),
+        "--points",
+        points.to_str().unwrap(),
+        "--out",
+        dir.join("corrected.csv").to_str().unwrap(),
+        "--force",
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success() && text.contains(&format!("noise: tracker {file_noise}, as the fit")),
+        "{text}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
