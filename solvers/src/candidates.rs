@@ -39,7 +39,7 @@ use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, On
 pub const SCREW_PERIODS: usize = 8;
 use volver_core::iso::Unit;
 use volver_core::noise::TrackerNoise;
-use volver_core::plausibility::limit;
+use volver_core::plausibility::{RATE_SPAN_H, limit};
 use volver_core::problem::{Problem, Residuals, Whitened};
 
 /// A candidate: an extension of the error model.
@@ -679,9 +679,10 @@ pub fn rank(
 }
 
 /// The plausible size of parameter `j` of `model` (in `unit`, [`limit`]); for a rate over time
-/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] × 1 hᵖ
-/// over the data's span `T` (h), `limit / Tᵖ`, so that the diagnosis does not depend on the
-/// unit of the time stamps (the rule of [`volver_core::plausibility::Context::time_span_h`]).
+/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] ×
+/// ([`RATE_SPAN_H`] h)ᵖ over the data's span `T` (h), `limit × (24 / T)ᵖ`, so that the diagnosis
+/// does not depend on the unit of the time stamps (the rule of
+/// [`volver_core::plausibility::Context::time_span_h`]).
 fn plausible(
     model: &Model,
     data: &volver_core::measure::MeasurementSet,
@@ -691,7 +692,7 @@ fn plausible(
     let span_h = data.time_span_s().filter(|&t| t > 0.0).map(|t| t / 3600.0);
     match (span_h, j < model.n_params()) {
         (Some(t), true) if model.time_power(j) > 0 => {
-            limit(unit) / t.powi(model.time_power(j) as i32)
+            limit(unit) * (RATE_SPAN_H / t).powi(model.time_power(j) as i32)
         }
         _ => limit(unit),
     }
