@@ -195,6 +195,63 @@ pub struct Observed {
     pub fix: String,
 }
 
+/// Where the machine `a` (of a truth file) differs from `b` (of the measurements), one
+/// `field: a against b` per differing value (`axes.X.range: [0.0, 3000.0] against …`); the
+/// tracker's noise is not part of the machine's geometry and is left out. Empty when they agree.
+pub fn machine_differences(
+    a: &volver_core::machine::MachineSpec,
+    b: &volver_core::machine::MachineSpec,
+) -> Vec<String> {
+    let value = |spec: &volver_core::machine::MachineSpec| {
+        let mut spec = spec.clone();
+        spec.tracker.noise = None;
+        serde_json::to_value(&spec).unwrap_or(serde_json::Value::Null)
+    };
+    let mut out = Vec::new();
+    json_differences("", &value(a), &value(b), &mut out);
+    out
+}
+
+/// The leaves where `a` and `b` differ, as `path: a against b`, into `out`.
+fn json_differences(
+    path: &str,
+    a: &serde_json::Value,
+    b: &serde_json::Value,
+    out: &mut Vec<String>,
+) {
+    use serde_json::Value;
+    let at = |key: &str| {
+        if path.is_empty() {
+            key.to_string()
+        } else {
+            format!("{path}.{key}")
+        }
+    };
+    match (a, b) {
+        (Value::Object(x), Value::Object(y)) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                let (u, v) = (
+                    x.get(k).unwrap_or(&Value::Null),
+                    y.get(k).unwrap_or(&Value::Null),
+                );
+                json_differences(&at(k), u, v, out);
+            }
+        }
+        (Value::Array(x), Value::Array(y))
+            if x.len() == y.len() && x.iter().any(|e| e.is_object()) =>
+        {
+            for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                json_differences(&at(&i.to_string()), u, v, out);
+            }
+        }
+        _ if a != b => out.push(format!("{path}: {a} against {b}")),
+        _ => {}
+    }
+}
+
 /// The noise error of the measurements `data` (read from `data_path`) given the true errors
 /// in `truth_path` (a results file): the generator's own figure from the `simulation.json`
 /// beside the truth when it belongs to these data (the `measurements.csv` written beside it,
@@ -211,8 +268,12 @@ pub fn noise_error(
         &ResultsFile::load(truth_path).context("reading the truth file")?,
         &label,
     )?;
-    if truth.model.machine().spec() != machine.spec() {
-        bail!("the machine of {label} is not the machine of the measurements");
+    let differences = machine_differences(truth.model.machine().spec(), machine.spec());
+    if !differences.is_empty() {
+        bail!(
+            "the machine of {label} is not the machine of the measurements: {}",
+            differences.join("; ")
+        );
     }
     let dir = truth_path.parent().unwrap_or(Path::new("."));
     let belongs = volver_core::fsio::same_file(&dir.join("measurements.csv"), data_path);
@@ -273,6 +334,7 @@ pub fn identify(
     );
     let (covariance, rule) = uncertainty_of(&problem, &mut id, settings)?;
     let mut results = ResultsFile::from_model(model, &id.params)?;
+    results.time_origin_s = model.needs_time().then_some(data.time_origin_s);
     if let Some(cov) = &covariance {
         // One name per column of the held factor: none when the priors decided them.
         let held = id
@@ -439,6 +501,11 @@ fn implausible_sizes(
                 .or(determined.as_ref().map(|a| a.covariance_factor.as_slice())),
             emm_um: Some(id.reached.stats.emm_um),
             relaxed: false,
+            time_span_h: problem
+                .data()
+                .time_span_s()
+                .filter(|&t| t > 0.0)
+                .map(|t| t / 3600.0),
         },
     )
 }

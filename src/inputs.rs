@@ -142,6 +142,9 @@ pub fn load_with(
         }
         None => MeasurementSet::load(&m, data).context("reading the measurements")?,
     };
+    if let Some(w) = set.time_unit_warning(&data.display().to_string()) {
+        eprintln!("  warning: {w}");
+    }
     Problem::new(&model, &set)?.check_scale_in(
         &data.display().to_string(),
         unit.as_ref().map(|(n, mm)| (&n[..], *mm)),
@@ -172,4 +175,106 @@ pub fn demo_test4(model: &Model) -> Result<Synthetic> {
     let m = model.machine();
     let truth = Truth::random(m, model.spec(), &Magnitudes::default(), DEMO_SEED)?;
     Ok(Simulation::new(Plan::preset(m, "test4")?, truth, DEMO_SEED).run()?)
+}
+
+/// The noise a command uses ([`noise_rule`]), where it comes from, and how the fit stands
+/// against it: stated in the text and the `--json` of `identify` and `uncertainty`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct NoiseUsed {
+    /// The noise model, in words.
+    pub model: String,
+    /// Where it comes from: `--noise`, the machine file's `[tracker] noise`, or the residuals.
+    pub source: String,
+    /// When a specified noise and the data disagree (the fit's EMM clearly above or below
+    /// what the noise leaves at these points), what that means; `None` when they agree or the
+    /// noise is the residuals' own.
+    pub disagreement: Option<String>,
+}
+
+/// The one noise rule: `--noise` when given (it wins over the machine file's, and the source
+/// says both when they differ), else the machine file's `[tracker] noise`, else an isotropic
+/// normal with the residuals' variance.
+pub fn noise_rule(
+    given: Option<&str>,
+    machine: &Machine,
+) -> Result<(volver_solvers::uncertainty::NoiseModel, NoiseUsed)> {
+    use volver_solvers::uncertainty::NoiseModel;
+    let file = machine.tracker().noise.filter(|n| !n.is_none());
+    let (model, source) = match (given, file) {
+        (Some(text), file) => {
+            let model = crate::uncertainty::noise_of(Some(text))?;
+            let source = match file {
+                Some(f) if NoiseModel::Tracker(f) != model => {
+                    format!("--noise, over the machine file's [tracker] noise {f}")
+                }
+                Some(_) => "--noise, as the machine file's [tracker] noise".to_string(),
+                None => "--noise".to_string(),
+            };
+            (model, source)
+        }
+        (None, Some(f)) => (
+            NoiseModel::Tracker(f),
+            "the machine file's [tracker] noise".to_string(),
+        ),
+        (None, None) => (
+            NoiseModel::Residual,
+            "the residuals (no --noise, no [tracker] noise in the machine file)".to_string(),
+        ),
+    };
+    let used = NoiseUsed {
+        model: model.to_string(),
+        source,
+        disagreement: None,
+    };
+    Ok((model, used))
+}
+
+impl NoiseUsed {
+    /// `self` with the fit at `params` (EMM `emm_um`) of `model` on `data` judged against a
+    /// specified noise ([`crate::diagnosis::standing`]): a disagreement when the fit is clearly
+    /// above what the noise leaves at these points (the model misses something, or the noise is
+    /// understated: the intervals then assume a model the data do not support) or far below it.
+    pub fn judged(
+        mut self,
+        noise: volver_solvers::uncertainty::NoiseModel,
+        model: &Model,
+        data: &MeasurementSet,
+        params: &[f64],
+        emm_um: f64,
+    ) -> NoiseUsed {
+        use crate::diagnosis::Standing;
+        let volver_solvers::uncertainty::NoiseModel::Tracker(n) = noise else {
+            return self;
+        };
+        let Ok(problem) = Problem::new(model, data) else {
+            return self;
+        };
+        if let Some((level, standing)) = crate::diagnosis::standing(&problem, params, emm_um, &n)
+            && standing != Standing::AtNoise
+        {
+            self.disagreement = Some(format!(
+                "the fit's EMM {emm_um:.2} µm is {:.2} × what this noise leaves at these points \
+                 ({:.2} µm): {}{}",
+                level.ratio(emm_um),
+                level.fit_emm_um,
+                standing.conclusion(),
+                if standing == Standing::Above {
+                    " (`volver diagnose`), or the noise is understated; intervals from it \
+                     assume a complete model"
+                } else {
+                    ""
+                }
+            ));
+        }
+        self
+    }
+
+    /// The statement as printed under a command's summary (two lines with a disagreement).
+    pub fn text(&self) -> String {
+        let mut out = format!("  noise: {}, from {}", self.model, self.source);
+        if let Some(d) = &self.disagreement {
+            out.push_str(&format!("\n  noise against the data: {d}"));
+        }
+        out
+    }
 }

@@ -483,7 +483,7 @@ impl Profile {
         }
         crate::measure::refuse_copies(&points, file)?;
         crate::measure::refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet { points })
+        Ok(MeasurementSet::from_file_times(points))
     }
 }
 

@@ -100,7 +100,8 @@ pub struct Measurement {
     pub measured: [f64; 3],
     /// What was observed.
     pub observation: Observation,
-    /// Seconds since the test started, when recorded.
+    /// Seconds since the test started, when recorded: since the set's earliest stamp
+    /// ([`MeasurementSet::time_origin_s`]) once read, whatever the file's origin.
     pub t_s: Option<f64>,
     /// Tracker station id, when recorded.
     pub station: Option<String>,
@@ -140,6 +141,11 @@ pub fn pose_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
 pub struct MeasurementSet {
     /// The points in file order.
     pub points: Vec<Measurement>,
+    /// The file's time stamp (s) that the points' `t_s` count from: its earliest, so that a fit
+    /// and its diagnosis do not depend on the clock's origin (an epoch time, a time of day) and
+    /// a drift's value at `t_s = 0` is the one at the test's start. Zero for a set made in
+    /// memory (a simulation starts at zero).
+    pub time_origin_s: f64,
 }
 
 /// The largest measured coordinate accepted (mm): 1 km, beyond the reach of any laser
@@ -593,7 +599,68 @@ impl MeasurementSet {
         }
         refuse_copies(&points, file)?;
         refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet { points })
+        Ok(MeasurementSet::from_file_times(points))
+    }
+
+    /// A set of points whose `t_s` are the file's stamps: counted from the earliest from now on,
+    /// which becomes [`MeasurementSet::time_origin_s`] (the difference is exact for stamps within
+    /// a factor of two of each other, an epoch time's for instance, and to an ulp of the
+    /// largest otherwise).
+    pub fn from_file_times(mut points: Vec<Measurement>) -> MeasurementSet {
+        let origin = points
+            .iter()
+            .filter_map(|p| p.t_s)
+            .fold(f64::INFINITY, f64::min);
+        let time_origin_s = if origin.is_finite() { origin } else { 0.0 };
+        for p in &mut points {
+            if let Some(t) = p.t_s.as_mut() {
+                *t -= time_origin_s;
+            }
+        }
+        MeasurementSet {
+            points,
+            time_origin_s,
+        }
+    }
+
+    /// The time the points span (s): the latest `t_s` (they count from the earliest); `None`
+    /// without time stamps.
+    pub fn time_span_s(&self) -> Option<f64> {
+        let (lo, hi) = self
+            .points
+            .iter()
+            .filter_map(|p| p.t_s)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+                (lo.min(t), hi.max(t))
+            });
+        (hi >= lo).then_some(hi - lo)
+    }
+
+    /// A warning when the time stamps do not look like seconds: the mean time between two
+    /// points below 0.05 s (hours or minutes?) or above 3 h (ms or µs?). A fit does not depend on
+    /// the unit (the time origin is the first stamp and the gauge's metric weighs a rate by the
+    /// test's span), but the rates it reports are per hour of a `t_s` read in seconds.
+    pub fn time_unit_warning(&self, file: &str) -> Option<String> {
+        let n = self.points.iter().filter(|p| p.t_s.is_some()).count();
+        let span = self.time_span_s()?;
+        if n < 2 || span <= 0.0 {
+            return None;
+        }
+        let step = span / (n - 1) as f64;
+        let guess = if step < 0.05 {
+            "hours or minutes"
+        } else if step > 3.0 * 3600.0 {
+            "milliseconds or microseconds"
+        } else {
+            return None;
+        };
+        Some(format!(
+            "{file}: t_s spans {} s over {n} points ({} s a point): are the stamps in {guess}? \
+             They are read as seconds; the fit is the same in any unit, but the rates it reports \
+             (mm/h, ppm/h, rad/h) are per hour of seconds",
+            crate::error::number(span),
+            crate::error::number(step)
+        ))
     }
 
     /// Writes the set as measurement CSV (axis columns in chain order, positions in mm and
@@ -675,7 +742,8 @@ impl MeasurementSet {
                 let _ = write!(
                     out,
                     ",{}",
-                    p.t_s.map_or(String::new(), |t| format!("{t:.3}"))
+                    p.t_s
+                        .map_or(String::new(), |t| format!("{:.3}", t + self.time_origin_s))
                 );
             }
             if with_station {
@@ -713,7 +781,9 @@ mod tests {
         assert!((p.commands.0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
         assert_eq!(p.reflector, 0);
         assert_eq!(p.measured, [950.0, 75.0, 1450.0]);
-        assert_eq!(p.t_s, Some(12.5));
+        // Times count from the earliest stamp, which the set keeps.
+        assert_eq!(p.t_s, Some(0.0));
+        assert_eq!(s.time_origin_s, 12.5);
         assert_eq!(p.station.as_deref(), Some("S1"));
         assert_eq!(p.line, 2);
         assert_eq!(s.points[1].t_s, None);
@@ -722,6 +792,10 @@ mod tests {
             MeasurementSet::from_csv_str(&m(), &s.to_csv_string(&m()), "again.csv").unwrap();
         assert_eq!(again.points.len(), 2);
         assert_eq!(again.points[0].commands, p.commands);
+        assert_eq!(
+            (again.time_origin_s, again.points[0].t_s),
+            (12.5, Some(0.0))
+        );
     }
 
     fn err(csv: &str) -> String {

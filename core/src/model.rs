@@ -445,6 +445,45 @@ impl Model {
         out
     }
 
+    /// The power of time (hours) parameter `j` multiplies in the forward model: 1 for a drift
+    /// rate (tool, location, tracker, station, an axis' scale growth) and a field's `t`, 2 for a
+    /// field's `t²`, 0 for every other parameter. The gauge's metric weighs a parameter of power
+    /// `p` by the RMS of `tᵖ` over the test's span, so that a fit does not depend on the unit of
+    /// the time stamps.
+    pub fn time_power(&self, j: usize) -> u32 {
+        for &(slot, first) in &self.effects {
+            match slot {
+                EffectSlot::Drift(_)
+                | EffectSlot::ThermalScale { .. }
+                | EffectSlot::LocationDrift { .. }
+                | EffectSlot::TrackerDrift(_)
+                | EffectSlot::StationDrift { .. }
+                    if j == first =>
+                {
+                    return 1;
+                }
+                EffectSlot::Field { vars, pair, .. } if j >= first => {
+                    let q = j - first;
+                    let power = |var: FieldVar, code: usize| {
+                        if var == FieldVar::Time {
+                            code as u32 + 1
+                        } else {
+                            0
+                        }
+                    };
+                    if pair && q < 4 {
+                        return power(vars[0], q / 2) + power(vars[1], q % 2);
+                    }
+                    if !pair && q < vars[0].functions() {
+                        return power(vars[0], q);
+                    }
+                }
+                _ => {}
+            }
+        }
+        0
+    }
+
     /// The modelled error with a given ISO name.
     pub fn term(&self, id: ErrorId) -> Option<&Term> {
         self.terms.iter().find(|t| t.id == id)

@@ -46,6 +46,11 @@ pub const MAX_TRANSLATION_MM: f64 = 1.0;
 /// Largest plausible growth of an axis' scale with time (ppm/h): steel (11.5 ppm/K) warming
 /// by 9 K an hour.
 pub const MAX_SCALE_GROWTH_PPM_PER_H: f64 = 100.0;
+/// The time over which a rate's per-hour limit is the plausible change (h): a day. A drift is
+/// judged by what it moves over the test, at most its limit × 24 h (1 mm/h: 24 mm), which the
+/// time stamps' unit does not change; tests up to a day are judged no stricter than by the rate
+/// itself (only gross faults, a unit off by orders, are caught).
+pub const RATE_SPAN_H: f64 = 24.0;
 /// Largest plausible rotation error (rad).
 pub const MAX_ANGLE_RAD: f64 = 1e-3;
 /// Largest plausible shift of the tracker from its rigid fit (mm); its angles: 5 mrad.
@@ -88,10 +93,25 @@ pub struct Implausible {
 
 impl fmt::Display for Implausible {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        // Whole units, or two or three significant digits below one (a rate per hour of stamps in
+        // µs read as seconds is tiny).
+        let shown = |v: f64| {
+            if v.abs() >= 1.0 || v == 0.0 {
+                format!("{v:.0}")
+            } else if v.abs() >= 0.01 {
+                format!("{v:.3}")
+            } else {
+                format!("{v:.2e}")
+            }
+        };
         write!(
             f,
-            "{} reaches {:.0} {} (plausible: up to {:.0} {})",
-            self.name, self.value, self.unit, self.limit, self.unit
+            "{} reaches {} {} (plausible: up to {} {})",
+            self.name,
+            shown(self.value),
+            self.unit,
+            shown(self.limit),
+            self.unit
         )
     }
 }
@@ -121,6 +141,12 @@ pub struct Context<'a> {
     /// covariance and whose values along unidentified directions are wherever the fit left
     /// them (only gross input faults are caught then).
     pub relaxed: bool,
+    /// The span of the measurements' time stamps (h, [`crate::measure::MeasurementSet::time_span_s`]):
+    /// a rate over time (mm/h, rad/h, ppm/h) is then judged by what it moves over the test,
+    /// against its per-hour limit over [`RATE_SPAN_H`] (its limit × 24 h / span as a rate), so
+    /// that the verdict does not depend on the unit of the stamps. `None` (a results file, which
+    /// keeps no span): the rate itself against its limit.
+    pub time_span_h: Option<f64>,
 }
 
 /// The implausible sizes of `params` (most implausible first).
@@ -190,7 +216,12 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
     }
     // Effect parameters, by group (screw.X.200.a/b, drift.x/y/z, reflector.R1.x/y/z, …).
     for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
-        let limit = k * limit(own) * own.micro().0;
+        let per_hour = matches!(own, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
+        let over_span = match context.time_span_h {
+            Some(t) if per_hour && t > 0.0 => RATE_SPAN_H / t,
+            _ => 1.0,
+        };
+        let limit = k * limit(own) * own.micro().0 * over_span;
         if beyond(value, limit) {
             out.push(Implausible {
                 name,

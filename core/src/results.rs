@@ -57,6 +57,12 @@ pub struct ResultsFile {
     /// The uncertainty of the parameters, when the fit stated it (`volver identify --out`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintyRecord>,
+    /// The measurements' time stamp (s, in their file's clock) that the model's time counts
+    /// from ([`crate::measure::MeasurementSet::time_origin_s`]), for a model with effects over
+    /// time: its drifts are zero there, and `predict`, `compensate` and `tables` give the
+    /// machine at that instant, the test's start.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_origin_s: Option<f64>,
 }
 
 /// The covariance of a fit's parameters, as factors: `Cov(p) = D Dᵀ + H Hᵀ` (the data's part and
@@ -187,6 +193,7 @@ impl ResultsFile {
                 })
                 .collect(),
             uncertainty: None,
+            time_origin_s: None,
         })
     }
 

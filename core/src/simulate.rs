@@ -549,7 +549,10 @@ impl Simulation {
             files: SimulationFiles::default(),
         };
         Ok(Synthetic {
-            measurements: MeasurementSet { points },
+            measurements: MeasurementSet {
+                points,
+                time_origin_s: 0.0,
+            },
             noise_free,
             truth,
             record,
@@ -660,11 +663,14 @@ impl Synthetic {
         )
         .map_err(io(&measurements))?;
         let truth = dir.join(&files.truth);
-        self.truth.to_results()?.save(&truth)?;
         let machine_path = dir.join(&files.machine);
-        // The machine file states the tracker's noise the data were made with.
+        // The machine file, and the truth's machine, state the tracker's noise the data were
+        // made with: the files agree with each other and with simulation.json.
         let mut spec = machine.spec().clone();
         spec.tracker.noise = (!self.record.noise.is_none()).then(|| self.record.noise.to_string());
+        let mut results = self.truth.to_results()?;
+        results.machine.clone_from(&spec);
+        results.save(&truth)?;
         let toml_text = toml::to_string(&spec)
             .map_err(|e| Error::Model(format!("writing the machine file: {e}")))?;
         crate::fsio::write_atomic(

@@ -58,7 +58,7 @@ use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, On
 pub const SCREW_PERIODS: usize = 8;
 use volver_core::iso::Unit;
 use volver_core::noise::TrackerNoise;
-use volver_core::plausibility::limit;
+use volver_core::plausibility::{RATE_SPAN_H, limit};
 use volver_core::problem::{Problem, Residuals, Whitened};
 
 /// A candidate: an extension of the error model.
@@ -721,6 +721,26 @@ pub fn rank(
     sort_and_merge(scores)
 }
 
+/// The plausible size of parameter `j` of `model` (in `unit`, [`limit`]); for a rate over time
+/// (a drift, a field's `tᵖ`, [`Model::time_power`]) the rate that moves it by [`limit`] ×
+/// ([`RATE_SPAN_H`] h)ᵖ over the data's span `T` (h), `limit × (24 / T)ᵖ`, so that the diagnosis
+/// does not depend on the unit of the time stamps (the rule of
+/// [`volver_core::plausibility::Context::time_span_h`]).
+fn plausible(
+    model: &Model,
+    data: &volver_core::measure::MeasurementSet,
+    j: usize,
+    unit: Unit,
+) -> f64 {
+    let span_h = data.time_span_s().filter(|&t| t > 0.0).map(|t| t / 3600.0);
+    match (span_h, j < model.n_params()) {
+        (Some(t), true) if model.time_power(j) > 0 => {
+            limit(unit) * (RATE_SPAN_H / t).powi(model.time_power(j) as i32)
+        }
+        _ => limit(unit),
+    }
+}
+
 /// The score of candidate `c` against the current model's fit (`rank0` identified directions,
 /// residual sum `rss0`, variance per coordinate `variance`), or why it cannot be scored.
 fn score(
@@ -745,9 +765,10 @@ fn score(
     let ridge: Vec<f64> = extended
         .params()
         .iter()
-        .map(|info| match model.param_index(&info.name) {
+        .enumerate()
+        .map(|(j, info)| match model.param_index(&info.name) {
             Some(_) => 0.0,
-            None => variance / limit(info.unit).powi(2),
+            None => variance / plausible(&extended, data, j, info.unit).powi(2),
         })
         .collect();
     // The step held to plausible sizes, and the same step without the bound.
@@ -766,7 +787,10 @@ fn score(
     let bic = |rss: f64| m * (rss / rss0).ln() + added as f64 * m.ln();
     let delta_bic = bic(rss1);
     let (scale, size_unit) = unit.micro();
-    let bound = limit(unit) * scale;
+    let first_new = (0..extended.n_params())
+        .find(|&j| model.param_index(&extended.params()[j].name).is_none())
+        .unwrap_or(usize::MAX);
+    let bound = plausible(&extended, data, first_new, unit) * scale;
     let bic_free = bic(rss_free);
     let flag = if size > bound {
         Some(format!(

@@ -56,38 +56,67 @@ const SAMPLES: usize = 65;
 pub const RULE: &str = "minimum norm in the function metric: the combinations the design cannot \
     identify (relative curvature below 1e-9 in the function metric, at the reference) are held at \
     their reference values, zero errors and the tracker's rigid fit (mean square of each error \
-    function over its travel, angles × 1000 mm); the rest is the optimum under them";
+    function over its travel, angles × 1000 mm, a drift over the test's span); the rest is the \
+    optimum under them";
 
 /// The function metric `M` (n × n) at `params`: `pᵀ M p` is the sum over the error functions of
 /// the mean square of their values at 65 evenly spaced positions of their travel (mm², angles
 /// times [`LEVER_MM`]), plus the squares of the tracker's pose and of the other effects'
 /// parameters in the same units (µm/h, ppm and ppm/h weigh as µm). The error functions are linear in
 /// their coefficients except the sine series' phases, whose derivative is taken at `params`.
+/// A rate over time weighs as over one hour here; [`problem_metric`] weighs it over the test.
 pub fn function_metric(model: &Model, params: &[f64]) -> Mat<f64> {
+    function_metric_over(model, params, None)
+}
+
+/// [`function_metric`] of a problem: a parameter multiplying `tᵖ` (a drift rate, a field's
+/// `t` and `t²`, [`Model::time_power`]) weighs as the RMS of its function over the test's span
+/// `T` (from its first stamp, [`volver_core::measure::MeasurementSet::time_span_s`]),
+/// `Tᵖ / √(2p + 1)` in hours, so that the gauge, and the fit, are the same whatever the unit
+/// of the time stamps (a rate in the stamps' unit scales as `1/T`).
+pub fn problem_metric(problem: &volver_core::problem::Problem, params: &[f64]) -> Mat<f64> {
+    let span_h = problem
+        .data()
+        .time_span_s()
+        .filter(|&t| t > 0.0)
+        .map(|t| t / 3600.0);
+    function_metric_over(problem.model(), params, span_h)
+}
+
+/// [`function_metric`] with rates over time weighed over a span of `span_h` hours (over one
+/// hour when `None`).
+pub fn function_metric_over(model: &Model, params: &[f64], span_h: Option<f64>) -> Mat<f64> {
+    let time = |j: usize| match (span_h, model.time_power(j)) {
+        (Some(t), p) if p > 0 => t.powi(p as i32) / f64::from(2 * p + 1).sqrt(),
+        _ => 1.0,
+    };
     weighted_metric(
         model,
         params,
         |id| {
             if id.unit() == Unit::Mm { 1.0 } else { LEVER_MM }
         },
-        |info| match info.unit {
-            Unit::Rad | Unit::RadPerHour => LEVER_MM,
-            Unit::Ppm | Unit::PpmPerHour => 1e-3,
-            Unit::Mm | Unit::MmPerHour => 1.0,
+        |j, info| {
+            let unit = match info.unit {
+                Unit::Rad | Unit::RadPerHour => LEVER_MM,
+                Unit::Ppm | Unit::PpmPerHour => 1e-3,
+                Unit::Mm | Unit::MmPerHour => 1.0,
+            };
+            unit * time(j)
         },
     )
 }
 
 /// A metric of the same form as [`function_metric`] with other weights: `pᵀ M p` is the sum
 /// over the error functions of the mean square of `term_scale(id) × value` at 65 evenly spaced
-/// positions of their travel, plus `(other_scale(info) × p_j)²` for every parameter no error
-/// function covers. A scale of zero leaves its part out. [`crate::prior`] weighs each function
-/// by one over its prior magnitude with it.
+/// positions of their travel, plus `(other_scale(j, info) × p_j)²` for every parameter `j` no
+/// error function covers. A scale of zero leaves its part out. [`crate::prior`] weighs each
+/// function by one over its prior magnitude with it.
 pub fn weighted_metric(
     model: &Model,
     params: &[f64],
     term_scale: impl Fn(volver_core::iso::ErrorId) -> f64,
-    other_scale: impl Fn(&volver_core::model::ParamInfo) -> f64,
+    other_scale: impl Fn(usize, &volver_core::model::ParamInfo) -> f64,
 ) -> Mat<f64> {
     let n = model.n_params();
     let mut m = Mat::<f64>::zeros(n, n);
@@ -122,7 +151,7 @@ pub fn weighted_metric(
         if covered[j] {
             continue;
         }
-        let w = other_scale(info);
+        let w = other_scale(j, info);
         m[(j, j)] = w * w;
     }
     m
@@ -220,7 +249,7 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     let (normal, metric) = rayon::join(
         || crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false),
         || match problem.machine() {
-            Some(machine) => function_metric(machine.model(), at),
+            Some(machine) => problem_metric(machine, at),
             None => Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 }),
         },
     );

@@ -94,7 +94,10 @@ pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
             points.push(m);
         }
     }
-    MeasurementSet { points }
+    MeasurementSet {
+        points,
+        time_origin_s: 0.0,
+    }
 }
 
 fn join(names: &[String]) -> String {

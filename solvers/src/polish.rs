@@ -286,7 +286,7 @@ fn negligible_step<'f>(
     let (metric, size) = match problem.machine() {
         Some(machine) => {
             let model = machine.model();
-            let m = crate::gauge::function_metric(model, p);
+            let m = crate::gauge::problem_metric(machine, p);
             let t = model.tracker_start();
             let pf: Vec<f64> = (0..n)
                 .map(|j| if (t..t + 6).contains(&j) { 0.0 } else { p[j] })

@@ -111,7 +111,7 @@ impl Priors {
                 let s = self.sigma_of(id);
                 if s > 0.0 { 1.0 / s } else { 0.0 }
             },
-            |info| match (info.group, info.unit) {
+            |_, info| match (info.group, info.unit) {
                 (volver_core::iso::Group::Tracker, Unit::Mm) if tracker_mm > 0.0 => {
                     1.0 / tracker_mm
                 }

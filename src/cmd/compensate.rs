@@ -158,11 +158,13 @@ pub fn vouch(
     let (ua, ur) = (u.aligned_mm, u.raw_mm);
     println!(
         "  U (k = 2) of the compensated tool point {} mm over the travel: up to {:.2} µm after \
-         the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {})",
+         the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {}; noise: \
+         {}, as the fit recorded it)",
         point_mm(tool),
         ua * 1e3,
         ur * 1e3,
-        u.gauge
+        u.gauge,
+        record.noise
     );
     if ua * 1e3 > max_u_um {
         let why = &u.why;

@@ -20,9 +20,11 @@ pub struct IdentifyArgs {
     /// Objective: phi (mean error module, eq. 12) or ve (mean squared error, eq. 1).
     #[arg(long, default_value = "phi")]
     objective: String,
-    /// The tracker's noise for the uncertainty the results file records (`paper`,
-    /// `normal:AZ,EL,R,R_PER_M`, … as `simulate --noise`); default: isotropic normal with the
-    /// residuals' variance.
+    /// The tracker's noise for the uncertainty the results file records: paper, none,
+    /// normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ), uniform:… (bounds) or
+    /// mpe:A_UM,B_UM_PER_M (±(a + b·L), k = 2). Default: the machine file's `[tracker] noise`,
+    /// else isotropic normal with the residuals' variance; the output says which, and whether
+    /// the fit agrees with it.
     #[arg(long)]
     noise: Option<String>,
     /// Prior magnitudes per error kind: `typical` or KIND=VALUE in the kind's unit (the kinds
@@ -93,7 +95,9 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         volver::core::fsio::write_atomic(path, text)
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    let settings = settings(&a)?;
+    let mut settings = settings(&a)?;
+    let (noise_model, noise_used) = volver::inputs::noise_rule(a.noise.as_deref(), &machine)?;
+    settings.noise = noise_model;
     let noise = match &a.truth {
         Some(path) => Some(noise_error(path, &machine, &a.inputs.data, &data)?),
         None => None,
@@ -134,11 +138,24 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             .save(out)
             .context("writing the results file")?;
     }
+    let noise_used = if outcome.id.termination.failed() {
+        noise_used
+    } else {
+        noise_used.judged(
+            noise_model,
+            &model,
+            &data,
+            &outcome.id.params,
+            outcome.id.reached.stats.emm_um,
+        )
+    };
     if a.json {
-        let value = serde_json::to_value(outcome.report()?)?;
+        let mut value = serde_json::to_value(outcome.report()?)?;
+        value["noise_used"] = serde_json::to_value(&noise_used)?;
         println!("{}", serde_json::to_string_pretty(&value)?);
     } else {
         print_outcome(&outcome, a.out.as_deref());
+        println!("{}", noise_used.text());
     }
     if let Some(r) = outcome.refusal {
         anyhow::bail!("{r}; no results written");
@@ -165,8 +182,6 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     settings.lm = volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(
         a.geodesic_acceleration,
     );
-    // The noise model of the uncertainty the results file records.
-    settings.noise = volver::uncertainty::noise_of(a.noise.as_deref())?;
     settings.priors = (!a.prior.is_empty())
         .then(|| volver::solvers::prior::Priors::parse(&a.prior))
         .transpose()?;

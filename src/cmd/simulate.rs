@@ -77,10 +77,13 @@ pub struct SimulateArgs {
     #[arg(long = "magnitude", value_name = "KIND=VALUE")]
     magnitude: Vec<String>,
     /// Tracker noise: paper (uniform on ±30 µrad, ±30 µrad, ±(4 µm + 0.8 µm/m): the paper's
-    /// "±" values read as bounds, which reproduces its tables 9–10), none, or a distribution and
-    /// four values: normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ) or uniform:… (bounds).
-    #[arg(long, default_value = "paper")]
-    noise: String,
+    /// "±" values read as bounds, which reproduces its tables 9–10), none, a distribution and
+    /// four values: normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ) or uniform:… (bounds),
+    /// or a maximum permissible error mpe:A_UM,B_UM_PER_M (±(a + b·L), k = 2). Default: the
+    /// machine file's `[tracker] noise`, else the paper's; given, it wins over the file's (the
+    /// output says both) and every file written states it.
+    #[arg(long)]
+    noise: Option<String>,
     /// An effect outside the standard model, hidden in the data (see below); repeatable.
     #[arg(long = "effect", value_name = "EFFECT=VALUES")]
     effect: Vec<String>,
@@ -114,7 +117,8 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     if a.observe == "range" {
         sim.observe = volver::core::measure::Observation::Range;
     }
-    sim.noise = TrackerNoise::from_text(&a.noise)?;
+    let (noise, noise_source) = noise_of(a.noise.as_deref(), &machine)?;
+    sim.noise = noise;
     sim.effects = a
         .effect
         .iter()
@@ -130,8 +134,33 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         volver::core::measure::PointColumns::Cartesian
     };
     let files = out.write_as(&a.out, columns)?;
-    print_record(&out, &machine, &files);
+    print_record(&out, &machine, &files, &noise_source);
     Ok(())
+}
+
+/// The noise to simulate with and where it comes from: `--noise` when given (naming the machine
+/// file's when it differs), else the machine file's `[tracker] noise`, else the paper's.
+fn noise_of(given: Option<&str>, machine: &Machine) -> Result<(TrackerNoise, String)> {
+    let file = machine.tracker().noise;
+    Ok(match (given, file) {
+        (Some(text), Some(f)) => {
+            let n = TrackerNoise::from_text(text)?;
+            if n == f {
+                (n, "--noise, as the machine file's [tracker] noise".into())
+            } else {
+                (
+                    n,
+                    format!("--noise, over the machine file's [tracker] noise {f}"),
+                )
+            }
+        }
+        (Some(text), None) => (TrackerNoise::from_text(text)?, "--noise".into()),
+        (None, Some(f)) => (f, "the machine file's [tracker] noise".into()),
+        (None, None) => (
+            TrackerNoise::PAPER,
+            "the paper's (no --noise, no [tracker] noise in the machine file)".into(),
+        ),
+    })
 }
 
 /// Checks the four files `simulate` writes into `--out` against its input files (and each
@@ -274,7 +303,12 @@ fn plan_of(
 }
 
 /// What was simulated and written.
-fn print_record(out: &volver::core::simulate::Synthetic, machine: &Machine, files: &[PathBuf]) {
+fn print_record(
+    out: &volver::core::simulate::Synthetic,
+    machine: &Machine,
+    files: &[PathBuf],
+    noise_source: &str,
+) {
     let r = &out.record;
     if r.positions * r.reflectors.len() == r.points {
         println!(
@@ -316,6 +350,7 @@ fn print_record(out: &volver::core::simulate::Synthetic, machine: &Machine, file
             volver::core::noise::Distribution::Uniform => "bounds ±a, σ = a/√3",
         }
     );
+    println!("    from {noise_source}");
     if r.effects.is_empty() {
         println!("  hidden effects: none");
     } else {

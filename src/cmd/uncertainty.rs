@@ -8,16 +8,17 @@ use clap::Args;
 use volver::compensation::tool_point_of;
 use volver::core::model::Model;
 use volver::solvers::uncertainty::{HELD_PRIOR_MM, K, PointUncertainty};
-use volver::uncertainty::{Assessment, Request, assess, combination_text, grid_of, noise_of};
+use volver::uncertainty::{Assessment, Request, assess, combination_text, grid_of};
 
 /// Arguments of `volver uncertainty`.
 #[derive(Args)]
 pub struct UncertaintyArgs {
     #[command(flatten)]
     inputs: super::Inputs,
-    /// The tracker's noise: `paper`, `none`, `normal:AZ,EL,R,R_PER_M` or `uniform:…` (µrad,
-    /// µrad, µm, µm/m), as `simulate --noise`; default: isotropic normal with the residuals'
-    /// variance.
+    /// The tracker's noise: paper, normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ),
+    /// uniform:… (bounds) or mpe:A_UM,B_UM_PER_M (±(a + b·L), k = 2). Default: the machine
+    /// file's `[tracker] noise`, else isotropic normal with the residuals' variance; the output
+    /// says which, and whether the fit agrees with it.
     #[arg(long)]
     noise: Option<String>,
     /// Monte Carlo replicas (GUM Supplement 1), besides the linearised uncertainty.
@@ -66,7 +67,8 @@ fn largest(us: &[PointUncertainty]) -> (f64, f64, f64, usize) {
 pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     let (machine, model, data) = a.inputs.load()?;
     let mut request = Request::new(&model)?;
-    request.noise = noise_of(a.noise.as_deref())?;
+    let (noise_model, noise_used) = volver::inputs::noise_rule(a.noise.as_deref(), &machine)?;
+    request.noise = noise_model;
     request.engine.clone_from(&a.solver);
     volver::solvers::engine(&a.solver)?;
     request.priors = (!a.prior.is_empty())
@@ -87,12 +89,21 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
         }
     };
     let assessment = assess(&model, &data, &request, &progress)?;
+    let noise_used = noise_used.judged(
+        noise_model,
+        &model,
+        &data,
+        &assessment.id.params,
+        assessment.id.reached.stats.emm_um,
+    );
     if a.json {
-        let value = serde_json::to_value(assessment.report(&model, &request))?;
+        let mut value = serde_json::to_value(assessment.report(&model, &request))?;
+        value["noise_used"] = serde_json::to_value(&noise_used)?;
         println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
     print_gauge(&assessment, &model, &request, data.points.len());
+    println!("{}", noise_used.text());
     print_parameters(&assessment, &model);
     print_tool_point(&assessment, &model, &request);
     let check = &assessment.model_check;
