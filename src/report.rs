@@ -172,14 +172,14 @@ pub fn html(input: &ReportInput) -> Result<String> {
         volver_solvers::identifiability::RANK_TOLERANCE,
         crate::diagnosis::CORRELATION_LISTED,
     );
-    // The fit's uncertainty: the data's (σ from the residuals) and the gauge's held
-    // combinations' prior.
+    // The fit's uncertainty: the data's (the one noise rule: the machine file's `[tracker]
+    // noise`, else σ from the residuals) and the gauge's held combinations' prior.
     let cov = volver_solvers::uncertainty::linear(
         &problem,
         last.id.gauge.as_ref(),
         params,
         options.objective,
-        volver_solvers::uncertainty::NoiseModel::Residual,
+        crate::inputs::noise_rule(None, m)?.0,
     );
     let truth = input
         .truth
@@ -600,9 +600,12 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
         last.id,
         volver_solvers::uncertainty::NoiseModel::Residual,
     );
+    let noise = cov
+        .as_ref()
+        .map_or_else(String::new, |c| c.noise.to_string());
     let _ = writeln!(
         s,
-        "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is its expanded uncertainty U (k = 2): the data's (linearised, σ from the residuals) and a prior of 100 µm or 100 µrad RMS on each combination the data cannot identify (held by the gauge at the reference){}. A panel titled \"not determined\" shows a function the data do not fix: its value is the gauge's choice, not a measurement.</p>",
+        "<h2>Identified error functions</h2><p>Each component error against its axis position; the band is its expanded uncertainty U (k = 2): the data's (linearised, noise: {noise}) and a prior of 100 µm or 100 µrad RMS on each combination the data cannot identify (held by the gauge at the reference){}. A panel titled \"not determined\" shows a function the data do not fix: its value is the gauge's choice, not a measurement.</p>",
         match truth {
             Some(t) => format!(
                 "; the dashed line is the truth in this model's parameters (its squareness rule \

@@ -276,12 +276,14 @@ fn broken_results_files_are_refused_with_the_place_named() {
     };
     let out = dir.join("tables");
     let out = out.to_str().unwrap();
+    // A simulation's truth carries no uncertainty: --force writes its tables.
     let ok = volver(&[
         "tables",
         "--results",
         dir.join("truth.json").to_str().unwrap(),
         "--out",
         out,
+        "--force",
     ]);
     assert!(
         ok.status.success(),

@@ -686,6 +686,7 @@ fn red_team_findings_are_refused_or_read() {
         &d("pts.csv"),
         "--out",
         &d("pts-comp.csv"),
+        "--force", // a simulation's truth carries no uncertainty
     ]);
     assert!(
         out.status.success(),

@@ -59,6 +59,8 @@ struct Answer {
     held: usize,
     drift: [f64; 2],
     top: String,
+    /// The first eight candidates: id, ΔBIC, flagged.
+    ranking: Vec<(String, f64, bool)>,
 }
 
 fn answer(data: &MeasurementSet) -> Answer {
@@ -77,6 +79,11 @@ fn answer(data: &MeasurementSet) -> Answer {
         held: id.gauge.as_ref().map_or(usize::MAX, |g| g.held.len()),
         drift: [rate("drift.x"), rate("drift.z")],
         top: ranked[0].id.clone(),
+        ranking: ranked
+            .iter()
+            .take(8)
+            .map(|c| (c.id.clone(), c.delta_bic, c.flag.is_some()))
+            .collect(),
     }
 }
 
@@ -133,5 +140,16 @@ fn the_fit_and_the_diagnosis_do_not_depend_on_the_clock() {
             );
         }
         assert_eq!(a.top, base.top, "{name}: the diagnosis' first candidate");
+        // The whole head of the ranking, fields over time included (their plausible size and
+        // their columns' scaling once depended on the unit): the same candidates in the same
+        // order, ΔBIC to 1e-6 relative, the same flags.
+        for (k, (got, want)) in a.ranking.iter().zip(&base.ranking).enumerate() {
+            assert!(
+                got.0 == want.0
+                    && (got.1 - want.1).abs() <= 1e-6 * want.1.abs().max(1.0)
+                    && got.2 == want.2,
+                "{name}: candidate {k}: {got:?} against {want:?}"
+            );
+        }
     }
 }

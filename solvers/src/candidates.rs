@@ -790,7 +790,14 @@ fn score(
     let first_new = (0..extended.n_params())
         .find(|&j| model.param_index(&extended.params()[j].name).is_none())
         .unwrap_or(usize::MAX);
-    let bound = plausible(&extended, data, first_new, unit) * scale;
+    // A size in a rate's unit is judged as a rate (over the data's span); a size in a length
+    // or an angle (a field's displacement, over t too) as that length or angle.
+    let rate = matches!(unit, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
+    let bound = if rate {
+        plausible(&extended, data, first_new, unit)
+    } else {
+        limit(unit)
+    } * scale;
     let bic_free = bic(rss_free);
     let flag = if size > bound {
         Some(format!(

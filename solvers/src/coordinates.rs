@@ -104,11 +104,16 @@ pub(crate) fn scaled_null_space(
 ) {
     let n = anchor.len();
     // A column at rounding level (a sinusoid the mesh samples only at its zeros) must not be
-    // blown up to unit norm: column norms are floored at 1e-12 of the largest.
-    let cmax = (0..n).map(|j| h[(j, j)]).fold(0.0_f64, f64::max);
+    // blown up to unit norm: column norms are floored at 1e-12 of the typical one (the median
+    // of the columns the data see). Not of the largest: a time term's column grows with the
+    // unit of the time stamps to the power of its degree (t² in µs: 1e24 × in hours), and one
+    // such column would lift the floor over every ordinary column.
+    let mut seen: Vec<f64> = (0..n).map(|j| h[(j, j)]).filter(|c| *c > 0.0).collect();
+    seen.sort_by(f64::total_cmp);
+    let typical = seen.get(seen.len() / 2).copied().unwrap_or(0.0);
     let d: Vec<f64> = (0..n)
         .map(|j| {
-            let c = h[(j, j)].max(1e-24 * cmax);
+            let c = h[(j, j)].max(1e-24 * typical);
             if c > 0.0 { 1.0 / c.sqrt() } else { 1.0 }
         })
         .collect();

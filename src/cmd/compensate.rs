@@ -123,7 +123,8 @@ pub struct CompensateArgs {
 /// machine's travel (5 positions per axis), printed after the set-up's rigid transform and raw;
 /// refused when the former exceeds `max_u_um` unless `force`, with the held combination that
 /// makes it and the measurement that would identify it; refused as well (unless `force`) when
-/// the record says the fit was above the noise, where no interval holds. Returns (after the transform, raw) in
+/// the record says the fit was above the noise, where no interval holds, or when there is no
+/// record (a simulation's truth, a file edited by hand): nothing then vouches for the errors. Returns (after the transform, raw) in
 /// mm, `None` when the results carry no uncertainty (a simulation's truth, an older file).
 pub fn vouch(
     model: &Model,
@@ -134,10 +135,13 @@ pub fn vouch(
     force: bool,
 ) -> Result<Option<(f64, f64)>> {
     let Some(record) = record else {
-        println!(
-            "  U unknown: the results file records no uncertainty (`volver identify --out` writes \
-             it); nothing vouches for this compensation"
-        );
+        let msg = "U unknown: the results file records no uncertainty (`volver identify --out`, \
+                   `report` and `diagnose --out` write it; a simulation's truth has none), so \
+                   nothing vouches for these errors";
+        if !force {
+            bail!("{msg}; --force uses them anyway");
+        }
+        println!("  warning: {msg} (used anyway: --force)");
         return Ok(None);
     };
     match record.model_check.as_ref() {

@@ -150,7 +150,9 @@ fn write_final(
             .with_context(|| format!("writing {}", path.display()))?;
     }
     if let Some(path) = &a.out {
-        let settings = volver::identification::Settings::default();
+        // The noise of the uncertainty it records: the one rule `identify` follows.
+        let mut settings = volver::identification::Settings::default();
+        settings.noise = volver::inputs::noise_rule(a.noise.as_deref(), model.machine())?.0;
         let outcome =
             volver::identification::identify(model, set, &settings, &mut volver::solvers::Silent)?;
         if let Some(why) = &outcome.refusal {

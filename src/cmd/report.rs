@@ -91,7 +91,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         last_model,
         &data,
         last_id,
-        volver::solvers::uncertainty::NoiseModel::Residual,
+        volver::inputs::noise_rule(None, last_model.machine())?.0,
     )?;
     let input = volver::report::ReportInput {
         title: format!("volver report — {}", a.inputs.data.display()),
