@@ -111,6 +111,8 @@ pub const CARRY_TOLERANCE_MM: f64 = 1e-4;
 #[derive(Clone, Debug, serde::Serialize)]
 #[non_exhaustive]
 pub struct Carry {
+    /// The machine's axes, in chain order (the order of each command's values).
+    pub axes: Vec<String>,
     /// The commands judged, file units.
     pub commands: Vec<Vec<f64>>,
     /// The largest distance between the model's tool point and the tables' (mm), at the test's
@@ -123,6 +125,16 @@ pub struct Carry {
 }
 
 impl Carry {
+    /// Command `k` as people write it: `X=3000, Y=0, Z=0` (mm, degrees).
+    pub fn place(&self, k: usize) -> String {
+        self.axes
+            .iter()
+            .zip(&self.commands[k])
+            .map(|(a, v)| format!("{a}={v}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// The parts that leave more than [`CARRY_TOLERANCE_MM`]: what refuses the export.
     pub fn significant(&self) -> Vec<&volver_core::tables::Uncarried> {
         self.uncarried
@@ -141,11 +153,11 @@ impl Carry {
                     _ => "",
                 };
                 format!(
-                    "{} ({} parameters): moves the tool point by up to {:.2} µm{when} (at {:?})",
+                    "{} ({} parameters): moves the tool point by up to {:.2} µm{when} (at {})",
                     u.name,
                     u.parameters.len(),
                     u.largest_mm * 1e3,
-                    self.commands[u.at]
+                    self.place(u.at)
                 )
             })
             .collect()
@@ -168,6 +180,12 @@ pub fn carry(model: &Model, params: &[f64], tables: &ErrorTables, tool: [f64; 3]
         .map(|k| crate::uncertainty::Assessment::commands(model, &plan, k))
         .collect();
     Ok(Carry {
+        axes: model
+            .machine()
+            .axes()
+            .iter()
+            .map(|a| a.axis.to_string())
+            .collect(),
         commands,
         departure_mm: departure.0,
         departure_at: departure.1,

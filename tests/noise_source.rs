@@ -149,6 +149,36 @@ fn the_truths_machine_agrees_and_a_different_one_is_named_by_its_field() {
         err.contains("axes.X.range: [0.0,3000.0] against [0.0,3100.0]"),
         "the message names the field and both values: {err}"
     );
+    // `simulate --truth` with a machine file: a different geometry is named the same way; the
+    // same geometry with another noise is accepted, and that file's noise is simulated and
+    // stated by every file written.
+    let again = |machine: &Path, out: &Path| {
+        volver(&[
+            "simulate",
+            "--machine",
+            machine.to_str().unwrap(),
+            "--truth",
+            sim.join("truth.json").to_str().unwrap(),
+            "--plan",
+            "X=0:3000:1000,Y=0:2000:1000,Z=0:800:400",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = again(&other, &dir.join("other"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("axes.X.range"), "{err}");
+    let noisier = dir.join("noisier.toml");
+    std::fs::write(&noisier, GANTRY.replace("mpe:15,6", "mpe:30,6")).unwrap();
+    let re = dir.join("re");
+    let o = again(&noisier, &re.join("sim"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let want = TrackerNoise::from_text("mpe:30,6").unwrap();
+    assert_eq!(
+        stated(&re),
+        [want; 3],
+        "the noise of --machine, in every file"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

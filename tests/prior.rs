@@ -309,7 +309,7 @@ fn the_cli_states_the_map_rule() {
         String::from_utf8_lossy(&out.stderr)
     );
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("(gauge: maximum a posteriori)"), "{text}");
+    assert!(text.contains("(gauge: maximum a posteriori"), "{text}");
     let out = volver(&[
         "uncertainty",
         "--data",

@@ -589,11 +589,11 @@ fn judge_carry(
     let c = volver::compensation::carry(model, params, tables, tool)?;
     println!(
         "  the tables against the model's tool point {} mm over {} commands of the travel: up to \
-         {:.3} µm apart (at {:?})",
+         {:.3} µm apart (at {})",
         point_mm(tool),
         c.commands.len(),
         c.departure_mm * 1e3,
-        c.commands[c.departure_at]
+        c.place(c.departure_at)
     );
     let lines = c.lines();
     if lines.is_empty() {

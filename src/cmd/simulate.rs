@@ -117,7 +117,12 @@ pub fn run(a: SimulateArgs) -> Result<()> {
     if a.observe == "range" {
         sim.observe = volver::core::measure::Observation::Range;
     }
-    let (noise, noise_source) = noise_of(a.noise.as_deref(), &machine)?;
+    // With --truth and --machine (the same geometry, checked), the noise is --machine's.
+    let noise_machine = match (&a.machine, &a.truth) {
+        (Some(_), Some(_)) => volver::inputs::machine(a.machine.as_deref())?.0,
+        _ => machine.clone(),
+    };
+    let (noise, noise_source) = noise_of(a.noise.as_deref(), &noise_machine)?;
     sim.noise = noise;
     sim.effects = a
         .effect
@@ -205,15 +210,20 @@ fn truth_of(
             let label = path.display().to_string();
             let results = ResultsFile::load(path).context("reading the truth file")?;
             let truth = Truth::from_results(&results, &label).context("reading the truth file")?;
-            if let Some(m) = &given_machine
-                && m.spec() != truth.model.machine().spec()
-            {
+            // The geometry must agree (the noise is not geometry: the given machine's, or
+            // --noise, is simulated); what differs is named.
+            let differences = given_machine.as_ref().map_or_else(Vec::new, |m| {
+                volver::identification::machine_differences(truth.model.machine().spec(), m.spec())
+            });
+            if !differences.is_empty() {
                 anyhow::bail!(
-                    "the machine of {label} differs from --machine {}; leave --machine out to use the truth's machine",
+                    "the machine of {label} differs from --machine {}: {}; leave --machine out \
+                     to use the truth's machine",
                     a.machine
                         .as_ref()
                         .map(|p| p.display().to_string())
-                        .unwrap_or_default()
+                        .unwrap_or_default(),
+                    differences.join("; ")
                 );
             }
             (truth, TruthSource::File { path: label })
