@@ -337,16 +337,10 @@ pub fn identify(
     results.time_origin_s = model.needs_time().then_some(data.time_origin_s);
     if let Some(cov) = &covariance {
         // One name per column of the held factor: none when the priors decided them.
-        let held = id
-            .gauge
-            .as_ref()
-            .filter(|_| settings.priors.is_none())
-            .map(|g| {
-                (0..g.held.len())
-                    .map(|c| crate::uncertainty::combination_text(model, g, c))
-                    .collect()
-            })
-            .unwrap_or_default();
+        let held = crate::uncertainty::held_text(
+            model,
+            id.gauge.as_ref().filter(|_| settings.priors.is_none()),
+        );
         let mut record = cov.to_record(&rule, held);
         record.model_check = Some(crate::uncertainty::check_fit(&problem, &id, settings.noise));
         results.uncertainty = Some(record);

@@ -267,17 +267,6 @@ pub fn candidate_grid(machine: &Machine, per_axis: usize) -> Result<Plan> {
     Ok(Plan::grid(machine, &ranges)?)
 }
 
-/// The leading parameters of each held combination, as text.
-fn held_text(model: &Model, gauge: Option<&Gauge>) -> Vec<String> {
-    gauge
-        .map(|g| {
-            (0..g.held.len())
-                .map(|c| crate::uncertainty::combination_text(model, g, c))
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
 /// A plan's nominal points and its gauge there (what the plan leaves unidentified).
 struct Nominal {
     data: MeasurementSet,
@@ -489,9 +478,9 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let nominal = Nominal::of(model, &planned)?;
     let (u95_mean_um, u95_max_um) =
         nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
-    let unidentified = held_text(model, nominal.gauge.as_ref());
+    let unidentified = crate::uncertainty::held_text(model, nominal.gauge.as_ref());
     let unidentifiable_by_candidates =
-        held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
+        crate::uncertainty::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
     // Advice for what the candidates cannot identify (the request's extra reflectors are
     // candidates already).
     let reflector_advice = if unidentifiable_by_candidates.is_empty() {

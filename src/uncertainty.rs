@@ -54,6 +54,18 @@ pub fn noise_of(text: Option<&str>) -> Result<NoiseModel> {
     })
 }
 
+/// One text per held combination of `gauge` ([`combination_text`]), in its order; none without
+/// a gauge: the names a results file records for the columns of its held factor.
+pub fn held_text(model: &Model, gauge: Option<&Gauge>) -> Vec<String> {
+    gauge
+        .map(|g| {
+            (0..g.held.len())
+                .map(|c| combination_text(model, g, c))
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
 /// The names of the parameters a held combination moves, with their shares.
 pub fn combination_text(model: &Model, gauge: &Gauge, c: usize) -> String {
     let parts: Vec<String> = gauge.held[c]
@@ -478,15 +490,7 @@ pub fn results_with_uncertainty(
         noise,
     );
     if let Some(cov) = cov {
-        let held = id
-            .gauge
-            .as_ref()
-            .map(|g| {
-                (0..g.held.len())
-                    .map(|c| combination_text(model, g, c))
-                    .collect()
-            })
-            .unwrap_or_default();
+        let held = held_text(model, id.gauge.as_ref());
         let rule = crate::identification::gauge_rule(None, id);
         let mut record = cov.to_record(&rule, held);
         record.model_check = Some(check_fit(&problem, id, noise));

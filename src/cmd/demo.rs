@@ -725,15 +725,7 @@ fn write_results(
     fit_check: volver::core::results::ModelCheck,
 ) -> Result<Vec<PathBuf>> {
     let mut results = ResultsFile::from_model(model2, &id2.params)?;
-    let held = id2
-        .gauge
-        .as_ref()
-        .map(|g| {
-            (0..g.held.len())
-                .map(|c| volver::uncertainty::combination_text(model2, g, c))
-                .collect()
-        })
-        .unwrap_or_default();
+    let held = volver::uncertainty::held_text(model2, id2.gauge.as_ref());
     let mut record = cov.to_record(volver::solvers::gauge::RULE, held);
     record.model_check = Some(fit_check);
     results.uncertainty = Some(record);

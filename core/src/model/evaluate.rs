@@ -439,7 +439,24 @@ impl Model {
         tool: &[f64; 3],
         params: &[f64],
     ) -> [S; 3] {
-        let mut e = self.errors_with_commands(commands, usize::MAX, 0.0, params);
+        self.tool_point_at(commands, tool, 0.0, params)
+    }
+
+    /// [`Model::tool_point`] `t_s` seconds after the test's start: what grows with time (a
+    /// scale, a rotary axis' line, a field over `t`) at its value then; the measurement's
+    /// effects left out as there (a drift of the tool point, also a tool shift, is the same
+    /// in two tool points at one time and cancels in their difference).
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn tool_point_at<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        tool: &[f64; 3],
+        t_s: f64,
+        params: &[f64],
+    ) -> [S; 3] {
+        let mut e = self.errors_with_commands(commands, usize::MAX, t_s, params);
         e.reflector_delta = [S::zero(); 3];
         e.range_scale = S::zero();
         crate::kinematics::tool_in_workpiece(&self.machine, commands, tool, &e)

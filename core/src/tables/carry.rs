@@ -167,8 +167,8 @@ pub fn uncarried(
                 .iter()
                 .enumerate()
                 .map(|(i, c)| {
-                    let a = tool_point_at(model, c, tool, t_s, params);
-                    let b = tool_point_at(model, c, tool, t_s, &without);
+                    let a = model.tool_point_at(&c.0, tool, t_s, params);
+                    let b = model.tool_point_at(&c.0, tool, t_s, &without);
                     let d = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
                     (d, i)
                 })
@@ -182,24 +182,6 @@ pub fn uncarried(
             }
         })
         .collect()
-}
-
-/// [`Model::tool_point`] at `t_s` after the test's start: the same chain with the error values
-/// there (the measurement's reflector offsets and range scale left out, as there).
-fn tool_point_at(
-    model: &Model,
-    commands: &Commands,
-    tool: &[f64; 3],
-    t_s: f64,
-    params: &[f64],
-) -> [f64; 3] {
-    if t_s == 0.0 {
-        return model.tool_point(&commands.0, tool, params);
-    }
-    let mut e = model.errors_at_point(commands, usize::MAX, t_s, params);
-    e.reflector_delta = [0.0; 3];
-    e.range_scale = 0.0;
-    tool_in_workpiece(model.machine(), &commands.0, tool, &e)
 }
 
 #[cfg(test)]
