@@ -24,7 +24,8 @@
 //! - [`dialect`]: the words that differ between G-code dialects (LinuxCNC, Fanuc);
 //! - [`tables`]: controller tables of the identified errors (ISG CSV, Etalon style, plain CSV);
 //! - [`fsio`]: atomic file output;
-//! - [`fuzz`]: harnesses for fuzzing the readers.
+//! - [`fuzz`]: harnesses for fuzzing the readers;
+//! - [`units`]: named unit conversions (µm per mm, µrad per rad, s per h).
 //!
 //! Units: mm and rad everywhere; degrees only in files.
 //!
@@ -69,5 +70,6 @@ pub mod random;
 pub mod results;
 pub mod simulate;
 pub mod tables;
+pub mod units;
 
 pub use error::{Error, Place, Result};
