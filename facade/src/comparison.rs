@@ -11,7 +11,7 @@
 //! assert!(c.engines[0].reason.converged());
 //! ```
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Error, Result};
 use serde::Serialize;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
@@ -90,7 +90,7 @@ pub fn compare(
             &lm.params,
             100.0 * volver_solvers::identifiability::RANK_TOLERANCE,
         )
-        .context("the identifiability analysis failed")?;
+        .ok_or_else(|| Error::Singular("the identifiability analysis failed".into()))?;
         let held = t.constraints.rows.len() - task.constraints.rows.len();
         (t, held)
     } else {

@@ -2,7 +2,7 @@
 //! implausible sizes), the tool point named on a command line, the controller tables and their
 //! expanded uncertainty.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Error, Result};
 use std::path::{Path, PathBuf};
 use volver_core::fsio::write_atomic;
 use volver_core::model::Model;
@@ -13,7 +13,9 @@ use volver_solvers::uncertainty::K;
 /// `--max-u-um` must be a positive length.
 pub fn check_max_u(v: f64) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
-        bail!("--max-u-um {v}: the limit must be a positive length (µm)");
+        return Err(Error::Request(format!(
+            "--max-u-um {v}: the limit must be a positive length (µm)"
+        )));
     }
     Ok(())
 }
@@ -41,11 +43,11 @@ pub fn load_results(
             .take(4)
             .map(ToString::to_string)
             .collect();
-        bail!(
+        return Err(Error::Implausible(format!(
             "{label}: implausible sizes: {}; {} (--accept uses them anyway)",
             list.join("; "),
             volver_core::plausibility::WHERE_TO_LOOK
-        );
+        )));
     }
     Ok((model, params, file.uncertainty))
 }
@@ -204,10 +206,10 @@ pub fn tool_point_of(
         let m = model.machine();
         let Some(r) = m.reflector_index(id) else {
             let ids: Vec<&str> = m.reflectors().iter().map(|r| r.id.as_str()).collect();
-            bail!(
+            return Err(Error::Request(format!(
                 "--tool-reflector {id}: the machine's reflectors are {}",
                 ids.join(", ")
-            );
+            )));
         };
         return Ok(m.reflectors()[r].offset);
     }
@@ -218,10 +220,14 @@ pub fn tool_point_of(
         .split(',')
         .map(|s| s.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| anyhow::anyhow!("--tool {text}: expected X,Y,Z in mm"))?;
+        .map_err(|_| Error::Request(format!("--tool {text}: expected X,Y,Z in mm")))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) => Ok([x, y, z]),
-        _ => bail!("--tool {text}: expected three finite numbers X,Y,Z in mm"),
+        _ => {
+            return Err(Error::Request(format!(
+                "--tool {text}: expected three finite numbers X,Y,Z in mm"
+            )));
+        }
     }
 }
 
@@ -441,10 +447,16 @@ pub fn tool_axis_of(text: Option<&str>) -> Result<[f64; 3]> {
                 .split(',')
                 .map(|x| x.trim().parse::<f64>())
                 .collect::<std::result::Result<_, _>>()
-                .map_err(|_| anyhow::anyhow!("--tool-axis {t}: expected X,Y,Z (three numbers)"))?;
+                .map_err(|_| {
+                    Error::Request(format!("--tool-axis {t}: expected X,Y,Z (three numbers)"))
+                })?;
             match v.as_slice() {
                 [x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
-                _ => bail!("--tool-axis {t}: expected X,Y,Z (three finite numbers)"),
+                _ => {
+                    return Err(Error::Request(format!(
+                        "--tool-axis {t}: expected X,Y,Z (three finite numbers)"
+                    )));
+                }
             }
         }
     }
@@ -464,10 +476,11 @@ pub fn compensator<'m>(
     axis: Option<[f64; 3]>,
 ) -> Result<volver_core::compensate::Compensator<'m>> {
     if hold.is_some() && axis.is_some() {
-        bail!(
+        return Err(Error::Request(
             "--tool-axis steers the tool's direction with every axis; --hold keeps some axes at \
              their programmed values: give one of them"
-        );
+                .into(),
+        ));
     }
     if hold.is_none() && (axis.is_some() || volver_core::compensate::is_five_axis(model.machine()))
     {
@@ -484,8 +497,9 @@ pub fn compensator<'m>(
                 .chars()
                 .filter(|c| !c.is_whitespace() && *c != ',')
                 .map(|c| {
-                    volver_core::iso::Axis::from_letter(c)
-                        .ok_or_else(|| anyhow::anyhow!("--hold {h}: '{c}' is not an axis letter"))
+                    volver_core::iso::Axis::from_letter(c).ok_or_else(|| {
+                        Error::Request(format!("--hold {h}: '{c}' is not an axis letter"))
+                    })
                 })
                 .collect::<Result<_>>()?;
             volver_core::compensate::Compensator::holding(model, params, tool, &held)?

@@ -25,7 +25,7 @@
 //! assert!(n.at_noise && (n.ratio - 1.0).abs() < 0.05 && n.repeats.as_ref().unwrap().agree);
 //! ```
 
-use anyhow::{Result, bail};
+use crate::error::{Error, Result};
 use serde::Serialize;
 use volver_core::diagnose;
 use volver_core::measure::MeasurementSet;
@@ -410,7 +410,10 @@ pub fn diagnose_with(
     let problem = Problem::new(model, data)?;
     let id = volver_solvers::strategy::fit(problem.clone());
     if id.termination.failed() {
-        bail!("the fit failed: {}", id.termination);
+        return Err(Error::NotSolved(format!(
+            "the fit failed: {}",
+            id.termination
+        )));
     }
     let r = problem.residuals(&id.params);
     let repeat = diagnose::repeat_noise(&problem);

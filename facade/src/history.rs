@@ -2,7 +2,7 @@
 //! history file (by default `volver-history.jsonl` beside the measurements), and
 //! `volver history` shows EMM and Φ per model revision as a table and an SVG chart.
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Error, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -110,7 +110,7 @@ pub fn read(path: &Path) -> Result<History> {
         }
     }
     if let Some(e) = first_error.filter(|_| history.records.is_empty()) {
-        return Err(anyhow::Error::new(e).context(format!(
+        return Err(Error::Json(e).context(format!(
             "{}, line {}: not a volver history record, and no line of the file is one",
             path.display(),
             history.skipped[0]

@@ -13,7 +13,7 @@
 //! assert_eq!(outcome.results.parameters.len(), model.n_params());
 //! ```
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Error, Result};
 use serde::Serialize;
 use std::path::Path;
 use volver_core::machine::Machine;
@@ -270,10 +270,10 @@ pub fn noise_error(
     )?;
     let differences = machine_differences(truth.model.machine().spec(), machine.spec());
     if !differences.is_empty() {
-        bail!(
+        return Err(Error::Mismatch(format!(
             "the machine of {label} is not the machine of the measurements: {}",
             differences.join("; ")
-        );
+        )));
     }
     let dir = truth_path.parent().unwrap_or(Path::new("."));
     let belongs = volver_core::fsio::same_file(&dir.join("measurements.csv"), data_path);
@@ -311,7 +311,7 @@ pub fn identify(
     observer: &mut dyn Observer,
 ) -> Result<Outcome> {
     if settings.subloops == 0 {
-        bail!("--subloops must be at least 1");
+        return Err(Error::Request("--subloops must be at least 1".into()));
     }
     let solver = volver_solvers::engine_with(&settings.engine, settings.lm)?;
     let options = &settings.options;
@@ -428,10 +428,12 @@ fn uncertainty_of(
     let rule = gauge_rule(settings.priors.as_ref().map(|p| p.rule()), id);
     match (&settings.priors, covariance) {
         (Some(p), Some(cov)) => Ok((Some(with_priors(problem, id, &cov, p)?), rule)),
-        (Some(_), None) => bail!(
-            "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
-            id.termination
-        ),
+        (Some(_), None) => {
+            return Err(Error::NotSolved(format!(
+                "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
+                id.termination
+            )));
+        }
         (None, cov) => Ok((cov, rule)),
     }
 }
@@ -451,7 +453,9 @@ pub(crate) fn with_priors(
         cov,
         priors,
     )
-    .context("the maximum a posteriori solution (a decomposition failed)")?;
+    .ok_or_else(|| {
+        Error::Singular("the maximum a posteriori solution (a decomposition failed)".into())
+    })?;
     id.params = post.params;
     id.reached = volver_solvers::evaluate(problem, &id.params);
     Ok(post.covariance)

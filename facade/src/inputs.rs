@@ -2,7 +2,7 @@
 //! XCFZ grinder and the paper's model when no file is given), a model extended by candidates of
 //! the diagnosis, and the demo's synthetic data.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Error, Result};
 use std::path::Path;
 use volver_core::machine::Machine;
 use volver_core::measure::MeasurementSet;
@@ -45,12 +45,12 @@ pub fn machine(
         return Ok((preset.machine()?, Some(preset)));
     }
     if !p.exists() && p.extension().is_none() && p.components().count() == 1 {
-        bail!(
+        return Err(Error::Request(format!(
             "--machine {}: no such file, nor an embedded machine (they are {}; `volver layout \
              --list` names them)",
             p.display(),
             volver_core::presets::names().join(", ")
-        );
+        )));
     }
     Ok((Machine::load(p).context("reading the machine file")?, None))
 }
@@ -70,14 +70,16 @@ pub fn machine(
 /// ```
 pub fn machine_and_model(machine: Option<&Path>, model: Option<&Path>) -> Result<(Machine, Model)> {
     let (m, preset) = self::machine(machine)?;
-    let model = match (model, preset) {
-        (Some(p), _) => Model::load(m.clone(), p).context("reading the error model")?,
-        (None, Some(preset)) => preset.model()?,
-        (None, None) => bail!(
-            "--model is needed with a machine file (the embedded models are for the embedded \
+    let model =
+        match (model, preset) {
+            (Some(p), _) => Model::load(m.clone(), p).context("reading the error model")?,
+            (None, Some(preset)) => preset.model()?,
+            (None, None) => return Err(Error::Request(
+                "--model is needed with a machine file (the embedded models are for the embedded \
              machines)"
-        ),
-    };
+                    .into(),
+            )),
+        };
     Ok((m, model))
 }
 
@@ -158,10 +160,10 @@ pub fn with_candidates(machine: &Machine, mut model: Model, ids: &[String]) -> R
         let library = volver_solvers::candidates::library(&model);
         let Some(c) = library.iter().find(|c| &c.id == id) else {
             let ids: Vec<&str> = library.iter().map(|c| c.id.as_str()).collect();
-            bail!(
+            return Err(Error::Mismatch(format!(
                 "--add {id}: not a candidate for this model; candidates are {}",
                 ids.join(", ")
-            );
+            )));
         };
         model = Model::new(machine.clone(), c.spec.clone())?;
     }

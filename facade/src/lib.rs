@@ -17,9 +17,12 @@
 pub use volver_core as core;
 pub use volver_solvers as solvers;
 
+pub use error::{Context, Error, Result};
+
 pub mod comparison;
 pub mod compensation;
 pub mod diagnosis;
+pub mod error;
 pub mod history;
 pub mod identification;
 pub mod inputs;

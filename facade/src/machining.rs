@@ -1,7 +1,7 @@
 //! What a part program is compensated with at the machine: the control's offsets and tool
 //! table, the machine's position at the start, and a tool point per tool.
 
-use anyhow::{Context, Result, bail};
+use crate::error::{Context, Error, Result};
 use std::collections::BTreeMap;
 use std::path::Path;
 use volver_core::gcode::offsets::{OffsetUnits, Offsets};
@@ -17,7 +17,7 @@ use volver_core::machine::Machine;
 /// ```
 pub fn offsets(offsets: Option<&Path>, tools: Option<&Path>, units: &str) -> Result<Offsets> {
     let units = OffsetUnits::from_name(units)
-        .ok_or_else(|| anyhow::anyhow!("--offset-units {units}: mm or inch"))?;
+        .ok_or_else(|| Error::Request(format!("--offset-units {units}: mm or inch")))?;
     let mut o = match offsets {
         None => Offsets::default(),
         Some(p) => {
@@ -34,10 +34,10 @@ pub fn offsets(offsets: Option<&Path>, tools: Option<&Path>, units: &str) -> Res
     };
     if let Some(p) = tools {
         if o.tool_table {
-            bail!(
+            return Err(Error::Request(format!(
                 "--tool-table {}: the offsets file has [tool] tables already; give the tools in one of them",
                 p.display()
-            );
+            )));
         }
         let label = p.display().to_string();
         let text = std::fs::read_to_string(p).with_context(|| format!("reading {label}"))?;
@@ -60,25 +60,27 @@ pub fn start(machine: &Machine, text: Option<&str>) -> Result<[Option<f64>; 6]> 
         return Ok(out);
     };
     let pairs = volver_core::machine::axis_value_pairs(text)
-        .map_err(|m| anyhow::anyhow!("--start {text}: {m}"))?;
+        .map_err(|m| Error::Request(format!("--start {text}: {m}")))?;
     for (letter, v) in pairs {
         let axis = volver_core::iso::Axis::from_letter(letter.chars().next().unwrap_or(' '))
             .filter(|_| letter.chars().count() == 1);
         let Some((k, a)) = axis.and_then(|a| machine.axis(a)) else {
-            bail!(
+            return Err(Error::Request(format!(
                 "--start {text}: '{letter}' is not an axis of the machine ({})",
                 machine.chain()
-            );
+            )));
         };
         if !(v.is_finite() && v.abs() <= volver_core::gcode::MAX_AXIS_VALUE) {
-            bail!(
+            return Err(Error::Request(format!(
                 "--start {text}: {} is not a position in {}",
                 volver_core::error::number(v),
                 a.file_unit()
-            );
+            )));
         }
         if out[k].replace(v).is_some() {
-            bail!("--start {text}: axis {letter} is given twice");
+            return Err(Error::Request(format!(
+                "--start {text}: axis {letter} is given twice"
+            )));
         }
     }
     Ok(out)
@@ -120,12 +122,12 @@ pub fn read_program(
         }
     } else if numbered.len() > 1 && !points.same_point {
         let list: Vec<String> = numbered.iter().map(|t| format!("T{t}")).collect();
-        bail!(
+        return Err(Error::Request(format!(
             "{label}: the program changes tools ({}) and no tool table gives their lengths: give \
              the tool table (--tool-table) so that each tool is compensated at its own tool point, \
              or --same-tool-point to compensate every tool at the one tool point",
             list.join(", ")
-        );
+        )));
     }
     Ok((prog, out))
 }

@@ -12,7 +12,7 @@
 //! [`compare`] runs plans on simulated truths: the realised tool-point error, the coverage of
 //! the predicted U, and whether a hidden drift is found.
 
-use anyhow::{Context, Result, anyhow};
+use crate::error::{Error, Result};
 use serde::Serialize;
 use volver_core::machine::{Commands, Machine, ReflectorSpec};
 use volver_core::measure::MeasurementSet;
@@ -150,10 +150,10 @@ fn with_reflectors(model: &Model, extra: &[ReflectorSpec]) -> Result<Model> {
     let mut spec = model.machine().spec().clone();
     for r in extra {
         if spec.reflectors.iter().any(|x| x.id == r.id) {
-            return Err(anyhow!(
+            return Err(Error::Mismatch(format!(
                 "candidate reflector '{}' has the id of one of the machine's reflectors",
                 r.id
-            ));
+            )));
         }
         spec.reflectors.push(r.clone());
     }
@@ -303,7 +303,7 @@ impl Nominal {
             volver_solvers::Objective::Phi,
             NoiseModel::Tracker(*noise),
         )
-        .ok_or_else(|| anyhow!("the plan's covariance could not be computed"))?;
+        .ok_or_else(|| Error::Singular("the plan's covariance could not be computed".into()))?;
         let tg = ToolGrid {
             commands: grid.to_vec(),
             tool,
@@ -323,10 +323,10 @@ impl Nominal {
 pub fn check_distinct_reflectors(machine: &Machine, reflectors: &[usize]) -> Result<()> {
     for (i, r) in reflectors.iter().enumerate() {
         if reflectors[..i].contains(r) {
-            return Err(anyhow!(
+            return Err(Error::Mismatch(format!(
                 "reflector {} is named twice: each reflector of a plan is measured once per pose",
                 machine.reflectors()[*r].id
-            ));
+            )));
         }
     }
     Ok(())
@@ -341,26 +341,25 @@ pub fn check_distinct_reflectors(machine: &Machine, reflectors: &[usize]) -> Res
 fn check_request(request: &Request) -> Result<()> {
     use volver_core::plan::MAX_PLAN_POSITIONS;
     if !(1..=MAX_PLAN_POSITIONS).contains(&request.points) {
-        return Err(anyhow!(
+        return Err(Error::Request(format!(
             "{} measurements: a plan has 1 … {MAX_PLAN_POSITIONS} (--points, or --hours × 3600 / \
              --seconds-per-point per station)",
             request.points
-        ));
+        )));
     }
     if request.per_axis < 2 {
-        return Err(anyhow!(
+        return Err(Error::Request(format!(
             "--per-axis {}: at least 2 candidate positions per axis (a single one measures no \
              error of the axis)",
             request.per_axis
-        ));
+        )));
     }
     if request.repeats >= request.points {
-        return Err(anyhow!(
+        return Err(Error::Request(format!(
             "--repeats {}: the reference pose's visits must leave room in a plan of {} \
              measurements",
-            request.repeats,
-            request.points
-        ));
+            request.repeats, request.points
+        )));
     }
     Ok(())
 }
@@ -374,20 +373,21 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let model = &full;
     let machine = model.machine();
     if request.noise.is_none() {
-        return Err(anyhow!(
+        return Err(Error::Request(
             "planning needs the tracker's noise (--noise or the machine file's [tracker] noise): \
              without it every design is equally good"
+                .into(),
         ));
     }
     let candidates = candidate_grid(machine, request.per_axis)?;
     if candidates.n_points() > MAX_CANDIDATES {
-        return Err(anyhow!(
+        return Err(Error::Request(format!(
             "{} candidate points ({} poses × {} reflectors): at most {MAX_CANDIDATES}; use a \
              smaller --per-axis",
             candidates.n_points(),
             candidates.positions.len(),
             candidates.reflectors.len()
-        ));
+        )));
     }
     let grid = crate::uncertainty::default_grid(machine, 5)?;
     let space = Space::new(
@@ -397,13 +397,15 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         request.tool,
         &grid.positions,
     )
-    .ok_or_else(|| anyhow!("the candidates' Jacobians are not finite at the nominal machine"))?;
+    .ok_or_else(|| {
+        Error::Singular("the candidates' Jacobians are not finite at the nominal machine".into())
+    })?;
     let steps = candidates.steps();
     // The reference pose's visits come out of the budget: the first design tells which pose
     // it is (the one the design measures most), the second is made for what is left.
     let first = space
         .design(request.points, request.criterion, request.iterations)
-        .ok_or_else(|| anyhow!("the design's information matrix is singular"))?;
+        .ok_or_else(|| Error::Singular("the design's information matrix is singular".into()))?;
     let mut per_pose = vec![0usize; candidates.positions.len()];
     for (s, &c) in steps.iter().zip(&first.counts) {
         per_pose[s.position] += c;
@@ -420,10 +422,10 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let visits_of_reference = request.repeats + 2;
     let reserved = visits_of_reference * reference_reflectors.len();
     if reserved >= request.points {
-        return Err(anyhow!(
+        return Err(Error::Request(format!(
             "{} points leave nothing beside the reference pose's {reserved} measurements",
             request.points
-        ));
+        )));
     }
     let design = space
         .design(
@@ -431,7 +433,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             request.criterion,
             request.iterations,
         )
-        .ok_or_else(|| anyhow!("the design's information matrix is singular"))?;
+        .ok_or_else(|| Error::Singular("the design's information matrix is singular".into()))?;
     // Visits: a pose measured k times at a reflector is visited k times.
     let mut visits = Vec::new();
     for (pose, _) in candidates.positions.iter().enumerate() {
@@ -649,7 +651,10 @@ pub fn compare(
             let problem = Problem::new(model, &data)?;
             let id = volver_solvers::strategy::fit(problem.clone());
             if id.termination.failed() {
-                return Err(anyhow!("{label}, seed {seed}: {}", id.termination));
+                return Err(Error::NotSolved(format!(
+                    "{label}, seed {seed}: {}",
+                    id.termination
+                )));
             }
             let base = tg.points(&truth.model, &truth.params);
             let d = tg.deviations(model, &id.params, &base, true);
@@ -665,7 +670,9 @@ pub fn compare(
                 volver_solvers::Objective::Phi,
                 NoiseModel::Tracker(*noise),
             )
-            .with_context(|| format!("{label}, seed {seed}: the fit's covariance"))?;
+            .ok_or_else(|| {
+                Error::Singular(format!("{label}, seed {seed}: the fit's covariance"))
+            })?;
             for (k, u) in tg
                 .uncertainty(model, &id.params, &cov, true)
                 .iter()

@@ -4,8 +4,8 @@
 mod figures;
 mod truth;
 
+use crate::error::{Error, Result};
 use crate::plot::{self, escape};
-use anyhow::Result;
 use figures::{cells, function_panels, measured_planes, micro, table, tool_point_uncertainty};
 use std::collections::BTreeMap;
 use std::fmt::Write;
@@ -156,7 +156,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     let last = input
         .fits
         .last()
-        .ok_or_else(|| anyhow::anyhow!("no fit to report"))?;
+        .ok_or_else(|| Error::Request("no fit to report".into()))?;
     let model = last.model;
     let m = model.machine();
     let problem = Problem::new(model, input.data)?;

@@ -8,7 +8,7 @@
 //! all five tests, since table 12 compensates test 4 with each test's errors). The noise is the
 //! paper's tracker read as bounds ([`TrackerNoise::PAPER`]).
 
-use anyhow::Result;
+use crate::error::Result;
 use volver_core::machine::Machine;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::{ErrorModelSpec, Model};

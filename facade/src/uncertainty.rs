@@ -2,7 +2,7 @@
 //! which a tool point's uncertainty is stated, the noise model named on a command line, and the
 //! words for a combination of parameters the data cannot identify.
 
-use anyhow::{Result, bail};
+use crate::error::{Error, Result};
 use volver_core::machine::Machine;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
@@ -46,7 +46,9 @@ pub fn noise_of(text: Option<&str>) -> Result<NoiseModel> {
         Some(t) => {
             let n = TrackerNoise::from_text(t)?;
             if n.is_none() {
-                bail!("--noise {t}: a noise-free tracker gives no uncertainty; give its noise")
+                return Err(Error::Request(format!(
+                    "--noise {t}: a noise-free tracker gives no uncertainty; give its noise"
+                )));
             }
             NoiseModel::Tracker(n)
         }
@@ -154,17 +156,17 @@ pub fn assess(
     request: &Request,
     progress: &(dyn Fn(usize) + Sync),
 ) -> Result<Assessment> {
-    use anyhow::Context;
     use volver_solvers::uncertainty::{ToolGrid, linear};
     let solver = volver_solvers::engine(&request.engine)?;
     let problem = volver_core::problem::Problem::new(model, data)?;
     let options = volver_solvers::Options::default();
     check_replicas(request)?;
     if request.priors.is_some() && request.monte_carlo.is_some() {
-        bail!(
+        return Err(Error::Request(
             "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
              the posterior of the priors is stated linearised only (run them apart)"
-        );
+                .into(),
+        ));
     }
     let mut id = volver_solvers::strategy::identify(
         solver.as_ref(),
@@ -175,7 +177,10 @@ pub fn assess(
         &mut volver_solvers::Silent,
     );
     if id.termination.failed() {
-        bail!("identification {}", id.termination);
+        return Err(Error::NotSolved(format!(
+            "identification {}",
+            id.termination
+        )));
     }
     let cov = linear(
         &problem,
@@ -184,7 +189,11 @@ pub fn assess(
         options.objective,
         request.noise,
     )
-    .context("the Jacobian at the solution is not finite or a decomposition failed")?;
+    .ok_or_else(|| {
+        Error::Singular(
+            "the Jacobian at the solution is not finite or a decomposition failed".into(),
+        )
+    })?;
     let covariance = match &request.priors {
         Some(p) => crate::identification::with_priors(&problem, &mut id, &cov, p)?,
         None => cov,
@@ -536,10 +545,12 @@ pub fn monte_carlo_ratio(us: &[volver_solvers::uncertainty::PointUncertainty], m
 fn check_replicas(request: &Request) -> Result<()> {
     use volver_solvers::uncertainty::MAX_REPLICAS;
     match request.monte_carlo {
-        Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => bail!(
-            "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
+        Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => {
+            return Err(Error::Request(format!(
+                "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
              2; {MAX_REPLICAS} replicas of test 4 take about 15 min on two cores)"
-        ),
+            )));
+        }
         _ => Ok(()),
     }
 }
@@ -575,11 +586,11 @@ fn monte_carlo_run(
         progress,
     )?;
     if mc.samples.len() < 2 {
-        bail!(
+        return Err(Error::NotSolved(format!(
             "Monte Carlo: {} of {n} replicas failed to solve, and a standard deviation needs \
              2 solved",
             mc.failed
-        );
+        )));
     }
     let a = grid.monte_carlo_u95(model, &mc, &base, true);
     let r = grid.monte_carlo_u95(model, &mc, &base, false);

@@ -186,7 +186,11 @@ pub fn vouch(
 }
 
 fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
-    tool_point_of(a.tool.as_deref(), a.tool_reflector.as_deref(), model)
+    Ok(tool_point_of(
+        a.tool.as_deref(),
+        a.tool_reflector.as_deref(),
+        model,
+    )?)
 }
 
 /// Options of `volver predict`.

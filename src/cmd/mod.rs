@@ -58,12 +58,12 @@ impl Inputs {
 
     /// Reads the three files.
     pub fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
-        volver::inputs::load_with(
+        Ok(volver::inputs::load_with(
             self.machine.as_deref(),
             self.model.as_deref(),
             &self.data,
             self.import.as_deref(),
-        )
+        )?)
     }
 }
 

@@ -2,7 +2,7 @@
 //! error functions can be drawn against the fit's: the same squareness rule, the same
 //! reference, the same gauge.
 
-use anyhow::{Result, bail};
+use crate::error::{Error, Result};
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::problem::Problem;
@@ -39,20 +39,20 @@ pub fn truth_in_model(
     let (tm, tp) = truth;
     let (a, b) = (tm.machine(), model.machine());
     if a.chain() != b.chain() {
-        bail!(
+        return Err(Error::Mismatch(format!(
             "the truth's machine has chain {}, the measurements' {}",
             a.chain(),
             b.chain()
-        );
+        )));
     }
     if a.reflectors().len() != b.reflectors().len() || a.stations().len() != b.stations().len() {
-        bail!(
+        return Err(Error::Mismatch(format!(
             "the truth's machine has {} reflectors and {} stations, the measurements' {} and {}",
             a.reflectors().len(),
             a.stations().len(),
             b.reflectors().len(),
             b.stations().len()
-        );
+        )));
     }
     let mut clean = data.clone();
     for p in &mut clean.points {
@@ -60,10 +60,10 @@ pub fn truth_in_model(
     }
     let id = volver_solvers::strategy::fit(Problem::new(model, &clean)?);
     if id.termination.failed() {
-        bail!(
+        return Err(Error::NotSolved(format!(
             "expressing the truth in the model's parameters failed: {}",
             id.termination
-        );
+        )));
     }
     Ok(TruthInModel {
         misfit_um: id.reached.stats.emm_um,
