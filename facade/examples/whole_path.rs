@@ -12,13 +12,13 @@
 //! Without arguments it runs on the demo's synthetic test 4 of the XCFZ grinder, which hides a
 //! second harmonic of the turntable C that the paper's model lacks.
 
-use anyhow::{Context, Result};
 use std::path::PathBuf;
 use volver::core::model::Model;
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver::identification::{Settings, identify};
 use volver::report::{Fit, ReportInput};
+use volver::{Error, Result};
 
 /// The engine this build offers beyond the native LM, by Cargo feature.
 fn engine_of_this_build() -> &'static str {
@@ -46,7 +46,11 @@ fn main() -> Result<()> {
             let data = sim.run()?.measurements;
             (m, model, data, "synthetic test 4".to_string())
         }
-        _ => anyhow::bail!("give MACHINE.toml MODEL.toml DATA.csv, or nothing for the demo's data"),
+        _ => {
+            return Err(Error::Request(
+                "give MACHINE.toml MODEL.toml DATA.csv, or nothing for the demo's data".into(),
+            ));
+        }
     };
     // 2. Identification with the build's engine.
     let mut settings = Settings::default();
@@ -67,7 +71,7 @@ fn main() -> Result<()> {
     let top = diagnosis
         .candidates
         .first()
-        .context("the diagnosis ranks no candidate")?;
+        .ok_or_else(|| Error::NotSolved("the diagnosis ranks no candidate".into()))?;
     // 4. The model with the top candidate, identified again.
     let extended =
         volver::inputs::with_candidates(&machine, model.clone(), std::slice::from_ref(&top.id))?;

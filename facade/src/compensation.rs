@@ -223,11 +223,9 @@ pub fn tool_point_of(
         .map_err(|_| Error::Request(format!("--tool {text}: expected X,Y,Z in mm")))?;
     match v[..] {
         [x, y, z] if v.iter().all(|c| c.is_finite() && c.abs() <= 1e6) => Ok([x, y, z]),
-        _ => {
-            return Err(Error::Request(format!(
-                "--tool {text}: expected three finite numbers X,Y,Z in mm"
-            )));
-        }
+        _ => Err(Error::Request(format!(
+            "--tool {text}: expected three finite numbers X,Y,Z in mm"
+        ))),
     }
 }
 
@@ -452,11 +450,9 @@ pub fn tool_axis_of(text: Option<&str>) -> Result<[f64; 3]> {
                 })?;
             match v.as_slice() {
                 [x, y, z] if [x, y, z].iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
-                _ => {
-                    return Err(Error::Request(format!(
-                        "--tool-axis {t}: expected X,Y,Z (three finite numbers)"
-                    )));
-                }
+                _ => Err(Error::Request(format!(
+                    "--tool-axis {t}: expected X,Y,Z (three finite numbers)"
+                ))),
             }
         }
     }

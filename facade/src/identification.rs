@@ -428,12 +428,10 @@ fn uncertainty_of(
     let rule = gauge_rule(settings.priors.as_ref().map(|p| p.rule()), id);
     match (&settings.priors, covariance) {
         (Some(p), Some(cov)) => Ok((Some(with_priors(problem, id, &cov, p)?), rule)),
-        (Some(_), None) => {
-            return Err(Error::NotSolved(format!(
-                "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
-                id.termination
-            )));
-        }
+        (Some(_), None) => Err(Error::Singular(format!(
+            "--prior: the fit has no covariance ({}), so the priors cannot be combined with it",
+            id.termination
+        ))),
         (None, cov) => Ok((cov, rule)),
     }
 }

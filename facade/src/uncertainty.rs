@@ -545,12 +545,10 @@ pub fn monte_carlo_ratio(us: &[volver_solvers::uncertainty::PointUncertainty], m
 fn check_replicas(request: &Request) -> Result<()> {
     use volver_solvers::uncertainty::MAX_REPLICAS;
     match request.monte_carlo {
-        Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => {
-            return Err(Error::Request(format!(
-                "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
+        Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => Err(Error::Request(format!(
+            "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
              2; {MAX_REPLICAS} replicas of test 4 take about 15 min on two cores)"
-            )));
-        }
+        ))),
         _ => Ok(()),
     }
 }
