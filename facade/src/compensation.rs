@@ -1,6 +1,10 @@
 //! Using identified errors on the machine: reading a results file for a control (refusing
 //! implausible sizes), the tool point named on a command line, the controller tables and their
-//! expanded uncertainty.
+//! expanded uncertainty, a compensation checked on a known machine.
+
+mod check;
+
+pub use check::{DirectionCheck, TruthCheck, check_on_truth, travel_grid};
 
 use crate::error::{Context, Error, Result};
 use std::path::{Path, PathBuf};

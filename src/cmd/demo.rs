@@ -6,17 +6,18 @@
 
 use anyhow::{Context, Result};
 use std::path::{Path, PathBuf};
-use volver::compensation::{reflector_centroid, write_tables};
-use volver::core::compensate::{Compensator, angle_between, cross};
-use volver::core::machine::Commands;
+use volver::compensation::{
+    TruthCheck, check_on_truth, reflector_centroid, travel_grid, write_tables,
+};
+use volver::core::compensate::{Compensator, cross};
 use volver::core::measure::MeasurementSet;
-use volver::core::metrics::ErrorStats;
 use volver::core::model::Model;
 use volver::core::plan::Plan;
 use volver::core::problem::{Problem, Residuals};
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 use volver::core::tables::ErrorTables;
+use volver::core::units::URAD_PER_RAD;
 use volver::diagnosis::Standing;
 use volver::inputs::{DEMO_DIR, DEMO_EFFECT, DEMO_SEED};
 use volver::report::{self, Fit, ReportInput};
@@ -401,34 +402,29 @@ fn cross_validation(
     Ok(cross)
 }
 
-/// What compensation does to the true machine over a grid of the work volume.
+/// What compensation does to the true machine over a grid of the work volume, with the tool
+/// point compensated.
 struct Check {
-    /// The programmed commands.
-    grid: Vec<Commands>,
-    /// The tool point.
+    /// The tool point (mm, frame of the last tool-side axis).
     tool: [f64; 3],
-    /// True tool-point error before and after compensation, and after the best rigid transform.
-    before: ErrorStats,
-    after: ErrorStats,
-    rigid: ErrorStats,
-    /// Five-axis: the true tool direction's angle from its target (µrad: mean and largest)
-    /// before compensation, after it, and after the set-up's rigid transform.
-    direction: Option<DirectionCheck>,
+    /// The check on the true machine.
+    truth: TruthCheck,
 }
 
-/// The tool direction's true error over the demo's grid (µrad).
-struct DirectionCheck {
-    before: (f64, f64),
-    after: (f64, f64),
-    rigid: (f64, f64),
+impl std::ops::Deref for Check {
+    type Target = TruthCheck;
+    fn deref(&self) -> &TruthCheck {
+        &self.truth
+    }
 }
 
-/// Mean and largest of `v` (rad) in µrad.
-fn mean_max_urad(v: &[f64]) -> (f64, f64) {
-    (
-        1e6 * v.iter().sum::<f64>() / v.len().max(1) as f64,
-        1e6 * v.iter().copied().fold(0.0, f64::max),
-    )
+/// "; N leave the travel" when N > 0.
+fn leaving(outside: usize) -> String {
+    if outside > 0 {
+        format!("; {outside} leave the travel")
+    } else {
+        String::new()
+    }
 }
 
 /// Step 6: Compensation, checked on the true machine (known here).
@@ -436,64 +432,34 @@ fn compensation(model2: &Model, id2: &Identification, out: &Synthetic) -> Result
     let m = model2.machine();
     let tool = reflector_centroid(model2);
     let comp = Compensator::new(model2, &id2.params, tool)?;
-    let (mut before, mut after) = (Vec::new(), Vec::new());
-    let mut programmed_grid = Vec::new();
-    let (mut worst, mut outside) = (0.0_f64, 0usize);
+    let truth = Compensator::new(&out.truth.model, &out.truth.params, tool)?;
+    let mut grid = Vec::new();
     for i in 0..=10 {
         for j in 0..12 {
             for k in 0..=6 {
-                let programmed = m.commands_from_file_units(&[
+                grid.push(m.commands_from_file_units(&[
                     140.0 * i as f64,
                     30.0 * j as f64,
                     100.0 * k as f64,
-                ]);
-                programmed_grid.push(programmed);
-                let c = comp.compensate(&programmed)?;
-                worst = worst.max(c.deviation_mm);
-                outside += usize::from(!c.outside_travel.is_empty());
-                let t = |q: &Commands| out.truth.model.tool_point(&q.0, &tool, &out.truth.params);
-                before.push((t(&programmed), c.target));
-                after.push((t(&c.commands), c.target));
+                ]));
             }
         }
     }
-    let stats = |v: &[([f64; 3], [f64; 3])]| {
-        let (a, b): (Vec<_>, Vec<_>) = v.iter().copied().unzip();
-        ErrorStats::between(&a, &b)
-    };
-    let (sb, sa) = (stats(&before), stats(&after));
-    // What a workpiece set-up leaves: the compensated tool points after the best rigid transform
-    // onto their targets (a constant shift and turn of the tool relative to the table is taken
-    // up when the workpiece is set up and probed).
-    let rigid = {
-        let (a, b): (Vec<_>, Vec<_>) = after.iter().copied().unzip();
-        volver::core::metrics::ErrorStats::after_rigid(&a, &b)
-    };
+    let c = check_on_truth(&comp, &truth, &grid)?;
     println!(
         "\n6. Compensation over a {}-point grid of the work volume (tool point at the reflectors' centroid), checked on the true machine:",
-        before.len()
+        grid.len()
     );
     println!(
         "   true tool-point error EMM {} → {} µm, EMax {} → {} µm in the workpiece frame; every command verified through the model (largest deviation {:.1e} mm){}",
-        um(sb.emm_um),
-        um(sa.emm_um),
-        um(sb.emax_um),
-        um(sa.emax_um),
-        worst,
-        if outside > 0 {
-            format!("; {outside} leave the travel")
-        } else {
-            String::new()
-        }
+        um(c.before.emm_um),
+        um(c.after.emm_um),
+        um(c.before.emax_um),
+        um(c.after.emax_um),
+        c.worst_deviation_mm,
+        leaving(c.outside_travel)
     );
-    Ok(Check {
-        grid: programmed_grid,
-        tool,
-        before: sb,
-        after: sa,
-        rigid,
-        direction: None,
-    })
+    Ok(Check { tool, truth: c })
 }
 
 /// Step 6 on a five-axis machine: compensation of the tool point (the first reflector, at the
@@ -505,67 +471,11 @@ fn compensation_five_axis(model2: &Model, id2: &Identification, out: &Synthetic)
     let axis = [0.0, 0.0, -1.0];
     let comp = Compensator::with_orientation(model2, &id2.params, tool, axis)?;
     let truth = Compensator::with_orientation(&out.truth.model, &out.truth.params, tool, axis)?;
-    // Five positions per axis, 10 % inside each end of the travel (compensation moves a command
-    // at an end outside it), a full turn in fifths.
-    let ranges: Vec<String> = m
-        .axes()
-        .iter()
-        .map(|ax| {
-            let (a, b) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
-            if ax.axis.is_rotary() && b - a >= 360.0 - 1e-9 {
-                format!("{}={a}:{}:72", ax.axis, a + 288.0)
-            } else {
-                let (lo, hi) = (a + 0.1 * (b - a), b - 0.1 * (b - a));
-                format!("{}={lo}:{hi}:{}", ax.axis, (hi - lo) / 4.0)
-            }
-        })
-        .collect();
-    let grid = Plan::parse_grid(m, &ranges.join(","))?.positions;
-    let (mut before, mut after) = (Vec::new(), Vec::new());
-    let (mut dir_before, mut dir_after, mut dirs) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut worst, mut worst_rad, mut worst_singular_rad) = (0.0_f64, 0.0_f64, 0.0_f64);
-    let (mut outside, mut singular) = (0usize, 0usize);
-    for programmed in &grid {
-        let c = comp.compensate(programmed)?;
-        let o = c.orientation.as_ref().expect("five-axis compensation");
-        worst = worst.max(c.deviation_mm);
-        if o.near_singularity {
-            worst_singular_rad = worst_singular_rad.max(o.deviation_rad);
-        } else {
-            worst_rad = worst_rad.max(o.deviation_rad);
-        }
-        outside += usize::from(!c.outside_travel.is_empty());
-        singular += usize::from(o.near_singularity);
-        before.push((truth.actual_point(programmed), c.target));
-        after.push((truth.actual_point(&c.commands), c.target));
-        dir_before.push(truth.direction_deviation_rad(programmed, o.target));
-        dir_after.push(truth.direction_deviation_rad(&c.commands, o.target));
-        dirs.push((
-            truth.actual_direction(&c.commands).expect("five-axis"),
-            o.target,
-        ));
-    }
-    let stats = |v: &[([f64; 3], [f64; 3])]| {
-        let (a, b): (Vec<_>, Vec<_>) = v.iter().copied().unzip();
-        ErrorStats::between(&a, &b)
-    };
-    let (sb, sa) = (stats(&before), stats(&after));
-    let (a, b): (Vec<_>, Vec<_>) = after.iter().copied().unzip();
-    let rigid = ErrorStats::after_rigid(&a, &b);
-    // The set-up's turn applies to the directions too.
-    let (r, _) = volver::core::metrics::rigid_fit(&a, &b);
-    let dir_rigid: Vec<f64> = dirs
-        .iter()
-        .map(|(d, t)| {
-            let rd: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| r[i][j] * d[j]).sum());
-            angle_between(rd, *t)
-        })
-        .collect();
-    let direction = DirectionCheck {
-        before: mean_max_urad(&dir_before),
-        after: mean_max_urad(&dir_after),
-        rigid: mean_max_urad(&dir_rigid),
-    };
+    let grid = travel_grid(m, 5)?;
+    let c = check_on_truth(&comp, &truth, &grid)?;
+    let direction = c
+        .direction
+        .ok_or_else(|| anyhow::anyhow!("the five-axis check has no direction"))?;
     println!(
         "\n6. Compensation of the tool point ({} mm, the tool's tip) and of the tool's direction (−z) over a {}-point grid of the travel (5 positions per axis, 10 % inside its ends), every axis solved, checked on the true machine:",
         volver::compensation::point_mm(tool),
@@ -573,47 +483,37 @@ fn compensation_five_axis(model2: &Model, id2: &Identification, out: &Synthetic)
     );
     println!(
         "   true tool-point error EMM {} → {} µm, EMax {} → {} µm in the workpiece frame; true direction error mean {} → {} µrad, largest {} → {} µrad",
-        um(sb.emm_um),
-        um(sa.emm_um),
-        um(sb.emax_um),
-        um(sa.emax_um),
-        um(direction.before.0),
-        um(direction.after.0),
-        um(direction.before.1),
-        um(direction.after.1)
+        um(c.before.emm_um),
+        um(c.after.emm_um),
+        um(c.before.emax_um),
+        um(c.after.emax_um),
+        um(direction.before_urad.0),
+        um(direction.after_urad.0),
+        um(direction.before_urad.1),
+        um(direction.after_urad.1)
     );
+    let singular = if c.near_singularity > 0 {
+        format!(
+            "; {} pass within {}° of the singularity (the tilt axis at zero): there the rotary axis above it keeps its angle, the tilt axis corrects what it can of the direction (up to {:.1} µrad left)",
+            c.near_singularity,
+            volver::core::compensate::SINGULAR_TILT_DEG,
+            c.worst_singular_rad * URAD_PER_RAD
+        )
+    } else {
+        String::new()
+    };
     println!(
-        "   every command verified through the model (largest deviation {:.1e} mm; direction {:.1e} rad away from the singularity){}{}",
-        worst,
-        worst_rad,
-        if outside > 0 {
-            format!("; {outside} leave the travel")
-        } else {
-            String::new()
-        },
-        if singular > 0 {
-            format!(
-                "; {singular} pass within {}° of the singularity (the tilt axis at zero): there the rotary axis above it keeps its angle, the tilt axis corrects what it can of the direction (up to {:.1} µrad left)",
-                volver::core::compensate::SINGULAR_TILT_DEG,
-                worst_singular_rad * 1e6
-            )
-        } else {
-            String::new()
-        }
+        "   every command verified through the model (largest deviation {:.1e} mm; direction {:.1e} rad away from the singularity){}{singular}",
+        c.worst_deviation_mm,
+        c.worst_direction_rad,
+        leaving(c.outside_travel)
     );
     println!(
         "   direction after the set-up's rigid transform: mean {} µrad, largest {} µrad",
-        um(direction.rigid.0),
-        um(direction.rigid.1)
+        um(direction.rigid_urad.0),
+        um(direction.rigid_urad.1)
     );
-    Ok(Check {
-        grid,
-        tool,
-        before: sb,
-        after: sa,
-        rigid,
-        direction: Some(direction),
-    })
+    Ok(Check { tool, truth: c })
 }
 
 /// Step 6, continued: What the data vouch for: the U of the identified tool point over the same grid
@@ -794,8 +694,8 @@ fn write_report(
             um(check.before.emm_um),
             um(check.after.emm_um),
             um(check.rigid.emm_um),
-            um(d.map_or(f64::NAN, |d| d.before.0)),
-            um(d.map_or(f64::NAN, |d| d.after.0))
+            um(d.map_or(f64::NAN, |d| d.before_urad.0)),
+            um(d.map_or(f64::NAN, |d| d.after_urad.0))
         )
     };
     let input = ReportInput {
