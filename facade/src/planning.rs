@@ -19,9 +19,10 @@ use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::order::{self, Visit};
-use volver_core::plan::{AxisRange, Plan, Step};
+use volver_core::plan::{AxisRange, MAX_PLAN_POSITIONS, Plan, Step};
 use volver_core::problem::Problem;
 use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
+use volver_core::units::S_PER_H;
 use volver_solvers::design::{Criterion, Space};
 use volver_solvers::gauge::Gauge;
 use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
@@ -332,33 +333,85 @@ pub fn check_distinct_reflectors(machine: &Machine, reflectors: &[usize]) -> Res
     Ok(())
 }
 
-/// Refuses counts a plan cannot have, before anything is allocated for them: 1 … 1 000 000
-/// measurements ([`MAX_PLAN_POSITIONS`], as a plan file), at least 2 candidate positions per axis
-/// (one measures no error of an axis: the design's ratio went to 3e9), and visits of the
-/// reference pose that leave room for the design.
-///
-/// [`MAX_PLAN_POSITIONS`]: volver_core::plan::MAX_PLAN_POSITIONS
-fn check_request(request: &Request) -> Result<()> {
-    use volver_core::plan::MAX_PLAN_POSITIONS;
-    if !(1..=MAX_PLAN_POSITIONS).contains(&request.points) {
-        return Err(Error::Request(format!(
-            "{} measurements: a plan has 1 … {MAX_PLAN_POSITIONS} (--points, or --hours × 3600 / \
-             --seconds-per-point per station)",
-            request.points
-        )));
+impl Request {
+    /// Refuses requests a plan cannot serve, before anything is allocated for them: 1 …
+    /// 1 000 000 measurements ([`MAX_PLAN_POSITIONS`], as a plan file), at least 2 candidate
+    /// positions per axis (one measures no error of an axis: the design's ratio went to 3e9),
+    /// visits of the reference pose that leave room for the design, a positive measuring time
+    /// per point, a finite tool offset and a tracker noise (without it every design is equally
+    /// good). [`plan`] calls it first.
+    ///
+    /// ```
+    /// use volver::planning::Request;
+    /// assert!(Request::default().validate().is_ok());
+    /// let too_few = Request { per_axis: 1, ..Request::default() };
+    /// assert!(too_few.validate().unwrap_err().to_string().starts_with("--per-axis 1"));
+    /// ```
+    ///
+    /// [`MAX_PLAN_POSITIONS`]: volver_core::plan::MAX_PLAN_POSITIONS
+    pub fn validate(&self) -> Result<()> {
+        check_seconds_per_point(self.seconds_per_point)?;
+        if !(1..=MAX_PLAN_POSITIONS).contains(&self.points) {
+            return Err(Error::Request(format!(
+                "{} measurements: a plan has 1 … {MAX_PLAN_POSITIONS} (--points, or --hours × \
+                 3600 / --seconds-per-point per station)",
+                self.points
+            )));
+        }
+        if self.per_axis < 2 {
+            return Err(Error::Request(format!(
+                "--per-axis {}: at least 2 candidate positions per axis (a single one measures \
+                 no error of the axis)",
+                self.per_axis
+            )));
+        }
+        if self.repeats >= self.points {
+            return Err(Error::Request(format!(
+                "--repeats {}: the reference pose's visits must leave room in a plan of {} \
+                 measurements",
+                self.repeats, self.points
+            )));
+        }
+        if !self.tool.iter().all(|c| c.is_finite()) {
+            return Err(Error::Request(format!(
+                "tool offset {:?} mm: three finite numbers",
+                self.tool
+            )));
+        }
+        if self.noise.is_none() {
+            return Err(Error::Request(
+                "planning needs the tracker's noise (--noise or the machine file's [tracker] \
+                 noise): without it every design is equally good"
+                    .into(),
+            ));
+        }
+        Ok(())
     }
-    if request.per_axis < 2 {
-        return Err(Error::Request(format!(
-            "--per-axis {}: at least 2 candidate positions per axis (a single one measures no \
-             error of the axis)",
-            request.per_axis
-        )));
+
+    /// The measurements that `hours` of measuring give at `seconds_per_point` when each of
+    /// `stations` stations measures the plan (`--hours`).
+    ///
+    /// ```
+    /// use volver::planning::Request;
+    /// assert_eq!(Request::points_for_hours(2.0, 6.0, 1).unwrap(), 1200);
+    /// assert!(Request::points_for_hours(-1.0, 6.0, 1).is_err());
+    /// ```
+    pub fn points_for_hours(hours: f64, seconds_per_point: f64, stations: usize) -> Result<usize> {
+        check_seconds_per_point(seconds_per_point)?;
+        if !(hours.is_finite() && hours > 0.0) {
+            return Err(Error::Request(format!(
+                "--hours {hours}: a positive number of hours"
+            )));
+        }
+        Ok((hours * S_PER_H / seconds_per_point / stations.max(1) as f64) as usize)
     }
-    if request.repeats >= request.points {
+}
+
+/// `--seconds-per-point` must be a positive number of seconds.
+fn check_seconds_per_point(seconds: f64) -> Result<()> {
+    if !(seconds.is_finite() && seconds > 0.0) {
         return Err(Error::Request(format!(
-            "--repeats {}: the reference pose's visits must leave room in a plan of {} \
-             measurements",
-            request.repeats, request.points
+            "--seconds-per-point {seconds}: a positive number of seconds"
         )));
     }
     Ok(())
@@ -366,19 +419,12 @@ fn check_request(request: &Request) -> Result<()> {
 
 /// Plans a test of `request.points` measurements for `model` (see the module documentation).
 pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
-    check_request(request)?;
+    request.validate()?;
     let t0 = std::time::Instant::now();
     let given = model;
     let full = with_reflectors(model, &request.extra_reflectors)?;
     let model = &full;
     let machine = model.machine();
-    if request.noise.is_none() {
-        return Err(Error::Request(
-            "planning needs the tracker's noise (--noise or the machine file's [tracker] noise): \
-             without it every design is equally good"
-                .into(),
-        ));
-    }
     let candidates = candidate_grid(machine, request.per_axis)?;
     if candidates.n_points() > MAX_CANDIDATES {
         return Err(Error::Request(format!(

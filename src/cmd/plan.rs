@@ -122,23 +122,15 @@ pub fn run(a: PlanArgs) -> Result<()> {
     if let Some(list) = &a.compare {
         return compare_plans(&a, &model, list, &noise, tool);
     }
-    if !(a.seconds_per_point.is_finite() && a.seconds_per_point > 0.0) {
-        bail!(
-            "--seconds-per-point {}: a positive number of seconds",
-            a.seconds_per_point
-        );
-    }
     // Checked before the design, which takes a while.
-    let program = program_options(&a, model.machine())?;
+    let stations = model.machine().stations().len();
     let points = match (a.points, a.hours) {
         (Some(n), _) => n,
         // Every station measures the plan.
-        (None, Some(h)) if h.is_finite() && h > 0.0 => {
-            (h * 3600.0 / a.seconds_per_point / model.machine().stations().len() as f64) as usize
-        }
-        (None, Some(h)) => bail!("--hours {h}: a positive number of hours"),
+        (None, Some(h)) => Request::points_for_hours(h, a.seconds_per_point, stations)?,
         (None, None) => 1040,
     };
+    let program = program_options(&a, model.machine())?;
     let extra_reflectors = match &a.reflectors {
         Some(p) => extra_reflectors(p)?,
         None => Vec::new(),
