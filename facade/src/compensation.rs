@@ -7,6 +7,7 @@ mod check;
 pub use check::{DirectionCheck, TruthCheck, check_on_truth, travel_grid};
 
 use crate::error::{Context, Error, Result};
+pub use crate::shared::reflector_centroid;
 use std::path::{Path, PathBuf};
 use volver_core::fsio::write_atomic;
 use volver_core::model::Model;
@@ -172,7 +173,7 @@ impl Carry {
 
 /// [`Carry`] of `tables` made from `model` at `params` for the tool point `tool`.
 pub fn carry(model: &Model, params: &[f64], tables: &ErrorTables, tool: [f64; 3]) -> Result<Carry> {
-    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
+    let plan = crate::shared::default_grid(model.machine(), 5)?;
     let mut departure = (0.0, 0);
     for (i, c) in plan.positions.iter().enumerate() {
         let a = model.tool_point(&c.0, &tool, params);
@@ -248,18 +249,6 @@ pub fn point_mm(p: [f64; 3]) -> String {
         })
         .collect();
     format!("({})", c.join(", "))
-}
-
-/// The centroid of the reflector offsets (mm).
-pub fn reflector_centroid(model: &Model) -> [f64; 3] {
-    let r = model.machine().reflectors();
-    let mut c = [0.0; 3];
-    for x in r {
-        for (ci, oi) in c.iter_mut().zip(x.offset) {
-            *ci += oi / r.len() as f64;
-        }
-    }
-    c
 }
 
 /// With one or two reflectors the rotation of the tool side about the line through them is
@@ -532,7 +521,7 @@ pub fn tool_point_u(
 ) -> Result<ToolPointU> {
     use volver_solvers::uncertainty::{Covariance, ToolGrid};
     let cov = Covariance::from_record(record, model.n_params());
-    let plan = crate::uncertainty::default_grid(model.machine(), 5)?;
+    let plan = crate::shared::default_grid(model.machine(), 5)?;
     let grid = ToolGrid {
         commands: plan.positions,
         tool,

@@ -26,6 +26,7 @@
 //! ```
 
 use crate::error::{Error, Result};
+pub use crate::shared::{ABOVE_NOISE_Z, CORRELATION_LISTED, Standing, standing};
 use serde::Serialize;
 use volver_core::diagnose;
 use volver_core::measure::MeasurementSet;
@@ -34,10 +35,6 @@ use volver_core::noise::TrackerNoise;
 use volver_core::problem::{Problem, Residuals};
 use volver_solvers::candidates::{Score, rank, sharing, um, verdict};
 use volver_solvers::identifiability::{Identifiability, analyse};
-
-/// Parameter pairs correlated above this (absolute value) are listed by the identifiability
-/// analysis of the diagnosis and of the report.
-pub const CORRELATION_LISTED: f64 = 0.95;
 
 /// How many harmonic orders each axis' periodogram shows.
 pub const PERIODOGRAM_ORDERS: usize = 6;
@@ -243,10 +240,6 @@ pub struct RepeatCheck {
     pub agree: bool,
 }
 
-/// How many standard deviations above what the noise leaves a fit's EMM must lie to be
-/// reported as off the noise, above or below (about 1.2 % of fits at the noise by chance).
-pub const ABOVE_NOISE_Z: f64 = 2.5;
-
 /// The same for one bin of a breakdown: with some sixty bins, each at about 2e-4 by chance.
 pub const BIN_ABOVE_NOISE_Z: f64 = 3.5;
 
@@ -331,7 +324,7 @@ pub struct IdentifiabilityReport {
     /// Condition number of the identified part.
     pub condition: f64,
     /// Each combination the data cannot identify, by the parameters it moves.
-    pub weak: Vec<Vec<crate::identification::Share>>,
+    pub weak: Vec<Vec<crate::shared::Share>>,
 }
 
 /// A candidate effect.
@@ -476,78 +469,6 @@ pub fn diagnose_with(
         candidates: ranked.iter().map(|s| Candidate::of(s, &ranked)).collect(),
         fit: id,
     })
-}
-
-/// Where a fit stands against what the tracker's noise leaves: the conclusion every output
-/// states is chosen from this, never written in advance.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-pub enum Standing {
-    /// Within [`ABOVE_NOISE_Z`] standard deviations of what a complete model leaves.
-    AtNoise,
-    /// Above it: something is missing.
-    Above,
-    /// Far below it: the specification overstates the noise of these data.
-    Below,
-}
-
-impl Standing {
-    /// The standing of a fit of EMM `emm_um` against `level`.
-    ///
-    /// ```
-    /// use volver::diagnosis::Standing;
-    /// use volver::core::diagnose::NoiseLevel;
-    /// let level = NoiseLevel { noise_emm_um: 50.0, fit_emm_um: 49.0, sd_um: 0.5 };
-    /// assert_eq!(Standing::of(&level, 49.4), Standing::AtNoise);
-    /// assert_eq!(Standing::of(&level, 67.0), Standing::Above);
-    /// assert_eq!(Standing::of(&level, 30.0), Standing::Below);
-    /// assert_eq!(Standing::of(&level, 67.0).conclusion(), "something is missing");
-    /// ```
-    pub fn of(level: &diagnose::NoiseLevel, emm_um: f64) -> Standing {
-        let z = level.z(emm_um);
-        if z > ABOVE_NOISE_Z {
-            Standing::Above
-        } else if z < -ABOVE_NOISE_Z {
-            Standing::Below
-        } else {
-            Standing::AtNoise
-        }
-    }
-
-    /// The conclusion in words.
-    pub fn conclusion(self) -> &'static str {
-        match self {
-            Standing::AtNoise => "the model explains everything but the noise",
-            Standing::Above => "something is missing",
-            Standing::Below => {
-                "far below what the noise leaves: the noise specification overstates the noise \
-                 of these data"
-            }
-        }
-    }
-}
-
-/// What the tracker's `noise` leaves of a fit at `params` of `problem` (its identified
-/// directions absorb part of it) and where the fit's EMM `emm_um` stands against it; `None`
-/// when the fit's identifiability cannot be analysed.
-pub fn standing(
-    problem: &Problem,
-    params: &[f64],
-    emm_um: f64,
-    noise: &TrackerNoise,
-) -> Option<(diagnose::NoiseLevel, Standing)> {
-    let ident = analyse(
-        &volver_solvers::Task::new(problem.clone()),
-        params,
-        volver_solvers::identifiability::RANK_TOLERANCE,
-        CORRELATION_LISTED,
-    )?;
-    let moments = diagnose::noise_moments(problem, noise);
-    let coordinates: usize = (0..problem.n_points())
-        .map(|i| if problem.scalar(i) { 1 } else { 3 })
-        .sum();
-    let all: Vec<usize> = (0..problem.n_points()).collect();
-    let level = diagnose::noise_level(&moments, &all, ident.rank, coordinates);
-    Some((level, Standing::of(&level, emm_um)))
 }
 
 /// The fit against the noise: overall, per bin, and the repeats (their estimate in µm and their
@@ -712,7 +633,7 @@ fn identifiability(model: &Model, a: &Identifiability) -> IdentifiabilityReport 
             .map(|w| {
                 w.parameters
                     .iter()
-                    .map(|&(j, share)| crate::identification::Share {
+                    .map(|&(j, share)| crate::shared::Share {
                         name: model.params()[j].name.clone(),
                         share,
                     })

@@ -14,6 +14,7 @@
 //! ```
 
 use crate::error::{Context, Error, Result};
+pub use crate::shared::Share;
 use serde::Serialize;
 use std::path::Path;
 use volver_core::machine::Machine;
@@ -76,15 +77,6 @@ pub struct Unidentified {
     pub relative_curvature: f64,
     /// The parameters it moves, with their shares.
     pub parameters: Vec<Share>,
-}
-
-/// A parameter's share of a combination.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct Share {
-    /// The parameter's name (ISO 230-1, e.g. `EXC.b1`).
-    pub name: String,
-    /// Its share (a component of the unit combination).
-    pub share: f64,
 }
 
 /// Everything an identification produced.
@@ -337,12 +329,12 @@ pub fn identify(
     results.time_origin_s = model.needs_time().then_some(data.time_origin_s);
     if let Some(cov) = &covariance {
         // One name per column of the held factor: none when the priors decided them.
-        let held = crate::uncertainty::held_text(
+        let held = crate::shared::held_text(
             model,
             id.gauge.as_ref().filter(|_| settings.priors.is_none()),
         );
         let mut record = cov.to_record(&rule, held);
-        record.model_check = Some(crate::uncertainty::check_fit(&problem, &id, settings.noise));
+        record.model_check = Some(crate::shared::check_fit(&problem, &id, settings.noise));
         results.uncertainty = Some(record);
     }
     let implausible = implausible_sizes(&problem, &id, covariance.as_ref());

@@ -204,7 +204,7 @@ pub fn noise_rule(
     let file = machine.tracker().noise.filter(|n| !n.is_none());
     let (model, source) = match (given, file) {
         (Some(text), file) => {
-            let model = crate::uncertainty::noise_of(Some(text))?;
+            let model = crate::shared::noise_of(Some(text))?;
             let source = match file {
                 Some(f) if NoiseModel::Tracker(f) != model => {
                     format!("--noise, over the machine file's [tracker] noise {f}")
@@ -233,7 +233,7 @@ pub fn noise_rule(
 
 impl NoiseUsed {
     /// `self` with the fit at `params` (EMM `emm_um`) of `model` on `data` judged against a
-    /// specified noise ([`crate::diagnosis::standing`]): a disagreement when the fit is clearly
+    /// specified noise ([`crate::shared::standing`]): a disagreement when the fit is clearly
     /// above what the noise leaves at these points (the model misses something, or the noise is
     /// understated: the intervals then assume a model the data do not support) or far below it.
     pub fn judged(
@@ -244,14 +244,14 @@ impl NoiseUsed {
         params: &[f64],
         emm_um: f64,
     ) -> NoiseUsed {
-        use crate::diagnosis::Standing;
+        use crate::shared::Standing;
         let volver_solvers::uncertainty::NoiseModel::Tracker(n) = noise else {
             return self;
         };
         let Ok(problem) = Problem::new(model, data) else {
             return self;
         };
-        if let Some((level, standing)) = crate::diagnosis::standing(&problem, params, emm_um, &n)
+        if let Some((level, standing)) = crate::shared::standing(&problem, params, emm_um, &n)
             && standing != Standing::AtNoise
         {
             self.disagreement = Some(format!(

@@ -30,6 +30,7 @@ pub mod machining;
 pub mod planning;
 pub mod plot;
 pub mod report;
+pub mod shared;
 pub mod study;
 pub mod uncertainty;
 

@@ -435,7 +435,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             candidates.reflectors.len()
         )));
     }
-    let grid = crate::uncertainty::default_grid(machine, 5)?;
+    let grid = crate::shared::default_grid(machine, 5)?;
     let space = Space::new(
         model,
         &candidates,
@@ -526,9 +526,9 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let nominal = Nominal::of(model, &planned)?;
     let (u95_mean_um, u95_max_um) =
         nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
-    let unidentified = crate::uncertainty::held_text(model, nominal.gauge.as_ref());
+    let unidentified = crate::shared::held_text(model, nominal.gauge.as_ref());
     let unidentifiable_by_candidates =
-        crate::uncertainty::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
+        crate::shared::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
     // Advice for what the candidates cannot identify (the request's extra reflectors are
     // candidates already).
     let reflector_advice = if unidentifiable_by_candidates.is_empty() {
@@ -676,7 +676,7 @@ pub fn compare(
     drift: Option<&str>,
 ) -> Result<Vec<Compared>> {
     let machine = model.machine();
-    let grid = crate::uncertainty::default_grid(machine, 5)?;
+    let grid = crate::shared::default_grid(machine, 5)?;
     let tg = ToolGrid {
         commands: grid.positions.clone(),
         tool,

@@ -133,7 +133,7 @@ impl<'a> ReportInput<'a> {
         fits: Vec<Fit<'a>>,
     ) -> ReportInput<'a> {
         let last = fits.last().expect("a report needs at least one fit");
-        let tool = crate::compensation::reflector_centroid(last.model);
+        let tool = crate::shared::reflector_centroid(last.model);
         ReportInput {
             title: title.into(),
             data_label: data_label.into(),
@@ -595,7 +595,7 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
         ..
     } = p;
     // Whether the bands mean anything: the fit against the noise.
-    let check = crate::uncertainty::check_fit(
+    let check = crate::shared::check_fit(
         problem,
         last.id,
         volver_solvers::uncertainty::NoiseModel::Residual,

@@ -3,34 +3,13 @@
 //! words for a combination of parameters the data cannot identify.
 
 use crate::error::{Error, Result};
+pub use crate::shared::{
+    MIN_REPEAT_PAIRS, REPEAT_MARGIN, check_fit, combination_text, default_grid, held_text, noise_of,
+};
 use volver_core::machine::Machine;
 use volver_core::model::Model;
-use volver_core::noise::TrackerNoise;
 use volver_core::plan::Plan;
-use volver_solvers::gauge::Gauge;
 use volver_solvers::uncertainty::NoiseModel;
-
-/// A grid of `per_axis` evenly spaced positions over every axis' travel (a full-turn rotary
-/// axis stops one step short of its end, which is its start).
-pub fn default_grid(m: &Machine, per_axis: usize) -> Result<Plan> {
-    let parts: Vec<String> = m
-        .axes()
-        .iter()
-        .map(|ax| {
-            let (a, b) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
-            let full_turn = ax.axis.is_rotary() && (b - a) >= 360.0 - 1e-9;
-            let steps = if full_turn { per_axis } else { per_axis - 1 };
-            let step = (b - a) / steps.max(1) as f64;
-            let end = if full_turn { b - step } else { b };
-            if step > 0.0 {
-                format!("{}={a}:{end}:{step}", ax.axis)
-            } else {
-                format!("{}={a}", ax.axis)
-            }
-        })
-        .collect();
-    Ok(Plan::parse_grid(m, &parts.join(","))?)
-}
 
 /// The grid of `--grid` (a preset or a grid text), or the default.
 pub fn grid_of(m: &Machine, text: Option<&str>) -> Result<Plan> {
@@ -38,45 +17,6 @@ pub fn grid_of(m: &Machine, text: Option<&str>) -> Result<Plan> {
         Some(t) => crate::inputs::plan(m, None, Some(t))?,
         None => default_grid(m, 5)?,
     })
-}
-
-/// The noise model of `--noise`.
-pub fn noise_of(text: Option<&str>) -> Result<NoiseModel> {
-    Ok(match text {
-        Some(t) => {
-            let n = TrackerNoise::from_text(t)?;
-            if n.is_none() {
-                return Err(Error::Request(format!(
-                    "--noise {t}: a noise-free tracker gives no uncertainty; give its noise"
-                )));
-            }
-            NoiseModel::Tracker(n)
-        }
-        None => NoiseModel::Residual,
-    })
-}
-
-/// One text per held combination of `gauge` ([`combination_text`]), in its order; none without
-/// a gauge: the names a results file records for the columns of its held factor.
-pub fn held_text(model: &Model, gauge: Option<&Gauge>) -> Vec<String> {
-    gauge
-        .map(|g| {
-            (0..g.held.len())
-                .map(|c| combination_text(model, g, c))
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
-/// The names of the parameters a held combination moves, with their shares.
-pub fn combination_text(model: &Model, gauge: &Gauge, c: usize) -> String {
-    let parts: Vec<String> = gauge.held[c]
-        .parameters
-        .iter()
-        .take(4)
-        .map(|&(j, s)| format!("{} {s:+.2}", model.params()[j].name))
-        .collect();
-    parts.join(", ")
 }
 
 /// What an uncertainty assessment is asked (the options of `volver uncertainty`).
@@ -106,7 +46,7 @@ impl Request {
             noise: NoiseModel::Residual,
             priors: None,
             grid: default_grid(model.machine(), 5)?,
-            tool: crate::compensation::reflector_centroid(model),
+            tool: crate::shared::reflector_centroid(model),
             monte_carlo: None,
         })
     }
@@ -282,7 +222,7 @@ pub struct Combination {
     /// Its relative curvature.
     pub relative_curvature: f64,
     /// The parameters it moves.
-    pub parameters: Vec<crate::identification::Share>,
+    pub parameters: Vec<crate::shared::Share>,
 }
 
 /// The tool point's expanded uncertainty (k = 2) at one grid command (µm).
@@ -373,7 +313,7 @@ impl Assessment {
                         parameters: h
                             .parameters
                             .iter()
-                            .map(|&(j, share)| crate::identification::Share {
+                            .map(|&(j, share)| crate::shared::Share {
                                 name: model.params()[j].name.clone(),
                                 share,
                             })
@@ -408,75 +348,6 @@ impl Assessment {
                 },
             ),
         }
-    }
-}
-
-/// The fewest pairs of repeated points the check of a fit against their noise takes.
-pub const MIN_REPEAT_PAIRS: usize = 5;
-
-/// How far above the noise its repeated points show a fit's EMM may lie before the model is
-/// reported incomplete (× what the noise leaves a complete model): the repeats' own estimate of
-/// the noise varies by some 10 % with tens of pairs.
-pub const REPEAT_MARGIN: f64 = 1.2;
-
-/// The fit `id` of `problem` against what the tracker's noise leaves a complete model
-/// ([`ModelCheck`]), with the noise the rule of one noise source gives: `noise` when it is the
-/// tracker's, else the machine file's `[tracker] noise` — judged as the diagnosis judges it
-/// ([`crate::diagnosis::standing`]: more than [`crate::diagnosis::ABOVE_NOISE_Z`] standard
-/// deviations above) — else from the repeated points ([`REPEAT_MARGIN`] above the noise they
-/// show, at least [`MIN_REPEAT_PAIRS`] pairs), else unknown.
-///
-/// [`ModelCheck`]: volver_core::results::ModelCheck
-pub fn check_fit(
-    problem: &volver_core::problem::Problem,
-    id: &volver_solvers::strategy::Identification,
-    noise: NoiseModel,
-) -> volver_core::results::ModelCheck {
-    use volver_core::problem::Residuals;
-    use volver_core::results::ModelCheck;
-    let model = problem.model();
-    let emm_um = id.reached.stats.emm_um;
-    let spec = match noise {
-        NoiseModel::Tracker(n) => Some(n),
-        NoiseModel::Residual => model.machine().tracker().noise,
-    }
-    .filter(|n| !n.is_none());
-    if let Some(n) = spec
-        && let Some((level, standing)) = crate::diagnosis::standing(problem, &id.params, emm_um, &n)
-    {
-        return ModelCheck {
-            emm_um,
-            expected_um: Some(level.fit_emm_um),
-            basis: format!("the tracker's specification {n}"),
-            above_noise: standing == crate::diagnosis::Standing::Above,
-        };
-    }
-    let held = id.gauge.as_ref().map_or(0, |g| g.held.len());
-    let free = model
-        .n_params()
-        .saturating_sub(model.constraints().rows.len() + held);
-    let coordinates: usize = (0..problem.n_points())
-        .map(|i| if problem.scalar(i) { 1 } else { 3 })
-        .sum();
-    let keep = (1.0 - free as f64 / coordinates.max(1) as f64)
-        .max(0.0)
-        .sqrt();
-    match volver_core::diagnose::repeat_noise(problem) {
-        Some((stats, pairs)) if pairs >= MIN_REPEAT_PAIRS => {
-            let expected = stats.emm_um * keep;
-            ModelCheck {
-                emm_um,
-                expected_um: Some(expected),
-                basis: format!("{pairs} pairs of repeated points"),
-                above_noise: emm_um > REPEAT_MARGIN * expected,
-            }
-        }
-        _ => ModelCheck {
-            emm_um,
-            expected_um: None,
-            basis: "no noise specification and fewer than 5 pairs of repeated points".into(),
-            above_noise: false,
-        },
     }
 }
 
