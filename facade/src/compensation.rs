@@ -13,6 +13,7 @@ use volver_core::fsio::write_atomic;
 use volver_core::model::Model;
 use volver_core::results::{ResultsFile, UncertaintyRecord};
 use volver_core::tables::ErrorTables;
+use volver_core::units::{UM_PER_MM, URAD_PER_RAD};
 use volver_solvers::uncertainty::K;
 
 /// `--max-u-um` must be a positive length.
@@ -325,9 +326,69 @@ pub fn compensate_points(
     use volver_core::compensate::{read_points, written};
     let pts = read_points(text, label, m)?;
     let axes = m.axes();
-    let letters: Vec<String> = axes.iter().map(|x| x.axis.letter().to_string()).collect();
     let oriented = comp.tool_axis().is_some();
-    let mut out = format!(
+    let mut out = points_header(m, oriented);
+    let mut t = Tally::default();
+    for p in &pts {
+        let c = comp
+            .compensate(&p.commands)
+            .with_context(|| format!("{label}:{}", p.line))?;
+        let (cells, written) = written(m, &c.commands, decimals);
+        let prog: Vec<String> = axes
+            .iter()
+            .enumerate()
+            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
+            .collect();
+        let wd = comp.deviation_mm(&written, c.target);
+        t.ws = t.ws.max(c.deviation_mm);
+        t.ww = t.ww.max(wd);
+        t.largest = t.largest.max(c.error_mm);
+        let off: String = c
+            .outside_travel
+            .iter()
+            .map(|&k| axes[k].axis.letter())
+            .collect();
+        t.outside += usize::from(!off.is_empty());
+        let extra = match &c.orientation {
+            Some(o) => t.orientation(comp, &written, o),
+            None => String::new(),
+        };
+        out.push_str(&format!(
+            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
+            p.line,
+            p.id.clone().unwrap_or_default(),
+            cells.join(","),
+            prog.join(","),
+            c.error_mm * UM_PER_MM,
+            wd * UM_PER_MM
+        ));
+    }
+    Ok(Compensated {
+        text: out,
+        points: pts.len(),
+        max_error_mm: t.largest,
+        worst_solved_mm: t.ws,
+        worst_written_mm: t.ww,
+        outside: t.outside,
+        orientation: oriented.then_some(OrientationSummary {
+            max_error_rad: t.dir_err,
+            worst_solved_rad: t.dir_ws,
+            worst_written_rad: t.dir_ww,
+            near_singularity: t.singular,
+            worst_singular_rad: t.dir_singular,
+        }),
+    })
+}
+
+/// The header of a compensated point list: the corrected commands, the programmed ones, the
+/// error and deviation, and the direction's columns when the orientation is compensated.
+fn points_header(m: &volver_core::machine::Machine, oriented: bool) -> String {
+    let letters: Vec<String> = m
+        .axes()
+        .iter()
+        .map(|x| x.axis.letter().to_string())
+        .collect();
+    format!(
         "line,id,{},{},error_um,deviation_um,outside_travel{}\n",
         letters.join(","),
         letters
@@ -340,75 +401,53 @@ pub fn compensate_points(
         } else {
             ""
         }
-    );
-    let (mut dir_err, mut dir_ws, mut dir_ww) = (0.0_f64, 0.0_f64, 0.0_f64);
-    let (mut singular, mut dir_singular) = (0, 0.0_f64);
-    let (mut ws, mut ww, mut outside, mut largest) = (0.0_f64, 0.0_f64, 0usize, 0.0_f64);
-    for p in &pts {
-        let c = comp
-            .compensate(&p.commands)
-            .with_context(|| format!("{label}:{}", p.line))?;
-        let (cells, written) = written(m, &c.commands, decimals);
-        let prog: Vec<String> = axes
-            .iter()
-            .enumerate()
-            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
-            .collect();
-        let wd = comp.deviation_mm(&written, c.target);
-        ws = ws.max(c.deviation_mm);
-        ww = ww.max(wd);
-        largest = largest.max(c.error_mm);
-        let off: String = c
-            .outside_travel
-            .iter()
-            .map(|&k| axes[k].axis.letter())
-            .collect();
-        outside += usize::from(!off.is_empty());
-        let extra = match &c.orientation {
-            Some(o) => {
-                let wd = comp.direction_deviation_rad(&written, o.target);
-                dir_err = dir_err.max(o.error_rad);
-                if o.near_singularity {
-                    singular += 1;
-                    dir_singular = dir_singular.max(o.deviation_rad);
-                } else {
-                    dir_ws = dir_ws.max(o.deviation_rad);
-                    dir_ww = dir_ww.max(wd);
-                }
-                format!(
-                    ",{:.4},{:.6},{:.6}",
-                    o.error_rad * 1e6,
-                    wd * 1e6,
-                    o.sensitivity
-                )
-            }
-            None => String::new(),
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
-            p.line,
-            p.id.clone().unwrap_or_default(),
-            cells.join(","),
-            prog.join(","),
-            c.error_mm * 1e3,
-            wd * 1e3
-        ));
+    )
+}
+
+/// The largest values over a compensated point list.
+#[derive(Default)]
+struct Tally {
+    /// Deviation as solved and as written (mm).
+    ws: f64,
+    ww: f64,
+    /// Uncompensated error (mm).
+    largest: f64,
+    /// Commands leaving the travel.
+    outside: usize,
+    /// Direction: uncompensated error, deviation as solved and as written away from the
+    /// singularity (rad).
+    dir_err: f64,
+    dir_ws: f64,
+    dir_ww: f64,
+    /// Commands near the singularity and the largest deviation left there (rad).
+    singular: usize,
+    dir_singular: f64,
+}
+
+impl Tally {
+    /// Tallies a compensated direction `o` (the command as `written`) and gives its cells.
+    fn orientation(
+        &mut self,
+        comp: &volver_core::compensate::Compensator,
+        written: &volver_core::machine::Commands,
+        o: &volver_core::compensate::OrientationResult,
+    ) -> String {
+        let wd = comp.direction_deviation_rad(written, o.target);
+        self.dir_err = self.dir_err.max(o.error_rad);
+        if o.near_singularity {
+            self.singular += 1;
+            self.dir_singular = self.dir_singular.max(o.deviation_rad);
+        } else {
+            self.dir_ws = self.dir_ws.max(o.deviation_rad);
+            self.dir_ww = self.dir_ww.max(wd);
+        }
+        format!(
+            ",{:.4},{:.6},{:.6}",
+            o.error_rad * URAD_PER_RAD,
+            wd * URAD_PER_RAD,
+            o.sensitivity
+        )
     }
-    Ok(Compensated {
-        text: out,
-        points: pts.len(),
-        max_error_mm: largest,
-        worst_solved_mm: ws,
-        worst_written_mm: ww,
-        outside,
-        orientation: oriented.then_some(OrientationSummary {
-            max_error_rad: dir_err,
-            worst_solved_rad: dir_ws,
-            worst_written_rad: dir_ww,
-            near_singularity: singular,
-            worst_singular_rad: dir_singular,
-        }),
-    })
 }
 
 /// What compensation did to the tool's direction over a point list or a program.

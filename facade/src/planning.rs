@@ -22,8 +22,8 @@ use volver_core::plan::order::{self, Visit};
 use volver_core::plan::{AxisRange, MAX_PLAN_POSITIONS, Plan, Step};
 use volver_core::problem::Problem;
 use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
-use volver_core::units::S_PER_H;
-use volver_solvers::design::{Criterion, Space};
+use volver_core::units::{S_PER_H, UM_PER_MM};
+use volver_solvers::design::{Criterion, Design, Space};
 use volver_solvers::gauge::Gauge;
 use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
 
@@ -164,8 +164,11 @@ fn with_reflectors(model: &Model, extra: &[ReflectorSpec]) -> Result<Model> {
 
 /// What the candidate poses leave unidentified with a reflector added at each of six positions
 /// 100 mm from the reflectors' centroid along the axes of the tool-side frame, keeping those
-/// that leave fewer than `base` combinations.
+/// that leave fewer than `base` combinations (none when `base` is 0: nothing to advise).
 fn advice(model: &Model, per_axis: usize, base: usize) -> Result<Vec<Advice>> {
+    if base == 0 {
+        return Ok(Vec::new());
+    }
     let r = model.machine().reflectors();
     let c: [f64; 3] =
         std::array::from_fn(|k| r.iter().map(|x| x.offset[k]).sum::<f64>() / r.len() as f64);
@@ -425,16 +428,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let full = with_reflectors(model, &request.extra_reflectors)?;
     let model = &full;
     let machine = model.machine();
-    let candidates = candidate_grid(machine, request.per_axis)?;
-    if candidates.n_points() > MAX_CANDIDATES {
-        return Err(Error::Request(format!(
-            "{} candidate points ({} poses × {} reflectors): at most {MAX_CANDIDATES}; use a \
-             smaller --per-axis",
-            candidates.n_points(),
-            candidates.positions.len(),
-            candidates.reflectors.len()
-        )));
-    }
+    let candidates = checked_candidates(machine, request.per_axis)?;
     let grid = crate::shared::default_grid(machine, 5)?;
     let space = Space::new(
         model,
@@ -446,27 +440,82 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     .ok_or_else(|| {
         Error::Singular("the candidates' Jacobians are not finite at the nominal machine".into())
     })?;
+    let (reference, design) = reference_and_design(&space, request, &candidates)?;
+    let visits_of_reference = request.repeats + 2;
+    let (sequence, _) = order::sequence(
+        machine,
+        &candidates.positions,
+        visits_of(
+            &candidates.steps(),
+            &design.counts,
+            candidates.positions.len(),
+        ),
+        Some((reference.clone(), request.repeats)),
+        request.seed,
+        50,
+    );
+    let planned = compact(
+        &candidates.positions,
+        &sequence,
+        format!(
+            "{}-optimal, {} points",
+            criterion_name(request.criterion),
+            request.points
+        ),
+    );
+    let nominal = Nominal::of(model, &planned)?;
+    let (u95_mean_um, u95_max_um) =
+        nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
+    let unidentified = crate::shared::held_text(model, nominal.gauge.as_ref());
+    let unidentifiable_by_candidates =
+        crate::shared::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
+    // Advice for what the candidates cannot identify (the request's extra reflectors are
+    // candidates already).
+    let reflector_advice = advice(model, request.per_axis, unidentifiable_by_candidates.len())?;
+    let plan_model = plan_model(given, machine, &request.extra_reflectors, &planned)?;
+    let n = planned.n_points();
+    Ok(Planned {
+        report: Report {
+            criterion: request.criterion,
+            points: n,
+            poses: planned.positions.len(),
+            reflectors: reflector_counts(machine, &planned),
+            candidates: space.len(),
+            // Every station measures the plan.
+            duration_h: (n * model.machine().stations().len()) as f64 * request.seconds_per_point
+                / S_PER_H,
+            equivalence: design.equivalence,
+            iterations: design.iterations,
+            tool_mm: request.tool,
+            u95_mean_um,
+            u95_max_um,
+            unidentified,
+            unidentifiable_by_candidates,
+            reflector_advice,
+            reference: file_units_rounded(machine, &candidates.positions[reference.position]),
+            reference_visits: visits_of_reference,
+            aliasing: order::aliasing(machine, &planned.positions, &planned.steps()),
+            time_s: t0.elapsed().as_secs_f64(),
+        },
+        plan: reindex(planned, machine, plan_model.machine()),
+        model: plan_model,
+    })
+}
+
+/// The reference pose and the design of what is left: the reference pose's visits come out of
+/// the budget, so a first design tells which pose it is (the one the design measures most) and
+/// the second is made for the measurements left.
+fn reference_and_design(
+    space: &Space,
+    request: &Request,
+    candidates: &Plan,
+) -> Result<(Visit, Design)> {
     let steps = candidates.steps();
-    // The reference pose's visits come out of the budget: the first design tells which pose
-    // it is (the one the design measures most), the second is made for what is left.
     let first = space
         .design(request.points, request.criterion, request.iterations)
         .ok_or_else(|| Error::Singular("the design's information matrix is singular".into()))?;
-    let mut per_pose = vec![0usize; candidates.positions.len()];
-    for (s, &c) in steps.iter().zip(&first.counts) {
-        per_pose[s.position] += c;
-    }
-    let reference_pose = (0..per_pose.len())
-        .max_by_key(|&p| (per_pose[p], std::cmp::Reverse(p)))
-        .unwrap_or(0);
-    let reference_reflectors: Vec<usize> = steps
-        .iter()
-        .zip(&first.counts)
-        .filter(|(s, c)| s.position == reference_pose && **c > 0)
-        .map(|(s, _)| s.reflector)
-        .collect();
-    let visits_of_reference = request.repeats + 2;
-    let reserved = visits_of_reference * reference_reflectors.len();
+    let reference = reference_of(&steps, &first.counts, candidates.positions.len());
+    let reserved = (request.repeats + 2) * reference.reflectors.len();
     if reserved >= request.points {
         return Err(Error::Request(format!(
             "{} points leave nothing beside the reference pose's {reserved} measurements",
@@ -480,12 +529,55 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             request.iterations,
         )
         .ok_or_else(|| Error::Singular("the design's information matrix is singular".into()))?;
-    // Visits: a pose measured k times at a reflector is visited k times.
+    Ok((reference, design))
+}
+
+/// The candidate grid of `per_axis` positions per axis, refused beyond [`MAX_CANDIDATES`]
+/// points.
+fn checked_candidates(machine: &Machine, per_axis: usize) -> Result<Plan> {
+    let candidates = candidate_grid(machine, per_axis)?;
+    if candidates.n_points() > MAX_CANDIDATES {
+        return Err(Error::Request(format!(
+            "{} candidate points ({} poses × {} reflectors): at most {MAX_CANDIDATES}; use a \
+             smaller --per-axis",
+            candidates.n_points(),
+            candidates.positions.len(),
+            candidates.reflectors.len()
+        )));
+    }
+    Ok(candidates)
+}
+
+/// The reference pose of a design (`counts` per candidate step): the pose it measures most
+/// (the first on a tie), visited with the reflectors the design measures there.
+fn reference_of(steps: &[Step], counts: &[usize], n_positions: usize) -> Visit {
+    let mut per_pose = vec![0usize; n_positions];
+    for (s, &c) in steps.iter().zip(counts) {
+        per_pose[s.position] += c;
+    }
+    let position = (0..per_pose.len())
+        .max_by_key(|&p| (per_pose[p], std::cmp::Reverse(p)))
+        .unwrap_or(0);
+    let reflectors = steps
+        .iter()
+        .zip(counts)
+        .filter(|(s, c)| s.position == position && **c > 0)
+        .map(|(s, _)| s.reflector)
+        .collect();
+    Visit {
+        position,
+        reflectors,
+    }
+}
+
+/// The visits of a design (`counts` per candidate step): a pose measured k times at a reflector
+/// is visited k times, each visit measuring the reflectors with visits left.
+fn visits_of(steps: &[Step], counts: &[usize], n_positions: usize) -> Vec<Visit> {
     let mut visits = Vec::new();
-    for (pose, _) in candidates.positions.iter().enumerate() {
+    for pose in 0..n_positions {
         let mine: Vec<(usize, usize)> = steps
             .iter()
-            .zip(&design.counts)
+            .zip(counts)
             .filter(|(s, c)| s.position == pose && **c > 0)
             .map(|(s, c)| (s.reflector, *c))
             .collect();
@@ -497,48 +589,27 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             });
         }
     }
-    let reference = Visit {
-        position: reference_pose,
-        reflectors: reference_reflectors,
-    };
-    let (sequence, _) = order::sequence(
-        machine,
-        &candidates.positions,
-        visits,
-        Some((reference.clone(), request.repeats)),
-        request.seed,
-        50,
-    );
-    let planned = compact(
-        &candidates.positions,
-        &sequence,
-        format!(
-            "{}-optimal, {} points",
-            match request.criterion {
-                Criterion::I => "I",
-                Criterion::V => "V",
-                Criterion::D => "D",
-            },
-            request.points
-        ),
-    );
-    let aliasing = order::aliasing(machine, &planned.positions, &planned.steps());
-    let nominal = Nominal::of(model, &planned)?;
-    let (u95_mean_um, u95_max_um) =
-        nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
-    let unidentified = crate::shared::held_text(model, nominal.gauge.as_ref());
-    let unidentifiable_by_candidates =
-        crate::shared::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
-    // Advice for what the candidates cannot identify (the request's extra reflectors are
-    // candidates already).
-    let reflector_advice = if unidentifiable_by_candidates.is_empty() {
-        Vec::new()
-    } else {
-        advice(model, request.per_axis, unidentifiable_by_candidates.len())?
-    };
-    // The plan's model: the given machine with the extra reflectors the plan measures.
-    let used_extra: Vec<ReflectorSpec> = request
-        .extra_reflectors
+    visits
+}
+
+/// The criterion's letter.
+fn criterion_name(c: Criterion) -> &'static str {
+    match c {
+        Criterion::I => "I",
+        Criterion::V => "V",
+        Criterion::D => "D",
+    }
+}
+
+/// The plan's model: the `given` machine with those of the `extra` reflectors that the plan
+/// (reflector indices of `machine`) measures.
+fn plan_model(
+    given: &Model,
+    machine: &Machine,
+    extra: &[ReflectorSpec],
+    planned: &Plan,
+) -> Result<Model> {
+    let used_extra: Vec<ReflectorSpec> = extra
         .iter()
         .filter(|r| {
             machine
@@ -547,53 +618,118 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         })
         .cloned()
         .collect();
-    let plan_model = with_reflectors(given, &used_extra)?;
-    let reflectors = planned
+    with_reflectors(given, &used_extra)
+}
+
+/// Each reflector the plan measures, with its number of measurements.
+fn reflector_counts(machine: &Machine, planned: &Plan) -> Vec<(String, usize)> {
+    let steps = planned.steps();
+    planned
         .reflectors
         .iter()
         .map(|&r| {
             (
                 machine.reflectors()[r].id.clone(),
-                planned.steps().iter().filter(|s| s.reflector == r).count(),
+                steps.iter().filter(|s| s.reflector == r).count(),
             )
         })
-        .collect();
-    let n = planned.n_points();
-    Ok(Planned {
-        report: Report {
-            criterion: request.criterion,
-            points: n,
-            poses: planned.positions.len(),
-            reflectors,
-            candidates: space.len(),
-            // Every station measures the plan.
-            duration_h: (n * model.machine().stations().len()) as f64 * request.seconds_per_point
-                / 3600.0,
-            equivalence: design.equivalence,
-            iterations: design.iterations,
-            tool_mm: request.tool,
-            u95_mean_um,
-            u95_max_um,
-            unidentified,
-            unidentifiable_by_candidates,
-            reflector_advice,
-            reference: machine
-                .axes()
-                .iter()
-                .enumerate()
-                .map(|(k, ax)| {
-                    // File units to 1e-9, without the radians' round trip (29.999999999999996°).
-                    (ax.to_file_units(candidates.positions[reference_pose].0[k]) * 1e9).round()
-                        / 1e9
-                })
-                .collect(),
-            reference_visits: visits_of_reference,
-            aliasing,
-            time_s: t0.elapsed().as_secs_f64(),
-        },
-        plan: reindex(planned, machine, plan_model.machine()),
-        model: plan_model,
+        .collect()
+}
+
+/// A pose in file units (mm, degrees) rounded to 1e-9, without the radians' round trip
+/// (29.999999999999996°).
+fn file_units_rounded(machine: &Machine, pose: &Commands) -> Vec<f64> {
+    machine
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(k, ax)| (ax.to_file_units(pose.0[k]) * 1e9).round() / 1e9)
+        .collect()
+}
+
+/// One simulated test of a compared plan: its fit's tool-point error and how many coordinates
+/// its U (k = 2) covers.
+struct Replica {
+    /// EMM of the identified tool point over the grid, after the set-up's transform (µm).
+    emm_um: f64,
+    /// Coordinates within their U.
+    inside: usize,
+    /// Coordinates checked.
+    total: usize,
+}
+
+/// Simulates `plan` on `truth` with `noise` (seed `seed`), fits `model` and checks the tool
+/// point over `tg` against the truth.
+fn replica(
+    model: &Model,
+    plan: &Plan,
+    truth: &Truth,
+    seed: u64,
+    noise: &TrackerNoise,
+    tg: &ToolGrid,
+    label: &str,
+) -> Result<Replica> {
+    let mut sim = Simulation::new(plan.clone(), truth.clone(), seed);
+    sim.noise = *noise;
+    let data = sim.run()?.measurements;
+    let problem = Problem::new(model, &data)?;
+    let id = volver_solvers::strategy::fit(problem.clone());
+    if id.termination.failed() {
+        return Err(Error::NotSolved(format!(
+            "{label}, seed {seed}: {}",
+            id.termination
+        )));
+    }
+    let base = tg.points(&truth.model, &truth.params);
+    let d = tg.deviations(model, &id.params, &base, true);
+    let emm = (0..base.len())
+        .map(|k| (d[3 * k].powi(2) + d[3 * k + 1].powi(2) + d[3 * k + 2].powi(2)).sqrt())
+        .sum::<f64>()
+        / base.len() as f64;
+    let cov = volver_solvers::uncertainty::linear(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        volver_solvers::Objective::Phi,
+        NoiseModel::Tracker(*noise),
+    )
+    .ok_or_else(|| Error::Singular(format!("{label}, seed {seed}: the fit's covariance")))?;
+    let (mut inside, mut total) = (0usize, 0usize);
+    for (k, u) in tg
+        .uncertainty(model, &id.params, &cov, true)
+        .iter()
+        .enumerate()
+    {
+        let u = u.u95_mm();
+        for c in 0..3 {
+            total += 1;
+            inside += usize::from(d[3 * k + c].abs() <= u[c]);
+        }
+    }
+    Ok(Replica {
+        emm_um: emm * UM_PER_MM,
+        inside,
+        total,
     })
+}
+
+/// Whether the diagnosis of `plan` simulated on `truth` with `effect` (seed `seed`) finds the
+/// effect first.
+fn drift_found(
+    model: &Model,
+    plan: &Plan,
+    truth: Truth,
+    seed: u64,
+    noise: &TrackerNoise,
+    effect: &Effect,
+) -> Result<bool> {
+    let mut sim = Simulation::new(plan.clone(), truth, seed);
+    sim.noise = *noise;
+    sim.effects = vec![effect.clone()];
+    let data = sim.run()?.measurements;
+    let diagnosis = crate::diagnosis::diagnose_with(model, &data, Some(noise))?;
+    let name = effect.id();
+    Ok(diagnosis.finding().is_some_and(|c| c.id.starts_with(name)))
 }
 
 /// `plan` (reflector indices of `from`) with the indices of the same reflector ids in `to`.
@@ -691,54 +827,13 @@ pub fn compare(
         let (mut found, mut runs) = (0usize, 0usize);
         for seed in 1..=seeds {
             let truth = Truth::random(machine, model.spec(), &Magnitudes::default(), seed)?;
-            let mut sim = Simulation::new(plan.clone(), truth.clone(), seed);
-            sim.noise = *noise;
-            let data = sim.run()?.measurements;
-            let problem = Problem::new(model, &data)?;
-            let id = volver_solvers::strategy::fit(problem.clone());
-            if id.termination.failed() {
-                return Err(Error::NotSolved(format!(
-                    "{label}, seed {seed}: {}",
-                    id.termination
-                )));
-            }
-            let base = tg.points(&truth.model, &truth.params);
-            let d = tg.deviations(model, &id.params, &base, true);
-            let emm = (0..base.len())
-                .map(|k| (d[3 * k].powi(2) + d[3 * k + 1].powi(2) + d[3 * k + 2].powi(2)).sqrt())
-                .sum::<f64>()
-                / base.len() as f64;
-            realised.push(emm * 1e3);
-            let cov = volver_solvers::uncertainty::linear(
-                &problem,
-                id.gauge.as_ref(),
-                &id.params,
-                volver_solvers::Objective::Phi,
-                NoiseModel::Tracker(*noise),
-            )
-            .ok_or_else(|| {
-                Error::Singular(format!("{label}, seed {seed}: the fit's covariance"))
-            })?;
-            for (k, u) in tg
-                .uncertainty(model, &id.params, &cov, true)
-                .iter()
-                .enumerate()
-            {
-                let u = u.u95_mm();
-                for c in 0..3 {
-                    total += 1;
-                    inside += usize::from(d[3 * k + c].abs() <= u[c]);
-                }
-            }
+            let r = replica(model, plan, &truth, seed, noise, &tg, label)?;
+            realised.push(r.emm_um);
+            inside += r.inside;
+            total += r.total;
             if let Some(effect) = &drift {
-                let mut sim = Simulation::new(plan.clone(), truth, seed);
-                sim.noise = *noise;
-                sim.effects = vec![effect.clone()];
-                let data = sim.run()?.measurements;
-                let diagnosis = crate::diagnosis::diagnose_with(model, &data, Some(noise))?;
                 runs += 1;
-                let name = effect.id();
-                found += usize::from(diagnosis.finding().is_some_and(|c| c.id.starts_with(name)));
+                found += usize::from(drift_found(model, plan, truth, seed, noise, effect)?);
             }
         }
         rows.push(Compared {

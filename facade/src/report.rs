@@ -2,6 +2,7 @@
 //! machine, the model, the summary tables, the plots, the diagnosis and the identifiability.
 
 mod figures;
+mod findings;
 mod truth;
 
 use crate::error::{Error, Result};
@@ -14,6 +15,7 @@ use volver_core::iso::ErrorId;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::problem::{Problem, Residuals, norm};
+use volver_core::units::UM_PER_MM;
 use volver_solvers::Options;
 use volver_solvers::candidates::Score;
 use volver_solvers::identifiability::analyse;
@@ -207,10 +209,10 @@ pub fn html(input: &ReportInput) -> Result<String> {
     maps(&page, &mut s)?;
     error_functions(&page, &mut s)?;
     squareness(&page, &mut s)?;
-    diagnosis(&page, &mut s)?;
-    candidates(&page, &mut s)?;
-    identifiability(&page, &mut s)?;
-    cross_validation(&page, &mut s)?;
+    findings::diagnosis(&page, &mut s)?;
+    findings::candidates(&page, &mut s)?;
+    findings::identifiability(&page, &mut s)?;
+    findings::cross_validation(&page, &mut s)?;
     let _ = writeln!(
         s,
         "<p style=\"color:#777\">Written by volver {}. Units: mm and rad in the files, µm and µrad here.</p></body></html>",
@@ -313,54 +315,8 @@ fn machine_and_model(p: &Page, s: &mut String) -> Result<()> {
 /// range offset with their U (k = 2), its measurements and what it leaves, and the set-up drawn
 /// in the reference station's mount frame (plan and elevation). Nothing for one tracker.
 fn stations(p: &Page, s: &mut String) -> Result<()> {
-    let Page {
-        model,
-        m,
-        problem,
-        params,
-        after,
-        cov,
-        ..
-    } = p;
-    if !m.has_stations() {
+    if !p.m.has_stations() {
         return Ok(());
-    }
-    let data = problem.data();
-    let u = cov.as_ref().map(|c| c.parameters());
-    let with_u = |j: usize, scale: f64, decimals: usize| match &u {
-        Some(u) => format!(
-            "{:.decimals$} ± {:.decimals$}",
-            params[j] * scale,
-            K * u[j] * scale
-        ),
-        None => format!("{:.decimals$}", params[j] * scale),
-    };
-    let mut rows = Vec::new();
-    for (k, (st, b)) in m.stations().iter().zip(model.stations()).enumerate() {
-        let mine: Vec<usize> = (0..data.points.len())
-            .filter(|&i| data.points[i].station_index == k)
-            .collect();
-        let ranges = mine.iter().filter(|&&i| problem.scalar(i)).count();
-        let emm = if mine.is_empty() {
-            "–".to_string()
-        } else {
-            format!(
-                "{:.3}",
-                mine.iter().map(|&i| norm(after[i])).sum::<f64>() / mine.len() as f64 * 1e3
-            )
-        };
-        rows.push(vec![
-            st.id.clone(),
-            format!("{:?}", st.observes).to_lowercase(),
-            format!("{:?}", st.setup.mount).to_lowercase(),
-            with_u(b.pose, 1.0, 4),
-            with_u(b.pose + 1, 1.0, 4),
-            with_u(b.pose + 2, 1.0, 4),
-            b.offset
-                .map_or("not modelled".to_string(), |j| with_u(j, 1e3, 2)),
-            format!("{} ({ranges} ranges)", mine.len()),
-            emm,
-        ]);
     }
     let _ = writeln!(
         s,
@@ -382,10 +338,76 @@ fn stations(p: &Page, s: &mut String) -> Result<()> {
             "measurements",
             "EMM µm",
         ],
-        &rows,
+        &station_rows(p),
     ));
-    // The set-up in the reference station's mount frame: each measured reflector (the
-    // identified machine, the station's pose removed) and the stations mounted as it is.
+    setup_views(p, s);
+    Ok(())
+}
+
+/// One row per station: its identity, identified pose and range offset with U, its
+/// measurements and the EMM they leave.
+fn station_rows(p: &Page) -> Vec<Vec<String>> {
+    let Page {
+        model,
+        m,
+        problem,
+        params,
+        after,
+        cov,
+        ..
+    } = p;
+    let data = problem.data();
+    let u = cov.as_ref().map(|c| c.parameters());
+    let with_u = |j: usize, scale: f64, decimals: usize| match &u {
+        Some(u) => format!(
+            "{:.decimals$} ± {:.decimals$}",
+            params[j] * scale,
+            K * u[j] * scale
+        ),
+        None => format!("{:.decimals$}", params[j] * scale),
+    };
+    let mut rows = Vec::new();
+    for (k, (st, b)) in m.stations().iter().zip(model.stations()).enumerate() {
+        let mine: Vec<usize> = (0..data.points.len())
+            .filter(|&i| data.points[i].station_index == k)
+            .collect();
+        let ranges = mine.iter().filter(|&&i| problem.scalar(i)).count();
+        let emm = if mine.is_empty() {
+            "–".to_string()
+        } else {
+            format!(
+                "{:.3}",
+                mine.iter().map(|&i| norm(after[i])).sum::<f64>() / mine.len() as f64 * UM_PER_MM
+            )
+        };
+        rows.push(vec![
+            st.id.clone(),
+            format!("{:?}", st.observes).to_lowercase(),
+            format!("{:?}", st.setup.mount).to_lowercase(),
+            with_u(b.pose, 1.0, 4),
+            with_u(b.pose + 1, 1.0, 4),
+            with_u(b.pose + 2, 1.0, 4),
+            b.offset
+                .map_or("not modelled".to_string(), |j| with_u(j, UM_PER_MM, 2)),
+            format!("{} ({ranges} ranges)", mine.len()),
+            emm,
+        ]);
+    }
+    rows
+}
+
+/// The set-up in the reference station's mount frame: each measured reflector (the identified
+/// machine, the station's pose removed) and the stations mounted as it is, in plan and
+/// elevation.
+fn setup_views(p: &Page, s: &mut String) {
+    let Page {
+        model,
+        m,
+        problem,
+        params,
+        ..
+    } = p;
+    let data = problem.data();
     let reference = &m.stations()[0].setup;
     let r0 = reference.base_rotation;
     let step = data.points.len().div_ceil(3000).max(1);
@@ -434,7 +456,6 @@ fn stations(p: &Page, s: &mut String) -> Result<()> {
         ),
         &[view("plan (x–y)", 0, 1), view("elevation (x–z)", 0, 2)],
     ));
-    Ok(())
 }
 
 /// The summary: each fit's EMM before and after, with U, the noise, the engines.
@@ -642,22 +663,7 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
             truth.as_ref().map(|t| (*model, t.params.as_slice())),
         ),
     ));
-    let consts: Vec<Vec<String>> = model
-        .terms()
-        .iter()
-        .filter(|t| matches!(t.id, ErrorId::Location { .. }))
-        .map(|t| {
-            let v = params[t.params.start];
-            let mut g = vec![0.0; params.len()];
-            g[t.params.start] = 1.0;
-            let u = cov.as_ref().map_or(0.0, |c| K * c.u(&g));
-            let (scale, unit) = micro(t.id);
-            vec![
-                t.id.to_string(),
-                format!("{:.3} ± {:.3} {unit}", v * scale, u * scale),
-            ]
-        })
-        .collect();
+    let consts = location_rows(model, params, cov.as_ref());
     if !consts.is_empty() {
         s.push_str(&table(
             &["location / squareness error", "value ± U (k = 2)"],
@@ -665,6 +671,26 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
         ));
     }
     Ok(())
+}
+
+/// One row per location (constant) error: its value with U (k = 2), in µm or µrad.
+fn location_rows(model: &Model, params: &[f64], cov: Option<&Covariance>) -> Vec<Vec<String>> {
+    model
+        .terms()
+        .iter()
+        .filter(|t| matches!(t.id, ErrorId::Location { .. }))
+        .map(|t| {
+            let v = params[t.params.start];
+            let mut g = vec![0.0; params.len()];
+            g[t.params.start] = 1.0;
+            let u = cov.map_or(0.0, |c| K * c.u(&g));
+            let (scale, unit) = micro(t.id);
+            vec![
+                t.id.to_string(),
+                format!("{:.3} ± {:.3} {unit}", v * scale, u * scale),
+            ]
+        })
+        .collect()
 }
 
 /// The squareness the model implies, with U (k = 2).
@@ -725,204 +751,6 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
             &["squareness", "value ± U (k = 2)"]
         };
         s.push_str(&table(head, &sq));
-    }
-    Ok(())
-}
-
-/// The diagnosis: residual breakdowns, candidates, the model revisions.
-fn diagnosis(p: &Page, s: &mut String) -> Result<()> {
-    let Page { problem, after, .. } = p;
-    // Diagnosis.
-    let _ = writeln!(s, "<h2>Diagnosis: where the model fails</h2>");
-    let breakdowns = diagnose::breakdowns(problem, after);
-    let noise_ref = diagnose::repeat_noise(problem).map(|(n, _)| n.emm_um);
-    for b in &breakdowns {
-        let data: Vec<(String, f64)> = b
-            .bins
-            .iter()
-            .map(|x| (x.label.clone(), x.stats.emm_um))
-            .collect();
-        s.push_str(&plot::bars(
-            &format!(
-                "Residual EMM by {} {} (spread {:.2})",
-                b.by,
-                b.unit,
-                b.spread()
-            ),
-            "EMM (µm)",
-            &data,
-            noise_ref.map(|n| ("repeat noise", n)),
-        ));
-    }
-    Ok(())
-}
-
-/// The candidate effects ranked for the first fit, and the model revisions.
-fn candidates(p: &Page, s: &mut String) -> Result<()> {
-    let Page { input, .. } = p;
-    if !input.candidates.is_empty() {
-        let _ = writeln!(
-            s,
-            "<h3>Effects the first model most likely missed (ranked by ΔBIC; below −10 is strong evidence)</h3>"
-        );
-        if let Some(first) = input.fits.first() {
-            let _ = writeln!(
-                s,
-                "<p><b>Verdict:</b> {}</p>",
-                crate::plot::escape(&volver_solvers::candidates::verdict(
-                    &input.candidates,
-                    first.id.reached.stats.emm_um
-                ))
-            );
-        }
-        let rows: Vec<Vec<String>> = input
-            .candidates
-            .iter()
-            .take(8)
-            .map(|c| {
-                if c.seen() {
-                    let why = c
-                        .flag
-                        .as_ref()
-                        .map_or(String::new(), |f| format!("IMPLAUSIBLE ({f}): "));
-                    vec![
-                        c.id.clone(),
-                        format!("{:.1}", c.delta_bic),
-                        format!("{:.3}", c.emm_um),
-                        format!("{:.2} {}", c.size, c.size_unit),
-                        format!("{why}{}", c.description),
-                    ]
-                } else {
-                    vec![
-                        c.id.clone(),
-                        "—".into(),
-                        "—".into(),
-                        "—".into(),
-                        match &c.failed {
-                            Some(why) => format!("could not be scored ({why}): {}", c.description),
-                            None => format!("not seen in these data: {}", c.description),
-                        },
-                    ]
-                }
-            })
-            .collect();
-        s.push_str(&table(
-            &["candidate", "ΔBIC", "EMM µm", "size", "meaning"],
-            &rows,
-        ));
-    }
-    if input.fits.len() > 1 {
-        let data: Vec<(String, f64)> = input
-            .fits
-            .iter()
-            .map(|f| (f.label.clone(), f.id.reached.stats.emm_um))
-            .collect();
-        s.push_str(&plot::bars(
-            "EMM per model revision",
-            "EMM (µm)",
-            &data,
-            input.noise_um.map(|n| ("noise error", n)),
-        ));
-    }
-    Ok(())
-}
-
-/// What the data identify: weak combinations and correlated pairs.
-fn identifiability(p: &Page, s: &mut String) -> Result<()> {
-    let Page { model, ident, .. } = p;
-    // Identifiability.
-    let _ = writeln!(s, "<h2>Identifiability</h2>");
-    match &ident {
-        Some(a) => {
-            let _ = writeln!(
-                s,
-                "<p>{} of {} free directions identified; condition number {:.3e}; residual σ {:.2} µm per coordinate.</p>",
-                a.rank,
-                a.free,
-                a.condition,
-                a.sigma_mm * 1e3
-            );
-            let rows: Vec<Vec<String>> = a
-                .weak
-                .iter()
-                .map(|w| {
-                    vec![
-                        format!("{:.1e}", w.relative_curvature),
-                        w.parameters
-                            .iter()
-                            .take(5)
-                            .map(|(j, x)| format!("{} {x:+.2}", model.params()[*j].name))
-                            .collect::<Vec<_>>()
-                            .join(", "),
-                    ]
-                })
-                .collect();
-            if !rows.is_empty() {
-                s.push_str(&table(
-                    &["relative curvature", "combination the data cannot identify"],
-                    &rows,
-                ));
-            }
-            let rows: Vec<Vec<String>> = a
-                .correlations
-                .iter()
-                .take(10)
-                .map(|(i, j, c)| {
-                    vec![
-                        model.params()[*i].name.clone(),
-                        model.params()[*j].name.clone(),
-                        format!("{c:+.3}"),
-                    ]
-                })
-                .collect();
-            if !rows.is_empty() {
-                let _ = writeln!(s, "<p>Most correlated parameter pairs:</p>");
-                s.push_str(&table(&["parameter", "parameter", "correlation"], &rows));
-            }
-        }
-        None => {
-            let _ = writeln!(s, "<p>The analysis failed (non-finite Jacobian).</p>");
-        }
-    }
-    Ok(())
-}
-
-/// Cross-validation on a reference test.
-fn cross_validation(p: &Page, s: &mut String) -> Result<()> {
-    let Page { input, model, .. } = p;
-    if !input.cross.is_empty() {
-        let _ = writeln!(
-            s,
-            "<h2>Cross-validation</h2><p>The errors identified on each set compensate an independent reference test: only the measurement's parameters ({}) are fitted there, never the machine's geometry. EMM before: the uncompensated machine with the tracker fitted rigidly, the initial EMM an identification of the reference prints. Residual % = EMM after / EMM before.</p>",
-            escape(&measurement_parts(model).join(", "))
-        );
-        let rows: Vec<Vec<String>> = input
-            .cross
-            .iter()
-            .map(|c| {
-                vec![
-                    c.label.clone(),
-                    format!("{:.3}", c.emm_before_um),
-                    format!("{:.3} ± {:.3}", c.emm_after_um, c.emm_after_u95_um),
-                    format!("{:.2} %", c.residual_percent),
-                ]
-            })
-            .collect();
-        s.push_str(&table(
-            &["identified on", "EMM before µm", "EMM after µm", "residual"],
-            &rows,
-        ));
-        let data: Vec<(String, f64)> = input
-            .cross
-            .iter()
-            .map(|c| (c.label.clone(), c.residual_percent))
-            .collect();
-        s.push_str(&plot::bars(
-            "Residual on the reference after compensation",
-            "residual (%)",
-            &data,
-            None,
-        ));
     }
     Ok(())
 }
