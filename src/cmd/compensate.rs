@@ -284,34 +284,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         None => None,
     };
     let comp = compensator(&model, &params, tool, a.hold.as_deref(), axis)?;
-    if let Some(d) = distance_from_reflector_line(&model, tool)
-        && d > 1.0
-    {
-        println!(
-            "  warning: the tool point is {d:.1} mm off the line through the reflectors; the tracker does not see the tool side's rotation about that line, so its compensation there rests on unmeasured errors"
-        );
-    }
-    let free: String = comp
-        .free_axes()
-        .iter()
-        .map(|&k| m.axes()[k].axis.letter())
-        .collect();
-    let steering = match comp.tool_axis() {
-        Some(d) => format!(
-            "tool point {} mm and tool axis ({:.4}, {:.4}, {:.4})",
-            point_mm(tool),
-            d[0],
-            d[1],
-            d[2]
-        ),
-        None => format!("tool point {} mm", point_mm(tool)),
-    };
-    println!(
-        "volver compensate — {} with the errors of {} (model \"{}\"), {steering}, solving for {free}",
-        m.chain(),
-        a.results.display(),
-        model.spec().name,
-    );
+    announce(&a, &model, &comp, tool);
     check_max_u(a.max_u_um)?;
     if !(a.tolerance.is_finite() && a.tolerance > 0.0) {
         bail!(
@@ -348,34 +321,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         );
     }
     if let Some(o) = &done.orientation {
-        println!(
-            "  tool direction: uncompensated error up to {:.4} µrad; verified through the forward \
-             model away from the singularity: largest angle {:.3e} rad as solved, {:.3e} rad as \
-             written",
-            o.max_error_rad * 1e6,
-            o.worst_solved_rad,
-            o.worst_written_rad
-        );
-        if o.near_singularity > 0 {
-            println!(
-                "  warning: {} corrected point(s) pass within {}° of the singularity (the rotary \
-                 axes nearly parallel: the tilt axis near zero); there the rotary axis the \
-                 direction hardly depends on keeps its programmed angle (no swing of up to half a \
-                 turn for microradians) and up to {:.3} µrad of the direction is left (see the \
-                 output's sensitivity)",
-                o.near_singularity,
-                volver::core::compensate::SINGULAR_TILT_DEG,
-                o.worst_singular_rad * 1e6
-            );
-        }
-        if o.worst_solved_rad.is_nan() || o.worst_solved_rad > a.tolerance_rad {
-            bail!(
-                "a corrected command's tool direction misses its target by {:.3e} rad, above the \
-                 tolerance {:.1e} rad; nothing written",
-                o.worst_solved_rad,
-                a.tolerance_rad
-            );
-        }
+        check_orientation(&a, o)?;
     }
     // A failed verification writes nothing: a program that misses its targets must not reach a
     // control.
@@ -387,6 +333,77 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     }
     write_atomic(&a.out, done.text).with_context(|| format!("writing {}", a.out.display()))?;
     println!("  written to {}", a.out.display());
+    Ok(())
+}
+
+/// Prints what is compensated: a warning when the tool point is off the line through the
+/// reflectors, then the machine, the results, the tool and the axes solved for.
+fn announce(a: &CompensateArgs, model: &Model, comp: &Compensator, tool: [f64; 3]) {
+    let m = model.machine();
+    if let Some(d) = distance_from_reflector_line(model, tool)
+        && d > 1.0
+    {
+        println!(
+            "  warning: the tool point is {d:.1} mm off the line through the reflectors; the tracker does not see the tool side's rotation about that line, so its compensation there rests on unmeasured errors"
+        );
+    }
+    let free: String = comp
+        .free_axes()
+        .iter()
+        .map(|&k| m.axes()[k].axis.letter())
+        .collect();
+    let steering = match comp.tool_axis() {
+        Some(d) => format!(
+            "tool point {} mm and tool axis ({:.4}, {:.4}, {:.4})",
+            point_mm(tool),
+            d[0],
+            d[1],
+            d[2]
+        ),
+        None => format!("tool point {} mm", point_mm(tool)),
+    };
+    println!(
+        "volver compensate — {} with the errors of {} (model \"{}\"), {steering}, solving for {free}",
+        m.chain(),
+        a.results.display(),
+        model.spec().name,
+    );
+}
+
+/// Prints what compensation did to the tool's direction and refuses a direction verified
+/// outside `--tolerance-rad`.
+fn check_orientation(
+    a: &CompensateArgs,
+    o: &volver::compensation::OrientationSummary,
+) -> Result<()> {
+    println!(
+        "  tool direction: uncompensated error up to {:.4} µrad; verified through the forward \
+         model away from the singularity: largest angle {:.3e} rad as solved, {:.3e} rad as \
+         written",
+        o.max_error_rad * 1e6,
+        o.worst_solved_rad,
+        o.worst_written_rad
+    );
+    if o.near_singularity > 0 {
+        println!(
+            "  warning: {} corrected point(s) pass within {}° of the singularity (the rotary \
+             axes nearly parallel: the tilt axis near zero); there the rotary axis the \
+             direction hardly depends on keeps its programmed angle (no swing of up to half a \
+             turn for microradians) and up to {:.3} µrad of the direction is left (see the \
+             output's sensitivity)",
+            o.near_singularity,
+            volver::core::compensate::SINGULAR_TILT_DEG,
+            o.worst_singular_rad * 1e6
+        );
+    }
+    if o.worst_solved_rad.is_nan() || o.worst_solved_rad > a.tolerance_rad {
+        bail!(
+            "a corrected command's tool direction misses its target by {:.3e} rad, above the \
+             tolerance {:.1e} rad; nothing written",
+            o.worst_solved_rad,
+            a.tolerance_rad
+        );
+    }
     Ok(())
 }
 

@@ -17,7 +17,7 @@ use volver::core::problem::{Problem, Residuals};
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Synthetic, Truth};
 use volver::core::tables::ErrorTables;
-use volver::core::units::URAD_PER_RAD;
+use volver::core::units::{UM_PER_MM, URAD_PER_RAD};
 use volver::diagnosis::Standing;
 use volver::inputs::{DEMO_DIR, DEMO_EFFECT, DEMO_SEED};
 use volver::report::{self, Fit, ReportInput};
@@ -242,23 +242,18 @@ fn against_noise(problem: &Problem, id: &Identification) -> Result<(Standing, St
     Ok((standing, line))
 }
 
-/// Step 3: Where it fails and what is missing: the candidates ranked, the best, and the model with
-/// it.
-fn diagnose(
-    setup: &Setup,
-    model: &Model,
-    data: &MeasurementSet,
-    id1: &Identification,
-) -> Result<(Vec<Score>, Score, Model)> {
-    let m = model.machine();
-    let p1 = Problem::new(model, data)?;
+/// Step 3's first look at the residuals: on the XCFZ grinder their periodogram over C (where
+/// the hidden harmonic shows), on a five-axis preset the EMM of each quarter of the test (where
+/// a drift shows).
+fn print_residual_view(setup: &Setup, p1: &Problem, id1: &Identification) -> Result<()> {
+    let m = p1.model().machine();
     if setup.xcfz() {
         let rm =
-            volver::core::diagnose::to_machine_frame(&p1, &id1.params, &p1.residuals(&id1.params));
+            volver::core::diagnose::to_machine_frame(p1, &id1.params, &p1.residuals(&id1.params));
         let (kc, _) = m
             .axis(volver::core::iso::Axis::C)
             .ok_or_else(|| anyhow::anyhow!("the demo machine has no C axis"))?;
-        let lines = volver::core::diagnose::axis_periodogram(&p1, &rm, kc, 4);
+        let lines = volver::core::diagnose::axis_periodogram(p1, &rm, kc, 4);
         let cells: Vec<String> = lines
             .iter()
             .map(|l| format!("order {}: {:.1} µm", l.frequency, l.total_um()))
@@ -280,7 +275,7 @@ fn diagnose(
                 let part = &norms[q * n / 4..(q + 1) * n / 4];
                 format!(
                     "{:.1}",
-                    1e3 * part.iter().sum::<f64>() / part.len().max(1) as f64
+                    UM_PER_MM * part.iter().sum::<f64>() / part.len().max(1) as f64
                 )
             })
             .collect();
@@ -289,6 +284,20 @@ fn diagnose(
             cells.join(", ")
         );
     }
+    Ok(())
+}
+
+/// Step 3: Where it fails and what is missing: the candidates ranked, the best, and the model with
+/// it.
+fn diagnose(
+    setup: &Setup,
+    model: &Model,
+    data: &MeasurementSet,
+    id1: &Identification,
+) -> Result<(Vec<Score>, Score, Model)> {
+    let m = model.machine();
+    let p1 = Problem::new(model, data)?;
+    print_residual_view(setup, &p1, id1)?;
     let ranked = rank(
         &p1,
         &id1.params,

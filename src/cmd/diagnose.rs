@@ -2,6 +2,9 @@
 
 use super::{Inputs, um};
 use anyhow::{Context, Result};
+use std::path::Path;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
 use volver::diagnosis::Diagnosis;
 
 /// Options of `volver diagnose`.
@@ -52,17 +55,28 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
         Some(text) => Some(volver::core::noise::TrackerNoise::from_text(text)?),
         None => model.machine().tracker().noise,
     };
-    if !a.iterate {
-        let mut d = volver::diagnosis::diagnose_with(&model, &set, noise.as_ref())?;
-        d.candidates.truncate(a.top);
-        if a.json {
-            let value = serde_json::to_value(&d)?;
-            println!("{}", serde_json::to_string_pretty(&value)?);
-            return Ok(());
-        }
-        print_diagnosis(&d);
+    if a.iterate {
+        return iterate(&a, &model, &set, noise.as_ref());
+    }
+    let mut d = volver::diagnosis::diagnose_with(&model, &set, noise.as_ref())?;
+    d.candidates.truncate(a.top);
+    if a.json {
+        let value = serde_json::to_value(&d)?;
+        println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
+    print_diagnosis(&d);
+    Ok(())
+}
+
+/// `volver diagnose --iterate`: the loop of diagnoses and additions, its history and its final
+/// model.
+fn iterate(
+    a: &DiagnoseArgs,
+    model: &Model,
+    set: &MeasurementSet,
+    noise: Option<&volver::core::noise::TrackerNoise>,
+) -> Result<()> {
     let history = (!a.no_history).then(|| {
         a.history
             .clone()
@@ -75,7 +89,7 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
     let data_name = a.inputs.data.display().to_string();
     let mut records = Vec::new();
     let (mut rounds, last_model) =
-        volver::diagnosis::iterate(&model, &set, noise.as_ref(), a.max_added, |r| {
+        volver::diagnosis::iterate(model, set, noise, a.max_added, |r| {
             records.push(
                 r.diagnosis
                     .history_record(&data_name, &r.added, r.parameters),
@@ -89,11 +103,13 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
             volver::history::append(path, record)?;
         }
     }
-    write_final(&a, &last_model, &set)?;
+    write_final(a, &last_model, set)?;
     if let Some(last) = rounds.last_mut() {
         last.diagnosis.candidates.truncate(a.top);
     }
-    let last = rounds.last().expect("one round at least");
+    let last = rounds
+        .last()
+        .ok_or_else(|| anyhow::anyhow!("the diagnosis loop ran no round"))?;
     if a.json {
         let value = serde_json::json!({
             "rounds": rounds.iter().map(|r| serde_json::json!({
@@ -108,6 +124,17 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
+    print_final(a, last, history.as_deref(), records.len());
+    Ok(())
+}
+
+/// The final model's diagnosis of the loop and the files written.
+fn print_final(
+    a: &DiagnoseArgs,
+    last: &volver::diagnosis::Round,
+    history: Option<&Path>,
+    rounds: usize,
+) {
     println!(
         "\nThe final model{}:\n",
         if last.added.is_empty() {
@@ -117,10 +144,9 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
         }
     );
     print_diagnosis(&last.diagnosis);
-    if let Some(path) = &history {
+    if let Some(path) = history {
         println!(
-            "\n{} rounds appended to {} (`volver history` shows them)",
-            records.len(),
+            "\n{rounds} rounds appended to {} (`volver history` shows them)",
             path.display()
         );
     }
@@ -133,7 +159,6 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
     if let Some(path) = &a.out {
         println!("its fit is written to {}", path.display());
     }
-    Ok(())
 }
 
 /// One round of `diagnose --iterate`, in a line or two.

@@ -3,6 +3,8 @@
 use super::{Inputs, Progress, print_observability, um};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
+use volver::core::measure::MeasurementSet;
+use volver::core::model::Model;
 use volver::identification::{Outcome, Settings, identify, noise_error};
 use volver::solvers::strategy::Phasing;
 use volver::solvers::{Objective, Options};
@@ -103,26 +105,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         None => None,
     };
     if !a.json {
-        println!(
-            "volver identify — {} points, model \"{}\" ({} parameters), solver {}, objective {}, strategy {}",
-            data.points.len(),
-            model.spec().name,
-            model.n_params(),
-            volver::solvers::engine(&settings.engine)?.name(),
-            settings.options.objective,
-            settings.phasing.name()
-        );
-    }
-    // What these positions can measure with this layout, before anything is fitted (the
-    // outcome carries the same findings).
-    if !a.json {
-        let findings =
-            volver::solvers::observability::observe(&model, &data, &model.initial_params());
-        if !findings.is_empty() {
-            println!("\nWhat these positions can and cannot measure with this layout:");
-            print_observability(&findings);
-            println!();
-        }
+        announce(&model, &data, &settings)?;
     }
     let mut outcome = identify(&model, &data, &settings, &mut Progress { quiet: a.json })?;
     outcome.noise_error = noise;
@@ -159,6 +142,27 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     }
     if let Some(r) = outcome.refusal {
         anyhow::bail!("{r}; no results written");
+    }
+    Ok(())
+}
+
+/// Prints what is fitted, and what these positions can measure with this layout before
+/// anything is fitted (the outcome carries the same findings).
+fn announce(model: &Model, data: &MeasurementSet, settings: &Settings) -> Result<()> {
+    println!(
+        "volver identify — {} points, model \"{}\" ({} parameters), solver {}, objective {}, strategy {}",
+        data.points.len(),
+        model.spec().name,
+        model.n_params(),
+        volver::solvers::engine(&settings.engine)?.name(),
+        settings.options.objective,
+        settings.phasing.name()
+    );
+    let findings = volver::solvers::observability::observe(model, data, &model.initial_params());
+    if !findings.is_empty() {
+        println!("\nWhat these positions can and cannot measure with this layout:");
+        print_observability(&findings);
+        println!();
     }
     Ok(())
 }

@@ -131,28 +131,7 @@ pub fn run(a: PlanArgs) -> Result<()> {
         (None, None) => 1040,
     };
     let program = program_options(&a, model.machine())?;
-    let extra_reflectors = match &a.reflectors {
-        Some(p) => extra_reflectors(p)?,
-        None => Vec::new(),
-    };
-    let request = Request {
-        points,
-        criterion: a.criterion.parse().map_err(anyhow::Error::msg)?,
-        tool,
-        noise,
-        per_axis: match a.per_axis {
-            Some(n) => n,
-            None => volver::planning::default_per_axis(
-                model.machine(),
-                model.machine().reflectors().len() + extra_reflectors.len(),
-            )?,
-        },
-        seed: a.seed,
-        repeats: a.repeats,
-        seconds_per_point: a.seconds_per_point,
-        extra_reflectors,
-        ..Request::default()
-    };
+    let request = request_of(&a, &model, points, noise, tool)?;
     let planned = plan(&model, &request)?;
     let machine = planned.model.machine();
     let machine_out =
@@ -184,6 +163,52 @@ pub fn run(a: PlanArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(r)?);
         return Ok(());
     }
+    print_planned(&a, r, machine, &title, &machine_out);
+    Ok(())
+}
+
+/// The planning request of the command line: `points` measurements, the criterion, the tool,
+/// the noise, the candidate values per axis (the default for the machine with the extra
+/// reflectors), the order's seed, the repeats and the extra reflectors.
+fn request_of(
+    a: &PlanArgs,
+    model: &volver::core::model::Model,
+    points: usize,
+    noise: TrackerNoise,
+    tool: [f64; 3],
+) -> Result<Request> {
+    let extra_reflectors = match &a.reflectors {
+        Some(p) => extra_reflectors(p)?,
+        None => Vec::new(),
+    };
+    Ok(Request {
+        points,
+        criterion: a.criterion.parse().map_err(anyhow::Error::msg)?,
+        tool,
+        noise,
+        per_axis: match a.per_axis {
+            Some(n) => n,
+            None => volver::planning::default_per_axis(
+                model.machine(),
+                model.machine().reflectors().len() + extra_reflectors.len(),
+            )?,
+        },
+        seed: a.seed,
+        repeats: a.repeats,
+        seconds_per_point: a.seconds_per_point,
+        extra_reflectors,
+        ..Request::default()
+    })
+}
+
+/// Prints the plan's report `r` (titled `title`) and the files written.
+fn print_planned(
+    a: &PlanArgs,
+    r: &volver::planning::Report,
+    machine: &Machine,
+    title: &str,
+    machine_out: &Option<PathBuf>,
+) {
     println!("volver plan — {title}");
     let stations = machine.stations().len();
     let each = if stations > 1 {
@@ -242,13 +267,12 @@ pub fn run(a: PlanArgs) -> Result<()> {
     for (what, path) in [
         ("plan file", &a.out),
         ("measuring program", &a.gcode),
-        ("machine file with the reflectors it uses", &machine_out),
+        ("machine file with the reflectors it uses", machine_out),
     ] {
         if let Some(p) = path {
             println!("  {what}: {}", p.display());
         }
     }
-    Ok(())
 }
 
 /// The measuring program's options from the command line (`None` without `--gcode`), each

@@ -229,30 +229,7 @@ fn truth_of(
             (truth, TruthSource::File { path: label })
         }
         None => {
-            let mut m = given_machine.unwrap_or_else(Machine::default_xcfz);
-            if let Some(text) = &a.stations {
-                let observes = if a.observe == "range" {
-                    volver::core::machine::Observes::Range
-                } else {
-                    volver::core::machine::Observes::Point
-                };
-                let layout = match text.parse::<usize>() {
-                    Ok(0) => anyhow::bail!("--stations 0: at least one station"),
-                    Ok(n) if n > volver::core::machine::MAX_STATIONS => anyhow::bail!(
-                        "--stations {n}: at most {} stations (every station measures the whole \
-                         plan)",
-                        volver::core::machine::MAX_STATIONS
-                    ),
-                    Ok(n) => volver::core::machine::StationSpec::default_layout(&m, n, observes),
-                    Err(_) => {
-                        let path = std::path::Path::new(text);
-                        let body = std::fs::read_to_string(path)
-                            .with_context(|| format!("reading the station layout {text}"))?;
-                        volver::core::machine::StationSpec::layout_from_toml_str(&body, text)?
-                    }
-                };
-                m = m.with_stations(layout)?;
-            }
+            let m = with_stations(a, given_machine.unwrap_or_else(Machine::default_xcfz))?;
             let structure = match &a.truth_model {
                 Some(p) => Model::load(m.clone(), p)
                     .context("reading the truth model")?
@@ -277,6 +254,35 @@ fn truth_of(
         }
     };
     Ok((truth, source, preset))
+}
+
+/// `m` with the stations of `--stations` (a count laid out by default, or a layout file)
+/// observing as `--observe` says; `m` as it is without `--stations`.
+fn with_stations(a: &SimulateArgs, m: Machine) -> Result<Machine> {
+    let Some(text) = &a.stations else {
+        return Ok(m);
+    };
+    let observes = if a.observe == "range" {
+        volver::core::machine::Observes::Range
+    } else {
+        volver::core::machine::Observes::Point
+    };
+    let layout = match text.parse::<usize>() {
+        Ok(0) => anyhow::bail!("--stations 0: at least one station"),
+        Ok(n) if n > volver::core::machine::MAX_STATIONS => anyhow::bail!(
+            "--stations {n}: at most {} stations (every station measures the whole \
+                 plan)",
+            volver::core::machine::MAX_STATIONS
+        ),
+        Ok(n) => volver::core::machine::StationSpec::default_layout(&m, n, observes),
+        Err(_) => {
+            let path = std::path::Path::new(text);
+            let body = std::fs::read_to_string(path)
+                .with_context(|| format!("reading the station layout {text}"))?;
+            volver::core::machine::StationSpec::layout_from_toml_str(&body, text)?
+        }
+    };
+    Ok(m.with_stations(layout)?)
 }
 
 /// The plan of `--plan` on `machine` (an embedded machine: `preset`), measuring the reflectors
