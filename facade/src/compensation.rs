@@ -164,7 +164,7 @@ impl Carry {
                     "{} ({} parameters): moves the tool point by up to {:.2} µm{when} (at {})",
                     u.name,
                     u.parameters.len(),
-                    u.largest_mm * 1e3,
+                    u.largest_mm * UM_PER_MM,
                     self.place(u.at)
                 )
             })
@@ -584,7 +584,7 @@ pub fn tool_point_u(
     } else {
         format!(
             "held combinations at the reference, a prior of {:.0} µm RMS each",
-            record.held_prior_mm * 1e3
+            record.held_prior_mm * UM_PER_MM
         )
     };
     let held = aligned[ia]

@@ -25,6 +25,7 @@ use volver_core::plausibility::{self, Implausible};
 use volver_core::problem::{Problem, Residuals};
 use volver_core::results::ResultsFile;
 use volver_core::simulate::{SimulationRecord, Truth};
+use volver_core::units::S_PER_H;
 use volver_solvers::observability::Finding;
 use volver_solvers::prior::Priors;
 use volver_solvers::strategy::{Identification, Phasing, Strategy};
@@ -493,7 +494,7 @@ fn implausible_sizes(
                 .data()
                 .time_span_s()
                 .filter(|&t| t > 0.0)
-                .map(|t| t / 3600.0),
+                .map(|t| t / S_PER_H),
         },
     )
 }

@@ -315,7 +315,7 @@ impl Nominal {
         let us: Vec<f64> = tg
             .uncertainty(model, &p0, &cov, true)
             .iter()
-            .map(|u| u.u95_max_mm() * 1e3)
+            .map(|u| u.u95_max_mm() * UM_PER_MM)
             .collect();
         let mean = us.iter().sum::<f64>() / us.len().max(1) as f64;
         Ok((mean, us.iter().copied().fold(0.0, f64::max)))

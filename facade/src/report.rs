@@ -15,7 +15,7 @@ use volver_core::iso::ErrorId;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::problem::{Problem, Residuals, norm};
-use volver_core::units::UM_PER_MM;
+use volver_core::units::{UM_PER_MM, URAD_PER_RAD};
 use volver_solvers::Options;
 use volver_solvers::candidates::Score;
 use volver_solvers::identifiability::analyse;
@@ -727,13 +727,15 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
             });
             let mut row = vec![
                 id.to_string(),
-                format!("{:.3} ± {:.3} µrad", v * 1e6, u * 1e6),
+                format!("{:.3} ± {:.3} µrad", v * URAD_PER_RAD, u * URAD_PER_RAD),
             ];
             if let Some(t) = &true_sq {
                 row.push(
                     t.iter()
                         .find(|(i, _)| i == id)
-                        .map_or("–".into(), |(_, w)| format!("{:.3} µrad", w * 1e6)),
+                        .map_or("–".into(), |(_, w)| {
+                            format!("{:.3} µrad", w * URAD_PER_RAD)
+                        }),
                 );
             }
             row

@@ -9,6 +9,7 @@ pub use crate::shared::{
 use volver_core::machine::Machine;
 use volver_core::model::Model;
 use volver_core::plan::Plan;
+use volver_core::units::UM_PER_MM;
 use volver_solvers::uncertainty::NoiseModel;
 
 /// The grid of `--grid` (a preset or a grid text), or the default.
@@ -279,7 +280,7 @@ impl Assessment {
     /// The serde form (`volver uncertainty --json`).
     pub fn report(&self, model: &Model, request: &Request) -> Report {
         use volver_solvers::uncertainty::{HELD_PRIOR_MM, K};
-        let um3 = |v: [f64; 3]| v.map(|x| x * 1e3);
+        let um3 = |v: [f64; 3]| v.map(|x| x * UM_PER_MM);
         let parts = self.covariance.parameter_parts();
         let u_mc = self.parameters_monte_carlo(model);
         let mc_aligned = self.monte_carlo.as_ref().map(|(_, a, _)| a);
@@ -333,8 +334,13 @@ impl Assessment {
                     u95_data_um: um3(u.u95_data_mm),
                     u95_held_um: um3(u.u95_held_mm),
                     u95_raw_um: um3(r.u95_mm()),
-                    u95_monte_carlo_um: mc_aligned
-                        .map(|m| [m[3 * k] * 1e3, m[3 * k + 1] * 1e3, m[3 * k + 2] * 1e3]),
+                    u95_monte_carlo_um: mc_aligned.map(|m| {
+                        [
+                            m[3 * k] * UM_PER_MM,
+                            m[3 * k + 1] * UM_PER_MM,
+                            m[3 * k + 2] * UM_PER_MM,
+                        ]
+                    }),
                 })
                 .collect(),
             model_check: self.model_check.clone(),

@@ -13,6 +13,7 @@ use volver::core::model::Model;
 use volver::core::results::ResultsFile;
 use volver::core::results::UncertaintyRecord;
 use volver::core::tables::ErrorTables;
+use volver::core::units::{UM_PER_MM, URAD_PER_RAD};
 use volver::machining::{self, ToolPoints};
 
 /// Options of `volver compensate`.
@@ -165,17 +166,17 @@ pub fn vouch(
          the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {}; noise: \
          {}, as the fit recorded it)",
         point_mm(tool),
-        ua * 1e3,
-        ur * 1e3,
+        ua * UM_PER_MM,
+        ur * UM_PER_MM,
         u.gauge,
         record.noise
     );
-    if ua * 1e3 > max_u_um {
+    if ua * UM_PER_MM > max_u_um {
         let why = &u.why;
         let msg = format!(
             "U of the compensated tool point reaches {:.1} µm (limit --max-u-um {max_u_um}): \
              {why}",
-            ua * 1e3
+            ua * UM_PER_MM
         );
         if !force {
             bail!("{msg}; --force uses the errors anyway");
@@ -300,7 +301,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         println!(
             "  {} points from {label}: uncompensated error up to {:.4} µm",
             done.points,
-            done.max_error_mm * 1e3
+            done.max_error_mm * UM_PER_MM
         );
         done
     } else {
@@ -380,7 +381,7 @@ fn check_orientation(
         "  tool direction: uncompensated error up to {:.4} µrad; verified through the forward \
          model away from the singularity: largest angle {:.3e} rad as solved, {:.3e} rad as \
          written",
-        o.max_error_rad * 1e6,
+        o.max_error_rad * URAD_PER_RAD,
         o.worst_solved_rad,
         o.worst_written_rad
     );
@@ -393,7 +394,7 @@ fn check_orientation(
              output's sensitivity)",
             o.near_singularity,
             volver::core::compensate::SINGULAR_TILT_DEG,
-            o.worst_singular_rad * 1e6
+            o.worst_singular_rad * URAD_PER_RAD
         );
     }
     if o.worst_solved_rad.is_nan() || o.worst_solved_rad > a.tolerance_rad {
@@ -539,7 +540,7 @@ fn gcode_summary(a: &CompensateArgs, label: &str, rep: &volver::core::gcode::Rep
         rep.arcs,
         a.chord_tolerance,
         rep.points,
-        rep.max_error_mm * 1e3
+        rep.max_error_mm * UM_PER_MM
     );
     if !rep.uncompensated.is_empty() {
         println!(
@@ -613,7 +614,7 @@ fn judge_carry(
          {:.3} µm apart (at {})",
         point_mm(tool),
         c.commands.len(),
-        c.departure_mm * 1e3,
+        c.departure_mm * UM_PER_MM,
         c.place(c.departure_at)
     );
     let lines = c.lines();

@@ -552,7 +552,7 @@ fn vouch(
             .iter()
             .map(|u| u.u95_max_mm())
             .fold(0.0_f64, f64::max)
-            * 1e3
+            * UM_PER_MM
     };
     let (u_rigid, u_raw) = (largest(true), largest(false));
     // The held combination that dominates the raw U, by name.
@@ -574,7 +574,7 @@ fn vouch(
         let u = direction_u95_rad(model2, &id2.params, &cov, check);
         println!(
             "   U of the identified tool direction there (k = 2, raw in the workpiece frame) up to {} µrad",
-            um(u * 1e6)
+            um(u * URAD_PER_RAD)
         );
     }
     if id2.gauge.as_ref().is_some_and(|g| !g.held.is_empty()) {

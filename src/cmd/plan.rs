@@ -10,6 +10,7 @@ use volver::core::fsio::write_atomic;
 use volver::core::machine::Machine;
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::file::{self, ProgramOptions, Wait};
+use volver::core::units::S_PER_H;
 use volver::planning::{Request, compare, plan};
 
 /// Arguments of `volver plan`.
@@ -337,7 +338,7 @@ fn program_of_file(a: &PlanArgs, path: &Path) -> Result<()> {
     write_atomic(out, file::gcode(&plan, &machine, &options, &title)?)
         .with_context(|| format!("writing {}", out.display()))?;
     let stations = machine.stations().len();
-    let hours = plan.n_points() as f64 * a.seconds_per_point / 3600.0;
+    let hours = plan.n_points() as f64 * a.seconds_per_point / S_PER_H;
     println!("volver plan — the measuring program of {}", path.display());
     println!(
         "  {} measurements at {} poses, {:.2} h at {} s per point{}; {} dialect",

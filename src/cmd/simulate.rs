@@ -8,6 +8,7 @@ use volver::core::noise::TrackerNoise;
 use volver::core::plan::Plan;
 use volver::core::results::ResultsFile;
 use volver::core::simulate::{Effect, Magnitudes, Simulation, Truth, TruthSource};
+use volver::core::units::S_PER_H;
 
 /// The magnitude kinds, effects and an example, after `volver simulate --help`.
 pub const SIMULATE_HELP: &str = "\
@@ -130,7 +131,7 @@ pub fn run(a: SimulateArgs) -> Result<()> {
         .map(|t| Effect::parse(t))
         .collect::<volver::core::Result<_>>()?;
     if let Some(h) = a.duration_h {
-        sim.duration_s = Some(h * 3600.0);
+        sim.duration_s = Some(h * S_PER_H);
     }
     let out = sim.run()?;
     let columns = if a.observe == "spherical" {
@@ -375,7 +376,7 @@ fn print_record(
     }
     println!(
         "  duration: {:.2} h (t_s from 0 to {:.0} s)",
-        r.duration_s / 3600.0,
+        r.duration_s / S_PER_H,
         r.duration_s
     );
     println!(

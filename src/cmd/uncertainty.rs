@@ -7,6 +7,7 @@ use anyhow::Result;
 use clap::Args;
 use volver::compensation::tool_point_of;
 use volver::core::model::Model;
+use volver::core::units::UM_PER_MM;
 use volver::solvers::uncertainty::{HELD_PRIOR_MM, K, PointUncertainty};
 use volver::uncertainty::{Assessment, Request, assess, combination_text, grid_of};
 
@@ -125,7 +126,7 @@ fn print_gauge(a: &Assessment, model: &Model, request: &Request, points: usize) 
         points,
         model.spec().name,
         a.id.reached.stats.emm_um,
-        a.covariance.sigma_mm * 1e3
+        a.covariance.sigma_mm * UM_PER_MM
     );
     println!("  noise model: {noise}");
     match (&a.id.gauge, a.rule.clone()) {
@@ -146,7 +147,7 @@ fn print_gauge(a: &Assessment, model: &Model, request: &Request, points: usize) 
             println!(
                 "  held combinations (not determined by these data; a prior of {:.0} µm RMS \
                  each in U):",
-                HELD_PRIOR_MM * 1e3
+                HELD_PRIOR_MM * UM_PER_MM
             );
             for c in 0..g.held.len() {
                 println!("    {}: {}", c + 1, combination_text(model, g, c));
@@ -204,9 +205,9 @@ fn print_tool_point(a: &Assessment, model: &Model, request: &Request) {
             "\n  tool point {tool_text} over {} commands, {label}: U95 up to {:.2} µm (data \
              {:.2} µm, held combinations {:.2} µm) at {:?}",
             us.len(),
-            t * 1e3,
-            d * 1e3,
-            h * 1e3,
+            t * UM_PER_MM,
+            d * UM_PER_MM,
+            h * UM_PER_MM,
             Assessment::commands(model, &request.grid, k)
         );
         if let (Some(g), Some(c)) = (&a.id.gauge, us[k].worst_held)
@@ -229,7 +230,7 @@ fn print_tool_point(a: &Assessment, model: &Model, request: &Request) {
                  largest)",
                 mc.samples.len(),
                 mc.time_s,
-                mmax * 1e3,
+                mmax * UM_PER_MM,
                 mean
             );
         }

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::plot::{Cell, FunctionPanel};
+use volver_core::units::UM_PER_MM;
 
 /// Per-cell means over the points that share the two plotted axes' positions.
 pub(super) fn cells(
@@ -24,9 +25,9 @@ pub(super) fn cells(
         );
         let key = ((x * 1e3).round() as i64, (y * 1e3).round() as i64);
         let g = groups.entry(key).or_insert((x, y, 0.0, [0.0; 3], 0));
-        g.2 += norm(*v) * 1e3;
+        g.2 += norm(*v) * UM_PER_MM;
         for (acc, vc) in g.3.iter_mut().zip(v) {
-            *acc += vc * 1e3;
+            *acc += vc * UM_PER_MM;
         }
         g.4 += 1;
     }
@@ -206,7 +207,7 @@ pub(super) fn tool_point_uncertainty(
     let raw = tg.uncertainty(model, params, cov, false);
     let umax = |v: &[volver_solvers::uncertainty::PointUncertainty]| {
         v.iter()
-            .map(|p| p.u95_max_mm() * 1e3)
+            .map(|p| p.u95_max_mm() * UM_PER_MM)
             .fold(0.0_f64, f64::max)
     };
     let (ua, ur) = (umax(&aligned), umax(&raw));
@@ -286,7 +287,7 @@ pub(super) fn u_maps(
                     m.axes()[ka].to_file_units(c.0[ka]),
                     m.axes()[kb].to_file_units(c.0[kb]),
                 );
-                let u = p.u95_max_mm() * 1e3;
+                let u = p.u95_max_mm() * UM_PER_MM;
                 match out
                     .iter_mut()
                     .find(|q| (q.x - x).abs() < 1e-9 && (q.y - y).abs() < 1e-9)

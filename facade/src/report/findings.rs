@@ -7,6 +7,7 @@ use crate::error::Result;
 use crate::plot::{self, escape};
 use std::fmt::Write;
 use volver_core::diagnose;
+use volver_core::units::UM_PER_MM;
 
 /// The diagnosis: residual breakdowns, candidates, the model revisions.
 pub(super) fn diagnosis(p: &Page, s: &mut String) -> Result<()> {
@@ -119,7 +120,7 @@ pub(super) fn identifiability(p: &Page, s: &mut String) -> Result<()> {
                 a.rank,
                 a.free,
                 a.condition,
-                a.sigma_mm * 1e3
+                a.sigma_mm * UM_PER_MM
             );
             let rows: Vec<Vec<String>> = a
                 .weak
