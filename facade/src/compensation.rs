@@ -3,8 +3,10 @@
 //! expanded uncertainty, a compensation checked on a known machine.
 
 mod check;
+mod gate;
 
 pub use check::{DirectionCheck, TruthCheck, check_on_truth, travel_grid};
+pub use gate::{Statement, Vouch, vouch};
 
 use crate::error::{Context, Error, Result};
 pub use crate::shared::reflector_centroid;
@@ -538,7 +540,7 @@ pub fn compensator<'m>(
 
 /// The expanded uncertainty (k = 2) of a compensated tool point over the machine's travel (5
 /// positions per axis), from a results file's record.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize)]
 #[non_exhaustive]
 pub struct ToolPointU {
     /// The largest U after the set-up's rigid transform (mm).

@@ -3,8 +3,9 @@
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 use volver::compensation::{
-    Compensated, check_max_u, compensate_points, compensator, distance_from_reflector_line,
-    load_results, point_mm, table_uncertainty, tool_point_of, tool_point_u, write_tables,
+    Compensated, Statement, check_max_u, compensate_points, compensator,
+    distance_from_reflector_line, load_results, point_mm, table_uncertainty, tool_point_of,
+    write_tables,
 };
 use volver::core::compensate::Compensator;
 use volver::core::fsio::write_atomic;
@@ -120,13 +121,9 @@ pub struct CompensateArgs {
     dialect: String,
 }
 
-/// The largest expanded uncertainty (k = 2) of the compensated tool point `tool` over the
-/// machine's travel (5 positions per axis), printed after the set-up's rigid transform and raw;
-/// refused when the former exceeds `max_u_um` unless `force`, with the held combination that
-/// makes it and the measurement that would identify it; refused as well (unless `force`) when
-/// the record says the fit was above the noise, where no interval holds, or when there is no
-/// record (a simulation's truth, a file edited by hand): nothing then vouches for the errors. Returns (after the transform, raw) in
-/// mm, `None` when the results carry no uncertainty (a simulation's truth, an older file).
+/// The U gate ([`volver::compensation::vouch`]) as the command line applies it: each note
+/// printed, each refusal an error unless `force` (then a warning). Returns the U after the
+/// set-up's transform and raw (mm), `None` when the results carry no uncertainty.
 pub fn vouch(
     model: &Model,
     params: &[f64],
@@ -135,55 +132,23 @@ pub fn vouch(
     max_u_um: f64,
     force: bool,
 ) -> Result<Option<(f64, f64)>> {
-    let Some(record) = record else {
-        let msg = "U unknown: the results file records no uncertainty (`volver identify --out`, \
-                   `report` and `diagnose --out` write it; a simulation's truth has none), so \
-                   nothing vouches for these errors";
-        if !force {
-            bail!("{msg}; --force uses them anyway");
-        }
-        println!("  warning: {msg} (used anyway: --force)");
-        return Ok(None);
-    };
-    match record.model_check.as_ref() {
-        Some(check) if check.above_noise => {
-            let msg = format!("U is not valid here: {}", check.statement());
-            if !force {
-                bail!("{msg}; --force uses the errors anyway");
+    let v = volver::compensation::vouch(model, params, record, tool, max_u_um)?;
+    for statement in &v.statements {
+        match statement {
+            Statement::Note(text) => println!("  {text}"),
+            Statement::Refusal {
+                reason,
+                override_text,
+            } => {
+                if !force {
+                    bail!("{reason}; {override_text}");
+                }
+                println!("  warning: {reason} (used anyway: --force)");
             }
-            println!("  warning: {msg} (used anyway: --force)");
+            _ => {}
         }
-        Some(check) => println!("  model check: {}", check.statement()),
-        None => println!(
-            "  model check: the results file does not say whether the fit was at the noise (it \
-             predates the check); the U below assumes a complete model"
-        ),
     }
-    let u = tool_point_u(model, params, record, tool)?;
-    let (ua, ur) = (u.aligned_mm, u.raw_mm);
-    println!(
-        "  U (k = 2) of the compensated tool point {} mm over the travel: up to {:.2} µm after \
-         the set-up's rigid transform, {:.2} µm raw in the workpiece frame (gauge: {}; noise: \
-         {}, as the fit recorded it)",
-        point_mm(tool),
-        ua * UM_PER_MM,
-        ur * UM_PER_MM,
-        u.gauge,
-        record.noise
-    );
-    if ua * UM_PER_MM > max_u_um {
-        let why = &u.why;
-        let msg = format!(
-            "U of the compensated tool point reaches {:.1} µm (limit --max-u-um {max_u_um}): \
-             {why}",
-            ua * UM_PER_MM
-        );
-        if !force {
-            bail!("{msg}; --force uses the errors anyway");
-        }
-        println!("  warning: {msg} (used anyway: --force)");
-    }
-    Ok(Some((ua, ur)))
+    Ok(v.u.map(|u| (u.aligned_mm, u.raw_mm)))
 }
 
 fn parse_tool(a: &CompensateArgs, model: &Model) -> Result<[f64; 3]> {
