@@ -41,9 +41,11 @@ use faer::{Mat, Side};
 use volver_core::iso::Unit;
 use volver_core::model::{Constraint, ConstraintKind, Model};
 use volver_core::problem::Residuals;
+use volver_core::units::{S_PER_H, UM_PER_MM, URAD_PER_RAD};
 
-/// The lever that turns an angle into a length in the metric (mm): 1 µrad weighs as 1 µm.
-pub const LEVER_MM: f64 = 1000.0;
+/// The lever that turns an angle into a length in the metric (mm): 1 µrad weighs as 1 µm
+/// (1000 mm: µrad per rad over µm per mm).
+pub const LEVER_MM: f64 = URAD_PER_RAD / UM_PER_MM;
 
 /// Relative curvature (generalised eigenvalue of `(JᵀJ, M)` over the largest) below which a
 /// direction is not identified and the gauge holds it.
@@ -79,7 +81,7 @@ pub fn problem_metric(problem: &volver_core::problem::Problem, params: &[f64]) -
         .data()
         .time_span_s()
         .filter(|&t| t > 0.0)
-        .map(|t| t / 3600.0);
+        .map(|t| t / S_PER_H);
     function_metric_over(problem.model(), params, span_h)
 }
 
@@ -99,7 +101,7 @@ pub fn function_metric_over(model: &Model, params: &[f64], span_h: Option<f64>) 
         |j, info| {
             let unit = match info.unit {
                 Unit::Rad | Unit::RadPerHour => LEVER_MM,
-                Unit::Ppm | Unit::PpmPerHour => 1e-3,
+                Unit::Ppm | Unit::PpmPerHour => 1.0 / UM_PER_MM,
                 Unit::Mm | Unit::MmPerHour => 1.0,
             };
             unit * time(j)
@@ -259,11 +261,44 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
         at: at.to_vec(),
         normal,
     }));
-    // Jacobi scaling by the metric's diagonal (by the Jacobian's where the metric sees nothing):
-    // bases whose coefficients differ in scale by many orders (a monomial's x³ over 1 400 mm)
-    // then give the same directions as well-scaled ones, to rounding.
+    let scale = jacobi_scale(&h, &metric);
+    let basis = free_basis(task, &scale, reference)?;
+    let mut found = Gauge {
+        reference: reference.to_vec(),
+        held: vec![],
+        metric,
+        plain,
+    };
+    if basis.ncols() == 0 {
+        return Some(found);
+    }
+    let fixed = fixed_by_constraints(task, n);
+    for (dz, curvature) in weak_directions(&h, &found.metric, &basis, tolerance)? {
+        let d: Vec<f64> = (0..n)
+            .map(|j| {
+                if fixed[j] {
+                    0.0
+                } else {
+                    (0..basis.ncols()).map(|r| basis[(j, r)] * dz[r]).sum()
+                }
+            })
+            .collect();
+        let number = found.held.len() + 1;
+        found
+            .held
+            .push(held(&found.metric, reference, d, curvature, number));
+    }
+    Some(found)
+}
+
+/// The Jacobi scaling of the parameters, one factor each: by the metric's diagonal (by the
+/// Jacobian's, `h` = JᵀJ, where the metric sees nothing). Bases whose coefficients differ in
+/// scale by many orders (a monomial's x³ over 1 400 mm) then give the same directions as
+/// well-scaled ones, to rounding.
+fn jacobi_scale(h: &Mat<f64>, metric: &Mat<f64>) -> Vec<f64> {
+    let n = h.nrows();
     let hmax = (0..n).map(|j| h[(j, j)]).fold(0.0_f64, f64::max);
-    let scale: Vec<f64> = (0..n)
+    (0..n)
         .map(|j| {
             let m = metric[(j, j)];
             if m > 0.0 {
@@ -274,25 +309,34 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
                 1.0
             }
         })
-        .collect();
+        .collect()
+}
+
+/// A basis of the directions `task`'s constraints leave free, in the parameters (n × free):
+/// `D N_s` with `D` the scaling `scale` and `N_s` the null space of the scaled constraints
+/// anchored at `reference`. `None` when the null space cannot be formed.
+fn free_basis(task: &Task, scale: &[f64], reference: &[f64]) -> Option<Mat<f64>> {
+    let n = reference.len();
     let (a, b) = task.constraints.dense(n);
     let a_scaled: Vec<f64> = (0..b.len() * n).map(|k| a[k] * scale[k % n]).collect();
-    let anchor: Vec<f64> = reference.iter().zip(&scale).map(|(p, s)| p / s).collect();
+    let anchor: Vec<f64> = reference.iter().zip(scale).map(|(p, s)| p / s).collect();
     let ns = crate::nullspace::NullSpace::new(&a_scaled, &b, &anchor).ok()?;
     let nf = ns.n_free();
-    let none = |metric| {
-        Some(Gauge {
-            reference: reference.to_vec(),
-            held: vec![],
-            metric,
-            plain: plain.clone(),
-        })
-    };
-    if nf == 0 {
-        return none(metric);
-    }
-    // The null space's basis in the parameters: p = D N_s z.
-    let basis = Mat::from_fn(n, nf, |j, k| scale[j] * ns.basis()[(j, k)]);
+    Some(Mat::from_fn(n, nf, |j, k| scale[j] * ns.basis()[(j, k)]))
+}
+
+/// The directions of the free space `basis` (n × nf) whose curvature `dᵀ h d / dᵀ M d` is at
+/// most `tolerance` × the largest, over the part of the free space the metric `M` sees
+/// (eigenvalues of `Nᵀ M N` above 1e-12 of the largest): each as its coordinates `d_z` in the
+/// free space (M-orthonormal `d = N d_z`) and its relative curvature, weakest first. Empty when
+/// the metric sees nothing; `None` when a decomposition fails.
+fn weak_directions(
+    h: &Mat<f64>,
+    metric: &Mat<f64>,
+    basis: &Mat<f64>,
+    tolerance: f64,
+) -> Option<Vec<(faer::Col<f64>, f64)>> {
+    let nf = basis.ncols();
     // The part of the free space the metric sees: M_z = Q diag(m) Qᵀ, kept where m > 1e-12 max
     // (decomposed while H_z is formed).
     let (evm, hz) = rayon::join(
@@ -303,7 +347,7 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     let (mv, q) = (evm.S().column_vector(), evm.U());
     let mmax = (0..nf).map(|i| mv[i]).fold(0.0_f64, f64::max);
     if mmax <= 0.0 {
-        return none(metric);
+        return Some(vec![]);
     }
     let seen: Vec<usize> = (0..nf).filter(|&i| mv[i] > 1e-12 * mmax).collect();
     let k = seen.len();
@@ -313,64 +357,175 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     let evc = c.self_adjoint_eigen(Side::Lower).ok()?;
     let (mu, y) = (evc.S().column_vector(), evc.U());
     let mu_max = mu[k - 1].max(f64::MIN_POSITIVE);
-    // Parameters a constraint fixes on its own: exactly still (the null space leaves rounding
-    // there).
+    Some(
+        (0..k)
+            .filter(|&i| mu[i] <= tolerance * mu_max)
+            .map(|i| (&w * y.col(i), mu[i].max(0.0) / mu_max))
+            .collect(),
+    )
+}
+
+/// The parameters a constraint of `task` fixes on its own (a row of one coefficient): exactly
+/// still in a held direction (the null space leaves rounding there).
+fn fixed_by_constraints(task: &Task, n: usize) -> Vec<bool> {
     let mut fixed = vec![false; n];
     for row in &task.constraints.rows {
         if let [(j, _)] = row.coeffs.as_slice() {
             fixed[*j] = true;
         }
     }
-    let mut held = Vec::new();
-    for i in (0..k).filter(|&i| mu[i] <= tolerance * mu_max) {
-        let dz = &w * y.col(i);
-        let d: Vec<f64> = (0..n)
-            .map(|j| {
-                if fixed[j] {
-                    0.0
-                } else {
-                    (0..nf).map(|r| basis[(j, r)] * dz[r]).sum()
-                }
-            })
-            .collect();
-        let md: Vec<f64> = (0..n)
-            .map(|a| (0..n).map(|b| metric[(a, b)] * d[b]).sum())
-            .collect();
-        // Shares of the direction in the metric: d_j (M d)_j sums to 1.
-        let mut parameters: Vec<(usize, f64)> = (0..n)
-            .map(|j| (j, d[j] * md[j]))
-            .filter(|(_, s)| s.abs() > 0.1)
-            .collect();
-        parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-        let cmax = md.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let coeffs: Vec<(usize, f64)> = md
-            .iter()
-            .enumerate()
-            .filter(|(_, v)| v.abs() > 1e-14 * cmax)
-            .map(|(j, v)| (j, v / cmax))
-            .collect();
-        let rhs = coeffs.iter().map(|&(j, c)| c * reference[j]).sum();
-        let curvature = mu[i].max(0.0) / mu_max;
-        held.push(Held {
-            relative_curvature: curvature,
-            direction: d,
-            parameters,
-            constraint: Constraint {
-                kind: ConstraintKind::Gauge,
-                label: format!(
-                    "gauge: unidentified combination {} held at the reference (relative \
-                     curvature {curvature:.1e})",
-                    held.len() + 1
-                ),
-                coeffs,
-                rhs,
-            },
-        });
+    fixed
+}
+
+/// The held combination number `number` along the direction `d` (the parameters' units, unit
+/// length in the metric `metric`) of relative curvature `curvature`: its shares, and the
+/// constraint `Σ c_j p_j = Σ c_j reference_j` with `c = M d` scaled to a largest coefficient
+/// of 1 (coefficients below 1e-14 of it left out).
+fn held(metric: &Mat<f64>, reference: &[f64], d: Vec<f64>, curvature: f64, number: usize) -> Held {
+    let n = d.len();
+    let md: Vec<f64> = (0..n)
+        .map(|a| (0..n).map(|b| metric[(a, b)] * d[b]).sum())
+        .collect();
+    // Shares of the direction in the metric: d_j (M d)_j sums to 1.
+    let mut parameters: Vec<(usize, f64)> = (0..n)
+        .map(|j| (j, d[j] * md[j]))
+        .filter(|(_, s)| s.abs() > 0.1)
+        .collect();
+    parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+    let cmax = md.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let coeffs: Vec<(usize, f64)> = md
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.abs() > 1e-14 * cmax)
+        .map(|(j, v)| (j, v / cmax))
+        .collect();
+    let rhs = coeffs.iter().map(|&(j, c)| c * reference[j]).sum();
+    Held {
+        relative_curvature: curvature,
+        direction: d,
+        parameters,
+        constraint: Constraint {
+            kind: ConstraintKind::Gauge,
+            label: format!(
+                "gauge: unidentified combination {number} held at the reference (relative \
+                 curvature {curvature:.1e})"
+            ),
+            coeffs,
+            rhs,
+        },
     }
-    Some(Gauge {
-        reference: reference.to_vec(),
-        held,
-        metric,
-        plain,
-    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::borrow::Cow;
+    use volver_core::model::Constraints;
+
+    /// `r_i = (a + b + c·x_i − y_i, 0, 0)`: a and b enter only as their sum, so the one direction
+    /// the data cannot identify is (1, −1, 0), whatever the data.
+    #[derive(Debug)]
+    struct SumOfTwo {
+        points: Vec<(f64, f64)>,
+        constraints: Constraints,
+    }
+
+    impl SumOfTwo {
+        fn new(constraints: Constraints) -> SumOfTwo {
+            let points = (0..6).map(|i| (i as f64, 2.0 + 0.5 * i as f64)).collect();
+            SumOfTwo {
+                points,
+                constraints,
+            }
+        }
+    }
+
+    impl Residuals for SumOfTwo {
+        fn n_params(&self) -> usize {
+            3
+        }
+        fn n_points(&self) -> usize {
+            self.points.len()
+        }
+        fn param_names(&self) -> Vec<String> {
+            vec!["a".into(), "b".into(), "c".into()]
+        }
+        fn constraints(&self) -> Cow<'_, Constraints> {
+            Cow::Borrowed(&self.constraints)
+        }
+        fn residual(&self, i: usize, p: &[f64]) -> [f64; 3] {
+            let (x, y) = self.points[i];
+            [p[0] + p[1] + p[2] * x - y, 0.0, 0.0]
+        }
+        fn residual_and_jacobian(&self, i: usize, p: &[f64], jac: &mut [f64]) -> [f64; 3] {
+            jac.fill(0.0);
+            jac[..3].copy_from_slice(&[1.0, 1.0, self.points[i].0]);
+            self.residual(i, p)
+        }
+        fn residual_second_directional(&self, _: usize, _: &[f64], _: &[f64]) -> [f64; 3] {
+            [0.0; 3]
+        }
+        fn observation_scale(&self, i: usize) -> f64 {
+            self.points[i].1
+        }
+    }
+
+    /// Without a machine the metric is the identity: the held direction is (1, −1, 0)/√2, its
+    /// constraint a − b = reference's a − b, and projecting moves a and b by the same amount in
+    /// opposite directions, leaving every residual as it was.
+    #[test]
+    fn the_gauge_holds_the_direction_written_by_hand() {
+        let task = Task::new(SumOfTwo::new(Constraints::default()));
+        let reference = [0.0; 3];
+        let g = gauge(&task, &reference, &reference, TOLERANCE).expect("a gauge");
+        assert_eq!(g.held.len(), 1);
+        let h = &g.held[0];
+        let half = std::f64::consts::FRAC_1_SQRT_2;
+        let sign = h.direction[0].signum();
+        for (d, want) in h.direction.iter().zip([half, -half, 0.0]) {
+            assert!((d * sign - want).abs() < 1e-12, "{:?}", h.direction);
+        }
+        assert!(h.relative_curvature < 1e-12, "{}", h.relative_curvature);
+        let mut coeffs = h.constraint.coeffs.clone();
+        coeffs.retain(|(_, c)| c.abs() > 1e-12);
+        let coeffs: Vec<(usize, f64)> = coeffs.iter().map(|&(j, c)| (j, c * sign)).collect();
+        assert_eq!(coeffs.len(), 2, "{coeffs:?}");
+        assert_eq!(coeffs[0].0, 0);
+        assert!((coeffs[0].1 - 1.0).abs() < 1e-12 && (coeffs[1].1 + 1.0).abs() < 1e-12);
+        assert_eq!(h.constraint.rhs, 0.0);
+        // (1, 0, 0) is (½, ½, 0) on the gauge: the same sum a + b, a − b = 0.
+        let p = g.project(&[1.0, 0.0, 0.3]);
+        for (v, want) in p.iter().zip([0.5, 0.5, 0.3]) {
+            assert!((v - want).abs() < 1e-12, "{p:?}");
+        }
+        assert!(g.offsets(&p)[0].abs() < 1e-12);
+        assert!((g.offsets(&[1.0, 0.0, 0.3])[0] * sign - half).abs() < 1e-12);
+    }
+
+    /// A constraint that fixes b leaves nothing unidentified: no direction is held, and the
+    /// tasks it applies to keep their own constraints only.
+    #[test]
+    fn a_fixed_parameter_leaves_nothing_to_hold() {
+        let constraints = Constraints {
+            rows: vec![Constraint {
+                kind: ConstraintKind::Fixed,
+                label: "b held".into(),
+                coeffs: vec![(1, 1.0)],
+                rhs: 0.0,
+            }],
+        };
+        let task = Task::new(SumOfTwo::new(constraints));
+        let reference = [0.0; 3];
+        let g = gauge(&task, &reference, &reference, TOLERANCE).expect("a gauge");
+        assert!(g.held.is_empty());
+        assert_eq!(g.apply(&task).constraints.rows.len(), 1);
+        assert_eq!(g.project(&[1.0, 0.0, 0.3]), vec![1.0, 0.0, 0.3]);
+    }
+
+    /// 1 µrad over the lever is 1 µm: 1e-6 rad × 1000 mm = 1e-3 mm.
+    #[test]
+    fn the_lever_weighs_a_microradian_as_a_micrometre() {
+        assert_eq!(LEVER_MM, 1000.0);
+        assert!((1e-6 * LEVER_MM - 1e-3).abs() < 1e-18);
+    }
 }

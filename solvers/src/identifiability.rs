@@ -13,6 +13,7 @@ use crate::Task;
 use crate::coordinates::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::model::{Constraint, ConstraintKind};
+use volver_core::units::TINY;
 
 /// A combination of parameters the data cannot identify.
 #[derive(Clone, Debug, PartialEq)]
@@ -129,57 +130,11 @@ pub fn analyse(
     let rank = kept.len();
     let dof = (3 * problem.n_points()).saturating_sub(rank).max(1);
     let sigma2 = residual_sq / dof as f64;
-    // Covariance in the parameters: D N (Σ_kept v vᵀ / μ) Nᵀ D σ².
-    // Columns: w_i = D N v_i / √μ_i.
-    let w: Vec<Vec<f64>> = kept
-        .iter()
-        .map(|&i| {
-            (0..n)
-                .map(|j| {
-                    d[j] * (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum::<f64>() / mu[i].sqrt()
-                })
-                .collect()
-        })
-        .collect();
+    let w = design_factor(&d, basis, (mu, v), &kept);
     let cov = |i: usize, j: usize| sigma2 * w.iter().map(|c| c[i] * c[j]).sum::<f64>();
     let uncertainty: Vec<f64> = (0..n).map(|j| cov(j, j).max(0.0).sqrt()).collect();
-    // Correlations do not depend on σ²: from the design alone, so that noise-free (planned)
-    // data have them too.
-    let design_cov = |i: usize, j: usize| w.iter().map(|c| c[i] * c[j]).sum::<f64>();
-    let design_sd: Vec<f64> = (0..n).map(|j| design_cov(j, j).max(0.0).sqrt()).collect();
-    let mut correlations = Vec::new();
-    for i in 0..n {
-        for j in i + 1..n {
-            let (si, sj) = (design_sd[i], design_sd[j]);
-            if si > 0.0 && sj > 0.0 {
-                let c = design_cov(i, j) / (si * sj);
-                if c.abs() > correlation {
-                    correlations.push((i, j, c));
-                }
-            }
-        }
-    }
-    correlations.sort_by(|a, b| b.2.abs().total_cmp(&a.2.abs()));
-    let weak = (0..nf)
-        .filter(|i| !kept.contains(i))
-        .map(|i| {
-            let dir: Vec<f64> = (0..n)
-                .map(|j| (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum())
-                .collect();
-            let mut parameters: Vec<(usize, f64)> = dir
-                .iter()
-                .enumerate()
-                .filter(|(_, x)| x.abs() > 0.1)
-                .map(|(j, x)| (j, *x))
-                .collect();
-            parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
-            WeakDirection {
-                relative_curvature: mu[i].max(0.0) / mu_max,
-                parameters,
-                scaled: dir,
-            }
-        })
-        .collect();
+    let correlations = correlated_pairs(&w, n, correlation);
+    let weak = weak_directions(basis, (mu, v), &kept);
     let mu_min_kept = kept.first().map_or(mu_max, |&i| mu[i]);
     Some(Identifiability {
         free: nf,
@@ -200,6 +155,83 @@ pub fn analyse(
             .map(|c| c.iter().map(|x| x * sigma2.sqrt()).collect())
             .collect(),
     })
+}
+
+/// The design's factor of the parameters' covariance, one column per identified direction `i`
+/// of `kept`: `w_i = D N v_i / √μ_i` (the covariance is `σ² Σ w_i w_iᵀ`), `d` the scales `D`,
+/// `basis` the null space `N`, `(mu, v)` the eigen-decomposition of `H_z`.
+fn design_factor(
+    d: &[f64],
+    basis: faer::MatRef<f64>,
+    (mu, v): (faer::ColRef<f64>, faer::MatRef<f64>),
+    kept: &[usize],
+) -> Vec<Vec<f64>> {
+    let (n, nf) = (basis.nrows(), basis.ncols());
+    // Covariance in the parameters: D N (Σ_kept v vᵀ / μ) Nᵀ D σ².
+    // Columns: w_i = D N v_i / √μ_i.
+    kept.iter()
+        .map(|&i| {
+            (0..n)
+                .map(|j| {
+                    d[j] * (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum::<f64>() / mu[i].sqrt()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The pairs of the `n` parameters whose correlation exceeds `threshold` in absolute value,
+/// strongest first, from the design's factor `w` ([`design_factor`]). Correlations do not
+/// depend on σ²: from the design alone, so that noise-free (planned) data have them too.
+fn correlated_pairs(w: &[Vec<f64>], n: usize, threshold: f64) -> Vec<(usize, usize, f64)> {
+    let design_cov = |i: usize, j: usize| w.iter().map(|c| c[i] * c[j]).sum::<f64>();
+    let design_sd: Vec<f64> = (0..n).map(|j| design_cov(j, j).max(0.0).sqrt()).collect();
+    let mut correlations = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (si, sj) = (design_sd[i], design_sd[j]);
+            if si > 0.0 && sj > 0.0 {
+                let c = design_cov(i, j) / (si * sj);
+                if c.abs() > threshold {
+                    correlations.push((i, j, c));
+                }
+            }
+        }
+    }
+    correlations.sort_by(|a, b| b.2.abs().total_cmp(&a.2.abs()));
+    correlations
+}
+
+/// The free directions not in `kept` (not identified), weakest first, in the scaled
+/// parameters (`basis` the null space `N`, `(mu, v)` the eigen-decomposition of `H_z`,
+/// ascending).
+fn weak_directions(
+    basis: faer::MatRef<f64>,
+    (mu, v): (faer::ColRef<f64>, faer::MatRef<f64>),
+    kept: &[usize],
+) -> Vec<WeakDirection> {
+    let (n, nf) = (basis.nrows(), basis.ncols());
+    let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+    (0..nf)
+        .filter(|i| !kept.contains(i))
+        .map(|i| {
+            let dir: Vec<f64> = (0..n)
+                .map(|j| (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum())
+                .collect();
+            let mut parameters: Vec<(usize, f64)> = dir
+                .iter()
+                .enumerate()
+                .filter(|(_, x)| x.abs() > 0.1)
+                .map(|(j, x)| (j, *x))
+                .collect();
+            parameters.sort_by(|a, b| b.1.abs().total_cmp(&a.1.abs()));
+            WeakDirection {
+                relative_curvature: mu[i].max(0.0) / mu_max,
+                parameters,
+                scaled: dir,
+            }
+        })
+        .collect()
 }
 
 /// `task` with its unidentifiable directions held: every free direction whose curvature at
@@ -234,7 +266,7 @@ fn hold_weak_once<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option
     let basis = ns.basis();
     let dmax = (0..nf).map(|i| hz[(i, i)]).fold(0.0_f64, f64::max);
     let s0: Vec<f64> = (0..nf)
-        .map(|i| 1.0 / hz[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+        .map(|i| 1.0 / hz[(i, i)].max(1e-12 * dmax).max(TINY).sqrt())
         .collect();
     // The LM's design: curvatures μ and directions w = S₀ u in z. It steps only in the span of
     // the kept w; holding w_i means holding its coordinate c_i = (S₀⁻¹ u_i)ᵀ z.

@@ -20,7 +20,7 @@
 //! ```
 
 use crate::Task;
-use crate::identifiability::analyse;
+use crate::identifiability::{Identifiability, analyse};
 use volver_core::basis::BasisKind;
 use volver_core::chain::Side;
 use volver_core::iso::Axis;
@@ -132,13 +132,27 @@ fn basis_words(kind: BasisKind, degree: usize) -> String {
 /// for a plan): unseen axes, too few positions, interchangeable pairs, unidentified
 /// combinations, in that order.
 pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Finding> {
-    let mut out = Vec::new();
-    let machine = model.machine();
     let Ok(problem) = Problem::new(model, data) else {
+        return Vec::new();
+    };
+    let col = column_norms(&problem, params);
+    let (unseen, mut out) = unseen_axes(model, &col);
+    out.extend(too_few_positions(model, data, &unseen));
+    // The design: interchangeable pairs and unidentified combinations.
+    let task = Task::new(problem);
+    let Some(a) = analyse(&task, params, 1e-10, INTERCHANGEABLE) else {
         return out;
     };
-    let n = model.n_params();
-    // Column norms of the Jacobian.
+    let design = Design::new(model, &a, &unseen);
+    out.extend(design.interchangeable());
+    out.extend(design.unidentified());
+    out
+}
+
+/// The squared norm of each column of the Jacobian at `params` over the problem's points
+/// (mm² per parameter unit squared).
+fn column_norms(problem: &Problem, params: &[f64]) -> Vec<f64> {
+    let n = params.len();
     let mut col = vec![0.0; n];
     let mut jac = vec![0.0; 3 * n];
     for i in 0..problem.n_points() {
@@ -147,8 +161,17 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             *c += jac[j].powi(2) + jac[n + j].powi(2) + jac[2 * n + j].powi(2);
         }
     }
+    col
+}
+
+/// The axes (their indices in the chain) whose modelled errors move no measured point (every
+/// column of theirs at most 1e-18 of the largest, `col` the squared column norms), and a
+/// finding for each: what cannot be measured and what would fix it.
+fn unseen_axes(model: &Model, col: &[f64]) -> (Vec<usize>, Vec<Finding>) {
+    let machine = model.machine();
     let cmax = col.iter().cloned().fold(0.0, f64::max);
-    let mut unseen_axes = Vec::new();
+    let mut unseen = Vec::new();
+    let mut out = Vec::new();
     for (k, ax) in machine.axes().iter().enumerate() {
         let terms: Vec<_> = model.terms().iter().filter(|t| t.axis == k).collect();
         if terms.is_empty() {
@@ -160,7 +183,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
         if seen {
             continue;
         }
-        unseen_axes.push(k);
+        unseen.push(k);
         let names: Vec<String> = terms.iter().map(|t| t.id.to_string()).collect();
         let frame = machine.tracker().mount == TrackerMount::Frame;
         let (what, fix) = if frame && ax.side == Side::Workpiece {
@@ -198,24 +221,36 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             fix,
         });
     }
-    // Positions per axis.
-    for (k, ax) in machine.axes().iter().enumerate() {
-        if unseen_axes.contains(&k) {
-            continue;
-        }
-        let mut pos: Vec<f64> = data.points.iter().map(|p| p.commands.0[k]).collect();
-        if ax.axis.is_rotary() {
-            // C = 0° and 360° are one pose.
-            for v in &mut pos {
-                *v = v.rem_euclid(std::f64::consts::TAU);
-                if (*v - std::f64::consts::TAU).abs() < 1e-9 {
-                    *v = 0.0;
-                }
+    (unseen, out)
+}
+
+/// The distinct positions of axis `k` in the data (a rotary axis' in rad, a turn apart being
+/// one pose), sorted.
+fn distinct_positions(data: &MeasurementSet, k: usize, rotary: bool) -> Vec<f64> {
+    let mut pos: Vec<f64> = data.points.iter().map(|p| p.commands.0[k]).collect();
+    if rotary {
+        // C = 0° and 360° are one pose.
+        for v in &mut pos {
+            *v = v.rem_euclid(std::f64::consts::TAU);
+            if (*v - std::f64::consts::TAU).abs() < 1e-9 {
+                *v = 0.0;
             }
         }
-        pos.sort_by(f64::total_cmp);
-        pos.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
-        let have = pos.len();
+    }
+    pos.sort_by(f64::total_cmp);
+    pos.dedup_by(|a, b| (*a - *b).abs() <= 1e-9 * (1.0 + b.abs()));
+    pos
+}
+
+/// A finding for each group of error functions (same basis and degree) of a seen axis that
+/// needs more positions of its axis than the data have ([`positions_needed`]).
+fn too_few_positions(model: &Model, data: &MeasurementSet, unseen: &[usize]) -> Vec<Finding> {
+    let mut out = Vec::new();
+    for (k, ax) in model.machine().axes().iter().enumerate() {
+        if unseen.contains(&k) {
+            continue;
+        }
+        let have = distinct_positions(data, k, ax.axis.is_rotary()).len();
         let mut groups: Vec<(BasisKind, usize, usize, Vec<String>)> = Vec::new();
         for t in model.terms().iter().filter(|t| t.axis == k) {
             let (kind, degree) = (t.basis.kind(), t.basis.degree());
@@ -254,76 +289,131 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
             });
         }
     }
-    // The design: interchangeable pairs and unidentified combinations.
-    let task = Task::new(problem);
-    let Some(a) = analyse(&task, params, 1e-10, INTERCHANGEABLE) else {
-        return out;
-    };
-    let name = |j: usize| model.params()[j].name.clone();
-    let unseen_param = |j: usize| {
-        model
+    out
+}
+
+/// What the design analysis says of the parameters, for the findings on interchangeable pairs
+/// and unidentified combinations.
+struct Design<'a> {
+    /// The model.
+    model: &'a Model,
+    /// The analysis of its design at the parameters.
+    analysis: &'a Identifiability,
+    /// The axes whose errors move no measured point (their parameters are reported there).
+    unseen: &'a [usize],
+    /// How much of each parameter the data leave undetermined: the norm of its row in the
+    /// unidentified directions (scaled coordinates, 0 … 1).
+    undetermined: Vec<f64>,
+}
+
+impl<'a> Design<'a> {
+    /// The design of `model` analysed as `analysis`, with the unseen axes `unseen`.
+    fn new(model: &'a Model, analysis: &'a Identifiability, unseen: &'a [usize]) -> Design<'a> {
+        let mut undetermined = vec![0.0_f64; model.n_params()];
+        for w in &analysis.weak {
+            for &(j, share) in &w.parameters {
+                undetermined[j] = undetermined[j].hypot(share);
+            }
+        }
+        Design {
+            model,
+            analysis,
+            unseen,
+            undetermined,
+        }
+    }
+
+    /// The name of parameter `j`.
+    fn name(&self, j: usize) -> String {
+        self.model.params()[j].name.clone()
+    }
+
+    /// Whether parameter `j` belongs to an error function of an unseen axis.
+    fn unseen_param(&self, j: usize) -> bool {
+        self.model
             .terms()
             .iter()
-            .any(|t| t.params.contains(&j) && unseen_axes.contains(&t.axis))
-    };
-    // How much of each parameter the data leave undetermined: the norm of its row in the
-    // unidentified directions (scaled coordinates, 0 … 1).
-    let mut undetermined = vec![0.0_f64; n];
-    for w in &a.weak {
-        for &(j, share) in &w.parameters {
-            undetermined[j] = undetermined[j].hypot(share);
-        }
+            .any(|t| t.params.contains(&j) && self.unseen.contains(&t.axis))
     }
-    // Coefficients of one error function are tied by its constraints (zero at the reference:
-    // c0 = c1 for a line), which is no property of the layout.
-    let term_of = |j: usize| model.terms().iter().position(|t| t.params.contains(&j));
-    for &(i, j, c) in a
-        .correlations
-        .iter()
-        .filter(|&&(i, j, _)| term_of(i).is_none() || term_of(i) != term_of(j))
-        .take(8)
-    {
-        if unseen_param(i) || unseen_param(j) || (undetermined[i] > 0.3 && undetermined[j] > 0.3) {
-            continue;
-        }
-        out.push(Finding {
-            axis: None,
-            kind: Kind::Interchangeable,
-            what: format!(
-                "{} and {} are nearly the same motion on this layout (correlation {c:+.3})",
-                name(i),
-                name(j)
-            ),
-            fix: "hold one of them (a [fixed] entry, or the squareness rule), or add a \
-                  measurement that moves them differently (another reflector, another tracker \
-                  position, more positions of their axes)"
-                .into(),
-        });
-    }
-    // The unidentified combinations, by cause: the tool's turn about the line through two
-    // reflectors (tool-side errors), and the tracker's pose against the rest.
-    let side_of = |j: usize| {
-        model
+
+    /// The chain side of the axis whose error function parameter `j` belongs to, if any.
+    fn side_of(&self, j: usize) -> Option<Side> {
+        self.model
             .terms()
             .iter()
             .find(|t| t.params.contains(&j))
-            .map(|t| machine.axes()[t.axis].side)
-    };
-    let listed = |keep: &dyn Fn(usize) -> bool| -> Vec<String> {
-        let mut js: Vec<usize> = (0..n)
-            .filter(|&j| undetermined[j] > 0.3 && !unseen_param(j) && keep(j))
+            .map(|t| self.model.machine().axes()[t.axis].side)
+    }
+
+    /// The first eight strongly correlated pairs of parameters of different error functions
+    /// (coefficients of one function are tied by its constraints, zero at the reference:
+    /// c0 = c1 for a line, which is no property of the layout), but for unseen parameters and
+    /// pairs both mostly undetermined (their combination is reported as unidentified).
+    fn interchangeable(&self) -> Vec<Finding> {
+        let model = self.model;
+        let undetermined = &self.undetermined;
+        let term_of = |j: usize| model.terms().iter().position(|t| t.params.contains(&j));
+        let mut out = Vec::new();
+        for &(i, j, c) in self
+            .analysis
+            .correlations
+            .iter()
+            .filter(|&&(i, j, _)| term_of(i).is_none() || term_of(i) != term_of(j))
+            .take(8)
+        {
+            if self.unseen_param(i)
+                || self.unseen_param(j)
+                || (undetermined[i] > 0.3 && undetermined[j] > 0.3)
+            {
+                continue;
+            }
+            out.push(Finding {
+                axis: None,
+                kind: Kind::Interchangeable,
+                what: format!(
+                    "{} and {} are nearly the same motion on this layout (correlation {c:+.3})",
+                    self.name(i),
+                    self.name(j)
+                ),
+                fix: "hold one of them (a [fixed] entry, or the squareness rule), or add a \
+                      measurement that moves them differently (another reflector, another \
+                      tracker position, more positions of their axes)"
+                    .into(),
+            });
+        }
+        out
+    }
+
+    /// The parameters `keep` accepts that the data leave mostly undetermined (share above 0.3,
+    /// unseen ones aside), most undetermined first, at most ten, each with its share in %.
+    fn listed(&self, keep: &dyn Fn(usize) -> bool) -> Vec<String> {
+        let undetermined = &self.undetermined;
+        let mut js: Vec<usize> = (0..self.model.n_params())
+            .filter(|&j| undetermined[j] > 0.3 && !self.unseen_param(j) && keep(j))
             .collect();
         js.sort_by(|&a, &b| undetermined[b].total_cmp(&undetermined[a]));
         js.iter()
             .take(10)
-            .map(|&j| format!("{} ({:.0} %)", name(j), 100.0 * undetermined[j].min(1.0)))
+            .map(|&j| {
+                format!(
+                    "{} ({:.0} %)",
+                    self.name(j),
+                    100.0 * undetermined[j].min(1.0)
+                )
+            })
             .collect()
-    };
-    let reflectors = machine.reflectors().len();
-    if !a.weak.is_empty() {
-        let tool = listed(&|j| side_of(j) == Some(Side::Tool));
-        let rest = listed(&|j| side_of(j) != Some(Side::Tool));
-        let count = a.weak.len();
+    }
+
+    /// The unidentified combinations, by cause: the tool's turn about the line through two
+    /// reflectors (tool-side errors), and the tracker's pose against the rest; the first
+    /// finding says how many combinations there are.
+    fn unidentified(&self) -> Vec<Finding> {
+        let mut out = Vec::new();
+        if self.analysis.weak.is_empty() {
+            return out;
+        }
+        let tool = self.listed(&|j| self.side_of(j) == Some(Side::Tool));
+        let rest = self.listed(&|j| self.side_of(j) != Some(Side::Tool));
         if !tool.is_empty() {
             out.push(Finding {
                 axis: None,
@@ -333,48 +423,18 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
                      data leave open): {}",
                     join(&tool)
                 ),
-                fix: match reflectors {
-                    1 => "a second reflector at another offset on the tool".into(),
-                    2 => "a third reflector off the line through the two reflectors (or one at \
-                          the tool's length): two reflectors cannot see the tool turn about \
-                          that line"
-                        .into(),
-                    _ => "reflectors further apart on the tool, or more positions of the \
-                          tool-side axes"
-                        .into(),
-                },
+                fix: tool_side_fix(self.model.machine().reflectors().len()).into(),
             });
         }
         if !rest.is_empty() {
-            let tracker = (0..n)
-                .any(|j| undetermined[j] > 0.3 && model.params()[j].name.starts_with("tracker"));
-            out.push(Finding {
-                axis: None,
-                kind: Kind::Unidentified,
-                what: format!(
-                    "{}: {}",
-                    if tracker {
-                        "the tracker's pose trades with machine errors"
-                    } else {
-                        "these errors trade with each other"
-                    },
-                    join(&rest)
-                ),
-                fix: if tracker {
-                    "a second tracker position (or station), or hold that part of the pose in \
-                     the model; what compensation needs is the tool relative to the workpiece, \
-                     which does not depend on it"
-                        .into()
-                } else {
-                    "more positions of their axes, or hold the combination".into()
-                },
-            });
+            out.push(self.trading(&rest));
         }
-        if let Some(first) = out.iter_mut().find(|f| f.kind == Kind::Unidentified) {
+        if let Some(first) = out.first_mut() {
             first.what = format!(
-                "{count} combination(s) of parameters cannot be identified from these \
+                "{} combination(s) of parameters cannot be identified from these \
                  positions{}; {}",
-                if unseen_axes.is_empty() {
+                self.analysis.weak.len(),
+                if self.unseen.is_empty() {
                     ""
                 } else {
                     " (the unseen axes' errors among them)"
@@ -382,8 +442,54 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
                 first.what
             );
         }
+        out
     }
-    out
+
+    /// The finding on the undetermined parameters `rest` off the tool side: the tracker's pose
+    /// trading with machine errors when one of its parameters is undetermined, errors trading
+    /// with each other otherwise.
+    fn trading(&self, rest: &[String]) -> Finding {
+        let model = self.model;
+        let tracker = (0..model.n_params())
+            .any(|j| self.undetermined[j] > 0.3 && model.params()[j].name.starts_with("tracker"));
+        Finding {
+            axis: None,
+            kind: Kind::Unidentified,
+            what: format!(
+                "{}: {}",
+                if tracker {
+                    "the tracker's pose trades with machine errors"
+                } else {
+                    "these errors trade with each other"
+                },
+                join(rest)
+            ),
+            fix: if tracker {
+                "a second tracker position (or station), or hold that part of the pose in \
+                 the model; what compensation needs is the tool relative to the workpiece, \
+                 which does not depend on it"
+                    .into()
+            } else {
+                "more positions of their axes, or hold the combination".into()
+            },
+        }
+    }
+}
+
+/// What would determine the tool-side errors, by the number of reflectors on the tool.
+fn tool_side_fix(reflectors: usize) -> &'static str {
+    match reflectors {
+        1 => "a second reflector at another offset on the tool",
+        2 => {
+            "a third reflector off the line through the two reflectors (or one at \
+             the tool's length): two reflectors cannot see the tool turn about \
+             that line"
+        }
+        _ => {
+            "reflectors further apart on the tool, or more positions of the \
+             tool-side axes"
+        }
+    }
 }
 
 /// A parameter the data cannot tell from a combination of the others: holding it at its value
@@ -463,19 +569,79 @@ pub fn redundant_parameters(
     params: &[f64],
     order: &[usize],
 ) -> Option<Vec<Redundancy>> {
-    use crate::coordinates::{reduce, scaled_null_space};
     use volver_core::model::{Constraint, ConstraintKind};
-    let n = params.len();
     let normal = crate::kernels::accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
-    // The weak directions (in the parameters' units) under `constraints`.
-    let weak = |constraints: &volver_core::model::Constraints| -> Option<Vec<Vec<f64>>> {
-        let (d, ns) = scaled_null_space(&normal.h, constraints, params);
+    let design = WeakDesign {
+        h: &normal.h,
+        params,
+    };
+    let mut constraints = task.constraints.clone();
+    let mut current = design.weak(&constraints)?;
+    let mut out = Vec::new();
+    for &j in order {
+        if current.is_empty() {
+            break;
+        }
+        // Only a parameter the weak directions move can take one of them away.
+        let Some(best) = current
+            .iter()
+            .filter(|dir| design.share(dir, j) > 1e-6)
+            .max_by(|a, b| design.share(a, j).total_cmp(&design.share(b, j)))
+            .cloned()
+        else {
+            continue;
+        };
+        let mut trial = constraints.clone();
+        trial.rows.push(Constraint {
+            kind: ConstraintKind::Fixed,
+            label: format!("parameter {j} held: redundant"),
+            coeffs: vec![(j, 1.0)],
+            rhs: params[j],
+        });
+        let Some(left) = design.weak(&trial) else {
+            continue;
+        };
+        if left.len() >= current.len() {
+            continue;
+        }
+        out.push(Redundancy {
+            param: j,
+            with: design.motion(&best, j),
+        });
+        constraints = trial;
+        current = left;
+    }
+    Some(out)
+}
+
+/// The unweighted normal matrix of a design at `params`, for the weak directions under a set
+/// of constraints ([`redundant_parameters`]).
+struct WeakDesign<'a> {
+    /// `JᵀJ` at `params`.
+    h: &'a faer::Mat<f64>,
+    /// Where the design is taken.
+    params: &'a [f64],
+}
+
+impl WeakDesign<'_> {
+    /// The norm of column `k` of the Jacobian.
+    fn col(&self, k: usize) -> f64 {
+        self.h[(k, k)].max(0.0).sqrt()
+    }
+
+    /// The directions (in the parameters' units) the design cannot identify under
+    /// `constraints`: relative curvature at most [`crate::identifiability::RANK_TOLERANCE`] in
+    /// the engine's scaled coordinates. `None` when a decomposition fails.
+    fn weak(&self, constraints: &volver_core::model::Constraints) -> Option<Vec<Vec<f64>>> {
+        use crate::coordinates::{reduce, scaled_null_space};
+        let n = self.params.len();
+        let (d, ns) = scaled_null_space(self.h, constraints, self.params);
         let ns = ns.ok()?;
         let nf = ns.n_free();
         if nf == 0 {
             return Some(vec![]);
         }
-        let (hz, _) = reduce(&d, ns.basis(), &normal.h, None);
+        let (hz, _) = reduce(&d, ns.basis(), self.h, None);
         let evd = hz.self_adjoint_eigen(faer::Side::Lower).ok()?;
         let (mu, v) = (evd.S().column_vector(), evd.U());
         let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
@@ -490,57 +656,33 @@ pub fn redundant_parameters(
                 })
                 .collect(),
         )
-    };
-    let col = |k: usize| normal.h[(k, k)].max(0.0).sqrt();
-    let mut constraints = task.constraints.clone();
-    let mut current = weak(&constraints)?;
-    let mut out = Vec::new();
-    for &j in order {
-        if current.is_empty() {
-            break;
-        }
-        // Only a parameter the weak directions move can take one of them away (shares in the
-        // Jacobian's scaling: a coefficient times its column's norm).
-        let share = |dir: &[f64]| {
-            let big = (0..n)
-                .map(|k| (dir[k] * col(k)).abs())
-                .fold(0.0_f64, f64::max);
-            (dir[j] * col(j)).abs() / big.max(f64::MIN_POSITIVE)
-        };
-        let Some(best) = current
-            .iter()
-            .filter(|dir| share(dir) > 1e-6)
-            .max_by(|a, b| share(a).total_cmp(&share(b)))
-            .cloned()
-        else {
-            continue;
-        };
-        let mut trial = constraints.clone();
-        trial.rows.push(Constraint {
-            kind: ConstraintKind::Fixed,
-            label: format!("parameter {j} held: redundant"),
-            coeffs: vec![(j, 1.0)],
-            rhs: params[j],
-        });
-        let Some(left) = weak(&trial) else {
-            continue;
-        };
-        if left.len() >= current.len() {
-            continue;
-        }
-        // The motion, with this parameter's coefficient 1; terms below 1e-3 of the largest
-        // (scaled by the columns' norms) left out.
+    }
+
+    /// The share of parameter `j` in the direction `dir`, in the Jacobian's scaling (a
+    /// coefficient times its column's norm, over the largest such).
+    fn share(&self, dir: &[f64], j: usize) -> f64 {
+        let big = (0..dir.len())
+            .map(|k| (dir[k] * self.col(k)).abs())
+            .fold(0.0_f64, f64::max);
+        (dir[j] * self.col(j)).abs() / big.max(f64::MIN_POSITIVE)
+    }
+
+    /// The motion parameter `j` makes with the others along `dir`, with its own coefficient 1:
+    /// terms below 1e-3 of the largest (scaled by the columns' norms) left out, largest first.
+    fn motion(&self, dir: &[f64], j: usize) -> Vec<(usize, f64)> {
+        let n = dir.len();
         let big = (0..n)
-            .map(|k| (best[k] * col(k)).abs())
+            .map(|k| (dir[k] * self.col(k)).abs())
             .fold(0.0_f64, f64::max);
         let mut with: Vec<(usize, f64)> = (0..n)
-            .filter(|&k| k != j && (best[k] * col(k)).abs() > 1e-3 * big)
-            .map(|k| (k, best[k] / best[j]))
+            .filter(|&k| k != j && (dir[k] * self.col(k)).abs() > 1e-3 * big)
+            .map(|k| (k, dir[k] / dir[j]))
             .collect();
-        with.sort_by(|a, b| (b.1 * col(b.0)).abs().total_cmp(&(a.1 * col(a.0)).abs()));
-        out.push(Redundancy { param: j, with });
-        constraints = trial;
-        current = left;
+        with.sort_by(|a, b| {
+            (b.1 * self.col(b.0))
+                .abs()
+                .total_cmp(&(a.1 * self.col(a.0)).abs())
+        });
+        with
     }
-    Some(out)
 }

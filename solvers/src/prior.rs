@@ -200,33 +200,11 @@ pub fn maximum_a_posteriori(
     priors: &Priors,
 ) -> Option<Posterior> {
     let n = params.len();
-    // The prior's centre: the gauge's reference (zero errors, the tracker's rigid fit); without
-    // a gauge, zero errors and the fit's own tracker pose (the tracker's prior then pulls
-    // nowhere).
-    let reference: Vec<f64> = match gauge {
-        Some(g) => g.reference.clone(),
-        None => {
-            let mut r = model.initial_params();
-            let t = model.tracker_start();
-            r[t..t + volver_core::kinematics::TRACKER_DOF]
-                .copy_from_slice(&params[t..t + volver_core::kinematics::TRACKER_DOF]);
-            r
-        }
-    };
+    let reference = prior_centre(model, gauge, params);
     let mw = priors.metric(model, params);
-    // E = [D G]: the data's factor, then the held combinations (no information from the data).
     let k = cov.data.ncols();
-    let held: Vec<&Vec<f64>> = gauge
-        .map(|g| g.held.iter().map(|h| &h.direction).collect())
-        .unwrap_or_default();
-    let m = k + held.len();
-    let e = Mat::from_fn(n, m, |j, c| {
-        if c < k {
-            cov.data[(j, c)]
-        } else {
-            held[c - k][j]
-        }
-    });
+    let e = data_and_held(cov, gauge, n);
+    let m = e.ncols();
     let mwe = &mw * &e;
     let mut lambda = e.transpose() * &mwe;
     for c in 0..k {
@@ -249,22 +227,12 @@ pub fn maximum_a_posteriori(
     let (s, v) = (eig.S().column_vector(), eig.U());
     let smax = (0..m).map(|i| s[i]).fold(0.0_f64, f64::max);
     let kept: Vec<usize> = (0..m).filter(|&i| s[i] > 1e-12 * smax).collect();
-    let mut z = vec![0.0; m];
-    for &i in &kept {
-        let c = (0..m).map(|r| v[(r, i)] * rhs[r]).sum::<f64>() / s[i];
-        for (r, zr) in z.iter_mut().enumerate() {
-            *zr += c * v[(r, i)];
-        }
-    }
+    let z = spectral_solve((s, v), &kept, &rhs);
     let step: Vec<f64> = (0..n)
         .map(|j| (0..m).map(|c| e[(j, c)] * z[c]).sum())
         .collect();
     let post: Vec<f64> = params.iter().zip(&step).map(|(p, d)| p + d).collect();
-    let shift = (0..n)
-        .map(|a| step[a] * (0..n).map(|b| mw[(a, b)] * step[b]).sum::<f64>())
-        .sum::<f64>()
-        .max(0.0)
-        .sqrt();
+    let shift = metric_norm(&mw, &step);
     // Posterior factor E V diag(1/√s).
     let ev = &e * v;
     let factor = Mat::from_fn(n, kept.len(), |j, c| ev[(j, kept[c])] / s[kept[c]].sqrt());
@@ -281,4 +249,64 @@ pub fn maximum_a_posteriori(
         },
         shift,
     })
+}
+
+/// The prior's centre: the gauge's reference (zero errors, the tracker's rigid fit); without
+/// a gauge, zero errors and the fit's own tracker pose from `params` (the tracker's prior then
+/// pulls nowhere).
+fn prior_centre(model: &Model, gauge: Option<&Gauge>, params: &[f64]) -> Vec<f64> {
+    match gauge {
+        Some(g) => g.reference.clone(),
+        None => {
+            let mut r = model.initial_params();
+            let t = model.tracker_start();
+            r[t..t + volver_core::kinematics::TRACKER_DOF]
+                .copy_from_slice(&params[t..t + volver_core::kinematics::TRACKER_DOF]);
+            r
+        }
+    }
+}
+
+/// `E = [D G]` (n rows): the data's covariance factor `D` ([`Covariance::data`]), then the
+/// combinations the gauge holds (no information from the data), one column each.
+fn data_and_held(cov: &Covariance, gauge: Option<&Gauge>, n: usize) -> Mat<f64> {
+    let k = cov.data.ncols();
+    let held: Vec<&Vec<f64>> = gauge
+        .map(|g| g.held.iter().map(|h| &h.direction).collect())
+        .unwrap_or_default();
+    let m = k + held.len();
+    Mat::from_fn(n, m, |j, c| {
+        if c < k {
+            cov.data[(j, c)]
+        } else {
+            held[c - k][j]
+        }
+    })
+}
+
+/// `Λ⁺ rhs` over the eigenvectors `kept` of `Λ = V diag(s) Vᵀ`: `Σ_kept v_i (v_iᵀ rhs) / s_i`.
+fn spectral_solve(
+    (s, v): (faer::ColRef<f64>, faer::MatRef<f64>),
+    kept: &[usize],
+    rhs: &[f64],
+) -> Vec<f64> {
+    let m = rhs.len();
+    let mut z = vec![0.0; m];
+    for &i in kept {
+        let c = (0..m).map(|r| v[(r, i)] * rhs[r]).sum::<f64>() / s[i];
+        for (r, zr) in z.iter_mut().enumerate() {
+            *zr += c * v[(r, i)];
+        }
+    }
+    z
+}
+
+/// `√(xᵀ M x)` (a negative square from rounding counts as zero).
+fn metric_norm(metric: &Mat<f64>, x: &[f64]) -> f64 {
+    let n = x.len();
+    (0..n)
+        .map(|a| x[a] * (0..n).map(|b| metric[(a, b)] * x[b]).sum::<f64>())
+        .sum::<f64>()
+        .max(0.0)
+        .sqrt()
 }

@@ -221,7 +221,7 @@ impl Expressible {
                     .sqrt()
             })
             .fold(0.0_f64, f64::max)
-            * 1e3;
+            * volver_core::units::UM_PER_MM;
         // The new columns, scaled to unit norm before projection: a singular value of the
         // projected block is then the share of a direction that is new.
         let scale: Vec<f64> = fresh
