@@ -282,7 +282,7 @@ impl MachineAxis {
 
     /// [`MachineAxis::normalise`] for any scalar of the forward model (a dual number carries
     /// the derivative along the position).
-    pub fn normalise_at<S: crate::kinematics::Real>(&self, position: S) -> S {
+    pub fn normalise_at<S: crate::scalar::Real>(&self, position: S) -> S {
         (position - self.min) * 2.0 / (self.max - self.min) - 1.0
     }
 

@@ -87,8 +87,9 @@ pub const SIMULATION_FORMAT: &str = "volver-simulation";
 /// The current simulation-record version.
 pub const SIMULATION_VERSION: u32 = 1;
 
-/// Test duration used when none is given: this many seconds per measured point.
-pub const DEFAULT_SECONDS_PER_POINT: f64 = 10.0;
+/// Test duration used when none is given, re-exported from [`crate::plan`] where it lives (kept
+/// at this path for existing users).
+pub use crate::plan::DEFAULT_SECONDS_PER_POINT;
 
 /// Highest harmonic the `rotary-harmonics` effect accepts (a periodic basis holds at most 15).
 pub const MAX_HARMONIC: usize = 15;
