@@ -14,13 +14,55 @@
 //! | `sine` order K | `d, a1, phi1 … aK, phiK` | d + Σ aₖ sin(kθ + φₖ) (eq. 21 with the harmonic index) |
 //! | `constant` | the error's name | a constant (location and squareness errors) |
 
-use crate::kinematics::Real;
+use crate::scalar::{Real, legendre_p, three_term};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::fmt;
 
+/// Gauss–Legendre quadrature, re-exported from [`crate::scalar`] where it lives (kept at this
+/// path for existing users).
+pub use crate::scalar::gauss_legendre;
+
 /// Most coefficients one error function may have.
 pub const MAX_COEFFS: usize = 32;
+
+/// Why [`Basis::new`] cannot build a basis.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BasisError {
+    /// A degree or order that alone reaches [`MAX_COEFFS`] (checked before any count is computed).
+    #[error("{kind} of degree/order {degree}: at most {MAX_COEFFS} coefficients are supported")]
+    DegreeTooHigh {
+        /// The basis kind.
+        kind: BasisKind,
+        /// The degree or order asked for.
+        degree: usize,
+    },
+    /// A degree or order whose number of coefficients exceeds [`MAX_COEFFS`].
+    #[error(
+        "{kind} of degree/order {degree} has {count} coefficients; at most {MAX_COEFFS} are supported"
+    )]
+    TooManyCoefficients {
+        /// The basis kind.
+        kind: BasisKind,
+        /// The degree or order asked for.
+        degree: usize,
+        /// Its number of coefficients.
+        count: usize,
+    },
+    /// A periodic series of order 0.
+    #[error("{kind} needs an order of at least 1 (harmonics)")]
+    NoHarmonics {
+        /// The basis kind (fourier or sine).
+        kind: BasisKind,
+    },
+}
+
+impl From<BasisError> for String {
+    fn from(e: BasisError) -> String {
+        e.to_string()
+    }
+}
 
 /// The kind of a basis, as named in error-model files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -84,7 +126,7 @@ pub struct Basis {
 impl Basis {
     /// A basis of a kind and degree (polynomials: degree; Chebyshev: degree = nodes − 1;
     /// periodic: order = number of harmonics; constant: ignored).
-    pub fn new(kind: BasisKind, degree: usize) -> Result<Basis, String> {
+    pub fn new(kind: BasisKind, degree: usize) -> Result<Basis, BasisError> {
         let degree = if kind == BasisKind::Constant {
             0
         } else {
@@ -93,9 +135,7 @@ impl Basis {
         // Checked before any count is computed: a degree near usize::MAX would wrap
         // `degree + 1` (or `1 + 2 · order`) to a small number.
         if degree >= MAX_COEFFS {
-            return Err(format!(
-                "{kind} of degree/order {degree}: at most {MAX_COEFFS} coefficients are supported"
-            ));
+            return Err(BasisError::DegreeTooHigh { kind, degree });
         }
         let b = Basis {
             kind,
@@ -103,13 +143,14 @@ impl Basis {
             card: Vec::new(),
         };
         if b.n_params() > MAX_COEFFS {
-            return Err(format!(
-                "{kind} of degree/order {degree} has {} coefficients; at most {MAX_COEFFS} are supported",
-                b.n_params()
-            ));
+            return Err(BasisError::TooManyCoefficients {
+                kind,
+                degree,
+                count: b.n_params(),
+            });
         }
         if kind.is_periodic() && degree == 0 {
-            return Err(format!("{kind} needs an order of at least 1 (harmonics)"));
+            return Err(BasisError::NoHarmonics { kind });
         }
         if kind == BasisKind::Chebyshev {
             let m = degree + 1;
@@ -304,42 +345,10 @@ fn dot<S: Real>(a: &[f64], b: &[S]) -> S {
     a.iter().zip(b).fold(S::zero(), |acc, (x, y)| acc + *y * *x)
 }
 
-/// Legendre P_0..P_{n−1} at x into `out`.
-fn legendre_p<S: Real>(x: S, out: &mut [S]) {
-    // Bonnet's recursion (k + 1)·P_{k+1} = (2k + 1)·x·P_k − k·P_{k−1}.
-    three_term(x, out, |k, prev, cur| {
-        let kf = (k - 1) as f64;
-        (x * (2.0 * kf + 1.0) * cur - prev * kf) / (kf + 1.0)
-    });
-}
-
 /// Chebyshev T_0..T_{n−1} at x into `out` (eq. 15).
 fn chebyshev_t<S: Real>(x: S, out: &mut [S]) {
     // T_{k+1} = 2x·T_k − T_{k−1}.
     three_term(x, out, |_, prev, cur| x * cur * 2.0 - prev);
-}
-
-/// A polynomial family by its three-term recurrence: `out[0] = 1`, `out[1] = x`, and
-/// `out[k] = next(k, out[k − 2], out[k − 1])`. The two previous values are kept in registers:
-/// reading them back from `out` right after writing them stalls store-to-load forwarding and
-/// cost most of a polynomial's evaluation.
-#[inline]
-fn three_term<S: Real>(x: S, out: &mut [S], next: impl Fn(usize, S, S) -> S) {
-    let n = out.len();
-    if n == 0 {
-        return;
-    }
-    out[0] = S::one();
-    if n == 1 {
-        return;
-    }
-    out[1] = x;
-    let (mut prev, mut cur) = (S::one(), x);
-    for (k, o) in out.iter_mut().enumerate().skip(2) {
-        let v = next(k, prev, cur);
-        *o = v;
-        (prev, cur) = (cur, v);
-    }
 }
 
 /// The m Chebyshev nodes zᵢ = −cos((2i−1)π/2m), i = 1..m, in increasing order (eq. 16).
@@ -347,33 +356,6 @@ pub fn chebyshev_nodes(m: usize) -> Vec<f64> {
     (1..=m)
         .map(|i| -((2 * i - 1) as f64 * PI / (2 * m) as f64).cos())
         .collect()
-}
-
-/// Gauss–Legendre nodes and weights on [−1, 1] (Newton on P_n), exact for degree 2n − 1.
-///
-/// ```
-/// let rule = volver_core::basis::gauss_legendre(4);
-/// let integral: f64 = rule.iter().map(|(x, w)| w * x.powi(6)).sum();
-/// assert!((integral - 2.0 / 7.0).abs() < 1e-14);
-/// ```
-pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    let mut out = Vec::with_capacity(n);
-    let mut p = vec![0.0; n + 1];
-    for i in 1..=n {
-        let mut x = (PI * (i as f64 - 0.25) / (n as f64 + 0.5)).cos();
-        let mut dp = 0.0;
-        for _ in 0..100 {
-            legendre_p(x, &mut p);
-            dp = n as f64 * (x * p[n] - p[n - 1]) / (x * x - 1.0);
-            let dx = p[n] / dp;
-            x -= dx;
-            if dx.abs() < 1e-16 {
-                break;
-            }
-        }
-        out.push((x, 2.0 / ((1.0 - x * x) * dp * dp)));
-    }
-    out
 }
 
 #[cfg(test)]

@@ -23,16 +23,15 @@
 
 use crate::chain::{MAX_AXES, Side};
 use crate::machine::{Commands, Machine, TrackerMount};
-use num_dual::DualNum;
 
 mod jacobian;
 pub use jacobian::{
     ErrorsJacobian, predict_with_errors_jacobian, tool_in_workpiece_with_errors_jacobian,
 };
 
-/// The scalar of the forward model: `f64` or a forward-mode dual number over `f64`.
-pub trait Real: DualNum<Primitive = f64> + Copy {}
-impl<T: DualNum<Primitive = f64> + Copy> Real for T {}
+/// The scalar of the forward model, re-exported from [`crate::scalar`] where it lives (kept at
+/// this path for existing users).
+pub use crate::scalar::Real;
 
 /// Number of tracker pose values: x, y, z (mm) and the small angles rx, ry, rz (rad).
 pub const TRACKER_DOF: usize = 6;

@@ -68,6 +68,7 @@ pub mod presets;
 pub mod problem;
 pub mod random;
 pub mod results;
+pub mod scalar;
 pub mod simulate;
 pub mod tables;
 pub mod units;

@@ -58,6 +58,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
+mod validate;
+
 /// The largest magnitude of a range, offset or position in a machine file (mm or degrees): 1 km,
 /// beyond any machine; larger numbers are a wrong unit or garbage (and would be written back as
 /// hundreds of digits).
@@ -282,7 +284,7 @@ impl MachineAxis {
 
     /// [`MachineAxis::normalise`] for any scalar of the forward model (a dual number carries
     /// the derivative along the position).
-    pub fn normalise_at<S: crate::kinematics::Real>(&self, position: S) -> S {
+    pub fn normalise_at<S: crate::scalar::Real>(&self, position: S) -> S {
         (position - self.min) * 2.0 / (self.max - self.min) - 1.0
     }
 
@@ -317,21 +319,82 @@ impl MachineAxis {
     /// let x = &m.axes()[0];
     /// assert_eq!(x.position_from_file(1400.0), Ok(1400.0));
     /// assert_eq!(
-    ///     x.position_from_file(1500.0).unwrap_err(),
+    ///     x.position_from_file(1500.0).unwrap_err().to_string(),
     ///     "1500 mm is outside the travel range [0, 1400] of axis X"
     /// );
     /// ```
-    pub fn position_from_file(&self, v: f64) -> std::result::Result<f64, String> {
+    pub fn position_from_file(&self, v: f64) -> std::result::Result<f64, OutOfTravel> {
         let (lo, hi) = (self.to_file_units(self.min), self.to_file_units(self.max));
         let tol = 1e-9 * (hi - lo).abs().max(1.0);
         if v < lo - tol || v > hi + tol {
-            return Err(format!(
-                "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
-                self.file_unit(),
-                self.axis
-            ));
+            return Err(OutOfTravel {
+                value: v,
+                unit: self.file_unit(),
+                lo,
+                hi,
+                axis: self.axis,
+            });
         }
         Ok(self.from_file_units(v))
+    }
+}
+
+/// A position outside an axis' travel (in the file's units: mm or deg).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{value} {unit} is outside the travel range [{lo}, {hi}] of axis {axis}")]
+pub struct OutOfTravel {
+    /// The position given.
+    pub value: f64,
+    /// Its unit: `mm` or `deg`.
+    pub unit: &'static str,
+    /// The travel's lower end.
+    pub lo: f64,
+    /// The travel's upper end.
+    pub hi: f64,
+    /// The axis.
+    pub axis: Axis,
+}
+
+impl From<OutOfTravel> for String {
+    fn from(e: OutOfTravel) -> String {
+        e.to_string()
+    }
+}
+
+/// A reflector or station a measurement names that the machine cannot give.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum NameError {
+    /// No reflector of that id.
+    #[error("reflector '{id}' is not in the machine file (known: {})", known.join(", "))]
+    UnknownReflector {
+        /// The id given.
+        id: String,
+        /// The machine's reflector ids.
+        known: Vec<String>,
+    },
+    /// No station of that id.
+    #[error("station '{id}' is not in the machine file (known: {})", known.join(", "))]
+    UnknownStation {
+        /// The id given.
+        id: String,
+        /// The machine's station ids.
+        known: Vec<String>,
+    },
+    /// No station named although the machine has several.
+    #[error(
+        "no station given: the machine file has {stations} stations, so every measurement names \
+         its own"
+    )]
+    StationNotGiven {
+        /// The machine's number of stations.
+        stations: usize,
+    },
+}
+
+impl From<NameError> for String {
+    fn from(e: NameError) -> String {
+        e.to_string()
     }
 }
 
@@ -416,257 +479,6 @@ impl Machine {
         Machine::from_spec_located(spec, label, None)
     }
 
-    fn from_spec_located(spec: MachineSpec, file: &str, source: Option<&str>) -> Result<Machine> {
-        let place = |needle: &str, field: &str| {
-            let mut p = Place::file(file).at_field(field);
-            if let Some(line) = source.and_then(|s| line_of_text(s, needle)) {
-                p = p.at_line(line);
-            }
-            p
-        };
-        let chain: Chain = spec
-            .chain
-            .parse()
-            .map_err(|m: String| Error::input(place(&spec.chain, "chain"), m))?;
-        for key in spec.axes.keys() {
-            let known = key.len() == 1
-                && key
-                    .chars()
-                    .next()
-                    .and_then(Axis::from_letter)
-                    .is_some_and(|a| chain.position(a).is_some());
-            if !known {
-                return Err(Error::input(
-                    place(&format!("axes.{key}"), &format!("axes.{key}")),
-                    format!(
-                        "axis '{key}' is not in the chain {chain}; expected one [axes.<letter>] table per axis of the chain"
-                    ),
-                ));
-            }
-        }
-        let mut axes = Vec::with_capacity(MAX_AXES);
-        for (axis, side) in chain.axes() {
-            let key = axis.letter().to_string();
-            let field = format!("axes.{key}");
-            let Some(a) = spec.axes.get(&key) else {
-                return Err(Error::input(
-                    Place::file(file).at_field(&field),
-                    format!(
-                        "the chain {chain} has axis {axis} but there is no [axes.{axis}] table with its range"
-                    ),
-                ));
-            };
-            let at = || place(&format!("[axes.{key}]"), &field);
-            let finite = a
-                .range
-                .iter()
-                .chain(&a.offset)
-                .chain(std::iter::once(&a.reference))
-                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION);
-            if !finite {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "range, offset and reference must be finite numbers of at most \
-                         {MAX_DIMENSION:e} (mm or degrees) in magnitude"
-                    ),
-                ));
-            }
-            if a.range[0] >= a.range[1] {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "range [{}, {}] must be [min, max] with min < max",
-                        a.range[0], a.range[1]
-                    ),
-                ));
-            }
-            if a.reference < a.range[0] || a.reference > a.range[1] {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "reference {} lies outside the range [{}, {}] ({})",
-                        a.reference,
-                        a.range[0],
-                        a.range[1],
-                        if axis.is_rotary() { "degrees" } else { "mm" }
-                    ),
-                ));
-            }
-            let conv = |v: f64| if axis.is_rotary() { v.to_radians() } else { v };
-            axes.push(MachineAxis {
-                axis,
-                side,
-                min: conv(a.range[0]),
-                max: conv(a.range[1]),
-                reference: conv(a.reference),
-                offset: a.offset,
-            });
-        }
-        if spec.reflectors.is_empty() {
-            return Err(Error::input(
-                Place::file(file).at_field("reflector"),
-                "at least one [[reflector]] with an id and an offset is needed",
-            ));
-        }
-        let mut reflectors: Vec<Reflector> = Vec::new();
-        for r in &spec.reflectors {
-            let at = || place(&r.id, "reflector.id");
-            if r.id.trim().is_empty() {
-                return Err(Error::input(
-                    Place::file(file).at_field("reflector.id"),
-                    "reflector id is empty",
-                ));
-            }
-            // The id is a cell of the measurement and point files (CSV) and a word of messages.
-            if !valid_id(&r.id) {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "reflector id {:?}: an id is written in CSV files, so it may hold no \
-                         comma, semicolon, quote, control character or surrounding space",
-                        r.id
-                    ),
-                ));
-            }
-            if reflectors.iter().any(|q| q.id == r.id) {
-                return Err(Error::input(
-                    at(),
-                    format!("reflector id '{}' is used twice", r.id),
-                ));
-            }
-            if !r
-                .offset
-                .iter()
-                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
-            {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "reflector offset must be finite numbers of at most {MAX_DIMENSION:e} mm"
-                    ),
-                ));
-            }
-            reflectors.push(Reflector {
-                id: r.id.clone(),
-                offset: r.offset,
-            });
-        }
-        let t = &spec.tracker;
-        let noise_of = |text: &Option<String>, field: &str| match text {
-            Some(text) => crate::noise::TrackerNoise::from_text(text)
-                .map(Some)
-                .map_err(|_| {
-                    Error::input(
-                        place(text, field),
-                        format!(
-                            "'{text}' is not a tracker noise: expected paper, none, \
-                             normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M, uniform:… or \
-                             mpe:A_UM,B_UM_PER_M"
-                        ),
-                    )
-                }),
-            None => Ok(None),
-        };
-        let setup = |mount, position: [f64; 3], orientation_deg: [f64; 3], noise, at: Place| {
-            if !position
-                .iter()
-                .chain(&orientation_deg)
-                .all(|v| v.is_finite() && v.abs() <= MAX_DIMENSION)
-            {
-                return Err(Error::input(
-                    at,
-                    format!(
-                        "position (mm) and orientation_deg must be finite numbers of at most \
-                         {MAX_DIMENSION:e} in magnitude"
-                    ),
-                ));
-            }
-            let [rx, ry, rz] = orientation_deg.map(f64::to_radians);
-            Ok(TrackerSetup {
-                mount,
-                position,
-                base_rotation: base_rotation(rx, ry, rz),
-                noise,
-            })
-        };
-        let tracker_noise = noise_of(&t.noise, "tracker.noise")?;
-        let mut stations: Vec<Station> = Vec::new();
-        if spec.stations.is_empty() {
-            stations.push(Station {
-                id: String::new(),
-                setup: setup(
-                    t.mount,
-                    t.position,
-                    t.orientation_deg,
-                    tracker_noise,
-                    place("[tracker]", "tracker"),
-                )?,
-                observes: Observes::Point,
-            });
-        } else if spec.stations.len() > MAX_STATIONS {
-            return Err(Error::input(
-                place("[[station]]", "station"),
-                format!(
-                    "{} stations: at most {MAX_STATIONS} (every station measures the whole plan)",
-                    spec.stations.len()
-                ),
-            ));
-        } else if t.position != [0.0; 3] || t.orientation_deg != [0.0; 3] {
-            return Err(Error::input(
-                place("[tracker]", "tracker"),
-                "with [[station]] tables the stations carry the poses: the [tracker] table may \
-                 only give the default noise (move its position and orientation_deg to the \
-                 first station)",
-            ));
-        }
-        for st in &spec.stations {
-            let at = || place(&st.id, "station.id");
-            if !valid_id(&st.id) {
-                return Err(Error::input(
-                    at(),
-                    format!(
-                        "station id {:?}: an id is written in CSV files, so it must be non-empty \
-                         and hold no comma, semicolon, quote, control character or surrounding \
-                         space",
-                        st.id
-                    ),
-                ));
-            }
-            if stations.iter().any(|q| q.id == st.id) {
-                return Err(Error::input(
-                    at(),
-                    format!("station id '{}' is used twice", st.id),
-                ));
-            }
-            let noise = noise_of(&st.noise, "station.noise")?.or(tracker_noise);
-            stations.push(Station {
-                id: st.id.clone(),
-                setup: setup(st.mount, st.position, st.orientation_deg, noise, at())?,
-                observes: st.observes,
-            });
-        }
-        let table = spec.clearance.iter().flatten();
-        let clearance = clearance_of(&axes, table.map(|(k, v)| (k.as_str(), *v))).or_else(
-            |(key, m)| match (key.as_str(), &spec.clearance) {
-                (_, None) => Ok(Vec::new()),
-                ("", _) => Err(Error::input(place("[clearance]", "clearance"), m)),
-                (k, _) => Err(Error::input(
-                    place("[clearance]", &format!("clearance.{k}")),
-                    m,
-                )),
-            },
-        )?;
-        Ok(Machine {
-            spec,
-            chain,
-            axes,
-            reflectors,
-            stations,
-            clearance,
-        })
-    }
-
     /// The specification this machine was built from (what files store).
     pub fn spec(&self) -> &MachineSpec {
         &self.spec
@@ -719,18 +531,16 @@ impl Machine {
     /// let m = volver_core::machine::Machine::default_xcfz();
     /// assert_eq!(m.reflector_named("R2"), Ok(1));
     /// assert_eq!(
-    ///     m.reflector_named("R9").unwrap_err(),
+    ///     m.reflector_named("R9").unwrap_err().to_string(),
     ///     "reflector 'R9' is not in the machine file (known: R1, R2)"
     /// );
     /// ```
-    pub fn reflector_named(&self, id: &str) -> std::result::Result<usize, String> {
-        self.reflector_index(id).ok_or_else(|| {
-            let known: Vec<&str> = self.reflectors.iter().map(|r| r.id.as_str()).collect();
-            format!(
-                "reflector '{id}' is not in the machine file (known: {})",
-                known.join(", ")
-            )
-        })
+    pub fn reflector_named(&self, id: &str) -> std::result::Result<usize, NameError> {
+        self.reflector_index(id)
+            .ok_or_else(|| NameError::UnknownReflector {
+                id: id.to_string(),
+                known: self.reflectors.iter().map(|r| r.id.clone()).collect(),
+            })
     }
 
     /// This machine measured from `stations` instead of its tracker (or its stations): the
@@ -743,7 +553,7 @@ impl Machine {
     /// let multi = m.with_stations(layout).unwrap();
     /// assert_eq!(multi.stations().len(), 4);
     /// assert_eq!(multi.station_named(Some("S3")), Ok(2));
-    /// assert!(multi.station_named(None).unwrap_err().contains("4 stations"));
+    /// assert!(multi.station_named(None).unwrap_err().to_string().contains("4 stations"));
     /// ```
     pub fn with_stations(&self, stations: Vec<StationSpec>) -> Result<Machine> {
         let mut spec = self.spec.clone();
@@ -779,27 +589,22 @@ impl Machine {
     /// let m = volver_core::machine::Machine::default_xcfz();
     /// assert_eq!(m.station_named(Some("anything")), Ok(0));
     /// ```
-    pub fn station_named(&self, id: Option<&str>) -> std::result::Result<usize, String> {
+    pub fn station_named(&self, id: Option<&str>) -> std::result::Result<usize, NameError> {
         if !self.has_stations() {
             return Ok(0);
         }
         match id {
             None if self.stations.len() == 1 => Ok(0),
-            None => Err(format!(
-                "no station given: the machine file has {} stations, so every measurement \
-                 names its own",
-                self.stations.len()
-            )),
+            None => Err(NameError::StationNotGiven {
+                stations: self.stations.len(),
+            }),
             Some(id) => self
                 .stations
                 .iter()
                 .position(|s| s.id == id)
-                .ok_or_else(|| {
-                    let known: Vec<&str> = self.stations.iter().map(|s| s.id.as_str()).collect();
-                    format!(
-                        "station '{id}' is not in the machine file (known: {})",
-                        known.join(", ")
-                    )
+                .ok_or_else(|| NameError::UnknownStation {
+                    id: id.to_string(),
+                    known: self.stations.iter().map(|s| s.id.clone()).collect(),
                 }),
         }
     }
@@ -900,7 +705,12 @@ fn clearance_of<'a>(
         if out.iter().any(|(j, _)| *j == k) {
             return Err(fail(format!("axis {key} is given twice")));
         }
-        out.push((k, axes[k].position_from_file(value).map_err(fail)?));
+        out.push((
+            k,
+            axes[k]
+                .position_from_file(value)
+                .map_err(|e| fail(e.to_string()))?,
+        ));
     }
     if out.is_empty() {
         return Err((

@@ -19,7 +19,7 @@
 //! ```
 
 use crate::error::{Error, Place, Result};
-use crate::kinematics::Real;
+use crate::scalar::Real;
 
 /// The 27 problems, in NIST's order of difficulty (lower, average, higher).
 pub const NAMES: [&str; 27] = [

@@ -77,7 +77,7 @@ impl Distribution {
             Distribution::Normal => &[-6.0, -2.0, 0.0, 2.0, 6.0],
         };
         let panels = edges.len() - 1;
-        let base = crate::basis::gauss_legendre(GAUSS_NODES / panels);
+        let base = crate::scalar::gauss_legendre(GAUSS_NODES / panels);
         let mut rule: Vec<(f64, f64)> = Vec::with_capacity(GAUSS_NODES);
         for p in edges.windows(2) {
             let (mid, half) = (0.5 * (p[0] + p[1]), 0.5 * (p[1] - p[0]));

@@ -43,6 +43,9 @@ pub const PRESETS: [&str; 7] = [
 /// laser-tracker test, which measures hundreds to a few thousand.
 pub const MAX_PLAN_POSITIONS: usize = 1_000_000;
 
+/// Test duration used when none is given: this many seconds per measured point.
+pub const DEFAULT_SECONDS_PER_POINT: f64 = 10.0;
+
 /// Values of one axis in a grid, file units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AxisRange {

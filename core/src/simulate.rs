@@ -87,8 +87,9 @@ pub const SIMULATION_FORMAT: &str = "volver-simulation";
 /// The current simulation-record version.
 pub const SIMULATION_VERSION: u32 = 1;
 
-/// Test duration used when none is given: this many seconds per measured point.
-pub const DEFAULT_SECONDS_PER_POINT: f64 = 10.0;
+/// Test duration used when none is given, re-exported from [`crate::plan`] where it lives (kept
+/// at this path for existing users).
+pub use crate::plan::DEFAULT_SECONDS_PER_POINT;
 
 /// Highest harmonic the `rotary-harmonics` effect accepts (a periodic basis holds at most 15).
 pub const MAX_HARMONIC: usize = 15;
@@ -111,6 +112,7 @@ fn stream(seed: u64, s: Stream) -> Rng {
 
 mod effects;
 mod magnitudes;
+mod sample;
 mod truth;
 pub use effects::{EFFECTS, Effect};
 pub use magnitudes::{MAGNITUDE_KINDS, Magnitudes};
@@ -344,220 +346,6 @@ impl Simulation {
         }
         Ok(duration)
     }
-
-    /// Generates the measurements.
-    pub fn run(&self) -> Result<Synthetic> {
-        let duration = self.validate()?;
-        let mut truth = self.truth.clone();
-        let ts = truth.model.tracker_start();
-        let mut drift = [0.0; 3]; // mm/s
-        let mut scale = 1.0;
-        let mut screws = Vec::new(); // (chain position, direction, amplitude mm, period mm, ref)
-        for e in &self.effects {
-            match e {
-                Effect::RotaryHarmonics {
-                    max_order,
-                    translation_um,
-                    rotation_urad,
-                } => {
-                    let mut rng = stream(self.seed, Stream::Harmonics);
-                    truth = truth.with_harmonics(
-                        *max_order,
-                        translation_um * 1e-3,
-                        rotation_urad * 1e-6,
-                        &mut rng,
-                    )?;
-                }
-                Effect::TrackerTilt { rx_urad, ry_urad } => {
-                    truth.params[ts + 3] += rx_urad * 1e-6;
-                    truth.params[ts + 4] += ry_urad * 1e-6;
-                }
-                Effect::ThermalDrift { rate_um_per_h } => {
-                    for k in 0..3 {
-                        drift[k] += rate_um_per_h[k] * 1e-3 / 3600.0;
-                    }
-                }
-                Effect::RangeScale { ppm } => scale *= 1.0 + ppm * 1e-6,
-                Effect::BallScrew {
-                    axis,
-                    period_mm,
-                    amplitude_um,
-                } => {
-                    let (k, ax) = truth
-                        .model
-                        .machine()
-                        .axis(*axis)
-                        .expect("validated: the axis exists");
-                    screws.push((
-                        k,
-                        axis.direction(),
-                        amplitude_um * 1e-3,
-                        *period_mm,
-                        ax.reference,
-                    ));
-                }
-                Effect::ReflectorOffset { .. }
-                | Effect::ThermalScale { .. }
-                | Effect::LocationDrift { .. }
-                | Effect::TrackerDrift { .. }
-                | Effect::StationDrift { .. }
-                | Effect::Coupling { .. } => {}
-            }
-        }
-        let machine = truth.model.machine().clone();
-        let mut offsets: Vec<[f64; 3]> = machine.reflectors().iter().map(|r| r.offset).collect();
-        for e in &self.effects {
-            if let Effect::ReflectorOffset {
-                reflector,
-                delta_um,
-            } = e
-            {
-                let r = machine
-                    .reflector_index(reflector)
-                    .expect("validated: the reflector exists");
-                for k in 0..3 {
-                    offsets[r][k] += delta_um[k] * 1e-3;
-                }
-            }
-        }
-        let has_drift = drift != [0.0; 3];
-        let mut nominal_errors = PointErrors::<f64>::zero();
-        nominal_errors.tracker = truth.tracker_pose();
-
-        let stations = machine.stations().len();
-        let steps = self.plan.steps();
-        let n = steps.len() * stations;
-        let mut noise_rng = stream(self.seed, Stream::Noise);
-        let mut points = Vec::with_capacity(n);
-        let mut noise_free = Vec::with_capacity(n);
-        let mut nominal = Vec::with_capacity(n);
-        // The errors of a position, computed once however many reflectors are measured there.
-        let mut cached: Option<(usize, PointErrors<f64>)> = None;
-        let visits = (0..stations).flat_map(|s| steps.iter().map(move |step| (s, step)));
-        for (i, (station, step)) in visits.enumerate() {
-            let (j, r) = (step.position, step.reflector);
-            let cmd = &self.plan.positions[j];
-            let errors = match &cached {
-                Some((at, e)) if *at == j => *e,
-                _ => {
-                    let mut errors = truth.model.errors_at(cmd, &truth.params);
-                    for &(k, dir, amp, period, reference) in &screws {
-                        errors.component[k][dir] +=
-                            amp * (2.0 * PI * (cmd.0[k] - reference) / period).sin();
-                    }
-                    self.couple(&machine, cmd, &mut errors);
-                    cached = Some((j, errors));
-                    errors
-                }
-            };
-            {
-                let t_s = if n > 1 {
-                    (duration * i as f64 / (n - 1) as f64 * 1e3).round() / 1e3
-                } else {
-                    0.0
-                };
-                let shift = has_drift.then(|| drift.map(|v| v * t_s));
-                let mut errors = errors;
-                if station > 0 {
-                    let pose = truth.model.stations()[station].pose;
-                    errors.tracker = std::array::from_fn(|k| truth.params[pose + k]);
-                    errors.station = station;
-                }
-                let errors = self.age(&machine, cmd, t_s, &errors);
-                let point = predict_with_tool_shift(&machine, cmd, &offsets[r], &errors, shift)
-                    .map(|v| v * scale);
-                let offset = truth.model.stations()[station]
-                    .offset
-                    .map_or(0.0, |o| truth.params[o]);
-                let (clean, measured) = match self.observe {
-                    crate::measure::Observation::Point => {
-                        let clean = if offset == 0.0 {
-                            point
-                        } else {
-                            let len = point.iter().map(|v| v * v).sum::<f64>().sqrt();
-                            point.map(|v| v * (1.0 + offset / len))
-                        };
-                        (clean, self.noise.apply(clean, &mut noise_rng))
-                    }
-                    crate::measure::Observation::Range => {
-                        // The noise's angles turn the point, its range part alone moves it
-                        // along the line of sight: the noisy reading's distance.
-                        let d = point.iter().map(|v| v * v).sum::<f64>().sqrt() + offset;
-                        let noisy = self.noise.apply([d, 0.0, 0.0], &mut noise_rng);
-                        let read = noisy.iter().map(|v| v * v).sum::<f64>().sqrt();
-                        ([d, 0.0, 0.0], [read, 0.0, 0.0])
-                    }
-                };
-                if measured.iter().any(|v| !v.is_finite()) {
-                    return Err(Error::Model(format!(
-                        "point {i} is not finite: the truth or an effect is out of bounds"
-                    )));
-                }
-                let mut nominal_errors = nominal_errors;
-                if station > 0 {
-                    let pose = truth.model.stations()[station].pose;
-                    nominal_errors.tracker = std::array::from_fn(|k| truth.params[pose + k]);
-                    nominal_errors.station = station;
-                }
-                let seen = predict(
-                    &machine,
-                    cmd,
-                    &machine.reflectors()[r].offset,
-                    &nominal_errors,
-                );
-                nominal.push(match self.observe {
-                    crate::measure::Observation::Point => seen,
-                    crate::measure::Observation::Range => {
-                        [seen.iter().map(|v| v * v).sum::<f64>().sqrt(), 0.0, 0.0]
-                    }
-                });
-                noise_free.push(clean);
-                points.push(Measurement {
-                    commands: *cmd,
-                    reflector: r,
-                    measured,
-                    observation: self.observe,
-                    t_s: Some(t_s),
-                    station: machine
-                        .has_stations()
-                        .then(|| machine.stations()[station].id.clone()),
-                    station_index: station,
-                    line: i + 2,
-                });
-            }
-        }
-        let measured: Vec<[f64; 3]> = points.iter().map(|p| p.measured).collect();
-        let record = SimulationRecord {
-            format: SIMULATION_FORMAT.into(),
-            version: SIMULATION_VERSION,
-            seed: self.seed,
-            plan: self.plan.name.clone(),
-            positions: self.plan.positions.len(),
-            points: n,
-            reflectors: self
-                .plan
-                .reflectors
-                .iter()
-                .map(|&r| machine.reflectors()[r].id.clone())
-                .collect(),
-            duration_s: duration,
-            noise: self.noise,
-            truth: self.truth_source.clone(),
-            effects: self.effects.clone(),
-            noise_error: ErrorStats::between(&measured, &noise_free),
-            machine_error: ErrorStats::between(&noise_free, &nominal),
-            files: SimulationFiles::default(),
-        };
-        Ok(Synthetic {
-            measurements: MeasurementSet {
-                points,
-                time_origin_s: 0.0,
-            },
-            noise_free,
-            truth,
-            record,
-        })
-    }
 }
 
 impl Simulation {
@@ -671,8 +459,9 @@ impl Synthetic {
         let mut results = self.truth.to_results()?;
         results.machine.clone_from(&spec);
         results.save(&truth)?;
-        let toml_text = toml::to_string(&spec)
-            .map_err(|e| Error::Model(format!("writing the machine file: {e}")))?;
+        let toml_text = toml::to_string(&spec).map_err(|e| Error::Serialize {
+            message: format!("writing the machine file: {e}"),
+        })?;
         crate::fsio::write_atomic(
             &machine_path,
             format!(

@@ -127,14 +127,14 @@ pub struct ProgramOptions {
 
 impl ProgramOptions {
     /// The defaults for `machine`: LinuxCNC, timed waits of
-    /// [`crate::simulate::DEFAULT_SECONDS_PER_POINT`] per reflector, no extra settling wait, the
+    /// [`super::DEFAULT_SECONDS_PER_POINT`] per reflector, no extra settling wait, the
     /// machine file's clearance (empty when it has none: [`gcode`] then refuses).
     pub fn new(machine: &Machine) -> ProgramOptions {
         ProgramOptions {
             dialect: Dialect::LinuxCnc,
             wait: Wait::Time,
             clearance: machine.clearance().to_vec(),
-            seconds_per_point: crate::simulate::DEFAULT_SECONDS_PER_POINT,
+            seconds_per_point: super::DEFAULT_SECONDS_PER_POINT,
             settle_s: 0.0,
         }
     }
