@@ -3,8 +3,8 @@
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
 use volver::compensation::{
-    Compensated, Statement, check_max_u, compensate_points, compensator,
-    distance_from_reflector_line, load_results, point_mm, table_uncertainty, tool_point_of,
+    Compensated, Statement, Vouch, check_max_u, compensate_points, compensator,
+    distance_from_reflector_line, load_results, point_mm, table_uncertainty, tool_point_of, vouch,
     write_tables,
 };
 use volver::core::compensate::Compensator;
@@ -124,15 +124,7 @@ pub struct CompensateArgs {
 /// The U gate ([`volver::compensation::vouch`]) as the command line applies it: each note
 /// printed, each refusal an error unless `force` (then a warning). Returns the U after the
 /// set-up's transform and raw (mm), `None` when the results carry no uncertainty.
-pub fn vouch(
-    model: &Model,
-    params: &[f64],
-    record: Option<&UncertaintyRecord>,
-    tool: [f64; 3],
-    max_u_um: f64,
-    force: bool,
-) -> Result<Option<(f64, f64)>> {
-    let v = volver::compensation::vouch(model, params, record, tool, max_u_um)?;
+pub fn apply(v: Vouch, force: bool) -> Result<Option<(f64, f64)>> {
     for statement in &v.statements {
         match statement {
             Statement::Note(text) => println!("  {text}"),
@@ -259,7 +251,10 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         );
     }
     let done = if let Some(path) = &a.points {
-        vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
+        apply(
+            vouch(&model, &params, record.as_ref(), tool, a.max_u_um)?,
+            a.force,
+        )?;
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
         let done = compensate_points(&comp, m, &text, &label, usize::from(a.decimals))?;
@@ -397,11 +392,11 @@ fn compensate_gcode(
         .iter()
         .any(|t| t.is_none_or(|t| !tool_points.contains_key(&t)))
     {
-        vouch(model, params, record, tool, a.max_u_um, a.force)?;
+        apply(vouch(model, params, record, tool, a.max_u_um)?, a.force)?;
     }
     for (t, p) in &tool_points {
         println!("  tool T{t}: tool point {} mm", point_mm(*p));
-        vouch(model, params, record, *p, a.max_u_um, a.force)?;
+        apply(vouch(model, params, record, *p, a.max_u_um)?, a.force)?;
         let c = compensator(model, params, *p, a.hold.as_deref(), axis)?;
         tooling.tools.insert(*t, c);
     }
@@ -618,7 +613,10 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
         a.results.display()
     );
-    vouch(&model, &params, record.as_ref(), tool, a.max_u_um, a.force)?;
+    apply(
+        vouch(&model, &params, record.as_ref(), tool, a.max_u_um)?,
+        a.force,
+    )?;
     judge_carry(&model, &params, &tables, tool, a.force)?;
     let mut paths = write_tables(&tables, &a.out)?;
     if let Some(r) = &record {
