@@ -65,10 +65,12 @@ pub enum Error {
     #[error("unknown objective '{0}': phi or ve")]
     UnknownObjective(String),
     /// A phasing name not in [`crate::strategy::PHASINGS`].
-    #[error("unknown phasing '{name}': {}", crate::strategy::PHASINGS.join(", "))]
+    #[error("unknown phasing '{name}': {}", known.join(", "))]
     UnknownPhasing {
         /// The name asked for.
         name: String,
+        /// The phasings there are.
+        known: &'static [&'static str],
     },
     /// A count outside its bounds (Monte Carlo replicas, …): checked before anything is
     /// allocated.

@@ -68,6 +68,7 @@ impl Phasing {
             _ => {
                 return Err(crate::Error::UnknownPhasing {
                     name: s.to_string(),
+                    known: &PHASINGS,
                 });
             }
         })
