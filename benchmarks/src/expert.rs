@@ -283,7 +283,7 @@ fn value_basis(
         for j in t.params.clone() {
             unit[j] = 1.0;
             basis[j] = model
-                .error_value(t.id, position, &unit)
+                .error_value(t.id, position, unit)
                 .ok_or("an error the model does not hold")?;
             unit[j] = 0.0;
         }

@@ -684,11 +684,11 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         }
     }
 
-    /// Φ's Newton stage begins ([`Irls::to_newton`]), the design refreshed and Moré's scaling
+    /// Φ's Newton stage begins ([`Irls::hand_over`]), the design refreshed and Moré's scaling
     /// restarted at the next pass; `restart_damping` when the majorising stage ended on refused
     /// steps.
     fn next_stage(&mut self, restart_damping: bool) {
-        self.irls.to_newton(self.phi());
+        self.irls.hand_over(self.phi());
         self.refresh = true;
         self.reset_scale = true;
         self.recost();

@@ -180,7 +180,7 @@ impl Irls {
 
     /// Φ's Newton stage begins at Φ = `phi_mm`: ε = `irls_final_epsilon × Φ` (for scalar
     /// residuals [`CONTINUATION`] × `irls_initial_epsilon × Φ`, the continuation's start).
-    pub(crate) fn to_newton(&mut self, phi_mm: f64) {
+    pub(crate) fn hand_over(&mut self, phi_mm: f64) {
         self.stage = Stage::Newton;
         self.refused = 0;
         let last = self.final_fraction;

@@ -40,9 +40,9 @@ fn majorising_epsilon_follows_phi() {
 }
 
 #[test]
-fn hand_over_to_newton_at_the_final_fraction() {
+fn hand_over_at_the_final_fraction() {
     let mut irls = Irls::new(&phi_options(), false, 2.0);
-    irls.to_newton(0.5);
+    irls.hand_over(0.5);
     assert_eq!(irls.stage(), Stage::Newton);
     assert_eq!(irls.eps(), 1e-9 * 0.5);
     assert!(!irls.follow(0.25), "the Newton stage's ε does not follow Φ");
@@ -58,7 +58,7 @@ fn hand_over_to_newton_at_the_final_fraction() {
 #[test]
 fn scalar_residuals_continue_tenfold_down_to_1e_6() {
     let mut irls = Irls::new(&phi_options(), true, 1.0);
-    irls.to_newton(1.0);
+    irls.hand_over(1.0);
     // 0.1 × CONTINUATION of Φ.
     assert!((irls.eps() - 1e-2).abs() < 1e-17);
     assert!((irls.objective_tolerance(1e-12) - 1e-5).abs() < 1e-20);
@@ -81,7 +81,7 @@ fn scalar_residuals_continue_tenfold_down_to_1e_6() {
         ..Options::default()
     };
     let mut irls = Irls::new(&options, true, 1.0);
-    irls.to_newton(1.0);
+    irls.hand_over(1.0);
     assert!(irls.shrink(1.0));
     assert!((irls.eps() - 1e-3).abs() < 1e-18);
     assert!(irls.shrink(1.0));
@@ -92,7 +92,7 @@ fn scalar_residuals_continue_tenfold_down_to_1e_6() {
 #[test]
 fn refusals_that_count_hand_back_to_majorising() {
     let mut irls = Irls::new(&phi_options(), false, 1.0);
-    irls.to_newton(1.0);
+    irls.hand_over(1.0);
     // Refusals within the cost's rounding do not count.
     irls.refused(1e-12, 1.0);
     irls.refused(1e-12, 1.0);
@@ -112,7 +112,7 @@ fn refusals_that_count_hand_back_to_majorising() {
     assert!(!irls.majorising_slowed(1.0, 1.0 - 1.1e-5));
     let mut resumed = 1;
     loop {
-        irls.to_newton(0.5);
+        irls.hand_over(0.5);
         irls.refused(1.0, 1.0);
         irls.refused(1.0, 1.0);
         if !irls.newton_failed() {
@@ -147,7 +147,7 @@ fn solves(options: &Options, phi0: f64, phi: impl Fn(usize) -> f64) -> Vec<f64> 
 #[test]
 fn continuation_shrinks_tenfold_to_the_final_epsilon() {
     // Defaults 0.1 → 1e-9: nine solves, whatever the rounding of eight divisions by ten.
-    for phi0 in [0.37, 1.0, 3.3e-3, 0.7071067811865476, 12.9] {
+    for phi0 in [0.37, 1.0, 3.3e-3, std::f64::consts::FRAC_1_SQRT_2, 12.9] {
         let eps = solves(&phi_options(), phi0, |k| phi0 / (k + 1) as f64);
         assert_eq!(eps.len(), 9, "Φ₀ = {phi0}: {eps:?}");
         assert!((eps[8] / (1e-9 * phi0) - 1.0).abs() < 1e-14);
