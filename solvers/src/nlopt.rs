@@ -98,6 +98,96 @@ struct State<'o> {
     observer: &'o mut dyn Observer,
 }
 
+fn termination_of(result: &Result<(nl::SuccessState, f64), (nl::FailState, f64)>) -> Termination {
+    use nl::{FailState as F, SuccessState as S};
+    match result {
+        Ok((S::FtolReached, _)) => Termination::ObjectiveChange,
+        Ok((S::XtolReached, _)) => Termination::ParameterChange,
+        Ok((S::MaxEvalReached, _)) => Termination::EvaluationLimit,
+        Ok((S::MaxTimeReached, _)) => Termination::IterationLimit,
+        Ok((S::Success, _)) | Ok((S::StopValReached, _)) => Termination::Gradient,
+        Err((F::RoundoffLimited, _)) => Termination::Stalled(crate::Stall::Reported(
+            "NLopt: rounding errors limited progress".into(),
+        )),
+        Err((F::InvalidArgs, _)) => {
+            Termination::InvalidInput(crate::Invalid::Reported("NLopt: invalid arguments".into()))
+        }
+        Err((F::ForcedStop, _)) => {
+            Termination::NumericalFailure(crate::Failure::Reported("NLopt: forced stop".into()))
+        }
+        Err((F::OutOfMemory, _)) => {
+            Termination::NumericalFailure(crate::Failure::Reported("NLopt: out of memory".into()))
+        }
+        Err((F::Failure, _)) => Termination::Stalled(crate::Stall::Reported(
+            "NLopt: generic failure, usually its line search".into(),
+        )),
+    }
+}
+
+impl Solver for Nlopt {
+    fn name(&self) -> &'static str {
+        match self.algorithm {
+            Algorithm::Lbfgs => "nlopt-lbfgs",
+            Algorithm::Slsqp => "nlopt-slsqp",
+            Algorithm::Mma => "nlopt-mma",
+            Algorithm::Bobyqa => "nlopt-bobyqa",
+        }
+    }
+
+    fn solve(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
+        let Started {
+            mut run,
+            free,
+            p0,
+            norms0,
+            ..
+        } = match begin(self.name(), task, start, options) {
+            Ok(b) => b,
+            Err(solution) => return *solution,
+        };
+        let problem = &*task.problem;
+        let np = problem.n_points();
+        let phi0 = norms0.iter().sum::<f64>() / np as f64;
+        let vars = Variables {
+            free: &free,
+            slsqp: self.algorithm == Algorithm::Slsqp,
+            tangent: free.tangent(),
+        };
+        let callback = Callback {
+            problem,
+            objective: options.objective,
+            vars: &vars,
+            state: RefCell::new(State {
+                eps: Continuation::new(options, phi0).eps(),
+                scale: 1.0,
+                calls: 0,
+                gradients: 0,
+                best: f64::INFINITY,
+                nonfinite: None,
+                edge: Default::default(),
+                observer,
+            }),
+        };
+        let mut x = vars.start(&p0);
+        let rows = equality_rows(task, &free.d);
+        let base = run.summary.evaluations;
+        let termination = self.stages(&callback, &mut x, options, (&rows, base, phi0));
+        let st = callback.state.into_inner();
+        run.summary.iterations = st.calls;
+        run.summary.evaluations = base + st.calls;
+        run.summary.jacobian_evaluations += st.gradients;
+        run.edge = st.edge.shifted(base);
+        let p = vars.params(&x);
+        run.finish(p, termination)
+    }
+}
+
 /// The variables NLopt sees and how they map to the parameters: SLSQP's `s = p / D` (every
 /// parameter, the equality constraints passed natively), the others' free coordinates z.
 struct Variables<'f> {
@@ -258,32 +348,6 @@ const BOBYQA_INITIAL_STEP: f64 = 1e-3;
 /// Relative tolerance of SLSQP's equality constraints (of 1 + |b|).
 const EQUALITY_TOLERANCE: f64 = 1e-12;
 
-fn termination_of(result: &Result<(nl::SuccessState, f64), (nl::FailState, f64)>) -> Termination {
-    use nl::{FailState as F, SuccessState as S};
-    match result {
-        Ok((S::FtolReached, _)) => Termination::ObjectiveChange,
-        Ok((S::XtolReached, _)) => Termination::ParameterChange,
-        Ok((S::MaxEvalReached, _)) => Termination::EvaluationLimit,
-        Ok((S::MaxTimeReached, _)) => Termination::IterationLimit,
-        Ok((S::Success, _)) | Ok((S::StopValReached, _)) => Termination::Gradient,
-        Err((F::RoundoffLimited, _)) => Termination::Stalled(crate::Stall::Reported(
-            "NLopt: rounding errors limited progress".into(),
-        )),
-        Err((F::InvalidArgs, _)) => {
-            Termination::InvalidInput(crate::Invalid::Reported("NLopt: invalid arguments".into()))
-        }
-        Err((F::ForcedStop, _)) => {
-            Termination::NumericalFailure(crate::Failure::Reported("NLopt: forced stop".into()))
-        }
-        Err((F::OutOfMemory, _)) => {
-            Termination::NumericalFailure(crate::Failure::Reported("NLopt: out of memory".into()))
-        }
-        Err((F::Failure, _)) => Termination::Stalled(crate::Stall::Reported(
-            "NLopt: generic failure, usually its line search".into(),
-        )),
-    }
-}
-
 impl Nlopt {
     /// NLopt's algorithm.
     fn nl_algorithm(&self) -> nl::Algorithm {
@@ -432,67 +496,3 @@ impl Nlopt {
 
 /// Restarts of the last solve, at most, while each still halves the cost.
 const MAX_RESTARTS: usize = 10;
-
-impl Solver for Nlopt {
-    fn name(&self) -> &'static str {
-        match self.algorithm {
-            Algorithm::Lbfgs => "nlopt-lbfgs",
-            Algorithm::Slsqp => "nlopt-slsqp",
-            Algorithm::Mma => "nlopt-mma",
-            Algorithm::Bobyqa => "nlopt-bobyqa",
-        }
-    }
-
-    fn solve(
-        &self,
-        task: &Task,
-        start: &[f64],
-        options: &Options,
-        observer: &mut dyn Observer,
-    ) -> Solution {
-        let Started {
-            mut run,
-            free,
-            p0,
-            norms0,
-            ..
-        } = match begin(self.name(), task, start, options) {
-            Ok(b) => b,
-            Err(solution) => return *solution,
-        };
-        let problem = &*task.problem;
-        let np = problem.n_points();
-        let phi0 = norms0.iter().sum::<f64>() / np as f64;
-        let vars = Variables {
-            free: &free,
-            slsqp: self.algorithm == Algorithm::Slsqp,
-            tangent: free.tangent(),
-        };
-        let callback = Callback {
-            problem,
-            objective: options.objective,
-            vars: &vars,
-            state: RefCell::new(State {
-                eps: Continuation::new(options, phi0).eps(),
-                scale: 1.0,
-                calls: 0,
-                gradients: 0,
-                best: f64::INFINITY,
-                nonfinite: None,
-                edge: Default::default(),
-                observer,
-            }),
-        };
-        let mut x = vars.start(&p0);
-        let rows = equality_rows(task, &free.d);
-        let base = run.summary.evaluations;
-        let termination = self.stages(&callback, &mut x, options, (&rows, base, phi0));
-        let st = callback.state.into_inner();
-        run.summary.iterations = st.calls;
-        run.summary.evaluations = base + st.calls;
-        run.summary.jacobian_evaluations += st.gradients;
-        run.edge = st.edge.shifted(base);
-        let p = vars.params(&x);
-        run.finish(p, termination)
-    }
-}
