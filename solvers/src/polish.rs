@@ -589,3 +589,6 @@ fn weak_second_order(
     let vw = Mat::from_fn(nf, k, |r, c| v[(r, weak[c])]);
     Some(hz + &vw * (&s * vw.transpose()))
 }
+
+#[cfg(test)]
+mod tests;
