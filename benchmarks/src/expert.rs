@@ -116,123 +116,133 @@ pub struct ExpertFit {
     pub message: String,
 }
 
-impl Expert {
-    /// Prepares `problem` (the paper's model on the XCFZ machine) from the start `p` (the
-    /// tracker already fitted, as volver's identification does first). Errs on another machine
-    /// or model, or a constraint the program does not eliminate (one spanning several errors).
-    ///
-    /// Nothing else is held: like Ceres users, the program leaves the combinations the data
-    /// cannot identify to the damping (volver holds them by its gauge).
-    pub fn new(problem: &Problem, p: &[f64]) -> Result<Expert, String> {
-        let t0 = Instant::now();
+/// Errs unless `problem` is the paper's model on the XCFZ machine with the tracker on the
+/// workpiece side (what the program is written for).
+fn check_machine(problem: &Problem) -> Result<(), String> {
+    let model = problem.model();
+    let machine = model.machine();
+    let chain: String = machine.axes().iter().map(|a| a.axis.letter()).collect();
+    if chain != "XCZ" || machine.tracker().mount != TrackerMount::Workpiece {
+        return Err(format!(
+            "the expert program is written for XCFZ with the tracker on the workpiece side, \
+             not {chain}"
+        ));
+    }
+    let terms = model.terms();
+    if terms.len() != ERRORS {
+        return Err(format!(
+            "the expert program is written for the paper's {ERRORS} errors, not {}",
+            terms.len()
+        ));
+    }
+    Ok(())
+}
+
+/// The value (error slot, then tracker pose) each parameter of `model` enters.
+fn slots_of(model: &volver_core::model::Model) -> Result<Vec<usize>, String> {
+    let n = model.params().len();
+    let ts = model.tracker_start();
+    let mut slot_of_param = vec![usize::MAX; n];
+    for (s, t) in model.terms().iter().enumerate() {
+        for j in t.params.clone() {
+            slot_of_param[j] = s;
+        }
+    }
+    for k in 0..TRACKER_DOF {
+        slot_of_param[ts + k] = ERRORS + k;
+    }
+    if let Some(j) = slot_of_param.iter().position(|&s| s == usize::MAX) {
+        return Err(format!("parameter {j} enters no value the program knows"));
+    }
+    Ok(slot_of_param)
+}
+
+/// Each parameter's role and the free ones, from the problem's constraints: a one-term row
+/// holds its parameter, a longer one (all in one value) eliminates its largest coefficient's
+/// parameter.
+fn roles_of(problem: &Problem, slot_of_param: &[usize]) -> Result<(Vec<Role>, Vec<usize>), String> {
+    let n = slot_of_param.len();
+    let mut roles: Vec<Option<Role>> = vec![None; n];
+    for row in &problem.constraints().rows {
+        let (j, a) = row
+            .coeffs
+            .iter()
+            .copied()
+            .max_by(|x, y| x.1.abs().total_cmp(&y.1.abs()))
+            .ok_or("an empty constraint row")?;
+        if row
+            .coeffs
+            .iter()
+            .any(|&(i, _)| slot_of_param[i] != slot_of_param[j] || roles[i].is_some())
+        {
+            return Err(format!(
+                "constraint `{}` spans several values or shares a parameter",
+                row.label
+            ));
+        }
+        roles[j] = Some(if row.coeffs.len() == 1 {
+            Role::Fixed(row.rhs / a)
+        } else {
+            Role::Pivot {
+                row: row.coeffs.clone(),
+                rhs: row.rhs,
+                a,
+            }
+        });
+    }
+    let mut free = Vec::new();
+    let roles: Vec<Role> = roles
+        .into_iter()
+        .enumerate()
+        .map(|(j, r)| {
+            r.unwrap_or_else(|| {
+                free.push(j);
+                Role::Free(free.len() - 1)
+            })
+        })
+        .collect();
+    Ok((roles, free))
+}
+
+/// The program's data of every point: its commands, reflector and measurement, the constant
+/// part of each value and each free coefficient's regressor.
+struct Regressors {
+    commands: Vec<f64>,
+    reflectors: Vec<f64>,
+    measured: Vec<f64>,
+    /// `SLOTS` per point.
+    constant: Vec<f64>,
+    /// `nf` per point.
+    regressor: Vec<f64>,
+}
+
+impl Regressors {
+    /// The data of `problem`'s points at the start `p`, with the parameters' `roles` and slots
+    /// and `nf` free coefficients. The regressor of each parameter at each point is its
+    /// value's derivative (the values are linear in their coefficients; checked at `p`).
+    fn of(
+        problem: &Problem,
+        p: &[f64],
+        roles: &[Role],
+        slot_of_param: &[usize],
+        nf: usize,
+    ) -> Result<Regressors, String> {
         let (model, data) = (problem.model(), problem.data());
         let machine = model.machine();
-        let chain: String = machine.axes().iter().map(|a| a.axis.letter()).collect();
-        if chain != "XCZ" || machine.tracker().mount != TrackerMount::Workpiece {
-            return Err(format!(
-                "the expert program is written for XCFZ with the tracker on the workpiece side, \
-                 not {chain}"
-            ));
-        }
-        let terms = model.terms();
-        if terms.len() != ERRORS {
-            return Err(format!(
-                "the expert program is written for the paper's {ERRORS} errors, not {}",
-                terms.len()
-            ));
-        }
-        let n = model.params().len();
-        let ts = model.tracker_start();
-        // The value each parameter enters.
-        let mut slot_of_param = vec![usize::MAX; n];
-        for (s, t) in terms.iter().enumerate() {
-            for j in t.params.clone() {
-                slot_of_param[j] = s;
-            }
-        }
-        for k in 0..TRACKER_DOF {
-            slot_of_param[ts + k] = ERRORS + k;
-        }
-        if let Some(j) = slot_of_param.iter().position(|&s| s == usize::MAX) {
-            return Err(format!("parameter {j} enters no value the program knows"));
-        }
-        // Constraints: a one-term row holds its parameter, a longer one (all in one value)
-        // eliminates its largest coefficient's parameter.
-        let mut roles: Vec<Option<Role>> = vec![None; n];
-        for row in &problem.constraints().rows {
-            let (j, a) = row
-                .coeffs
-                .iter()
-                .copied()
-                .max_by(|x, y| x.1.abs().total_cmp(&y.1.abs()))
-                .ok_or("an empty constraint row")?;
-            if row
-                .coeffs
-                .iter()
-                .any(|&(i, _)| slot_of_param[i] != slot_of_param[j] || roles[i].is_some())
-            {
-                return Err(format!(
-                    "constraint `{}` spans several values or shares a parameter",
-                    row.label
-                ));
-            }
-            roles[j] = Some(if row.coeffs.len() == 1 {
-                Role::Fixed(row.rhs / a)
-            } else {
-                Role::Pivot {
-                    row: row.coeffs.clone(),
-                    rhs: row.rhs,
-                    a,
-                }
-            });
-        }
-        let mut free = Vec::new();
-        let roles: Vec<Role> = roles
-            .into_iter()
-            .enumerate()
-            .map(|(j, r)| {
-                r.unwrap_or_else(|| {
-                    free.push(j);
-                    Role::Free(free.len() - 1)
-                })
-            })
-            .collect();
-        let nf = free.len();
-        // The regressor of each parameter at each point: its value's derivative (the values are
-        // linear in their coefficients; checked below).
+        let n = roles.len();
         let np = data.points.len();
-        let mut unit = vec![0.0; n];
-        let mut basis = vec![0.0; n];
-        let mut constant = vec![0.0; np * SLOTS];
-        let mut regressor = vec![0.0; np * nf];
-        let (mut commands, mut reflectors, mut measured) = (
-            Vec::with_capacity(3 * np),
-            Vec::with_capacity(3 * np),
-            Vec::with_capacity(3 * np),
-        );
+        let (mut unit, mut basis) = (vec![0.0; n], vec![0.0; n]);
+        let mut out = Regressors {
+            commands: Vec::with_capacity(3 * np),
+            reflectors: Vec::with_capacity(3 * np),
+            measured: Vec::with_capacity(3 * np),
+            constant: vec![0.0; np * SLOTS],
+            regressor: vec![0.0; np * nf],
+        };
         for (i, m) in data.points.iter().enumerate() {
-            for (s, t) in terms.iter().enumerate() {
-                let position = m.commands.0[t.axis];
-                for j in t.params.clone() {
-                    unit[j] = 1.0;
-                    basis[j] = model
-                        .error_value(t.id, position, &unit)
-                        .ok_or("an error the model does not hold")?;
-                    unit[j] = 0.0;
-                }
-                let direct = model.error_value(t.id, position, p).unwrap_or(f64::NAN);
-                let linear: f64 = t.params.clone().map(|j| basis[j] * p[j]).sum();
-                if (direct - linear).abs() > 1e-12 * (1.0 + direct.abs()) {
-                    return Err(format!(
-                        "error {s} is not linear in its coefficients: {direct} vs {linear}"
-                    ));
-                }
-            }
-            for k in 0..TRACKER_DOF {
-                basis[ts + k] = 1.0;
-            }
-            let c = &mut constant[i * SLOTS..(i + 1) * SLOTS];
-            let g = &mut regressor[i * nf..(i + 1) * nf];
+            value_basis(model, &m.commands.0[..], p, (&mut unit, &mut basis))?;
+            let c = &mut out.constant[i * SLOTS..(i + 1) * SLOTS];
+            let g = &mut out.regressor[i * nf..(i + 1) * nf];
             for (j, role) in roles.iter().enumerate() {
                 let s = slot_of_param[j];
                 match role {
@@ -251,41 +261,101 @@ impl Expert {
                 }
             }
             let refl = machine.reflectors()[m.reflector].offset;
-            commands.extend_from_slice(&m.commands.0[..3]);
-            reflectors.extend_from_slice(&refl);
-            measured.extend_from_slice(&m.measured);
+            out.commands.extend_from_slice(&m.commands.0[..3]);
+            out.reflectors.extend_from_slice(&refl);
+            out.measured.extend_from_slice(&m.measured);
         }
+        Ok(out)
+    }
+}
+
+/// Each parameter's derivative of the value it enters at the axis positions `commands` into
+/// `basis` (1 for the tracker pose), checking at `p` that the values are linear in their
+/// coefficients; `unit` is zeros of the parameters' length (left so).
+fn value_basis(
+    model: &volver_core::model::Model,
+    commands: &[f64],
+    p: &[f64],
+    (unit, basis): (&mut [f64], &mut [f64]),
+) -> Result<(), String> {
+    for (s, t) in model.terms().iter().enumerate() {
+        let position = commands[t.axis];
+        for j in t.params.clone() {
+            unit[j] = 1.0;
+            basis[j] = model
+                .error_value(t.id, position, unit)
+                .ok_or("an error the model does not hold")?;
+            unit[j] = 0.0;
+        }
+        let direct = model.error_value(t.id, position, p).unwrap_or(f64::NAN);
+        let linear: f64 = t.params.clone().map(|j| basis[j] * p[j]).sum();
+        if (direct - linear).abs() > 1e-12 * (1.0 + direct.abs()) {
+            return Err(format!(
+                "error {s} is not linear in its coefficients: {direct} vs {linear}"
+            ));
+        }
+    }
+    let ts = model.tracker_start();
+    for k in 0..TRACKER_DOF {
+        basis[ts + k] = 1.0;
+    }
+    Ok(())
+}
+
+/// The program's problem header for `problem` with `nf` free coefficients (the data pointers
+/// null until the buffers are in place).
+fn raw_problem(problem: &Problem, nf: usize) -> RawProblem {
+    let model = problem.model();
+    let machine = model.machine();
+    let axes = machine.axes();
+    let mut raw = RawProblem {
+        offset: [axes[0].offset, axes[1].offset, axes[2].offset],
+        z_reference: axes[2].reference,
+        base_rotation: machine.tracker().base_rotation,
+        slot_axis: [0; ERRORS],
+        slot_location: [0; ERRORS],
+        slot_component: [0; ERRORS],
+        points: problem.data().points.len() as c_int,
+        free: nf as c_int,
+        commands: std::ptr::null(),
+        reflectors: std::ptr::null(),
+        measured: std::ptr::null(),
+        constant: std::ptr::null(),
+        regressor: std::ptr::null(),
+        slot_of: std::ptr::null(),
+    };
+    for (s, t) in model.terms().iter().enumerate() {
+        raw.slot_axis[s] = t.axis as c_int;
+        raw.slot_location[s] = matches!(t.id, ErrorId::Location { .. }) as c_int;
+        raw.slot_component[s] = t.id.component().index() as c_int;
+    }
+    raw
+}
+
+impl Expert {
+    /// Prepares `problem` (the paper's model on the XCFZ machine) from the start `p` (the
+    /// tracker already fitted, as volver's identification does first). Errs on another machine
+    /// or model, or a constraint the program does not eliminate (one spanning several errors).
+    ///
+    /// Nothing else is held: like Ceres users, the program leaves the combinations the data
+    /// cannot identify to the damping (volver holds them by its gauge).
+    pub fn new(problem: &Problem, p: &[f64]) -> Result<Expert, String> {
+        let t0 = Instant::now();
+        let model = problem.model();
+        check_machine(problem)?;
+        let slot_of_param = slots_of(model)?;
+        let (roles, free) = roles_of(problem, &slot_of_param)?;
+        let data = Regressors::of(problem, p, &roles, &slot_of_param, free.len())?;
         let slot_of: Vec<c_int> = free.iter().map(|&j| slot_of_param[j] as c_int).collect();
-        let axes = machine.axes();
-        let mut raw = RawProblem {
-            offset: [axes[0].offset, axes[1].offset, axes[2].offset],
-            z_reference: axes[2].reference,
-            base_rotation: machine.tracker().base_rotation,
-            slot_axis: [0; ERRORS],
-            slot_location: [0; ERRORS],
-            slot_component: [0; ERRORS],
-            points: np as c_int,
-            free: nf as c_int,
-            commands: std::ptr::null(),
-            reflectors: std::ptr::null(),
-            measured: std::ptr::null(),
-            constant: std::ptr::null(),
-            regressor: std::ptr::null(),
-            slot_of: std::ptr::null(),
-        };
-        for (s, t) in terms.iter().enumerate() {
-            raw.slot_axis[s] = t.axis as c_int;
-            raw.slot_location[s] = matches!(t.id, ErrorId::Location { .. }) as c_int;
-            raw.slot_component[s] = t.id.component().index() as c_int;
-        }
+        let raw = raw_problem(problem, free.len());
         let mut e = Expert {
             roles,
             free,
-            commands,
-            reflectors,
-            measured,
-            constant,
-            regressor,
+            commands: data.commands,
+            reflectors: data.reflectors,
+            measured: data.measured,
+            constant: data.constant,
+            regressor: data.regressor,
             slot_of,
             raw,
             setup_s: 0.0,

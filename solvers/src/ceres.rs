@@ -42,6 +42,7 @@
 //! ```
 
 use crate::coordinates::held_values;
+use crate::lm::irls::Continuation;
 use crate::options::{Objective, Options};
 use crate::run::{Started, begin};
 use crate::summary::Termination;
@@ -49,6 +50,7 @@ use crate::{Iteration, Observer, Solution, Solver, Task};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use volver_ceres_sys as cs;
 use volver_core::problem::{Residuals, norm};
+use volver_core::units::{TINY, UM_PER_MM};
 
 pub use cs::LinearSolver;
 
@@ -150,6 +152,194 @@ fn termination_of(s: &cs::Summary, evaluation_limit: bool) -> Termination {
     }
 }
 
+/// The parameter block's manifold: free, a subset held (every constraint holds one parameter),
+/// or the linear manifold `s₀ + N t` over the null space of `A D`.
+fn space_of(task: &Task, free: &crate::coordinates::Free) -> cs::Space {
+    let (n, nf) = (free.d.len(), free.n_free());
+    if task.constraints.rows.is_empty() {
+        cs::Space::Free
+    } else if held_values(&task.constraints).len() == task.constraints.rows.len() {
+        let mut idx: Vec<usize> = free.fixed.iter().map(|&(j, _)| j).collect();
+        idx.sort_unstable();
+        idx.dedup();
+        cs::Space::Subset(idx)
+    } else {
+        let b = free.ns.basis();
+        cs::Space::Linear {
+            basis: (0..n * nf).map(|k| b[(k / nf, k % nf)]).collect(),
+            columns: nf,
+        }
+    }
+}
+
+/// What the iteration callback of the solves follows: the run's options and observer, the
+/// passes counted before the first solve, the last pass that improved the cost, and whether
+/// the current solve was stopped at the evaluation limit.
+struct Progress<'t, 'a, 'o> {
+    problem: &'t (dyn Residuals + 'a),
+    /// Column scaling: p = s ∘ d.
+    d: &'t [f64],
+    cost: &'t Cost<'t, 'a>,
+    options: &'o Options,
+    observer: &'o mut dyn Observer,
+    wants: bool,
+    base_evaluations: usize,
+    /// Iterations of the earlier solves, and the smoothing of this one (mm).
+    done_before: usize,
+    eps: f64,
+    improved_pass: usize,
+    evaluation_limit: bool,
+}
+
+impl Progress<'_, '_, '_> {
+    /// One Ceres iteration: the report (Ceres' cost as Φ_ε or ve; EMM from a residual pass
+    /// when the observer reads it) and the evaluation limit.
+    fn on_iteration(&mut self, it: &cs::Iteration, params: &[f64]) -> cs::Control {
+        let np = self.problem.n_points();
+        let passes = self.cost.passes.load(Ordering::Relaxed);
+        let evaluations = self.base_evaluations + passes;
+        // A stage's start counts as an improvement, as in the other engines.
+        if it.iteration == 0 || it.successful {
+            self.improved_pass = passes;
+        }
+        if it.iteration > 0 {
+            let objective_now = match self.options.objective {
+                Objective::Ve => 2.0 * it.cost / np as f64,
+                Objective::Phi => it.cost / np as f64 + self.eps,
+            };
+            let emm_um = if self.wants {
+                let p: Vec<f64> = params.iter().zip(self.d).map(|(s, d)| s * d).collect();
+                (0..np)
+                    .map(|i| norm(self.problem.residual(i, &p)))
+                    .sum::<f64>()
+                    / np as f64
+                    * UM_PER_MM
+            } else {
+                f64::NAN
+            };
+            self.observer.iteration(&Iteration {
+                iteration: self.done_before + it.iteration,
+                evaluations,
+                cost: objective_now,
+                emm_um,
+                damping: 1.0 / it.trust_region_radius,
+                step: it.step_norm,
+                accepted: it.successful,
+            });
+        }
+        if evaluations >= self.options.max_evaluations {
+            self.evaluation_limit = true;
+            cs::Control::Stop
+        } else {
+            cs::Control::Continue
+        }
+    }
+}
+
+impl Ceres {
+    /// Ceres' options for the next solve of the continuation (`iterations` already done, Φ₀ =
+    /// `phi0_mm` over `np` points).
+    fn options_for(
+        &self,
+        options: &Options,
+        continuation: &Continuation,
+        iterations: usize,
+        (np, phi0_mm): (usize, f64),
+    ) -> cs::Options {
+        cs::Options {
+            trust_region: cs::TrustRegion::LevenbergMarquardt,
+            linear_solver: self.linear_solver,
+            max_iterations: options.max_iterations.saturating_sub(iterations),
+            function_tolerance: continuation.tolerance(options.objective_tolerance),
+            // Ceres' gradient test is absolute, in its cost (≈ n Φ or ½ n ve).
+            gradient_tolerance: options.gradient_tolerance * np as f64 * phi0_mm.max(TINY),
+            parameter_tolerance: options.parameter_tolerance,
+            // Ceres' radius is the inverse of the LM damping.
+            initial_trust_region_radius: 1.0 / options.initial_damping.max(TINY),
+            threads: self.threads,
+            jacobi_scaling: true,
+        }
+    }
+
+    /// The solves of the ε-continuation until the last one ends or one fails; the run's
+    /// iterations and Jacobian evaluations counted.
+    fn stages(
+        &self,
+        cp: &mut cs::Problem<'_>,
+        run: &mut crate::run::Run,
+        progress: &mut Progress,
+        phi0_mm: f64,
+    ) -> Termination {
+        let options = progress.options;
+        let np = progress.problem.n_points();
+        let mut continuation = Continuation::new(options, phi0_mm);
+        loop {
+            let final_stage = continuation.is_final();
+            let iterations = run.summary.iterations;
+            let ceres_options = self.options_for(options, &continuation, iterations, (np, phi0_mm));
+            if ceres_options.max_iterations == 0 {
+                return Termination::IterationLimit;
+            }
+            progress.evaluation_limit = false;
+            progress.done_before = iterations;
+            progress.eps = continuation.eps();
+            let summary = match cp
+                .solve(&ceres_options, &mut |it: &cs::Iteration, params: &[f64]| {
+                    progress.on_iteration(it, params)
+                }) {
+                Ok(s) => s,
+                Err(e) => {
+                    return Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
+                }
+            };
+            run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
+            run.summary.jacobian_evaluations += summary.jacobian_evaluations;
+            let t = termination_of(&summary, progress.evaluation_limit);
+            if final_stage || !t.converged() {
+                return t;
+            }
+            // Φ: sharpen the smoothing (Ceres' cost is Σ (√(‖r‖² + ε²) − ε) ≈ n Φ).
+            continuation.shrink(summary.final_cost / np as f64);
+            if let Err(e) = cp.set_loss_epsilon(continuation.eps()) {
+                return Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
+            }
+        }
+    }
+}
+
+/// The run's evaluations and its finite edge from the blocks Ceres evaluated (`base`: the
+/// evaluations before the first solve, `improved_pass` the last pass that improved), and the
+/// termination naming non-finite blocks when it failed.
+fn account(
+    run: &mut crate::run::Run,
+    cost: &Cost,
+    (base, improved_pass): (usize, usize),
+    termination: Termination,
+) -> Termination {
+    run.summary.evaluations = base + cost.passes.load(Ordering::Relaxed);
+    let nonfinite_pass = cost.nonfinite_pass.load(Ordering::Relaxed);
+    let nonfinite = cost.nonfinite.load(Ordering::Relaxed);
+    // Ceres evaluates blocks, not trial points: the edge sees the last pass with a
+    // non-finite block, and counts blocks.
+    if nonfinite > 0 {
+        run.edge.nonfinite_at(base + nonfinite_pass);
+        run.edge.count = nonfinite;
+    }
+    run.edge.improved = base + improved_pass;
+    if nonfinite > 0 && !termination.converged() {
+        match termination {
+            Termination::NumericalFailure(s) => {
+                Termination::NumericalFailure(crate::Failure::Reported(format!(
+                    "{s} (a residual or Jacobian entry was not finite)"
+                )))
+            }
+            t => t,
+        }
+    } else {
+        termination
+    }
+}
+
 impl Solver for Ceres {
     fn name(&self) -> &'static str {
         "ceres"
@@ -173,32 +363,15 @@ impl Solver for Ceres {
             Err(solution) => return *solution,
         };
         let problem = &*task.problem;
-        let n = start.len();
         let np = problem.n_points();
-        let nf = free.n_free();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
         let d = &free.d;
         let s0: Vec<f64> = p0.iter().zip(d).map(|(p, d)| p / d).collect();
-        let held = &free.fixed;
-        let space = if task.constraints.rows.is_empty() {
-            cs::Space::Free
-        } else if held_values(&task.constraints).len() == task.constraints.rows.len() {
-            let mut idx: Vec<usize> = held.iter().map(|&(j, _)| j).collect();
-            idx.sort_unstable();
-            idx.dedup();
-            cs::Space::Subset(idx)
-        } else {
-            let b = free.ns.basis();
-            cs::Space::Linear {
-                basis: (0..n * nf).map(|k| b[(k / nf, k % nf)]).collect(),
-                columns: nf,
-            }
-        };
-        let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
-        let mut eps = (options.irls_initial_epsilon * phi0).max(1e-300);
         let loss = match options.objective {
             Objective::Ve => cs::Loss::None,
-            Objective::Phi => cs::Loss::Module { epsilon: eps },
+            Objective::Phi => cs::Loss::Module {
+                epsilon: Continuation::new(options, phi0).eps(),
+            },
         };
         let cost = Cost {
             problem,
@@ -208,7 +381,7 @@ impl Solver for Ceres {
             nonfinite_pass: AtomicUsize::new(0),
         };
         let mut cp = match cs::Problem::new(&s0, np, 3, &cost, loss)
-            .and_then(|mut cp| cp.set_space(&space).map(|_| cp))
+            .and_then(|mut cp| cp.set_space(&space_of(task, &free)).map(|_| cp))
         {
             Ok(cp) => cp,
             Err(e) => {
@@ -218,114 +391,25 @@ impl Solver for Ceres {
                 );
             }
         };
-        let wants = observer.wants_metrics();
         let base_evaluations = run.summary.evaluations;
-        let mut improved_pass = 0;
-        let termination = loop {
-            let final_stage = options.objective == Objective::Ve || eps <= eps_final(phi0) * 1.0001;
-            let ceres_options = cs::Options {
-                trust_region: cs::TrustRegion::LevenbergMarquardt,
-                linear_solver: self.linear_solver,
-                max_iterations: options
-                    .max_iterations
-                    .saturating_sub(run.summary.iterations),
-                function_tolerance: if final_stage {
-                    options.objective_tolerance
-                } else {
-                    1e-3
-                },
-                // Ceres' gradient test is absolute, in its cost (≈ n Φ or ½ n ve).
-                gradient_tolerance: options.gradient_tolerance * np as f64 * phi0.max(1e-300),
-                parameter_tolerance: options.parameter_tolerance,
-                // Ceres' radius is the inverse of the LM damping.
-                initial_trust_region_radius: 1.0 / options.initial_damping.max(1e-300),
-                threads: self.threads,
-                jacobi_scaling: true,
-            };
-            if ceres_options.max_iterations == 0 {
-                break Termination::IterationLimit;
-            }
-            let mut evaluation_limit = false;
-            let done_before = run.summary.iterations;
-            let mut on_iteration = |it: &cs::Iteration, params: &[f64]| {
-                let passes = cost.passes.load(Ordering::Relaxed);
-                let evaluations = base_evaluations + passes;
-                // A stage's start counts as an improvement, as in the other engines.
-                if it.iteration == 0 || it.successful {
-                    improved_pass = passes;
-                }
-                if it.iteration > 0 {
-                    let (objective_now, emm) = match options.objective {
-                        Objective::Ve => (2.0 * it.cost / np as f64, f64::NAN),
-                        Objective::Phi => (it.cost / np as f64 + eps, f64::NAN),
-                    };
-                    let emm_um = if wants {
-                        let p: Vec<f64> = params.iter().zip(d).map(|(s, d)| s * d).collect();
-                        (0..np).map(|i| norm(problem.residual(i, &p))).sum::<f64>() / np as f64
-                            * 1e3
-                    } else {
-                        emm
-                    };
-                    observer.iteration(&Iteration {
-                        iteration: done_before + it.iteration,
-                        evaluations,
-                        cost: objective_now,
-                        emm_um,
-                        damping: 1.0 / it.trust_region_radius,
-                        step: it.step_norm,
-                        accepted: it.successful,
-                    });
-                }
-                if evaluations >= options.max_evaluations {
-                    evaluation_limit = true;
-                    cs::Control::Stop
-                } else {
-                    cs::Control::Continue
-                }
-            };
-            let summary = match cp.solve(&ceres_options, &mut on_iteration) {
-                Ok(s) => s,
-                Err(e) => {
-                    break Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
-                }
-            };
-            run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
-            run.summary.jacobian_evaluations += summary.jacobian_evaluations;
-            let t = termination_of(&summary, evaluation_limit);
-            if final_stage || !t.converged() {
-                break t;
-            }
-            // Φ: sharpen the smoothing (Ceres' cost is Σ (√(‖r‖² + ε²) − ε) ≈ n Φ).
-            let phi = summary.final_cost / np as f64;
-            eps = (eps / 10.0).max(eps_final(phi));
-            if let Err(e) = cp.set_loss_epsilon(eps) {
-                break Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
-            }
+        let mut progress = Progress {
+            problem,
+            d,
+            cost: &cost,
+            options,
+            wants: observer.wants_metrics(),
+            observer,
+            base_evaluations,
+            done_before: 0,
+            eps: 0.0,
+            improved_pass: 0,
+            evaluation_limit: false,
         };
-        run.summary.evaluations = base_evaluations + cost.passes.load(Ordering::Relaxed);
-        let nonfinite_pass = cost.nonfinite_pass.load(Ordering::Relaxed);
-        let nonfinite = cost.nonfinite.load(Ordering::Relaxed);
-        // Ceres evaluates blocks, not trial points: the edge sees the last pass with a
-        // non-finite block, and counts blocks.
-        if nonfinite > 0 {
-            run.edge.nonfinite_at(base_evaluations + nonfinite_pass);
-            run.edge.count = nonfinite;
-        }
-        run.edge.improved = base_evaluations + improved_pass;
-        let termination = if nonfinite > 0 && !termination.converged() {
-            match termination {
-                Termination::NumericalFailure(s) => {
-                    Termination::NumericalFailure(crate::Failure::Reported(format!(
-                        "{s} (a residual or Jacobian entry was not finite)"
-                    )))
-                }
-                t => t,
-            }
-        } else {
-            termination
-        };
+        let termination = self.stages(&mut cp, &mut run, &mut progress, phi0);
+        let improved = (base_evaluations, progress.improved_pass);
+        let termination = account(&mut run, &cost, improved, termination);
         let mut p: Vec<f64> = cp.params().iter().zip(d).map(|(s, d)| s * d).collect();
-        for &(j, v) in held {
+        for &(j, v) in &free.fixed {
             p[j] = v;
         }
         run.finish(p, termination)

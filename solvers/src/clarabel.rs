@@ -54,6 +54,7 @@ use ::clarabel::solver::{
 };
 use faer::Mat;
 use volver_core::problem::norm;
+use volver_core::units::{TINY, UM_PER_MM};
 
 /// The prox-linear engine (`clarabel`).
 #[derive(Clone, Copy, Debug, Default)]
@@ -99,126 +100,159 @@ fn linearise(task: &Task, p: &[f64], tangent: &Mat<f64>) -> Option<Linearisation
     Some(Linearisation { r, jz })
 }
 
-/// Solves the sub-problem (data scaled by `scale`); the step, or Clarabel's status.
-fn step(
-    objective: Objective,
-    lin: &Linearisation,
-    k: usize,
+/// The cone program of a sub-problem: `min ½ xᵀPx + qᵀx` subject to `A x + s = b`, s in the
+/// cones.
+struct ConeProgram {
+    p: CscMatrix<f64>,
+    q: Vec<f64>,
+    a: CscMatrix<f64>,
+    b: Vec<f64>,
+    cones: Vec<SupportedConeT<f64>>,
+}
+
+/// The sub-problem's settings and where the step's values are (the first `k` variables).
+struct Subproblem {
+    /// The proximal weight μ and the trust radius Δ (scaled coordinates).
     mu: f64,
     radius: f64,
+    /// The data are divided by this (the current objective), so that Clarabel's tolerances are
+    /// relative.
     scale: f64,
-) -> Result<Vec<f64>, String> {
-    let np = lin.r.len() / 3;
-    let nn = np as f64;
-    let settings = DefaultSettingsBuilder::default()
+}
+
+/// Clarabel's settings for the sub-problems.
+fn settings() -> Result<::clarabel::solver::DefaultSettings<f64>, String> {
+    DefaultSettingsBuilder::default()
         .verbose(false)
         .max_iter(200)
         .tol_gap_abs(1e-10)
         .tol_gap_rel(1e-10)
         .tol_feas(1e-10)
         .build()
-        .map_err(|e| format!("Clarabel settings: {e:?}"))?;
-    // Column-by-column CSC of A; rows as documented in the module.
+        .map_err(|e| format!("Clarabel settings: {e:?}"))
+}
+
+/// Solves the sub-problem (data scaled by `sub.scale`); the step, or Clarabel's status.
+fn step(
+    objective: Objective,
+    lin: &Linearisation,
+    k: usize,
+    sub: &Subproblem,
+) -> Result<Vec<f64>, String> {
+    let settings = settings()?;
+    let program = match objective {
+        Objective::Phi => phi_program(lin, k, sub),
+        Objective::Ve => ve_program(lin, k, sub),
+    };
+    solve_cone(program, settings, k)
+}
+
+/// Φ's sub-problem: variables (δ, t), `min (1/n) Σ t_i + (μ/2)‖δ‖²` with the cones
+/// `‖r_i + J_i δ‖ ≤ t_i` (rows 4i … 4i + 3) and `‖δ‖ ≤ Δ` (the last k + 1 rows). The CSC of
+/// A is built column by column.
+fn phi_program(lin: &Linearisation, k: usize, sub: &Subproblem) -> ConeProgram {
+    let np = lin.r.len() / 3;
+    let nvar = k + np;
+    let m = 4 * np + k + 1;
     let mut colptr = vec![0usize];
     let mut rowval = Vec::new();
     let mut nzval = Vec::new();
-    match objective {
-        Objective::Phi => {
-            let nvar = k + np;
-            let m = 4 * np + k + 1;
-            for c in 0..k {
-                for i in 0..np {
-                    for d in 0..3 {
-                        let v = lin.jz[(3 * i + d) * k + c];
-                        if v != 0.0 {
-                            rowval.push(4 * i + 1 + d);
-                            nzval.push(-v / scale);
-                        }
-                    }
-                }
-                rowval.push(4 * np + 1 + c);
-                nzval.push(-1.0);
-                colptr.push(rowval.len());
-            }
-            for i in 0..np {
-                rowval.push(4 * i);
-                nzval.push(-1.0);
-                colptr.push(rowval.len());
-            }
-            let a = CscMatrix::new(m, nvar, colptr, rowval, nzval);
-            let mut bv = vec![0.0; m];
-            for i in 0..np {
-                for d in 0..3 {
-                    bv[4 * i + 1 + d] = lin.r[3 * i + d] / scale;
+    for c in 0..k {
+        for i in 0..np {
+            for d in 0..3 {
+                let v = lin.jz[(3 * i + d) * k + c];
+                if v != 0.0 {
+                    rowval.push(4 * i + 1 + d);
+                    nzval.push(-v / sub.scale);
                 }
             }
-            bv[4 * np] = radius;
-            let mut cv: Vec<SupportedConeT<f64>> = vec![SupportedConeT::SecondOrderConeT(4); np];
-            cv.push(SupportedConeT::SecondOrderConeT(k + 1));
-            let mut qv = vec![0.0; nvar];
-            for qi in qv.iter_mut().skip(k) {
-                *qi = 1.0 / nn;
-            }
-            let pdiag: Vec<f64> = (0..k).map(|_| mu).collect();
-            let pm = CscMatrix::new(
-                nvar,
-                nvar,
-                (0..=nvar).map(|c| c.min(k)).collect(),
-                (0..k).collect(),
-                pdiag,
-            );
-            solve_cone(pm, qv, a, bv, cv, settings, k)
         }
-        Objective::Ve => {
-            // P = (2/n) Jᵀ J / scale + μ I (upper triangle), q = (2/n) Jᵀ r / scale.
-            let jm = Mat::from_fn(3 * np, k, |i, c| lin.jz[i * k + c]);
-            let jtj = jm.transpose() * &jm;
-            let mut pc = vec![0usize];
-            let mut pr = Vec::new();
-            let mut pv = Vec::new();
-            for c in 0..k {
-                for rr in 0..=c {
-                    let v = 2.0 / nn * jtj[(rr, c)] / scale + if rr == c { mu } else { 0.0 };
-                    if v != 0.0 {
-                        pr.push(rr);
-                        pv.push(v);
-                    }
-                }
-                pc.push(pr.len());
-            }
-            let p_mat = CscMatrix::new(k, k, pc, pr, pv);
-            let q = (0..k)
-                .map(|c| {
-                    2.0 / nn
-                        * (0..3 * np)
-                            .map(|i| lin.jz[i * k + c] * lin.r[i])
-                            .sum::<f64>()
-                        / scale
-                })
-                .collect();
-            for c in 0..k {
-                rowval.push(1 + c);
-                nzval.push(-1.0);
-                colptr.push(rowval.len());
-            }
-            let a = CscMatrix::new(k + 1, k, colptr, rowval, nzval);
-            let mut b = vec![0.0; k + 1];
-            b[0] = radius;
-            let cones = vec![SupportedConeT::SecondOrderConeT(k + 1)];
-            solve_cone(p_mat, q, a, b, cones, settings, k)
+        rowval.push(4 * np + 1 + c);
+        nzval.push(-1.0);
+        colptr.push(rowval.len());
+    }
+    for i in 0..np {
+        rowval.push(4 * i);
+        nzval.push(-1.0);
+        colptr.push(rowval.len());
+    }
+    let a = CscMatrix::new(m, nvar, colptr, rowval, nzval);
+    let mut b = vec![0.0; m];
+    for i in 0..np {
+        for d in 0..3 {
+            b[4 * i + 1 + d] = lin.r[3 * i + d] / sub.scale;
         }
     }
+    b[4 * np] = sub.radius;
+    let mut cones: Vec<SupportedConeT<f64>> = vec![SupportedConeT::SecondOrderConeT(4); np];
+    cones.push(SupportedConeT::SecondOrderConeT(k + 1));
+    let mut q = vec![0.0; nvar];
+    for qi in q.iter_mut().skip(k) {
+        *qi = 1.0 / np as f64;
+    }
+    let pdiag: Vec<f64> = (0..k).map(|_| sub.mu).collect();
+    let p = CscMatrix::new(
+        nvar,
+        nvar,
+        (0..=nvar).map(|c| c.min(k)).collect(),
+        (0..k).collect(),
+        pdiag,
+    );
+    ConeProgram { p, q, a, b, cones }
 }
 
+/// ve's sub-problem: `P = (2/n) JᵀJ / scale + μ I` (upper triangle), `q = (2/n) Jᵀr / scale`,
+/// and the cone `‖δ‖ ≤ Δ`.
+fn ve_program(lin: &Linearisation, k: usize, sub: &Subproblem) -> ConeProgram {
+    let np = lin.r.len() / 3;
+    let nn = np as f64;
+    let jm = Mat::from_fn(3 * np, k, |i, c| lin.jz[i * k + c]);
+    let jtj = jm.transpose() * &jm;
+    let mut pc = vec![0usize];
+    let mut pr = Vec::new();
+    let mut pv = Vec::new();
+    for c in 0..k {
+        for rr in 0..=c {
+            let v = 2.0 / nn * jtj[(rr, c)] / sub.scale + if rr == c { sub.mu } else { 0.0 };
+            if v != 0.0 {
+                pr.push(rr);
+                pv.push(v);
+            }
+        }
+        pc.push(pr.len());
+    }
+    let p = CscMatrix::new(k, k, pc, pr, pv);
+    let q = (0..k)
+        .map(|c| {
+            2.0 / nn
+                * (0..3 * np)
+                    .map(|i| lin.jz[i * k + c] * lin.r[i])
+                    .sum::<f64>()
+                / sub.scale
+        })
+        .collect();
+    let mut colptr = vec![0usize];
+    let mut rowval = Vec::new();
+    let mut nzval = Vec::new();
+    for c in 0..k {
+        rowval.push(1 + c);
+        nzval.push(-1.0);
+        colptr.push(rowval.len());
+    }
+    let a = CscMatrix::new(k + 1, k, colptr, rowval, nzval);
+    let mut b = vec![0.0; k + 1];
+    b[0] = sub.radius;
+    let cones = vec![SupportedConeT::SecondOrderConeT(k + 1)];
+    ConeProgram { p, q, a, b, cones }
+}
+
+/// Clarabel's solution of `program`: its first `k` variables (the step).
 fn solve_cone(
-    p: CscMatrix<f64>,
-    q: Vec<f64>,
-    a: CscMatrix<f64>,
-    b: Vec<f64>,
-    cones: Vec<SupportedConeT<f64>>,
+    program: ConeProgram,
     settings: ::clarabel::solver::DefaultSettings<f64>,
     k: usize,
 ) -> Result<Vec<f64>, String> {
+    let ConeProgram { p, q, a, b, cones } = program;
     let mut solver = DefaultSolver::new(&p, &q, &a, &b, &cones, settings)
         .map_err(|e| format!("Clarabel refused the sub-problem: {e:?}"))?;
     solver.solve();
@@ -258,6 +292,183 @@ fn objective_value(objective: Objective, norms: &[f64]) -> f64 {
     crate::loss::cost_of(objective, norms, 0.0)
 }
 
+/// The smallest proximal weight μ (relative to the scaled sub-problem).
+const MU_FLOOR: f64 = 1e-12;
+
+/// μ past which a sub-problem Clarabel cannot solve ends the run.
+const MU_MAX: f64 = 1e20;
+
+/// A step is accepted when the objective falls by more than this share of the model's
+/// predicted decrease (the gain ratio ρ).
+const ACCEPTANCE: f64 = 1e-4;
+
+/// What follows a trial.
+enum Next {
+    /// Accepted: linearise at the new point.
+    Relinearise,
+    /// Refused (the region shrunk) or the sub-problem failed: another trial.
+    Retry,
+    /// The run ends.
+    Stop(Termination),
+}
+
+/// The prox-linear iteration's state: the point (p, its distance z from the start in the free
+/// coordinates, its residual modules in mm and its objective), the proximal weight μ and the
+/// trust radius Δ.
+struct Prox<'c, 'a, 'o> {
+    task: &'c Task<'a>,
+    options: &'o Options,
+    free: crate::coordinates::Free,
+    p: Vec<f64>,
+    z: Vec<f64>,
+    norms: Vec<f64>,
+    cost: f64,
+    mu: f64,
+    radius: f64,
+}
+
+impl Prox<'_, '_, '_> {
+    /// A sub-problem Clarabel cannot solve: the region shrinks for another trial; `false` when
+    /// μ or Δ are past use.
+    fn after_failure(&mut self) -> bool {
+        if self.mu > MU_MAX || self.radius < TINY {
+            return false;
+        }
+        self.mu = (self.mu * 10.0).max(1e-6);
+        self.radius /= 4.0;
+        true
+    }
+
+    /// Φ at the current point (µm).
+    fn emm_um(&self) -> f64 {
+        self.norms.iter().sum::<f64>() / self.norms.len() as f64 * UM_PER_MM
+    }
+
+    /// The trial of the sub-problem's step `delta` from the linearisation `lin`: the stopping
+    /// tests on its prediction, its evaluation, the report, then acceptance (μ and Δ adapted
+    /// to the gain ratio) or refusal (the region shrunk).
+    fn trial(
+        &mut self,
+        lin: &Linearisation,
+        delta: &[f64],
+        run: &mut crate::run::Run,
+        observer: &mut dyn Observer,
+    ) -> Next {
+        let (options, objective) = (self.options, self.options.objective);
+        let k = self.free.n_free();
+        let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let znorm = self.z.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let small_step =
+            step_norm <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
+        let pred = self.cost - model_value(objective, lin, k, delta);
+        if pred <= options.objective_tolerance * self.cost {
+            return Next::Stop(if small_step {
+                Termination::ParameterChange
+            } else {
+                Termination::ObjectiveChange
+            });
+        }
+        let p_new = self.free.step(&self.p, delta);
+        run.summary.evaluations += 1;
+        let new = crate::loss::norms(&*self.task.problem, &p_new);
+        let cost_new = new
+            .as_ref()
+            .map(|v| objective_value(objective, v))
+            .unwrap_or(f64::INFINITY);
+        if new.is_none() {
+            run.nonfinite_trial();
+        }
+        let rho = (self.cost - cost_new) / pred;
+        let accepted = rho > ACCEPTANCE;
+        if accepted {
+            run.improved();
+        }
+        let np = self.norms.len();
+        observer.iteration(&Iteration {
+            iteration: run.summary.iterations,
+            evaluations: run.summary.evaluations,
+            cost: if accepted { cost_new } else { self.cost },
+            emm_um: match (&new, accepted) {
+                (Some(v), true) => v.iter().sum::<f64>() / np as f64 * UM_PER_MM,
+                (None, true) => f64::NAN,
+                (_, false) => self.emm_um(),
+            },
+            damping: self.mu,
+            step: step_norm,
+            accepted,
+        });
+        if !accepted {
+            self.mu = (self.mu * 4.0).max(MU_FLOOR);
+            self.radius = step_norm / 4.0;
+            return if small_step {
+                Next::Stop(Termination::ParameterChange)
+            } else {
+                Next::Retry
+            };
+        }
+        let old = self.cost;
+        self.z = self.z.iter().zip(delta).map(|(a, b)| a + b).collect();
+        self.p = p_new;
+        self.norms = new.unwrap_or_default();
+        self.cost = cost_new;
+        self.adapt(rho, step_norm);
+        if small_step {
+            Next::Stop(Termination::ParameterChange)
+        } else if old - self.cost <= options.objective_tolerance * old {
+            Next::Stop(Termination::ObjectiveChange)
+        } else {
+            Next::Relinearise
+        }
+    }
+
+    /// μ and Δ after an accepted step of length `step_norm` with gain ratio `rho`: a good model
+    /// (ρ > ¾) loosens both, a poor one (ρ < ¼) tightens both.
+    fn adapt(&mut self, rho: f64, step_norm: f64) {
+        if rho > 0.75 {
+            self.mu = (self.mu / 3.0).max(MU_FLOOR);
+            self.radius = self.radius.max(3.0 * step_norm);
+        } else if rho < 0.25 {
+            self.mu *= 2.0;
+            self.radius = self.radius.min(step_norm.max(TINY));
+        }
+    }
+
+    /// The trials from one linearisation until one is accepted or the run ends.
+    fn trials(
+        &mut self,
+        lin: &Linearisation,
+        run: &mut crate::run::Run,
+        observer: &mut dyn Observer,
+    ) -> Option<Termination> {
+        let (options, k) = (self.options, self.free.n_free());
+        loop {
+            if run.summary.iterations >= options.max_iterations {
+                return Some(Termination::IterationLimit);
+            }
+            if run.summary.evaluations >= options.max_evaluations {
+                return Some(Termination::EvaluationLimit);
+            }
+            run.summary.iterations += 1;
+            // μ is relative to the scaled sub-problem (objective ≈ 1 at δ = 0).
+            let sub = Subproblem {
+                mu: self.mu,
+                radius: self.radius,
+                scale: self.cost,
+            };
+            let next = match step(options.objective, lin, k, &sub) {
+                Ok(delta) => self.trial(lin, &delta, run, observer),
+                Err(_) if self.after_failure() => Next::Retry,
+                Err(e) => Next::Stop(Termination::NumericalFailure(crate::Failure::Reported(e))),
+            };
+            match next {
+                Next::Relinearise => return None,
+                Next::Retry => {}
+                Next::Stop(t) => return Some(t),
+            }
+        }
+    }
+}
+
 impl Solver for ProxLinear {
     fn name(&self) -> &'static str {
         "clarabel"
@@ -273,137 +484,50 @@ impl Solver for ProxLinear {
         let Started {
             mut run,
             free,
-            p0: mut p,
-            norms0: mut norms,
+            p0,
+            norms0,
             ..
         } = match begin(self.name(), task, start, options) {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        let problem = &*task.problem;
-        let np = problem.n_points();
-        let k = free.n_free();
-        let objective = options.objective;
-        let mut z = vec![0.0; k];
-        let tangent = free.tangent();
-        let mut cost = objective_value(objective, &norms);
-        let ve0 = norms.iter().map(|r| r * r).sum::<f64>() / np as f64;
+        let np = task.problem.n_points();
+        let cost = objective_value(options.objective, &norms0);
+        let ve0 = norms0.iter().map(|r| r * r).sum::<f64>() / np as f64;
         // Scaled coordinates: a unit of z moves the residual vector by ~1 mm. A first step may
         // change the residuals by up to ten times their norm.
-        let mut radius = (10.0 * (np as f64 * ve0).sqrt()).max(1e-6);
-        let mu_floor = 1e-12;
-        let mut mu = options.initial_damping;
-        let termination = 'outer: loop {
-            if cost == 0.0 {
+        let radius = (10.0 * (np as f64 * ve0).sqrt()).max(1e-6);
+        let tangent = free.tangent();
+        let mut prox = Prox {
+            task,
+            options,
+            z: vec![0.0; free.n_free()],
+            free,
+            p: p0,
+            norms: norms0,
+            cost,
+            mu: options.initial_damping,
+            radius,
+        };
+        let termination = loop {
+            if prox.cost == 0.0 {
                 break Termination::Gradient;
             }
             if run.summary.evaluations >= options.max_evaluations {
                 break Termination::EvaluationLimit;
             }
-            let Some(lin) = linearise(task, &p, &tangent) else {
+            let Some(lin) = linearise(task, &prox.p, &tangent) else {
                 break Termination::NumericalFailure(crate::Failure::JacobianNotFinite(
                     crate::At::Iteration(run.summary.iterations),
                 ));
             };
             run.summary.evaluations += 1;
             run.summary.jacobian_evaluations += 1;
-            loop {
-                if run.summary.iterations >= options.max_iterations {
-                    break 'outer Termination::IterationLimit;
-                }
-                if run.summary.evaluations >= options.max_evaluations {
-                    break 'outer Termination::EvaluationLimit;
-                }
-                run.summary.iterations += 1;
-                // μ is relative to the scaled sub-problem (objective ≈ 1 at δ = 0).
-                let delta = match step(objective, &lin, k, mu, radius, cost) {
-                    Ok(d) => d,
-                    Err(e) => {
-                        // A sub-problem Clarabel cannot solve: shrink the region and retry.
-                        if mu > 1e20 || radius < 1e-300 {
-                            break 'outer Termination::NumericalFailure(crate::Failure::Reported(
-                                e,
-                            ));
-                        }
-                        mu = (mu * 10.0).max(1e-6);
-                        radius /= 4.0;
-                        continue;
-                    }
-                };
-                let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let znorm = z.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let small_step = step_norm
-                    <= options.parameter_tolerance * (znorm + options.parameter_tolerance);
-                let pred = cost - model_value(objective, &lin, k, &delta);
-                if pred <= options.objective_tolerance * cost {
-                    break 'outer if small_step {
-                        Termination::ParameterChange
-                    } else {
-                        Termination::ObjectiveChange
-                    };
-                }
-                let p_new = free.step(&p, &delta);
-                let z_new: Vec<f64> = z.iter().zip(&delta).map(|(a, b)| a + b).collect();
-                run.summary.evaluations += 1;
-                let new = crate::loss::norms(problem, &p_new);
-                let cost_new = new
-                    .as_ref()
-                    .map(|v| objective_value(objective, v))
-                    .unwrap_or(f64::INFINITY);
-                if new.is_none() {
-                    run.nonfinite_trial();
-                }
-                let rho = (cost - cost_new) / pred;
-                let accepted = rho > 1e-4;
-                if accepted {
-                    run.improved();
-                }
-                let emm_new = new
-                    .as_ref()
-                    .map(|v| v.iter().sum::<f64>() / np as f64 * 1e3)
-                    .unwrap_or(f64::NAN);
-                observer.iteration(&Iteration {
-                    iteration: run.summary.iterations,
-                    evaluations: run.summary.evaluations,
-                    cost: if accepted { cost_new } else { cost },
-                    emm_um: if accepted {
-                        emm_new
-                    } else {
-                        norms.iter().sum::<f64>() / np as f64 * 1e3
-                    },
-                    damping: mu,
-                    step: step_norm,
-                    accepted,
-                });
-                if accepted {
-                    let old = cost;
-                    p = p_new;
-                    z = z_new;
-                    norms = new.unwrap_or_default();
-                    cost = cost_new;
-                    if rho > 0.75 {
-                        mu = (mu / 3.0).max(mu_floor);
-                        radius = radius.max(3.0 * step_norm);
-                    } else if rho < 0.25 {
-                        mu *= 2.0;
-                        radius = radius.min(step_norm.max(1e-300));
-                    }
-                    if small_step {
-                        break 'outer Termination::ParameterChange;
-                    }
-                    if old - cost <= options.objective_tolerance * old {
-                        break 'outer Termination::ObjectiveChange;
-                    }
-                    break;
-                }
-                mu = (mu * 4.0).max(mu_floor);
-                radius = step_norm / 4.0;
-                if small_step {
-                    break 'outer Termination::ParameterChange;
-                }
+            if let Some(t) = prox.trials(&lin, &mut run, observer) {
+                break t;
             }
         };
-        run.finish(p, termination)
+        run.finish(prox.p, termination)
     }
 }
 

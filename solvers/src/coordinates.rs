@@ -8,6 +8,7 @@ use crate::kernels::accumulate;
 use crate::nullspace::NullSpace;
 use faer::{Mat, Side};
 use volver_core::model::Constraints;
+use volver_core::units::TINY;
 
 /// The scaled, constraint-free parametrisation `p = D (s₀ + N z)`.
 pub(crate) struct Free {
@@ -198,7 +199,7 @@ pub(crate) fn design_from_reduced(h0: &Mat<f64>) -> Option<(Vec<f64>, Mat<f64>)>
     let nf = h0.nrows();
     let dmax = (0..nf).map(|i| h0[(i, i)]).fold(0.0_f64, f64::max);
     let s0: Vec<f64> = (0..nf)
-        .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(1e-300).sqrt())
+        .map(|i| 1.0 / h0[(i, i)].max(1e-12 * dmax).max(TINY).sqrt())
         .collect();
     let hp0 = Mat::from_fn(nf, nf, |i, j| s0[i] * h0[(i, j)] * s0[j]);
     let evd = hp0.self_adjoint_eigen(Side::Lower).ok()?;

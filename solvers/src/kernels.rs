@@ -340,61 +340,85 @@ fn block_part(
         }
     }
     let Some(hbs) = out else {
-        for rho in 0..rows {
-            for j in 0..nc {
-                tb[j * rows + rho] = blk[rho * nc + j];
-            }
-        }
-        let mut rb = vec![0.0; nc * nc];
-        qr_update(&mut rb, nc, &mut tb[..rows * nc], rows);
         let g = g.pop().unwrap_or_default();
         return Some(BlockPart {
             g: vec![g],
-            factor: Some(rb),
+            factor: Some(block_factor(blk, tb, rows, nc)),
         });
     };
-    let lower = |blk: &[f64], hb: &mut [f64]| {
-        // n × rows: column ρ is row ρ of the block.
-        let jt = faer::MatRef::from_column_major_slice_with_stride(&blk[..rows * nc], n, rows, nc);
-        triangular_matmul(
-            faer::MatMut::from_column_major_slice_mut(hb, n, n),
-            BlockStructure::TriangularLower,
-            Accum::Replace,
-            jt,
-            BlockStructure::Rectangular,
-            jt.transpose(),
-            BlockStructure::Rectangular,
-            1.0,
-            Par::Seq,
-        );
-    };
-    lower(blk, &mut hbs[0]);
+    lower_product(blk, &mut hbs[0], n, rows);
     if with_design {
-        // The unweighted rows become the weighted ones, point by point (each point's rows read
-        // through `row`, which the pass no longer needs).
-        for q in 0..m {
-            let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
-            for c in 0..3 {
-                row[c * n..(c + 1) * n].copy_from_slice(&out[c * nc..c * nc + n]);
-            }
-            let r = [out[n], out[nc + n], out[2 * nc + n]];
-            let (o0, rest) = out.split_at_mut(nc);
-            let (o1, o2) = rest.split_at_mut(nc);
-            let (j0, rest) = row.split_at(n);
-            let (j1, j2) = rest.split_at(n);
-            weigh_rows(
-                weight,
-                r,
-                norm(r),
-                [j0, j1, &j2[..n]],
-                [o0, o1, o2],
-                &mut g[1],
-                false,
-            );
-        }
-        lower(blk, &mut hbs[1]);
+        reweigh_rows(weight, blk, row, m, &mut g[1]);
+        lower_product(blk, &mut hbs[1], n, rows);
     }
     Some(BlockPart { g, factor: None })
+}
+
+/// The triangular factor ((n+1)², column-major) of a block's `rows` rows of `nc` = n + 1
+/// columns in `blk` (the residual last), by a QR on columns: the rows transposed into `tb`
+/// first.
+fn block_factor(blk: &[f64], tb: &mut [f64], rows: usize, nc: usize) -> Vec<f64> {
+    for rho in 0..rows {
+        for j in 0..nc {
+            tb[j * rows + rho] = blk[rho * nc + j];
+        }
+    }
+    let mut rb = vec![0.0; nc * nc];
+    qr_update(&mut rb, nc, &mut tb[..rows * nc], rows);
+    rb
+}
+
+/// The lower triangle of a block's `J_bᵀ W_b J_b` into `hb` (n × n, column-major) from its
+/// `rows` weighted rows in `blk` (each n + 1 long, the residual last).
+fn lower_product(blk: &[f64], hb: &mut [f64], n: usize, rows: usize) {
+    let nc = n + 1;
+    // n × rows: column ρ is row ρ of the block.
+    let jt = faer::MatRef::from_column_major_slice_with_stride(&blk[..rows * nc], n, rows, nc);
+    triangular_matmul(
+        faer::MatMut::from_column_major_slice_mut(hb, n, n),
+        BlockStructure::TriangularLower,
+        Accum::Replace,
+        jt,
+        BlockStructure::Rectangular,
+        jt.transpose(),
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+}
+
+/// The block's `m` points' unweighted rows in `blk` become the rows weighted by `weight`,
+/// point by point (each point's rows read through `row`, which the pass no longer needs), and
+/// their `w Jᵀ r` added to `g`.
+fn reweigh_rows(
+    weight: &(dyn Fn(f64) -> (f64, f64) + Sync),
+    blk: &mut [f64],
+    row: &mut [f64],
+    m: usize,
+    g: &mut [f64],
+) {
+    let n = g.len();
+    let nc = n + 1;
+    for q in 0..m {
+        let out = &mut blk[3 * q * nc..3 * (q + 1) * nc];
+        for c in 0..3 {
+            row[c * n..(c + 1) * n].copy_from_slice(&out[c * nc..c * nc + n]);
+        }
+        let r = [out[n], out[nc + n], out[2 * nc + n]];
+        let (o0, rest) = out.split_at_mut(nc);
+        let (o1, o2) = rest.split_at_mut(nc);
+        let (j0, rest) = row.split_at(n);
+        let (j1, j2) = rest.split_at(n);
+        weigh_rows(
+            weight,
+            r,
+            norm(r),
+            [j0, j1, &j2[..n]],
+            [o0, o1, o2],
+            g,
+            false,
+        );
+    }
 }
 
 /// One point's weighted rows `W^½ [J | r]` under `weight(‖r‖)` written to `o` (three rows of

@@ -82,54 +82,35 @@
 //! assert!(sol.summary.reached.stats.emm_um < 1e-6 * sol.summary.initial.stats.emm_um);
 //! ```
 
+mod damping;
 mod finish;
 mod geodesic;
+pub(crate) mod irls;
+mod restrict;
+#[cfg(test)]
+mod tests;
 
-use crate::coordinates::{Free, design_from_reduced, design_of, reduce};
-use crate::kernels::{
-    accumulate, accumulate_weighted, damped_lstsq, normal_solve, sandwich, solve_spd,
-};
+use crate::coordinates::Free;
+use crate::kernels::{accumulate, accumulate_weighted, damped_lstsq, normal_solve, solve_spd};
 use crate::loss::{cost_of, norms_of, weight_of};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
 use crate::run::{Started, begin};
 use crate::summary::{At, Failure, Termination};
 use crate::{Iteration, Observer, Solution, Solver, Task};
+use damping::Damping;
 use faer::Mat;
 use geodesic::curvature_gradient;
+use irls::{Irls, Stage};
+use restrict::Restricted;
 use volver_core::problem::{Residuals, norm};
-
-/// The majorising stage of a Φ fit first hands over to Newton once a step gains less than this
-/// fraction of the cost.
-const FIRST_GAIN: f64 = 1e-3;
-
-/// A Newton stage that refuses this many trial steps in a row has been handed a point where its
-/// model fails (a residual near the kink of its norm that the optimum does not interpolate): the
-/// majorising stage resumes, to hand over at a gain a hundred times smaller.
-const NEWTON_REFUSALS: usize = 2;
-
-/// A refused Newton step counts towards [`NEWTON_REFUSALS`] when the decrease it predicted was
-/// above this share of the cost.
-const NEWTON_FAILURE_SHARE: f64 = 1e-9;
-
-/// The smallest hand-over gain: from there on the Newton stage runs to the end.
-const MAJORISING_GAIN: f64 = 1e-6;
-
-/// A Φ fit with scalar residuals (ranges alone, whose module is the absolute value: an L1
-/// fit) starts its Newton stage at ε = this × [`Options::irls_initial_epsilon`] × Φ and, each
-/// time it converges there, goes on from that optimum with ε this much smaller, down to
-/// [`SCALAR_FINAL_EPSILON`] × Φ (or [`Options::irls_final_epsilon`] × Φ when that is larger):
-/// a scalar residual's exact curvature is ε²/(r² + ε²)^³ᐟ²,
-/// so a Newton model at the final ε straight away sees only the points already within ε of
-/// zero, and the damped steps crawl.
-const CONTINUATION: f64 = 0.1;
-
-/// A Φ fit with scalar residuals ends its continuation at ε = this × Φ when
-/// [`Options::irls_final_epsilon`] is smaller: Φ_ε − Φ ≤ ε, so Φ is then exact to 1e-6 relative
-/// (every finer stage costs some thirty damped steps on test 4's ranges and moves Φ by less).
-const SCALAR_FINAL_EPSILON: f64 = 1e-6;
+use volver_core::units::UM_PER_MM;
 
 /// Gauss–Newton refinements of a converged least-squares fit, at most.
 const REFINEMENTS: usize = 100;
+
+/// A trial step is accepted when it lowers the cost by more than this share of the decrease
+/// its model predicted (the gain ratio ρ).
+const ACCEPTANCE: f64 = 1e-4;
 
 /// The native engine (always available), with the settings only it reads; the criteria every
 /// engine shares are in [`Options`].
@@ -189,53 +170,29 @@ impl LevenbergMarquardt {
     }
 }
 
-/// The model of the cost a step uses (see the module documentation).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Stage {
-    /// Φ's majorising stage: every point with its full curvature, ε following Φ.
-    Majorising,
-    /// The exact Gauss–Newton model (Triggs-corrected for Φ); least squares' only stage.
-    Newton,
-}
-
-/// A Jacobian pass restricted to the directions steps may take: the free coordinates' normal
-/// equations, the span of the identifiable design directions and the damping's scaling.
-struct Restricted {
-    /// `H_z = Nᵀ D H D N` and `g_z = Nᵀ D g` in the free coordinates.
-    hz: Mat<f64>,
-    gz: Vec<f64>,
-    /// The identifiable span (free coordinates × its dimension); `None`: all of z.
-    q: Option<Mat<f64>>,
-    /// The scaling `S = M^-½` of the span's coordinates (Moré's M).
-    sc: Vec<f64>,
-    /// `S H_q S` and `S g_q`.
-    hp: Mat<f64>,
-    gp: Vec<f64>,
-    /// Least squares: `R_z = R D N`, `R' = R_z Q S` and `c` (see [`crate::kernels::Factor`]).
-    factor: Option<(Mat<f64>, Mat<f64>, Vec<f64>)>,
-}
-
-impl Restricted {
-    /// From the span's scaled coordinates back to z.
-    fn to_z(&self, y: &[f64]) -> Vec<f64> {
-        let y: Vec<f64> = y.iter().zip(&self.sc).map(|(y, s)| y * s).collect();
-        match &self.q {
-            None => y,
-            Some(q) => {
-                let (nf, nr) = (q.nrows(), q.ncols());
-                (0..nf)
-                    .map(|k| (0..nr).map(|c| q[(k, c)] * y[c]).sum())
-                    .collect()
-            }
-        }
-    }
-}
-
 /// A trial step: the step in z (velocity plus half the acceleration) and the damped system's
 /// velocity alone, for the predicted decrease.
 struct Trial {
     total: Vec<f64>,
     delta: Vec<f64>,
+}
+
+/// The damped system's solution at one λ: the velocity `y` in the span's scaled coordinates,
+/// the least-squares factor `R_λ` when the pass has one, and the damped normal matrix (the
+/// Cholesky route's, and the acceleration's without a factor).
+struct Velocity {
+    y: Vec<f64>,
+    lsq: Option<(Vec<f64>, Mat<f64>)>,
+    damped: Mat<f64>,
+}
+
+/// A trial point: its parameters, its distance from the start in z, its residual modules and
+/// its cost.
+struct Candidate {
+    p: Vec<f64>,
+    z: Vec<f64>,
+    norms: Vec<f64>,
+    cost: f64,
 }
 
 /// What became of a trial step.
@@ -250,7 +207,8 @@ enum Verdict {
 /// iteration is a [`Lm::jacobian_pass`], its [`Lm::restrict`]ion to the identifiable directions,
 /// then [`Lm::trial_step`]s, each [`Lm::judge`]d (accepted or refused) until one is accepted or
 /// a criterion stops the run; [`Lm::next_stage`] changes the IRLS stage of a Φ fit and
-/// [`Lm::refine`] polishes a converged least-squares fit.
+/// [`Lm::refine`] polishes a converged least-squares fit. The damping and the IRLS schedule are
+/// states of their own ([`Damping`], [`Irls`]).
 struct Lm<'t, 'a, 'o> {
     run: crate::run::Run<'t, 'a>,
     problem: &'t (dyn Residuals + 'a),
@@ -262,25 +220,17 @@ struct Lm<'t, 'a, 'o> {
     /// directions (a diagonal damping in z has no meaning).
     dense_rows: bool,
     /// The parameters, the step's distance from the start in the scaled free coordinates, and
-    /// the residual modules at p.
+    /// the residual modules at p (mm).
     p: Vec<f64>,
     z: Vec<f64>,
     norms: Vec<f64>,
-    stage: Stage,
-    eps: f64,
-    /// Whether some residuals are scalar ([`Residuals::scalar`]), and the Newton stage's ε as a
-    /// fraction of Φ (see [`CONTINUATION`]).
-    scalar: bool,
-    fraction: f64,
+    /// The IRLS stage and ε.
+    irls: Irls,
     cost: f64,
-    /// The first cost (the gradient test's scale) and Φ at the start.
+    /// The first cost (the gradient test's scale) and Φ at the start (mm).
     cost0: f64,
     phi0: f64,
-    lambda: f64,
-    nu: f64,
-    /// The majorising stage's hand-over gain, and the Newton stage's refused trials in a row.
-    gain: f64,
-    refused: usize,
+    damping: Damping,
     /// The design's curvatures and directions in z, how many times it was computed, and
     /// whether the next pass recomputes it (a new IRLS stage).
     design: (Vec<f64>, Mat<f64>),
@@ -321,8 +271,9 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         let objective = options.objective;
         let np = norms0.len();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
-        let eps = (options.irls_initial_epsilon * phi0).max(1e-300);
-        let cost = cost_of(objective, &norms0, eps);
+        let scalar = (0..task.problem.n_points()).any(|i| task.problem.scalar(i));
+        let irls = Irls::new(options, scalar, phi0);
+        let cost = cost_of(objective, &norms0, irls.eps());
         // A gauge's rows are dense combinations of every parameter, so the free coordinates z
         // mix them all and a diagonal damping in z has no meaning (measured on test 3: 214
         // iterations instead of 42). Steps are then taken in the design's directions, as when
@@ -343,21 +294,11 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             dense_rows,
             p: p0,
             norms: norms0,
-            stage: if objective == Objective::Ve {
-                Stage::Newton
-            } else {
-                Stage::Majorising
-            },
-            eps,
-            scalar: (0..task.problem.n_points()).any(|i| task.problem.scalar(i)),
-            fraction: options.irls_final_epsilon,
+            irls,
             cost,
             cost0: cost,
             phi0,
-            lambda: options.initial_damping,
-            nu: 2.0,
-            gain: FIRST_GAIN,
-            refused: 0,
+            damping: Damping::new(options.initial_damping),
             design: (Vec::new(), Mat::new()),
             design_generation: 0,
             refresh: false,
@@ -377,10 +318,9 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         self.norms.iter().sum::<f64>() / self.np() as f64
     }
 
-    /// A point's weight and radial reduction in the current stage's model.
-    fn weight(&self, r: f64) -> (f64, f64) {
-        let (w, c) = weight_of(self.objective, r, self.eps, self.np());
-        (w, if self.stage == Stage::Newton { c } else { 0.0 })
+    /// The cost at the current point under the current ε (after ε changed).
+    fn recost(&mut self) {
+        self.cost = cost_of(self.objective, &self.norms, self.irls.eps());
     }
 
     /// The progress report of a trial.
@@ -389,7 +329,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             iteration: self.run.summary.iterations,
             evaluations: self.run.summary.evaluations,
             cost: self.cost,
-            emm_um: self.phi() * 1e3,
+            emm_um: self.phi() * UM_PER_MM,
             damping,
             step,
             accepted,
@@ -401,7 +341,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// The gradient test (Newton stage only): the largest scaled gradient component below
     /// `gradient_tolerance` of the first cost.
     fn gradient_converged(&self, gmax: f64) -> bool {
-        self.stage == Stage::Newton
+        self.irls.stage() == Stage::Newton
             && (self.cost == 0.0 || gmax <= self.options.gradient_tolerance * self.cost0)
     }
 
@@ -433,31 +373,14 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// smoothing moves Φ by up to ε: a stage has converged once its steps gain far less, and
     /// the next, smaller ε takes over).
     fn objective_tolerance(&self) -> f64 {
-        if self.scalar && self.objective == Objective::Phi {
-            self.options.objective_tolerance.max(1e-3 * self.fraction)
-        } else {
-            self.options.objective_tolerance
-        }
+        self.irls
+            .objective_tolerance(self.options.objective_tolerance)
     }
 
     /// Whether the majorising stage has slowed down: an accepted step from `old` gained less
-    /// than the hand-over gain ([`FIRST_GAIN`], then down to [`MAJORISING_GAIN`]) of the cost.
+    /// than the hand-over gain of the cost ([`Irls::majorising_slowed`]).
     fn majorising_slowed(&self, old: f64) -> bool {
-        old - self.cost <= self.gain * old
-    }
-
-    /// Whether the Newton stage has failed where it was handed the point and the majorising
-    /// stage may resume ([`NEWTON_REFUSALS`] refused trials in a row, a hand-over gain left).
-    fn newton_failed(&self) -> bool {
-        self.stage == Stage::Newton
-            && self.objective == Objective::Phi
-            && self.refused >= NEWTON_REFUSALS
-            && self.gain > MAJORISING_GAIN
-    }
-
-    /// The damping has grown past any use.
-    fn damping_exhausted(&self) -> bool {
-        !self.lambda.is_finite() || self.lambda > 1e30
+        self.irls.majorising_slowed(old, self.cost)
     }
 
     // The named steps.
@@ -487,37 +410,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         };
         let refresh = self.refresh && self.objective == Objective::Phi;
         self.refresh = false;
-        if self.stage == Stage::Majorising {
-            self.eps = (self.options.irls_initial_epsilon * self.phi()).max(1e-300);
-            self.cost = cost_of(self.objective, &self.norms, self.eps);
+        if self.irls.follow(self.phi()) {
+            self.recost();
         }
-        let this = &*self;
-        let weighted = |r: f64| this.weight(r);
-        let (design, normal) = if refresh {
-            // A new stage: its design (unweighted) and its equations from one pass, then the
-            // design decomposed.
-            let both = accumulate_weighted(this.problem, &this.p, &weighted, true, false);
-            match both {
-                Some(mut both) => {
-                    let normal = both.pop();
-                    let plain = both.pop().map(|plain| plain.h);
-                    (plain.map(|h| design_of(&this.free, &h)), normal)
-                }
-                None => (None, None),
-            }
-        } else {
-            rayon::join(
-                || pending.as_ref().map(|h| design_of(&this.free, h)),
-                || {
-                    accumulate(
-                        this.problem,
-                        &this.p,
-                        weighted,
-                        this.objective == Objective::Ve,
-                    )
-                },
-            )
-        };
+        let (design, normal) = self.weighted_pass(refresh, pending.as_ref());
         let Some(normal) = normal else {
             return Err(Termination::NumericalFailure(Failure::JacobianNotFinite(
                 At::Iteration(iterations),
@@ -532,103 +428,48 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         Ok(normal)
     }
 
-    /// The pass reduced to the free coordinates, the gradient test, and the restriction to the
-    /// identifiable directions with Moré's scaling.
-    fn restrict(&mut self, normal: crate::kernels::Normal) -> Result<Restricted, Termination> {
-        let iterations = self.run.summary.iterations;
-        let n = self.problem.n_params();
-        let nf = self.free.n_free();
-        // Reduce to the free coordinates: Hz = Nᵀ D H D N, gz = Nᵀ D g.
-        let dv = &self.free.d;
-        let basis = self.free.ns.basis();
-        let (hz, gz) = reduce(dv, basis, &normal.h, Some(&normal.g));
-        let gmax = gz.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        if self.gradient_converged(gmax) {
-            return Err(Termination::Gradient);
-        }
-        // Directions whose design curvature is below rank_tolerance × the largest are not
-        // identifiable from the data: steps stay in the span q of the others. The
-        // Gauss–Newton model neglects Σ r_i ∇²r_i, which grows with the residuals: once Φ is
-        // below 1e-4 Φ_start (a nearly exact fit, where that model is exact too) the
-        // tolerance relaxes in proportion, so such a fit may use every direction.
-        let tolerance = self.settings.rank_tolerance * (1e4 * self.phi() / self.phi0).min(1.0);
-        if self.objective == Objective::Ve {
-            // Uniform weights: the current matrix is the design.
-            self.design = design_from_reduced(&hz).ok_or({
-                Termination::NumericalFailure(Failure::Decomposition {
-                    matrix: "the normal matrix",
-                    at: At::Iteration(iterations),
-                })
-            })?;
-            self.design_generation += 1;
-        }
-        let (mu0, dirs0) = (&self.design.0, &self.design.1);
-        let mu0_max = mu0[nf - 1].max(0.0);
-        // A zero tolerance holds nothing (not even a direction whose curvature rounds to ≤ 0).
-        let keep: Vec<usize> = (0..nf)
-            .filter(|&i| tolerance == 0.0 || mu0[i] > tolerance * mu0_max)
-            .collect();
-        self.run.summary.unidentifiable = nf - keep.len();
-        let q = (keep.len() < nf || self.dense_rows)
-            .then(|| Mat::from_fn(nf, keep.len(), |k, c| dirs0[(k, keep[c])]));
-        let (hq, gq) = match &q {
-            None => (hz.clone(), gz.clone()),
-            Some(q) => {
-                let hq = sandwich(hz.as_ref(), q.as_ref());
-                let gq: Vec<f64> = (0..q.ncols())
-                    .map(|c| (0..nf).map(|k| q[(k, c)] * gz[k]).sum())
-                    .collect();
-                (hq, gq)
+    /// The pass itself: the weighted normal equations at p and, when asked, a design (the
+    /// unweighted equations of this very pass when `refresh`, else the `pending` matrix
+    /// decomposed on the other threads); `None` where a decomposition or the pass failed.
+    #[allow(clippy::type_complexity)]
+    fn weighted_pass(
+        &self,
+        refresh: bool,
+        pending: Option<&Mat<f64>>,
+    ) -> (
+        Option<Option<(Vec<f64>, Mat<f64>)>>,
+        Option<crate::kernels::Normal>,
+    ) {
+        let np = self.np();
+        let weighted = |r: f64| self.irls.weight(r, np);
+        if refresh {
+            // A new stage: its design (unweighted) and its equations from one pass, then the
+            // design decomposed.
+            let both = accumulate_weighted(self.problem, &self.p, &weighted, true, false);
+            match both {
+                Some(mut both) => {
+                    let normal = both.pop();
+                    let plain = both.pop().map(|plain| plain.h);
+                    (
+                        plain.map(|h| crate::coordinates::design_of(&self.free, &h)),
+                        normal,
+                    )
+                }
+                None => (None, None),
             }
-        };
-        // Damping: λ M with M the diagonal of the largest diag(H) seen in the step's
-        // coordinates (Moré's scaling, as MINPACK: it never shrinks, so a parameter whose
-        // column fades as the fit runs into a flat region is still damped at its earlier
-        // scale). The maximum runs while the coordinates stay the same: z, or the span q of
-        // the identifiable design directions until the design is refreshed (every iteration
-        // for ve, every IRLS stage for Φ); a new IRLS stage also restarts it (a new cost).
-        let nr = gq.len();
-        let coords = q.as_ref().map(|_| (self.design_generation, nr));
-        if self.reset_scale || coords != self.scale_coords || self.dmax.len() != nr {
-            self.reset_scale = false;
-            self.scale_coords = coords;
-            self.dmax = vec![0.0; nr];
+        } else {
+            rayon::join(
+                || pending.map(|h| crate::coordinates::design_of(&self.free, h)),
+                || {
+                    accumulate(
+                        self.problem,
+                        &self.p,
+                        weighted,
+                        self.objective == Objective::Ve,
+                    )
+                },
+            )
         }
-        for (i, v) in self.dmax.iter_mut().enumerate() {
-            *v = (*v).max(hq[(i, i)]);
-        }
-        // A direction the data have never seen is damped at unit scale (MINPACK's rule); no
-        // floor relative to the others, whose curvatures may legitimately span 10²⁰ along
-        // the path of a strongly nonlinear model (MGH10).
-        // Scaled by S = M^-½: H' = S H S, g' = S g, and the damping is λ I.
-        let sc: Vec<f64> = self
-            .dmax
-            .iter()
-            .map(|&v| 1.0 / if v > 0.0 { v } else { 1.0 }.sqrt())
-            .collect();
-        let hp = Mat::from_fn(nr, nr, |i, j| sc[i] * hq[(i, j)] * sc[j]);
-        let gp: Vec<f64> = (0..nr).map(|i| sc[i] * gq[i]).collect();
-        // Least squares: the factor in the same coordinates, R_z = R D N and R' = R_z Q S,
-        // so that each step solves min ‖R' y + c‖² + λ‖y‖² by QR.
-        let factor = normal.factor.map(|f| {
-            let rd = Mat::from_fn(n, n, |i, j| f.r[(i, j)] * dv[j]);
-            let rz = &rd * basis;
-            let rq = match &q {
-                None => rz.clone(),
-                Some(q) => &rz * q,
-            };
-            let rps = Mat::from_fn(n, nr, |i, j| rq[(i, j)] * sc[j]);
-            (rz, rps, f.c)
-        });
-        Ok(Restricted {
-            hz,
-            gz,
-            q,
-            sc,
-            hp,
-            gp,
-            factor,
-        })
     }
 
     /// The damped step at the current λ, corrected by geodesic acceleration when asked;
@@ -638,16 +479,36 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         r: &Restricted,
         observer: &mut dyn Observer,
     ) -> Result<Option<Trial>, Termination> {
-        let iterations = self.run.summary.iterations;
+        let velocity = self.velocity(r);
+        let delta = r.to_z(&velocity.y);
+        if delta.iter().any(|v| !v.is_finite()) {
+            return Err(Termination::NumericalFailure(Failure::StepNotFinite(
+                At::Iteration(self.run.summary.iterations),
+            )));
+        }
+        let mut total = delta.clone();
+        if self.settings.geodesic_acceleration {
+            let Some(a) = self.acceleration(r, &velocity, &delta, observer)? else {
+                return Ok(None);
+            };
+            for (t, a) in total.iter_mut().zip(a) {
+                *t += 0.5 * a;
+            }
+        }
+        Ok(Some(Trial { total, delta }))
+    }
+
+    /// The damped system `(H' + λ I) y = −g'` solved at the current λ: with the factor, the QR
+    /// of `[R'; √λ I]` (whose `R_λ` also gives `(H' + λI)⁻¹` for the acceleration); else
+    /// Cholesky of the damped normal matrix (an SVD pseudo-inverse if it fails; NaN where both
+    /// fail).
+    fn velocity(&self, r: &Restricted) -> Velocity {
         let nr = r.gp.len();
-        let lambda = self.lambda;
-        // Cholesky of the damped system (an SVD pseudo-inverse if it fails).
+        let lambda = self.damping.lambda();
         let damped = Mat::from_fn(nr, nr, |i, j| {
             r.hp[(i, j)] + if i == j { lambda } else { 0.0 }
         });
         let rhs: Vec<f64> = r.gp.iter().map(|g| -g).collect();
-        // With the factor: the QR of [R'; √λ I], whose R_λ also gives (H' + λI)⁻¹ for the
-        // acceleration; else Cholesky of the damped normal matrix.
         let lsq = r
             .factor
             .as_ref()
@@ -656,69 +517,69 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             Some((y, _)) => y.clone(),
             None => solve_spd(&damped, &rhs).unwrap_or_else(|| vec![f64::NAN; nr]),
         };
-        let delta = r.to_z(&y);
-        if delta.iter().any(|v| !v.is_finite()) {
-            return Err(Termination::NumericalFailure(Failure::StepNotFinite(
-                At::Iteration(iterations),
-            )));
+        Velocity { y, lsq, damped }
+    }
+
+    /// Geodesic acceleration of the velocity `delta` (z): `a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ)` in
+    /// z; `Ok(None)` (a refused trial, λ grown) when `2‖a‖ > α‖δ‖` in the damping norm, α =
+    /// [`ACCELERATION_RATIO`].
+    fn acceleration(
+        &mut self,
+        r: &Restricted,
+        velocity: &Velocity,
+        delta: &[f64],
+        observer: &mut dyn Observer,
+    ) -> Result<Option<Vec<f64>>, Termination> {
+        let iterations = self.run.summary.iterations;
+        let nr = r.gp.len();
+        let ynorm = velocity.y.iter().map(|v| v * v).sum::<f64>().sqrt();
+        let accel = (ynorm > 0.0)
+            .then(|| {
+                curvature_gradient(
+                    self.problem,
+                    &self.free,
+                    &self.p,
+                    delta,
+                    self.objective,
+                    self.irls.eps(),
+                )
+            })
+            .flatten();
+        self.run.summary.evaluations += 1;
+        self.run.summary.jacobian_evaluations += 1;
+        let Some(bz) = accel else {
+            return Err(Termination::NumericalFailure(
+                Failure::SecondDerivativeNotFinite(At::Iteration(iterations)),
+            ));
+        };
+        let nf = self.free.n_free();
+        let bq: Vec<f64> = match &r.q {
+            None => bz,
+            Some(q) => (0..nr)
+                .map(|c| (0..nf).map(|k| q[(k, c)] * bz[k]).sum())
+                .collect(),
+        };
+        let rhs: Vec<f64> = bq.iter().zip(&r.sc).map(|(b, s)| -b * s).collect();
+        let ya = match &velocity.lsq {
+            Some((_, rl)) => normal_solve(rl, &rhs),
+            None => solve_spd(&velocity.damped, &rhs),
         }
-        // Geodesic acceleration: a = −(H + λM)⁻¹ Jᵀ W r''(δ, δ); the step is δ + a/2,
-        // refused (as a failed step) when 2‖a‖ > α‖δ‖ in the damping norm.
-        let mut total = delta.clone();
-        if self.settings.geodesic_acceleration {
-            let ynorm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
-            let accel = (ynorm > 0.0)
-                .then(|| {
-                    curvature_gradient(
-                        self.problem,
-                        &self.free,
-                        &self.p,
-                        &delta,
-                        self.objective,
-                        self.eps,
-                    )
-                })
-                .flatten();
-            self.run.summary.evaluations += 1;
-            self.run.summary.jacobian_evaluations += 1;
-            let Some(bz) = accel else {
+        .unwrap_or_else(|| vec![f64::NAN; nr]);
+        let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
+        // A NaN ratio refuses the step too.
+        let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
+        if !small_enough {
+            let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+            self.report(observer, self.damping.lambda(), step, false);
+            self.damping.rejected();
+            if self.damping.exhausted() {
                 return Err(Termination::NumericalFailure(
-                    Failure::SecondDerivativeNotFinite(At::Iteration(iterations)),
+                    Failure::AccelerationRefusedEveryStep(At::Iteration(iterations)),
                 ));
-            };
-            let nf = self.free.n_free();
-            let bq: Vec<f64> = match &r.q {
-                None => bz,
-                Some(q) => (0..nr)
-                    .map(|c| (0..nf).map(|k| q[(k, c)] * bz[k]).sum())
-                    .collect(),
-            };
-            let rhs: Vec<f64> = bq.iter().zip(&r.sc).map(|(b, s)| -b * s).collect();
-            let ya = match &lsq {
-                Some((_, rl)) => normal_solve(rl, &rhs),
-                None => solve_spd(&damped, &rhs),
             }
-            .unwrap_or_else(|| vec![f64::NAN; nr]);
-            let anorm = ya.iter().map(|v| v * v).sum::<f64>().sqrt();
-            // A NaN ratio refuses the step too.
-            let small_enough = 2.0 * anorm <= ACCELERATION_RATIO * ynorm;
-            if !small_enough {
-                let step = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
-                self.report(observer, self.lambda, step, false);
-                self.lambda *= self.nu;
-                self.nu *= 2.0;
-                if self.damping_exhausted() {
-                    return Err(Termination::NumericalFailure(
-                        Failure::AccelerationRefusedEveryStep(At::Iteration(iterations)),
-                    ));
-                }
-                return Ok(None);
-            }
-            for (t, a) in total.iter_mut().zip(r.to_z(&ya)) {
-                *t += 0.5 * a;
-            }
+            return Ok(None);
         }
-        Ok(Some(Trial { total, delta }))
+        Ok(Some(r.to_z(&ya)))
     }
 
     /// Evaluates a trial and accepts or refuses it on the gain ratio, then applies the stopping
@@ -729,82 +590,89 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         trial: Trial,
         observer: &mut dyn Observer,
     ) -> Result<Verdict, Termination> {
-        let n = self.problem.n_params();
-        let nf = self.free.n_free();
         let Trial { total, delta } = trial;
         let step = total.iter().map(|v| v * v).sum::<f64>().sqrt();
         let small_step = self.small_step(step);
-        // Predicted decrease of the quadratic model along δ (the velocity; the acceleration
-        // only bends the path): from the factor, −(cᵀv + ½‖v‖²) with v = R_z δ, else from H_z
-        // and g_z.
-        let pred = match &r.factor {
-            Some((rz, _, c)) => {
-                let v: Vec<f64> = (0..n)
-                    .map(|i| (0..nf).map(|k| rz[(i, k)] * delta[k]).sum())
-                    .collect();
-                -(0..n).map(|i| c[i] * v[i] + 0.5 * v[i] * v[i]).sum::<f64>()
-            }
-            None => {
-                let hd: Vec<f64> = (0..nf)
-                    .map(|i| (0..nf).map(|j| r.hz[(i, j)] * delta[j]).sum())
-                    .collect();
-                -(0..nf)
-                    .map(|i| r.gz[i] * delta[i] + 0.5 * delta[i] * hd[i])
-                    .sum::<f64>()
-            }
-        };
-        let p_new = self.free.step(&self.p, &total);
-        let z_new: Vec<f64> = self.z.iter().zip(&total).map(|(a, b)| a + b).collect();
-        let norms_new = norms_of(self.problem, &p_new);
+        let pred = r.predicted_decrease(&delta);
+        let p = self.free.step(&self.p, &total);
+        let z: Vec<f64> = self.z.iter().zip(&total).map(|(a, b)| a + b).collect();
+        let norms = norms_of(self.problem, &p);
         self.run.summary.evaluations += 1;
-        let cost_new = cost_of(self.objective, &norms_new, self.eps);
-        if !cost_new.is_finite() {
+        let cost = cost_of(self.objective, &norms, self.irls.eps());
+        if !cost.is_finite() {
             self.run.nonfinite_trial();
         }
-        let rho = if cost_new.is_finite() && pred > 0.0 {
-            (self.cost - cost_new) / pred
+        let rho = if cost.is_finite() && pred > 0.0 {
+            (self.cost - cost) / pred
         } else {
             -1.0
         };
-        let accepted = rho > 1e-4;
-        if !accepted {
-            self.report(observer, self.lambda, step, false);
-            self.lambda *= self.nu;
-            self.nu *= 2.0;
-            // Only a refusal of a decrease well above the cost's rounding counts: near the
-            // optimum refusals are how the damping finds the rounding.
-            if pred > NEWTON_FAILURE_SHARE * self.cost {
-                self.refused += 1;
-            }
-            if self.newton_failed() {
-                self.majorising_again();
-                return Ok(Verdict::NextPass);
-            }
-            let rounding = self.within_rounding(pred, self.cost - cost_new);
-            if small_step || rounding || self.damping_exhausted() {
-                if self.stage == Stage::Newton {
-                    return Err(if rounding {
-                        Termination::ObjectiveChange
-                    } else {
-                        Termination::ParameterChange
-                    });
-                }
-                self.next_stage(true);
-                return Ok(Verdict::NextPass);
-            }
-            return Ok(Verdict::Retry);
+        if rho > ACCEPTANCE {
+            let candidate = Candidate { p, z, norms, cost };
+            self.accept(candidate, rho, step, small_step, observer)
+        } else {
+            self.refuse(pred, cost, step, small_step, observer)
         }
+    }
+
+    /// A refused trial (predicted decrease `pred`, cost measured `cost_new`, length `step`):
+    /// more damping and another trial, unless the Newton stage failed (the majorising stage
+    /// resumes), the step was small, the change within the cost's rounding or the damping
+    /// exhausted (the run stops in the Newton stage; the majorising stage hands over).
+    fn refuse(
+        &mut self,
+        pred: f64,
+        cost_new: f64,
+        step: f64,
+        small_step: bool,
+        observer: &mut dyn Observer,
+    ) -> Result<Verdict, Termination> {
+        self.report(observer, self.damping.lambda(), step, false);
+        self.damping.rejected();
+        // Only a refusal of a decrease well above the cost's rounding counts: near the
+        // optimum refusals are how the damping finds the rounding.
+        self.irls.refused(pred, self.cost);
+        if self.irls.newton_failed() {
+            self.majorising_again();
+            return Ok(Verdict::NextPass);
+        }
+        let rounding = self.within_rounding(pred, self.cost - cost_new);
+        if small_step || rounding || self.damping.exhausted() {
+            if self.irls.stage() == Stage::Newton {
+                return Err(if rounding {
+                    Termination::ObjectiveChange
+                } else {
+                    Termination::ParameterChange
+                });
+            }
+            self.next_stage(true);
+            return Ok(Verdict::NextPass);
+        }
+        Ok(Verdict::Retry)
+    }
+
+    /// An accepted trial (gain ratio `rho`, length `step`): the point moves, λ follows
+    /// Nielsen's rule, then the Newton stage's parameter- and objective-change tests, or the
+    /// majorising stage's hand-over.
+    fn accept(
+        &mut self,
+        candidate: Candidate,
+        rho: f64,
+        step: f64,
+        small_step: bool,
+        observer: &mut dyn Observer,
+    ) -> Result<Verdict, Termination> {
         self.run.improved();
-        self.refused = 0;
+        self.irls.accepted();
         let old = self.cost;
-        self.p = p_new;
-        self.z = z_new;
-        self.norms = norms_new;
-        self.cost = cost_new;
-        self.report(observer, self.lambda, step, true);
-        self.lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
-        self.nu = 2.0;
-        match self.stage {
+        let Candidate { p, z, norms, cost } = candidate;
+        self.p = p;
+        self.z = z;
+        self.norms = norms;
+        self.cost = cost;
+        self.report(observer, self.damping.lambda(), step, true);
+        self.damping.accepted(rho);
+        match self.irls.stage() {
             Stage::Newton if small_step => Err(Termination::ParameterChange),
             Stage::Newton if self.small_change(old) => Err(Termination::ObjectiveChange),
             Stage::Majorising if small_step || self.majorising_slowed(old) => {
@@ -816,57 +684,39 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         }
     }
 
-    /// Φ's Newton stage begins: ε = irls_final_epsilon · Φ, the design refreshed and Moré's
-    /// scaling restarted at the next pass; `restart_damping` when the majorising stage ended
-    /// on refused steps.
+    /// Φ's Newton stage begins ([`Irls::hand_over`]), the design refreshed and Moré's scaling
+    /// restarted at the next pass; `restart_damping` when the majorising stage ended on refused
+    /// steps.
     fn next_stage(&mut self, restart_damping: bool) {
-        self.stage = Stage::Newton;
-        self.refused = 0;
-        let last = self.options.irls_final_epsilon;
-        self.fraction = if self.scalar {
-            (self.options.irls_initial_epsilon * CONTINUATION).max(last)
-        } else {
-            last
-        };
-        self.eps = (self.fraction * self.phi()).max(1e-300);
+        self.irls.hand_over(self.phi());
         self.refresh = true;
         self.reset_scale = true;
-        self.cost = cost_of(self.objective, &self.norms, self.eps);
+        self.recost();
         if restart_damping {
-            self.lambda = self.options.initial_damping;
-            self.nu = 2.0;
+            self.damping.restart();
         }
     }
 
     /// A Φ fit with scalar residuals whose Newton stage converged above the final ε goes on
-    /// from there with ε [`CONTINUATION`] times smaller (the damping kept); `false` when ε is
+    /// from there with a smaller ε ([`Irls::shrink`], the damping kept); `false` when ε is
     /// already the final one, or for any other fit.
     fn shrink_epsilon(&mut self) -> bool {
-        let last = self.options.irls_final_epsilon.max(SCALAR_FINAL_EPSILON);
-        if self.stage != Stage::Newton || self.objective != Objective::Phi || self.fraction <= last
-        {
+        if !self.irls.shrink(self.phi()) {
             return false;
         }
-        self.fraction = (self.fraction * CONTINUATION).max(last);
-        self.eps = (self.fraction * self.phi()).max(1e-300);
-        self.cost = cost_of(self.objective, &self.norms, self.eps);
-        self.refused = 0;
+        self.recost();
         true
     }
 
-    /// Φ's majorising stage resumes (the Newton stage failed where it was handed the point),
-    /// to hand over at a gain a hundred times smaller: ε back to irls_initial_epsilon · Φ, the
-    /// design refreshed, Moré's scaling and the damping restarted.
+    /// Φ's majorising stage resumes (the Newton stage failed where it was handed the point,
+    /// [`Irls::back_to_majorising`]): the design refreshed, Moré's scaling and the damping
+    /// restarted.
     fn majorising_again(&mut self) {
-        self.stage = Stage::Majorising;
-        self.gain = (self.gain * 1e-2).max(MAJORISING_GAIN);
-        self.refused = 0;
-        self.eps = (self.options.irls_initial_epsilon * self.phi()).max(1e-300);
-        self.cost = cost_of(self.objective, &self.norms, self.eps);
+        self.irls.back_to_majorising(self.phi());
+        self.recost();
         self.refresh = true;
         self.reset_scale = true;
-        self.lambda = self.options.initial_damping;
-        self.nu = 2.0;
+        self.damping.restart();
     }
 }
 

@@ -40,14 +40,19 @@
 //! # }
 //! ```
 
+use crate::coordinates::Free;
+use crate::lm::irls::Continuation;
 use crate::loss::{cost_and_gradient, cost_of, norms};
 use crate::options::{Objective, Options};
 use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::nlopt as nl;
+use faer::Mat;
 use std::cell::RefCell;
 use std::panic::{AssertUnwindSafe, catch_unwind};
+use volver_core::problem::Residuals;
+use volver_core::units::UM_PER_MM;
 
 /// NLopt algorithms volver offers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,6 +84,7 @@ impl Nlopt {
 
 /// What the objective callback tracks between calls.
 struct State<'o> {
+    /// The current smoothing (mm).
     eps: f64,
     /// NLopt sees cost / scale (the cost at the start of the run), so that its absolute
     /// internal tests (L-BFGS' gradient norm) stay meaningful as the cost falls by decades.
@@ -146,228 +152,347 @@ impl Solver for Nlopt {
             Err(solution) => return *solution,
         };
         let problem = &*task.problem;
-        let n = start.len();
         let np = problem.n_points();
-        let nf = free.n_free();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
-        let objective = options.objective;
-        let eps_final = |phi: f64| (options.irls_final_epsilon * phi).max(1e-300);
-        let d = &free.d;
-        let slsqp = self.algorithm == Algorithm::Slsqp;
-        // SLSQP's variables: s = p / D (every parameter); the others': z.
-        let tangent = free.tangent();
-        let params_of = |x: &[f64]| -> Vec<f64> {
-            if slsqp {
-                let mut p: Vec<f64> = x.iter().zip(d).map(|(s, d)| s * d).collect();
-                for &(j, v) in &free.fixed {
-                    p[j] = v;
-                }
-                p
-            } else {
-                free.params(x)
+        let vars = Variables {
+            free: &free,
+            slsqp: self.algorithm == Algorithm::Slsqp,
+            tangent: free.tangent(),
+        };
+        let callback = Callback {
+            problem,
+            objective: options.objective,
+            vars: &vars,
+            state: RefCell::new(State {
+                eps: Continuation::new(options, phi0).eps(),
+                scale: 1.0,
+                calls: 0,
+                gradients: 0,
+                best: f64::INFINITY,
+                nonfinite: None,
+                edge: Default::default(),
+                observer,
+            }),
+        };
+        let mut x = vars.start(&p0);
+        let rows = equality_rows(task, &free.d);
+        let base = run.summary.evaluations;
+        let termination = self.stages(&callback, &mut x, options, (&rows, base, phi0));
+        let st = callback.state.into_inner();
+        run.summary.iterations = st.calls;
+        run.summary.evaluations = base + st.calls;
+        run.summary.jacobian_evaluations += st.gradients;
+        run.edge = st.edge.shifted(base);
+        let p = vars.params(&x);
+        run.finish(p, termination)
+    }
+}
+
+/// The variables NLopt sees and how they map to the parameters: SLSQP's `s = p / D` (every
+/// parameter, the equality constraints passed natively), the others' free coordinates z.
+struct Variables<'f> {
+    free: &'f Free,
+    slsqp: bool,
+    /// `D N`: the parameters' change per unit of z.
+    tangent: Mat<f64>,
+}
+
+impl Variables<'_> {
+    /// The parameters at the variables `x`.
+    fn params(&self, x: &[f64]) -> Vec<f64> {
+        if self.slsqp {
+            let mut p: Vec<f64> = x.iter().zip(&self.free.d).map(|(s, d)| s * d).collect();
+            for &(j, v) in &self.free.fixed {
+                p[j] = v;
             }
-        };
-        let state = RefCell::new(State {
-            eps: (options.irls_initial_epsilon * phi0).max(1e-300),
-            scale: 1.0,
-            calls: 0,
-            gradients: 0,
-            best: f64::INFINITY,
-            nonfinite: None,
-            edge: Default::default(),
-            observer,
-        });
-        let f = |x: &[f64], grad: Option<&mut [f64]>, _: &mut ()| -> f64 {
-            let result = catch_unwind(AssertUnwindSafe(|| {
-                let mut st = state.borrow_mut();
-                st.calls += 1;
-                let p = params_of(x);
-                let eps = st.eps;
-                let value = match grad {
-                    Some(g) => {
-                        st.gradients += 1;
-                        match cost_and_gradient(problem, objective, eps, &p) {
-                            Some((c, gp)) => {
-                                let sc = st.scale;
-                                if slsqp {
-                                    for (j, gj) in g.iter_mut().enumerate() {
-                                        *gj = gp[j] * d[j] / sc;
-                                    }
-                                } else {
-                                    for (k, gk) in g.iter_mut().enumerate() {
-                                        *gk = (0..n).map(|j| tangent[(j, k)] * gp[j]).sum::<f64>()
-                                            / sc;
-                                    }
-                                }
-                                c
-                            }
-                            None => f64::NAN,
-                        }
-                    }
-                    None => match norms(problem, &p) {
-                        Some(v) => cost_of(objective, &v, eps),
-                        None => f64::NAN,
-                    },
-                };
-                if !value.is_finite() {
-                    if st.nonfinite.is_none() {
-                        st.nonfinite = Some(format!(
-                            "a residual or Jacobian entry is not finite at objective call {}",
-                            st.calls
-                        ));
-                    }
-                    let call = st.calls;
-                    st.edge.nonfinite_at(call);
-                }
-                let accepted = value < st.best;
-                if accepted {
-                    st.best = value;
-                    st.edge.improved = st.calls;
-                }
-                let (calls, best) = (st.calls, st.best);
-                let emm_um = if st.observer.wants_metrics() {
-                    norms(problem, &p)
-                        .map(|v| v.iter().sum::<f64>() / np as f64 * 1e3)
-                        .unwrap_or(f64::NAN)
-                } else {
-                    f64::NAN
-                };
-                st.observer.iteration(&Iteration {
-                    iteration: calls,
-                    evaluations: calls,
-                    cost: best,
-                    emm_um,
-                    damping: 0.0,
-                    step: 0.0,
-                    accepted,
-                });
-                value / st.scale
-            }));
-            result.unwrap_or(f64::NAN)
-        };
-        let (dim, mut x) = if slsqp {
-            (
-                n,
-                p0.iter().zip(d).map(|(p, d)| p / d).collect::<Vec<f64>>(),
-            )
+            p
         } else {
-            (nf, vec![0.0; nf])
-        };
-        // SLSQP's equality constraints, in s: (A D) s = b, duplicate rows dropped.
-        let (a, b) = task.constraints.dense(n);
-        let mut rows: Vec<(Vec<f64>, f64)> = Vec::new();
-        for (i, &bi) in b.iter().enumerate() {
-            let row: Vec<f64> = (0..n).map(|j| a[i * n + j] * d[j]).collect();
-            if !rows.iter().any(|(r, c)| *r == row && *c == bi) {
-                rows.push((row, bi));
+            self.free.params(x)
+        }
+    }
+
+    /// The variables at the start `p0`.
+    fn start(&self, p0: &[f64]) -> Vec<f64> {
+        if self.slsqp {
+            p0.iter().zip(&self.free.d).map(|(p, d)| p / d).collect()
+        } else {
+            vec![0.0; self.free.n_free()]
+        }
+    }
+
+    /// The gradient `g` in the variables of the cost whose gradient in the parameters is `gp`,
+    /// divided by the run's `scale`.
+    fn gradient(&self, gp: &[f64], g: &mut [f64], scale: f64) {
+        if self.slsqp {
+            for (j, gj) in g.iter_mut().enumerate() {
+                *gj = gp[j] * self.free.d[j] / scale;
+            }
+        } else {
+            let n = gp.len();
+            for (k, gk) in g.iter_mut().enumerate() {
+                *gk = (0..n).map(|j| self.tangent[(j, k)] * gp[j]).sum::<f64>() / scale;
             }
         }
-        let base_evaluations = run.summary.evaluations;
-        let cost_at = |x: &[f64], eps: f64| {
-            norms(problem, &params_of(x)).map(|v| cost_of(objective, &v, eps))
+    }
+}
+
+/// The objective NLopt calls: the smoothed cost at the variables (and its gradient when asked),
+/// scaled, each call reported to the observer and the non-finite ones recorded.
+struct Callback<'f, 'a, 'o> {
+    problem: &'f (dyn Residuals + 'a),
+    objective: Objective,
+    vars: &'f Variables<'f>,
+    state: RefCell<State<'o>>,
+}
+
+impl Callback<'_, '_, '_> {
+    /// One call from NLopt; NaN (a refused point) when the model is not finite there or a
+    /// panic unwinds from it (it must not cross the C library).
+    fn call(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            let mut st = self.state.borrow_mut();
+            st.calls += 1;
+            let p = self.vars.params(x);
+            let value = self.value(&mut st, &p, grad);
+            self.record(&mut st, &p, value);
+            value / st.scale
+        }));
+        result.unwrap_or(f64::NAN)
+    }
+
+    /// The cost at `p` (and its gradient into `grad` when asked); NaN when not finite.
+    fn value(&self, st: &mut State, p: &[f64], grad: Option<&mut [f64]>) -> f64 {
+        let eps = st.eps;
+        match grad {
+            Some(g) => {
+                st.gradients += 1;
+                match cost_and_gradient(self.problem, self.objective, eps, p) {
+                    Some((c, gp)) => {
+                        self.vars.gradient(&gp, g, st.scale);
+                        c
+                    }
+                    None => f64::NAN,
+                }
+            }
+            None => match norms(self.problem, p) {
+                Some(v) => cost_of(self.objective, &v, eps),
+                None => f64::NAN,
+            },
+        }
+    }
+
+    /// The call's bookkeeping: a non-finite value recorded, the best cost so far, the report.
+    fn record(&self, st: &mut State, p: &[f64], value: f64) {
+        if !value.is_finite() {
+            if st.nonfinite.is_none() {
+                st.nonfinite = Some(format!(
+                    "a residual or Jacobian entry is not finite at objective call {}",
+                    st.calls
+                ));
+            }
+            let call = st.calls;
+            st.edge.nonfinite_at(call);
+        }
+        let accepted = value < st.best;
+        if accepted {
+            st.best = value;
+            st.edge.improved = st.calls;
+        }
+        let (calls, best) = (st.calls, st.best);
+        let np = self.problem.n_points();
+        let emm_um = if st.observer.wants_metrics() {
+            norms(self.problem, p)
+                .map(|v| v.iter().sum::<f64>() / np as f64 * UM_PER_MM)
+                .unwrap_or(f64::NAN)
+        } else {
+            f64::NAN
         };
+        st.observer.iteration(&Iteration {
+            iteration: calls,
+            evaluations: calls,
+            cost: best,
+            emm_um,
+            damping: 0.0,
+            step: 0.0,
+            accepted,
+        });
+    }
+}
+
+/// SLSQP's equality constraints in s, `(A D) s = b`, duplicate rows dropped.
+fn equality_rows(task: &Task, d: &[f64]) -> Vec<(Vec<f64>, f64)> {
+    let n = d.len();
+    let (a, b) = task.constraints.dense(n);
+    let mut rows: Vec<(Vec<f64>, f64)> = Vec::new();
+    for (i, &bi) in b.iter().enumerate() {
+        let row: Vec<f64> = (0..n).map(|j| a[i * n + j] * d[j]).collect();
+        if !rows.iter().any(|(r, c)| *r == row && *c == bi) {
+            rows.push((row, bi));
+        }
+    }
+    rows
+}
+
+/// A run's settings for one solve: the relative objective-change `tolerance`, the evaluations
+/// `remaining`, SLSQP's equality `rows`.
+struct Setup<'r> {
+    tolerance: f64,
+    remaining: usize,
+    rows: &'r [(Vec<f64>, f64)],
+}
+
+/// Free coordinates are scaled: a unit moves the residuals by ~1 mm; BOBYQA's first trust
+/// region is a thousandth of that.
+const BOBYQA_INITIAL_STEP: f64 = 1e-3;
+
+/// Relative tolerance of SLSQP's equality constraints (of 1 + |b|).
+const EQUALITY_TOLERANCE: f64 = 1e-12;
+
+impl Nlopt {
+    /// NLopt's algorithm.
+    fn nl_algorithm(&self) -> nl::Algorithm {
+        match self.algorithm {
+            Algorithm::Lbfgs => nl::Algorithm::Lbfgs,
+            Algorithm::Slsqp => nl::Algorithm::Slsqp,
+            Algorithm::Mma => nl::Algorithm::Mma,
+            Algorithm::Bobyqa => nl::Algorithm::Bobyqa,
+        }
+    }
+
+    /// Sets the tolerances, the evaluation limit, SLSQP's equality constraints and BOBYQA's
+    /// first step on `opt`.
+    fn configure<F: nl::ObjFn<()>>(
+        &self,
+        opt: &mut nl::Nlopt<F, ()>,
+        options: &Options,
+        setup: &Setup,
+    ) -> nl::OptResult {
+        opt.set_ftol_rel(setup.tolerance)?;
+        opt.set_xtol_rel(options.parameter_tolerance)?;
+        opt.set_maxeval(setup.remaining.min(u32::MAX as usize) as u32)?;
+        let rows = setup.rows;
+        if self.algorithm == Algorithm::Slsqp && !rows.is_empty() {
+            let m = rows.len();
+            let n = rows[0].0.len();
+            let tol: Vec<f64> = rows
+                .iter()
+                .map(|(_, c)| EQUALITY_TOLERANCE * (1.0 + c.abs()))
+                .collect();
+            opt.add_equality_mconstraint(
+                m,
+                // `move`: NLopt keeps the closure until `opt` is dropped, after this function
+                // returns (`rows` borrows the caller's buffer, which outlives `opt`).
+                move |out: &mut [f64], s: &[f64], grad: Option<&mut [f64]>, _: &mut ()| {
+                    for (i, (row, c)) in rows.iter().enumerate() {
+                        out[i] = row.iter().zip(s).map(|(a, s)| a * s).sum::<f64>() - c;
+                    }
+                    if let Some(g) = grad {
+                        for (i, (row, _)) in rows.iter().enumerate() {
+                            g[i * n..(i + 1) * n].copy_from_slice(row);
+                        }
+                    }
+                },
+                (),
+                &tol,
+            )?;
+        }
+        if self.algorithm == Algorithm::Bobyqa {
+            opt.set_initial_step1(BOBYQA_INITIAL_STEP)?;
+        }
+        Ok(nl::SuccessState::Success)
+    }
+
+    /// One solve from `x` (moved to its end): NLopt's termination, a stall naming the first
+    /// non-finite call.
+    fn solve_once(
+        &self,
+        callback: &Callback,
+        x: &mut [f64],
+        options: &Options,
+        setup: &Setup,
+    ) -> Termination {
+        let f = |x: &[f64], grad: Option<&mut [f64]>, _: &mut ()| -> f64 { callback.call(x, grad) };
+        let mut opt = nl::Nlopt::new(self.nl_algorithm(), x.len(), &f, nl::Target::Minimize, ());
+        if let Err(e) = self.configure(&mut opt, options, setup) {
+            return Termination::InvalidInput(crate::Invalid::Reported(format!(
+                "NLopt refused its settings: {e:?}"
+            )));
+        }
+        let result = opt.optimize(x);
+        drop(opt);
+        let t = termination_of(&result);
+        // A non-finite trial point is a rejected evaluation, not the end: the run fails
+        // only if NLopt itself gives up on it (its result is then kept only if finite).
+        let nonfinite = callback.state.borrow_mut().nonfinite.take();
+        match (t, nonfinite) {
+            (Termination::Stalled(s), Some(why)) => {
+                Termination::Stalled(crate::Stall::Reported(format!("{s}; {why}")))
+            }
+            (t, _) => t,
+        }
+    }
+
+    /// The solves of the ε-continuation from `x` (moved to the end) until the last converges
+    /// (restarted, rescaled, while a solve still halves the cost) or one fails; `base`: the
+    /// run's evaluations before the first.
+    fn stages(
+        &self,
+        callback: &Callback,
+        x: &mut [f64],
+        options: &Options,
+        (rows, base, phi0_mm): (&[(Vec<f64>, f64)], usize, f64),
+    ) -> Termination {
+        let (problem, objective) = (callback.problem, callback.objective);
+        let np = problem.n_points();
+        let cost_at = |x: &[f64], eps: f64| {
+            norms(problem, &callback.vars.params(x)).map(|v| cost_of(objective, &v, eps))
+        };
+        let mut continuation = Continuation::new(options, phi0_mm);
         let mut restarts = 0;
-        let termination = loop {
-            let eps = state.borrow().eps;
-            let stage_cost = cost_at(&x, eps).unwrap_or(f64::NAN);
-            state.borrow_mut().scale = if stage_cost.is_finite() && stage_cost > 0.0 {
+        loop {
+            let eps = continuation.eps();
+            let stage_cost = cost_at(x, eps).unwrap_or(f64::NAN);
+            callback.state.borrow_mut().scale = if stage_cost.is_finite() && stage_cost > 0.0 {
                 stage_cost
             } else {
                 1.0
             };
-            let final_stage = objective == Objective::Ve || eps <= eps_final(phi0) * 1.0001;
-            let used = state.borrow().calls;
-            let remaining = options
-                .max_evaluations
-                .saturating_sub(base_evaluations + used);
+            let final_stage = continuation.is_final();
+            let used = callback.state.borrow().calls;
+            let remaining = options.max_evaluations.saturating_sub(base + used);
             if remaining == 0 {
-                break Termination::EvaluationLimit;
+                return Termination::EvaluationLimit;
             }
-            let algorithm = match self.algorithm {
-                Algorithm::Lbfgs => nl::Algorithm::Lbfgs,
-                Algorithm::Slsqp => nl::Algorithm::Slsqp,
-                Algorithm::Mma => nl::Algorithm::Mma,
-                Algorithm::Bobyqa => nl::Algorithm::Bobyqa,
+            let setup = Setup {
+                tolerance: continuation.tolerance(options.objective_tolerance),
+                remaining,
+                rows,
             };
-            let mut opt = nl::Nlopt::new(algorithm, dim, &f, nl::Target::Minimize, ());
-            let mut setup = || -> nl::OptResult {
-                opt.set_ftol_rel(if final_stage {
-                    options.objective_tolerance
-                } else {
-                    1e-3
-                })?;
-                opt.set_xtol_rel(options.parameter_tolerance)?;
-                opt.set_maxeval(remaining.min(u32::MAX as usize) as u32)?;
-                if slsqp && !rows.is_empty() {
-                    let m = rows.len();
-                    let tol: Vec<f64> = rows.iter().map(|(_, c)| 1e-12 * (1.0 + c.abs())).collect();
-                    opt.add_equality_mconstraint(
-                        m,
-                        |out: &mut [f64], s: &[f64], grad: Option<&mut [f64]>, _: &mut ()| {
-                            for (i, (row, c)) in rows.iter().enumerate() {
-                                out[i] = row.iter().zip(s).map(|(a, s)| a * s).sum::<f64>() - c;
-                            }
-                            if let Some(g) = grad {
-                                for (i, (row, _)) in rows.iter().enumerate() {
-                                    g[i * n..(i + 1) * n].copy_from_slice(row);
-                                }
-                            }
-                        },
-                        (),
-                        &tol,
-                    )?;
-                }
-                if self.algorithm == Algorithm::Bobyqa {
-                    // Free coordinates are scaled: a unit moves the residuals by ~1 mm.
-                    opt.set_initial_step1(1e-3)?;
-                }
-                Ok(nl::SuccessState::Success)
-            };
-            if let Err(e) = setup() {
-                break Termination::InvalidInput(crate::Invalid::Reported(format!(
-                    "NLopt refused its settings: {e:?}"
-                )));
-            }
-            let result = opt.optimize(&mut x);
-            drop(opt);
-            let t = termination_of(&result);
-            // A non-finite trial point is a rejected evaluation, not the end: the run fails
-            // only if NLopt itself gives up on it (its result is then kept only if finite).
-            let nonfinite = state.borrow_mut().nonfinite.take();
-            let t = match (t, nonfinite) {
-                (Termination::Stalled(s), Some(why)) => {
-                    Termination::Stalled(crate::Stall::Reported(format!("{s}; {why}")))
-                }
-                (t, _) => t,
-            };
+            let t = self.solve_once(callback, x, options, &setup);
             let settled = t.converged() || matches!(t, Termination::Stalled(_));
-            if final_stage && settled && restarts < 10 {
+            if final_stage && settled && restarts < MAX_RESTARTS {
                 // A run that still lowered the cost by half restarts, rescaled: L-BFGS's
                 // internal tests are absolute and stop early on exact fits.
-                let now = cost_at(&x, eps).unwrap_or(f64::NAN);
+                let now = cost_at(x, eps).unwrap_or(f64::NAN);
                 if now < 0.5 * stage_cost {
                     restarts += 1;
-                    state.borrow_mut().best = f64::INFINITY;
+                    callback.state.borrow_mut().best = f64::INFINITY;
                     continue;
                 }
             }
             if final_stage || !settled {
-                break t;
+                return t;
             }
-            let p = params_of(&x);
-            let phi = norms(problem, &p)
+            let phi = norms(problem, &callback.vars.params(x))
                 .map(|v| v.iter().sum::<f64>() / np as f64)
-                .unwrap_or(phi0);
-            let mut st = state.borrow_mut();
-            st.eps = (st.eps / 10.0).max(eps_final(phi));
+                .unwrap_or(phi0_mm);
+            continuation.shrink(phi);
+            let mut st = callback.state.borrow_mut();
+            st.eps = continuation.eps();
             st.best = f64::INFINITY;
-        };
-        let st = state.into_inner();
-        run.summary.iterations = st.calls;
-        run.summary.evaluations = base_evaluations + st.calls;
-        run.summary.jacobian_evaluations += st.gradients;
-        run.edge = st.edge.shifted(base_evaluations);
-        let p = params_of(&x);
-        run.finish(p, termination)
+        }
     }
 }
+
+/// Restarts of the last solve, at most, while each still halves the cost.
+const MAX_RESTARTS: usize = 10;

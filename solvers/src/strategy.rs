@@ -538,13 +538,13 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
         options.objective,
         options.irls_final_epsilon,
     ) {
-        Some((q, report)) => {
+        Ok((q, report)) => {
             out.summary.iterations += report.steps;
             out.summary.jacobian_evaluations += report.jacobian_evaluations;
             out.summary.evaluations += report.evaluations + report.jacobian_evaluations;
             q
         }
-        None => projected,
+        Err(_) => projected,
     };
     out.summary.reached = evaluate(problem, &out.params);
     out.summary.time_s += t0.elapsed().as_secs_f64();

@@ -25,7 +25,7 @@ impl Lm<'_, '_, '_> {
             {
                 break;
             }
-            let (objective, eps) = (self.objective, self.eps);
+            let (objective, eps) = (self.objective, self.irls.eps());
             let Some(f) = accumulate(problem, &self.p, |r| weight_of(objective, r, eps, np), true)
                 .and_then(|normal| normal.factor)
             else {
@@ -50,7 +50,7 @@ impl Lm<'_, '_, '_> {
             let p_new = self.free.step(&self.p, &dz);
             let norms_new = norms_of(problem, &p_new);
             self.run.summary.evaluations += 1;
-            let cost_new = cost_of(self.objective, &norms_new, self.eps);
+            let cost_new = cost_of(self.objective, &norms_new, self.irls.eps());
             let accepted = cost_new <= self.cost + rounding;
             if accepted {
                 self.z.iter_mut().zip(&dz).for_each(|(a, b)| *a += b);
@@ -69,7 +69,7 @@ impl Lm<'_, '_, '_> {
 impl Lm<'_, '_, '_> {
     /// Φ: Newton polish of the converged point ([`crate::polish::settle`]).
     pub(super) fn polish(&mut self, task: &Task) {
-        if let Some((q, report)) = crate::polish::settle_scaled(
+        if let Ok((q, report)) = crate::polish::settle_scaled(
             task,
             &self.p,
             Some(&self.free.d),
