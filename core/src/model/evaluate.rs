@@ -2,10 +2,41 @@
 //! reflector and tool points, and the exact Jacobian and second directional derivative.
 
 use super::*;
+use crate::units::{PPM, S_PER_H};
 
 /// A field's variables, its functions' values at a point for each (a second set for a pair),
 /// and how many the first has.
 type FieldValues<S> = ([FieldVar; 2], [S; 4], [S; 4], usize);
+
+/// A ratio in one ppm (`1e-6`, bit for bit).
+const RATIO_PER_PPM: f64 = 1.0 / PPM;
+
+/// Where the effects are evaluated: the point's commands (internal units), reflector, station
+/// and time (s), the field functions computed last, and where ∂value/∂p goes when asked.
+struct EffectPoint<'a, S> {
+    /// Commanded positions, chain order (mm, rad).
+    commands: &'a [S; MAX_AXES],
+    /// The reflector measured.
+    reflector: usize,
+    /// The station measuring.
+    station: usize,
+    /// The time stamp (s).
+    t_s: f64,
+    /// The last field's functions (shared by its three components).
+    field: Option<FieldValues<S>>,
+    /// ∂value/∂p by parameter, when asked.
+    jac: Option<&'a mut [f64]>,
+}
+
+impl<S> EffectPoint<'_, S> {
+    /// Writes ∂value/∂p of parameter `p`, when asked.
+    #[inline]
+    fn set(&mut self, p: usize, g: f64) {
+        if let Some(jac) = self.jac.as_deref_mut() {
+            jac[p] = g;
+        }
+    }
+}
 
 impl Model {
     /// Argument of a term's basis for a command: the angle (rad) for periodic bases, otherwise
@@ -206,91 +237,114 @@ impl Model {
         t_s: f64,
         params: &[f64],
         vals: &mut [S],
-        mut jac: Option<&mut [f64]>,
+        jac: Option<&mut [f64]>,
     ) {
         let base = self.terms.len() + TRACKER_DOF;
-        // A field's functions at this point, shared by its three components' slots (which
-        // follow one another).
-        let mut field: Option<FieldValues<S>> = None;
+        let mut at = EffectPoint {
+            commands,
+            reflector,
+            station,
+            t_s,
+            field: None,
+            jac,
+        };
         for (i, &(slot, j)) in self.effects.iter().enumerate() {
-            let mut set = |p: usize, g: f64| {
-                if let Some(jac) = jac.as_deref_mut() {
-                    jac[p] = g;
-                }
-            };
-            vals[base + i] = match slot {
-                EffectSlot::Drift(_) => {
-                    let t_h = t_s / 3600.0;
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::Reflector { reflector: r, .. } => {
-                    let on = if r == reflector { 1.0 } else { 0.0 };
-                    set(j, on);
-                    S::from(params[j] * on)
-                }
-                EffectSlot::RangeScale => {
-                    set(j, 1e-6);
-                    S::from(params[j] * 1e-6)
-                }
-                EffectSlot::Screw {
-                    k,
-                    period_mm,
-                    reference,
-                    ..
-                } => {
-                    let phase =
-                        (commands[k] - reference) * (2.0 * std::f64::consts::PI) / period_mm;
-                    let (sn, cs) = phase.sin_cos();
-                    set(j, sn.re());
-                    set(j + 1, cs.re());
-                    sn * params[j] + cs * params[j + 1]
-                }
-                EffectSlot::ThermalScale { k, .. } => {
-                    let g = 1e-6 * t_s / 3600.0;
-                    set(j, commands[k].re() * g);
-                    commands[k] * (params[j] * g)
-                }
-                EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => {
-                    let t_h = t_s / 3600.0;
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::StationDrift { station: s, .. } => {
-                    let t_h = if s == station { t_s / 3600.0 } else { 0.0 };
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::Field { vars, pair, .. } => {
-                    // A single field holds its variable twice; a pair's two are distinct.
-                    if field.is_none_or(|f| f.0 != vars) {
-                        let t_h = t_s / 3600.0;
-                        let (mut a, mut b) = ([S::zero(); 4], [S::zero(); 4]);
-                        let na = self.field_functions(vars[0], commands, t_h, &mut a);
-                        if pair {
-                            self.field_functions(vars[1], commands, t_h, &mut b);
-                        }
-                        field = Some((vars, a, b, na));
-                    }
-                    let (_, a, b, na) = field.expect("set above");
-                    let mut v = S::zero();
-                    if pair {
-                        for (q, (x, y)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate()
-                        {
-                            let phi = a[x] * b[y];
-                            set(j + q, phi.re());
-                            v += phi * params[j + q];
-                        }
-                    } else {
-                        for (q, phi) in a[..na].iter().enumerate() {
-                            set(j + q, phi.re());
-                            v += *phi * params[j + q];
-                        }
-                    }
-                    v
-                }
-            };
+            vals[base + i] = self.effect_value(slot, j, params, &mut at);
         }
+    }
+
+    /// The value of the effect in `slot`, its first parameter `j`, at `at` (whose ∂value/∂p it
+    /// writes when asked).
+    #[inline]
+    fn effect_value<S: Real>(
+        &self,
+        slot: EffectSlot,
+        j: usize,
+        params: &[f64],
+        at: &mut EffectPoint<S>,
+    ) -> S {
+        let t_h = at.t_s / S_PER_H;
+        match slot {
+            EffectSlot::Drift(_)
+            | EffectSlot::LocationDrift { .. }
+            | EffectSlot::TrackerDrift(_) => {
+                at.set(j, t_h);
+                S::from(params[j] * t_h)
+            }
+            EffectSlot::Reflector { reflector: r, .. } => {
+                let on = if r == at.reflector { 1.0 } else { 0.0 };
+                at.set(j, on);
+                S::from(params[j] * on)
+            }
+            EffectSlot::RangeScale => {
+                at.set(j, RATIO_PER_PPM);
+                S::from(params[j] * RATIO_PER_PPM)
+            }
+            EffectSlot::Screw {
+                k,
+                period_mm,
+                reference,
+                ..
+            } => {
+                let phase = (at.commands[k] - reference) * (2.0 * std::f64::consts::PI) / period_mm;
+                let (sn, cs) = phase.sin_cos();
+                at.set(j, sn.re());
+                at.set(j + 1, cs.re());
+                sn * params[j] + cs * params[j + 1]
+            }
+            EffectSlot::ThermalScale { k, .. } => {
+                let g = RATIO_PER_PPM * at.t_s / S_PER_H;
+                at.set(j, at.commands[k].re() * g);
+                at.commands[k] * (params[j] * g)
+            }
+            EffectSlot::StationDrift { station: s, .. } => {
+                let t_h = if s == at.station { t_h } else { 0.0 };
+                at.set(j, t_h);
+                S::from(params[j] * t_h)
+            }
+            EffectSlot::Field { vars, pair, .. } => self.field_value(vars, pair, j, params, at),
+        }
+    }
+
+    /// The value of one component of an error field over `vars` (`pair`: two distinct
+    /// variables; else one, held twice), its first parameter `j`. A field's functions are
+    /// computed once for its three components' slots (which follow one another).
+    #[inline]
+    fn field_value<S: Real>(
+        &self,
+        vars: [FieldVar; 2],
+        pair: bool,
+        j: usize,
+        params: &[f64],
+        at: &mut EffectPoint<S>,
+    ) -> S {
+        let (a, b, na) = match at.field {
+            Some((v, a, b, na)) if v == vars => (a, b, na),
+            _ => {
+                let t_h = at.t_s / S_PER_H;
+                let (mut a, mut b) = ([S::zero(); 4], [S::zero(); 4]);
+                let na = self.field_functions(vars[0], at.commands, t_h, &mut a);
+                if pair {
+                    self.field_functions(vars[1], at.commands, t_h, &mut b);
+                }
+                at.field = Some((vars, a, b, na));
+                (a, b, na)
+            }
+        };
+        let mut v = S::zero();
+        if pair {
+            for (q, (x, y)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate() {
+                let phi = a[x] * b[y];
+                at.set(j + q, phi.re());
+                v += phi * params[j + q];
+            }
+        } else {
+            for (q, phi) in a[..na].iter().enumerate() {
+                at.set(j + q, phi.re());
+                v += *phi * params[j + q];
+            }
+        }
+        v
     }
 
     /// Predicted reflector position in the tracker frame (mm) for `commands` (chain order,
@@ -575,37 +629,9 @@ impl Model {
         );
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter: a term's basis values.
         let mut vals = [0.0; MAX_SLOTS];
-        let mut g = [0.0; MAX_COEFFS];
-        let mut at = 0;
-        for grp in &self.groups {
-            let out = &mut vals[grp.terms.clone()];
-            let block = &mut jac[grp.params..grp.params + grp.terms.len() * grp.len];
-            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
-                Some(values) => {
-                    self.group_values_cached(grp, params, values, out);
-                    spread(values, block);
-                }
-                None => {
-                    self.group_values(grp, &commands.0, params, &mut g, out);
-                    spread(&g[..grp.len], block);
-                }
-            }
-        }
-        let m = self.terms.len() + TRACKER_DOF;
-        let pose = self.stations[station].pose;
-        vals[self.terms.len()..m].copy_from_slice(&params[pose..pose + TRACKER_DOF]);
-        if self.stations.len() > 1 || self.stations[0].offset.is_some() {
-            // Another station's pose and every range offset do not move this point (the
-            // offset enters after the chain, in the observation).
-            for b in &self.stations {
-                jac[b.pose..b.pose + TRACKER_DOF].fill(0.0);
-                if let Some(o) = b.offset {
-                    jac[o] = 0.0;
-                }
-            }
-        }
-        jac[pose..pose + TRACKER_DOF].fill(1.0);
-        let m = m + self.effects.len();
+        self.term_values_and_bases(commands, params, cached, &mut vals, jac);
+        self.tracker_values_and_bases(station, params, &mut vals, jac);
+        let m = self.terms.len() + TRACKER_DOF + self.effects.len();
         self.effect_values(
             &commands.0,
             reflector,
@@ -637,6 +663,58 @@ impl Model {
             r2[j] = g[2][s] * d;
         }
         point
+    }
+
+    /// The terms' values into `vals` and, into row 0 of `jac`, each term parameter's
+    /// ∂value/∂p: its basis value at the point (from `cached` regressors when given).
+    fn term_values_and_bases(
+        &self,
+        commands: &Commands,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+        vals: &mut [f64; MAX_SLOTS],
+        jac: &mut [f64],
+    ) {
+        let mut g = [0.0; MAX_COEFFS];
+        let mut at = 0;
+        for grp in &self.groups {
+            let out = &mut vals[grp.terms.clone()];
+            let block = &mut jac[grp.params..grp.params + grp.terms.len() * grp.len];
+            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
+                Some(values) => {
+                    self.group_values_cached(grp, params, values, out);
+                    spread(values, block);
+                }
+                None => {
+                    self.group_values(grp, &commands.0, params, &mut g, out);
+                    spread(&g[..grp.len], block);
+                }
+            }
+        }
+    }
+
+    /// The pose of `station` into the tracker slots of `vals` and, into row 0 of `jac`, 1 for
+    /// its parameters and 0 for the other stations' poses and every range offset (which do not
+    /// move this point: the offset enters after the chain, in the observation).
+    fn tracker_values_and_bases(
+        &self,
+        station: usize,
+        params: &[f64],
+        vals: &mut [f64; MAX_SLOTS],
+        jac: &mut [f64],
+    ) {
+        let m = self.terms.len() + TRACKER_DOF;
+        let pose = self.stations[station].pose;
+        vals[self.terms.len()..m].copy_from_slice(&params[pose..pose + TRACKER_DOF]);
+        if self.stations.len() > 1 || self.stations[0].offset.is_some() {
+            for b in &self.stations {
+                jac[b.pose..b.pose + TRACKER_DOF].fill(0.0);
+                if let Some(o) = b.offset {
+                    jac[o] = 0.0;
+                }
+            }
+        }
+        jac[pose..pose + TRACKER_DOF].fill(1.0);
     }
 
     /// Second derivative of the predicted point along the parameter direction `dir`:
