@@ -45,6 +45,7 @@ use std::ops::Range;
 use std::path::Path;
 
 mod build;
+mod effect_values;
 mod evaluate;
 mod observe;
 mod regressors;
