@@ -247,7 +247,56 @@ impl Simulation {
         }
     }
 
+    /// Checks the simulation before it runs: its plan against the machine, the observation, the
+    /// duration (s, returned), the noise and the effects.
     fn validate(&self) -> Result<f64> {
+        self.validate_plan()?;
+        let machine = self.truth.model.machine();
+        let place = |field: &str| Place::file("simulation").at_field(field.to_string());
+        let n = (self.plan.n_points() * machine.stations().len()) as f64;
+        if self.observe == crate::measure::Observation::Point
+            && let Some(st) = machine
+                .stations()
+                .iter()
+                .find(|s| s.observes == crate::machine::Observes::Range)
+        {
+            return Err(Error::input(
+                place("observe"),
+                format!(
+                    "station '{}' observes ranges only: simulate it with ranges (--observe range)",
+                    st.id
+                ),
+            ));
+        }
+        let duration = self.duration_s.unwrap_or(DEFAULT_SECONDS_PER_POINT * n);
+        if !(duration.is_finite() && duration >= 0.0) {
+            return Err(Error::input(
+                place("duration_s"),
+                format!("{duration} s is not a finite duration ≥ 0"),
+            ));
+        }
+        let nz = &self.noise;
+        let sigmas = [
+            nz.azimuth_urad,
+            nz.elevation_urad,
+            nz.range_um,
+            nz.range_um_per_m,
+        ];
+        if sigmas.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
+            return Err(Error::input(
+                place("noise"),
+                "every noise value (σ or bound) must be a finite number ≥ 0",
+            ));
+        }
+        for e in &self.effects {
+            e.validate(machine)?;
+        }
+        Ok(duration)
+    }
+
+    /// Checks the plan against the machine: some point measured, every step's position and
+    /// reflector, every reflector, every position within the travel.
+    fn validate_plan(&self) -> Result<()> {
         let machine = self.truth.model.machine();
         let place = |field: &str| Place::file("simulation").at_field(field.to_string());
         if self.plan.positions.is_empty() || self.plan.n_points() == 0 {
@@ -306,45 +355,7 @@ impl Simulation {
                 }
             }
         }
-        let n = (self.plan.n_points() * machine.stations().len()) as f64;
-        if self.observe == crate::measure::Observation::Point
-            && let Some(st) = machine
-                .stations()
-                .iter()
-                .find(|s| s.observes == crate::machine::Observes::Range)
-        {
-            return Err(Error::input(
-                place("observe"),
-                format!(
-                    "station '{}' observes ranges only: simulate it with ranges (--observe range)",
-                    st.id
-                ),
-            ));
-        }
-        let duration = self.duration_s.unwrap_or(DEFAULT_SECONDS_PER_POINT * n);
-        if !(duration.is_finite() && duration >= 0.0) {
-            return Err(Error::input(
-                place("duration_s"),
-                format!("{duration} s is not a finite duration ≥ 0"),
-            ));
-        }
-        let nz = &self.noise;
-        let sigmas = [
-            nz.azimuth_urad,
-            nz.elevation_urad,
-            nz.range_um,
-            nz.range_um_per_m,
-        ];
-        if sigmas.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
-            return Err(Error::input(
-                place("noise"),
-                "every noise value (σ or bound) must be a finite number ≥ 0",
-            ));
-        }
-        for e in &self.effects {
-            e.validate(machine)?;
-        }
-        Ok(duration)
+        Ok(())
     }
 }
 
