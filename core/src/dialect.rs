@@ -36,6 +36,7 @@ pub const FANUC_PROGRAM_NUMBER: u32 = 1;
 
 /// A G-code dialect (see the module's docs for the rules of each).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Dialect {
     /// LinuxCNC / RS274NGC: dwell `G4 P<seconds>`.
     #[default]

@@ -95,6 +95,7 @@ impl fmt::Display for Axis {
 /// The parameter group of an error, used by phased strategies (paper, table 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum Group {
     /// Squareness errors of linear axes (A0Z, B0Z, C0Y …).
     Squareness,
@@ -122,6 +123,7 @@ impl fmt::Display for Group {
 
 /// Unit of a parameter or error value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum Unit {
     /// Millimetres.
     #[serde(rename = "mm")]

@@ -121,6 +121,7 @@ pub use truth::Truth;
 /// Where the truth came from, for the record.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "source", rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum TruthSource {
     /// Drawn by [`Truth::random`].
     Random {

@@ -10,6 +10,7 @@ pub const MAX_EFFECT_VALUE: f64 = 1e6;
 /// A physical effect outside the standard model (see the module documentation for formulas).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "effect", rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum Effect {
     /// Thermal drift of the tool point in the machine frame.
     ThermalDrift {
