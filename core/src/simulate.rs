@@ -81,6 +81,12 @@ use std::f64::consts::PI;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+/// mm in one µm (`1e-3` bit for bit: the nearest double to 1/1000).
+pub(crate) const MM_PER_UM: f64 = 1.0 / crate::units::UM_PER_MM;
+
+/// rad in one µrad (`1e-6` bit for bit).
+pub(crate) const RAD_PER_URAD: f64 = 1.0 / crate::units::URAD_PER_RAD;
+
 /// The `format` field of a simulation record.
 pub const SIMULATION_FORMAT: &str = "volver-simulation";
 
@@ -381,7 +387,7 @@ impl Simulation {
                 let xi = (cmd.0[k] - ax.min) / (ax.max - ax.min);
                 let eta = (cmd.0[kb] - bx.min) / (bx.max - bx.min);
                 errors.component[k][component.direction()] +=
-                    amplitude_um * 1e-3 * (PI * xi).sin() * eta;
+                    amplitude_um * MM_PER_UM * (PI * xi).sin() * eta;
             }
         }
     }
@@ -396,16 +402,17 @@ impl Simulation {
         errors: &PointErrors<f64>,
     ) -> PointErrors<f64> {
         let mut out = *errors;
-        let t_h = t_s / 3600.0;
+        let t_h = t_s / crate::units::S_PER_H;
         for e in &self.effects {
             match e {
                 Effect::ThermalScale { axis, ppm_per_h } => {
                     let (k, _) = machine.axis(*axis).expect("validated: the axis exists");
-                    out.component[k][axis.direction()] += ppm_per_h * 1e-6 * cmd.0[k] * t_h;
+                    out.component[k][axis.direction()] +=
+                        ppm_per_h * (1.0 / crate::units::PPM) * cmd.0[k] * t_h;
                 }
                 Effect::TrackerDrift { rate_urad_per_h } => {
                     for (k, v) in rate_urad_per_h.iter().enumerate() {
-                        out.tracker[3 + k] += v * 1e-6 * t_h;
+                        out.tracker[3 + k] += v * RAD_PER_URAD * t_h;
                     }
                 }
                 Effect::StationDrift {
@@ -413,7 +420,7 @@ impl Simulation {
                     rate_um_per_h,
                 } if machine.station_named(Some(station)) == Ok(errors.station) => {
                     for (k, v) in rate_um_per_h.iter().enumerate() {
-                        out.tracker[k] += v * 1e-3 * t_h;
+                        out.tracker[k] += v * MM_PER_UM * t_h;
                     }
                 }
                 Effect::LocationDrift {
@@ -424,7 +431,7 @@ impl Simulation {
                     out.has_location[k] = true;
                     let across = (0..3).filter(|&c| c != axis.direction());
                     for (c, v) in across.zip(rate_um_per_h) {
-                        out.location[k][c] += v * 1e-3 * t_h;
+                        out.location[k][c] += v * MM_PER_UM * t_h;
                     }
                 }
                 _ => {}
