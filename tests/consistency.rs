@@ -204,6 +204,7 @@ fn params_of(model: &Model, rng: &mut Rng) -> Vec<f64> {
             Unit::MmPerHour => 0.01,
             Unit::RadPerHour => 1e-5,
             Unit::Ppm | Unit::PpmPerHour => 5.0,
+            other => panic!("no test scale for unit {other:?}"),
         };
         p[j] += scale * rng.next();
     }

@@ -76,6 +76,7 @@ fn effect_parameters_have_names_units_and_exact_jacobians() {
             Unit::MmPerHour => 0.01,
             Unit::RadPerHour => 1e-5,
             Unit::Ppm | Unit::PpmPerHour => 10.0,
+            other => panic!("no test scale for unit {other:?}"),
         };
         p[j] += scale * rng.normal();
     }

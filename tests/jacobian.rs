@@ -57,6 +57,7 @@ fn random_params(model: &Model, rng: &mut Rng) -> Vec<f64> {
                 (false, volver::core::iso::Unit::MmPerHour) => 0.01,
                 (false, volver::core::iso::Unit::RadPerHour) => 1e-5,
                 (false, volver::core::iso::Unit::Ppm | volver::core::iso::Unit::PpmPerHour) => 10.0,
+                (false, other) => panic!("no test scale for unit {other:?}"),
             };
             let base = if p.name == "tracker.x" { 150.0 } else { 0.0 };
             base + scale * rng.next()

@@ -67,6 +67,7 @@ impl From<BasisError> for String {
 /// The kind of a basis, as named in error-model files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum BasisKind {
     /// A constant value (location and squareness errors).
     Constant,

@@ -32,6 +32,7 @@ use crate::kinematics::{PointErrors, predict_with_tool_shift};
 use crate::metrics::ErrorStats;
 use crate::noise::TrackerNoise;
 use crate::problem::{Problem, norm};
+use crate::units::UM_PER_MM;
 use std::f64::consts::PI;
 
 /// Residuals of the points that fall in one bin.
@@ -75,7 +76,8 @@ impl Breakdown {
 
 fn bin_of(label: String, from: f64, to: f64, points: Vec<usize>, residuals: &[[f64; 3]]) -> Bin {
     let n = points.len().max(1) as f64;
-    let mean_um = [0, 1, 2].map(|c| points.iter().map(|&i| residuals[i][c]).sum::<f64>() / n * 1e3);
+    let mean_um =
+        [0, 1, 2].map(|c| points.iter().map(|&i| residuals[i][c]).sum::<f64>() / n * UM_PER_MM);
     Bin {
         label,
         from,
@@ -251,7 +253,7 @@ pub fn periodogram(x: &[f64], residuals: &[[f64; 3]], frequencies: &[f64]) -> Ve
                 }
             }
             let amplitude_um =
-                [0, 1, 2].map(|c| solve3(m, rhs[c]).map_or(0.0, |s| s[1].hypot(s[2]) * 1e3));
+                [0, 1, 2].map(|c| solve3(m, rhs[c]).map_or(0.0, |s| s[1].hypot(s[2]) * UM_PER_MM));
             Line {
                 frequency: f,
                 amplitude_um,
@@ -365,7 +367,7 @@ pub fn largest(residuals: &[[f64; 3]], k: usize) -> Vec<(usize, f64)> {
     let mut v: Vec<(usize, f64)> = residuals
         .iter()
         .enumerate()
-        .map(|(i, r)| (i, norm(*r) * 1e3))
+        .map(|(i, r)| (i, norm(*r) * UM_PER_MM))
         .collect();
     v.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
     v.truncate(k);
@@ -471,8 +473,8 @@ pub fn noise_level(
         .max(0.0)
         .sqrt();
     NoiseLevel {
-        noise_emm_um: mean * 1e3,
-        fit_emm_um: mean * keep * 1e3,
-        sd_um: var.sqrt() * keep * 1e3,
+        noise_emm_um: mean * UM_PER_MM,
+        fit_emm_um: mean * keep * UM_PER_MM,
+        sd_um: var.sqrt() * keep * UM_PER_MM,
     }
 }

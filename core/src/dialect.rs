@@ -36,6 +36,7 @@ pub const FANUC_PROGRAM_NUMBER: u32 = 1;
 
 /// A G-code dialect (see the module's docs for the rules of each).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Dialect {
     /// LinuxCNC / RS274NGC: dwell `G4 P<seconds>`.
     #[default]
@@ -57,9 +58,9 @@ impl Dialect {
     /// ```
     pub fn dwell_words(self, seconds: f64) -> String {
         debug_assert!(seconds.is_finite() && (0.0..=MAX_DWELL_S).contains(&seconds));
-        let ms = (seconds * 1000.0).round();
+        let ms = (seconds * crate::units::MS_PER_S).round();
         match self {
-            Dialect::LinuxCnc => format!("G4 P{}", ms / 1000.0 + 0.0),
+            Dialect::LinuxCnc => format!("G4 P{}", ms / crate::units::MS_PER_S + 0.0),
             Dialect::Fanuc => format!("G04 P{}", ms as u64),
         }
     }

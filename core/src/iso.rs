@@ -4,6 +4,7 @@
 //! Names are written with the digit zero (`X0C`); the letter O (`XOC`, the paper's spelling) and
 //! a leading `E` (`EX0C`, `EB0Z`) are accepted on input. Translations are in mm, rotations in rad.
 
+use crate::units::{UM_PER_MM, URAD_PER_RAD};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -95,6 +96,7 @@ impl fmt::Display for Axis {
 /// The parameter group of an error, used by phased strategies (paper, table 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum Group {
     /// Squareness errors of linear axes (A0Z, B0Z, C0Y …).
     Squareness,
@@ -122,6 +124,7 @@ impl fmt::Display for Group {
 
 /// Unit of a parameter or error value.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[non_exhaustive]
 pub enum Unit {
     /// Millimetres.
     #[serde(rename = "mm")]
@@ -148,12 +151,12 @@ impl Unit {
     /// µrad for rad, µm/h for mm/h, ppm for ppm, ppm/h for ppm/h, µrad/h for rad/h.
     pub fn micro(self) -> (f64, &'static str) {
         match self {
-            Unit::Mm => (1e3, "µm"),
-            Unit::Rad => (1e6, "µrad"),
-            Unit::MmPerHour => (1e3, "µm/h"),
+            Unit::Mm => (UM_PER_MM, "µm"),
+            Unit::Rad => (URAD_PER_RAD, "µrad"),
+            Unit::MmPerHour => (UM_PER_MM, "µm/h"),
             Unit::Ppm => (1.0, "ppm"),
             Unit::PpmPerHour => (1.0, "ppm/h"),
-            Unit::RadPerHour => (1e6, "µrad/h"),
+            Unit::RadPerHour => (URAD_PER_RAD, "µrad/h"),
         }
     }
 }

@@ -98,6 +98,7 @@ pub struct ReflectorSpec {
 /// Where the tracker stands.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum TrackerMount {
     /// On the workpiece end of the chain (the paper: on the turntable of XCFZ); it moves with the
     /// workpiece-side axes and measures the tool relative to the workpiece.

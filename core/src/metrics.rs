@@ -39,7 +39,7 @@ pub fn emm_u95_um(modules: &[f64]) -> f64 {
     }
     let mean = modules.iter().sum::<f64>() / n as f64;
     let var = modules.iter().map(|m| (m - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-    2.0 * (var / n as f64).sqrt() * 1e3
+    2.0 * (var / n as f64).sqrt() * crate::units::UM_PER_MM
 }
 
 impl ErrorStats {
@@ -91,8 +91,8 @@ impl ErrorStats {
             return ErrorStats::default();
         }
         ErrorStats {
-            emm_um: sum / n as f64 * 1e3,
-            emax_um: max * 1e3,
+            emm_um: sum / n as f64 * crate::units::UM_PER_MM,
+            emax_um: max * crate::units::UM_PER_MM,
         }
     }
 }

@@ -45,6 +45,7 @@ use std::ops::Range;
 use std::path::Path;
 
 mod build;
+mod effect_values;
 mod evaluate;
 mod observe;
 mod regressors;
@@ -77,6 +78,7 @@ enum JacobianTarget<'a> {
 
 /// Which error value a parameter feeds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Owner {
     /// Coefficient `coeff` of modelled error `term` (index in [`Model::terms`]).
     Term {
@@ -137,6 +139,7 @@ pub struct ParamInfo {
 /// Why a constraint exists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum ConstraintKind {
     /// A linear-axis error vanishes at the reference position.
     Reference,

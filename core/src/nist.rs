@@ -161,36 +161,51 @@ fn number(s: &str, label: &str, line: usize, field: &str) -> Result<f64> {
     }
 }
 
-impl Dataset {
-    /// Reads a StRD file (`label` names it in errors).
-    pub fn parse(name: &str, text: &str, label: &str) -> Result<Dataset> {
-        let lines: Vec<&str> = text.lines().collect();
-        let (p_first, p_last) = line_range(text, "Starting Values", label)?;
-        let (_, c_last) = line_range(text, "Certified Values", label)?;
-        let (d_first, d_last) = line_range(text, "Data ", label)?;
-        let get = |n: usize| -> Result<&str> {
-            lines.get(n.wrapping_sub(1)).copied().ok_or_else(|| {
-                Error::input(
-                    Place::file(label).at_line(n),
-                    format!("the header points past the end ({} lines)", lines.len()),
-                )
-            })
-        };
-        let difficulty = if text.contains("Lower Level of Difficulty") {
-            Difficulty::Lower
-        } else if text.contains("Average Level of Difficulty") {
-            Difficulty::Average
-        } else if text.contains("Higher Level of Difficulty") {
-            Difficulty::Higher
-        } else {
-            return Err(Error::input(
-                Place::file(label).at_field("difficulty"),
-                "no 'Level of Difficulty' line",
-            ));
-        };
-        let (mut s1, mut s2, mut cert, mut sd) = (vec![], vec![], vec![], vec![]);
-        for n in p_first..=p_last {
-            let line = get(n)?;
+/// The level of difficulty a StRD file states.
+fn difficulty(text: &str, label: &str) -> Result<Difficulty> {
+    if text.contains("Lower Level of Difficulty") {
+        Ok(Difficulty::Lower)
+    } else if text.contains("Average Level of Difficulty") {
+        Ok(Difficulty::Average)
+    } else if text.contains("Higher Level of Difficulty") {
+        Ok(Difficulty::Higher)
+    } else {
+        Err(Error::input(
+            Place::file(label).at_field("difficulty"),
+            "no 'Level of Difficulty' line",
+        ))
+    }
+}
+
+/// The lines of a StRD file, read section by section at the lines its header gives.
+struct Strd<'a> {
+    /// The file's lines.
+    lines: Vec<&'a str>,
+    /// The file's name, for errors.
+    label: &'a str,
+}
+
+impl Strd<'_> {
+    /// Line `n` (1-based), or the error that the header points past the end.
+    fn line(&self, n: usize) -> Result<&str> {
+        self.lines.get(n.wrapping_sub(1)).copied().ok_or_else(|| {
+            Error::input(
+                Place::file(self.label).at_line(n),
+                format!(
+                    "the header points past the end ({} lines)",
+                    self.lines.len()
+                ),
+            )
+        })
+    }
+
+    /// The parameter lines `first..=last` (`bK = start1 start2 certified sd`): the two starts,
+    /// the certified values and their standard deviations.
+    fn parameters(&self, first: usize, last: usize) -> Result<[Vec<f64>; 4]> {
+        let label = self.label;
+        let mut columns: [Vec<f64>; 4] = Default::default();
+        for n in first..=last {
+            let line = self.line(n)?;
             let (lhs, rhs) = line.split_once('=').ok_or_else(|| {
                 Error::input(
                     Place::file(label).at_line(n),
@@ -208,28 +223,42 @@ impl Dataset {
                     ),
                 ));
             }
-            s1.push(number(v[0], label, n, field)?);
-            s2.push(number(v[1], label, n, field)?);
-            cert.push(number(v[2], label, n, field)?);
-            sd.push(number(v[3], label, n, field)?);
-        }
-        let mut certified_rss = None;
-        for n in p_last + 1..=c_last {
-            let line = get(n)?;
-            if let Some(rest) = line.trim_start().strip_prefix("Residual Sum of Squares:") {
-                certified_rss = Some(number(rest.trim(), label, n, "Residual Sum of Squares")?);
+            for (column, s) in columns.iter_mut().zip(&v) {
+                column.push(number(s, label, n, field)?);
             }
         }
-        let certified_rss = certified_rss.ok_or_else(|| {
+        Ok(columns)
+    }
+
+    /// The certified residual sum of squares, in lines `first..=last`.
+    fn certified_rss(&self, first: usize, last: usize) -> Result<f64> {
+        let mut certified_rss = None;
+        for n in first..=last {
+            let line = self.line(n)?;
+            if let Some(rest) = line.trim_start().strip_prefix("Residual Sum of Squares:") {
+                certified_rss = Some(number(
+                    rest.trim(),
+                    self.label,
+                    n,
+                    "Residual Sum of Squares",
+                )?);
+            }
+        }
+        certified_rss.ok_or_else(|| {
             Error::input(
-                Place::file(label).at_field("Residual Sum of Squares"),
-                format!("not found in lines {} to {c_last}", p_last + 1),
+                Place::file(self.label).at_field("Residual Sum of Squares"),
+                format!("not found in lines {first} to {last}"),
             )
-        })?;
+        })
+    }
+
+    /// The data lines `first..=last`: y and the predictors x1, x2 … of each observation.
+    fn data(&self, first: usize, last: usize) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+        let label = self.label;
         let (mut y, mut x) = (vec![], vec![]);
         let mut width = None;
-        for n in d_first..=d_last {
-            let line = get(n)?;
+        for n in first..=last {
+            let line = self.line(n)?;
             let v: Vec<&str> = line.split_whitespace().collect();
             if v.len() < 2 || width.is_some_and(|w| w != v.len()) {
                 return Err(Error::input(
@@ -247,6 +276,24 @@ impl Dataset {
                     .collect::<Result<Vec<f64>>>()?,
             );
         }
+        Ok((y, x))
+    }
+}
+
+impl Dataset {
+    /// Reads a StRD file (`label` names it in errors).
+    pub fn parse(name: &str, text: &str, label: &str) -> Result<Dataset> {
+        let (p_first, p_last) = line_range(text, "Starting Values", label)?;
+        let (_, c_last) = line_range(text, "Certified Values", label)?;
+        let (d_first, d_last) = line_range(text, "Data ", label)?;
+        let strd = Strd {
+            lines: text.lines().collect(),
+            label,
+        };
+        let difficulty = difficulty(text, label)?;
+        let [s1, s2, cert, sd] = strd.parameters(p_first, p_last)?;
+        let certified_rss = strd.certified_rss(p_last + 1, c_last)?;
+        let (y, x) = strd.data(d_first, d_last)?;
         let ds = Dataset {
             name: name.to_string(),
             difficulty,

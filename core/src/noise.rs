@@ -32,6 +32,16 @@
 //! ```
 
 use crate::random::Rng;
+use crate::units::{MM_PER_M, UM_PER_MM, URAD_PER_RAD};
+
+/// mm in one µm (`1e-3` bit for bit).
+const MM_PER_UM: f64 = 1.0 / UM_PER_MM;
+
+/// m in one mm (`1e-3` bit for bit).
+const M_PER_MM: f64 = 1.0 / MM_PER_M;
+
+/// rad in one µrad (`1e-6` bit for bit).
+const RAD_PER_URAD: f64 = 1.0 / URAD_PER_RAD;
 use serde::{Deserialize, Serialize};
 
 /// The distribution of each of the tracker's three noise components.
@@ -347,14 +357,14 @@ impl TrackerNoise {
     /// Standard deviations of azimuth and elevation, rad, whatever the distribution.
     pub fn angle_sigmas_rad(&self) -> (f64, f64) {
         (
-            self.distribution.sigma(self.azimuth_urad) * 1e-6,
-            self.distribution.sigma(self.elevation_urad) * 1e-6,
+            self.distribution.sigma(self.azimuth_urad) * RAD_PER_URAD,
+            self.distribution.sigma(self.elevation_urad) * RAD_PER_URAD,
         )
     }
 
     /// The range's value (σ for a normal, bound for a uniform) at a range of `r_mm`, in mm.
     pub fn range_value_mm(&self, r_mm: f64) -> f64 {
-        (self.range_um + self.range_um_per_m * r_mm * 1e-3) * 1e-3
+        (self.range_um + self.range_um_per_m * r_mm * M_PER_MM) * MM_PER_UM
     }
 
     /// Standard deviation of the range at a range of `r_mm`, in mm, whatever the distribution.
@@ -399,8 +409,8 @@ impl TrackerNoise {
         }
         let rho = p[0].hypot(p[1]);
         let r = rho.hypot(p[2]);
-        let az = p[1].atan2(p[0]) + self.azimuth_urad * 1e-6 * na;
-        let el = p[2].atan2(rho) + self.elevation_urad * 1e-6 * ne;
+        let az = p[1].atan2(p[0]) + self.azimuth_urad * RAD_PER_URAD * na;
+        let el = p[2].atan2(rho) + self.elevation_urad * RAD_PER_URAD * ne;
         let r = r + self.range_value_mm(r) * nr;
         let (sa, ca) = az.sin_cos();
         let (se, ce) = el.sin_cos();

@@ -29,7 +29,7 @@
 
 use crate::error::{Error, Place, Result};
 use crate::iso::Axis;
-use crate::machine::{Commands, Machine};
+use crate::machine::{Commands, Machine, MachineAxis};
 
 pub mod file;
 pub mod order;
@@ -204,85 +204,47 @@ impl Plan {
     pub fn parse_grid(machine: &Machine, text: &str) -> Result<Plan> {
         let grids: Vec<&str> = text.split(';').map(str::trim).collect();
         if grids.len() > 1 {
-            let mut plan = Plan::parse_grid(machine, grids[0])?;
-            let key = |q: &Commands| q.0.map(f64::to_bits);
-            let mut seen: std::collections::HashSet<_> = plan.positions.iter().map(key).collect();
-            for g in &grids[1..] {
-                if g.is_empty() {
-                    return Err(Error::input(
-                        Place::file("plan").at_field("grid"),
-                        "an empty grid between ';' separators",
-                    ));
-                }
-                let next = Plan::parse_grid(machine, g)?;
-                // A position an earlier grid has is measured once (where it first comes).
-                for q in next.positions {
-                    if seen.insert(key(&q)) {
-                        plan.positions.push(q);
-                    }
-                }
-                if plan.positions.len() > MAX_PLAN_POSITIONS {
-                    return Err(Error::input(
-                        Place::file("plan").at_field("grid"),
-                        format!("more than {MAX_PLAN_POSITIONS} positions"),
-                    ));
+            return Plan::union_of_grids(machine, &grids, text);
+        }
+        let ranges = text
+            .split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(AxisRange::parse)
+            .collect::<Result<Vec<_>>>()?;
+        Plan::grid_named(machine, &ranges, text)
+    }
+
+    /// The grids of `grids` (the `;`-separated parts of `text`) one after the other, each
+    /// position measured once, where it first comes.
+    fn union_of_grids(machine: &Machine, grids: &[&str], text: &str) -> Result<Plan> {
+        let place = || Place::file("plan").at_field("grid");
+        let mut plan = Plan::parse_grid(machine, grids[0])?;
+        let key = |q: &Commands| q.0.map(f64::to_bits);
+        let mut seen: std::collections::HashSet<_> = plan.positions.iter().map(key).collect();
+        for g in &grids[1..] {
+            if g.is_empty() {
+                return Err(Error::input(
+                    place(),
+                    "an empty grid between ';' separators",
+                ));
+            }
+            let next = Plan::parse_grid(machine, g)?;
+            // A position an earlier grid has is measured once (where it first comes).
+            for q in next.positions {
+                if seen.insert(key(&q)) {
+                    plan.positions.push(q);
                 }
             }
-            plan.name = text.to_string();
-            return Ok(plan);
-        }
-        let place = || Place::file("plan").at_field("grid");
-        let mut ranges = Vec::new();
-        for part in text.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            let (name, spec) = part.split_once('=').ok_or_else(|| {
-                Error::input(
+            if plan.positions.len() > MAX_PLAN_POSITIONS {
+                return Err(Error::input(
                     place(),
-                    format!("'{part}' is not AXIS=start:end:step or AXIS=value"),
-                )
-            })?;
-            let mut letters = name.trim().chars();
-            let axis = match (letters.next().and_then(Axis::from_letter), letters.next()) {
-                (Some(a), None) => a,
-                _ => {
-                    return Err(Error::input(
-                        place(),
-                        format!("'{name}' is not an axis letter"),
-                    ));
-                }
-            };
-            let nums: Vec<f64> = spec
-                .split(':')
-                .map(|s| s.trim().parse::<f64>())
-                .collect::<std::result::Result<_, _>>()
-                .map_err(|_| {
-                    Error::input(
-                        place(),
-                        format!("'{spec}' (axis {axis}) is not start:end:step or a number"),
-                    )
-                })?;
-            let range = match nums.as_slice() {
-                [v] => AxisRange {
-                    axis,
-                    start: *v,
-                    end: *v,
-                    step: 0.0,
-                },
-                [s, e, st] => AxisRange {
-                    axis,
-                    start: *s,
-                    end: *e,
-                    step: *st,
-                },
-                _ => {
-                    return Err(Error::input(
-                        place(),
-                        format!("'{spec}' (axis {axis}) is not start:end:step or a number"),
-                    ));
-                }
-            };
-            ranges.push(range);
+                    format!("more than {MAX_PLAN_POSITIONS} positions"),
+                ));
+            }
         }
-        Plan::grid_named(machine, &ranges, text)
+        plan.name = text.to_string();
+        Ok(plan)
     }
 
     /// A grid over the given ranges (one per axis of the machine, any order).
@@ -290,6 +252,8 @@ impl Plan {
         Plan::grid_named(machine, ranges, "grid")
     }
 
+    /// A grid named `name` (its errors' field): every axis' values, then their Cartesian
+    /// product, first chain axis slowest.
     fn grid_named(machine: &Machine, ranges: &[AxisRange], name: &str) -> Result<Plan> {
         let place = || Place::file("plan").at_field(name.to_string());
         let mut per_axis: Vec<Vec<f64>> = Vec::new();
@@ -310,58 +274,7 @@ impl Plan {
                     ));
                 }
             };
-            let finite = r.start.is_finite() && r.end.is_finite() && r.step.is_finite();
-            if !finite || (r.start != r.end && (r.step <= 0.0 || r.end < r.start)) {
-                return Err(Error::input(
-                    place(),
-                    format!(
-                        "axis {}: {}:{}:{} is not start ≤ end with a positive step",
-                        ax.axis,
-                        crate::error::number(r.start),
-                        crate::error::number(r.end),
-                        crate::error::number(r.step)
-                    ),
-                ));
-            }
-            let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
-            let tol = 1e-9 * (hi - lo).abs().max(1.0);
-            if r.start < lo - tol || r.end > hi + tol {
-                return Err(Error::input(
-                    place(),
-                    format!(
-                        "axis {}: {}..{} {} leaves the travel range [{lo}, {hi}]",
-                        ax.axis,
-                        crate::error::number(r.start),
-                        crate::error::number(r.end),
-                        ax.file_unit()
-                    ),
-                ));
-            }
-            // Counted before anything is allocated: a step of 1e-9 mm would ask for 10¹² values.
-            let count = if r.start == r.end {
-                1.0
-            } else {
-                ((r.end - r.start) / r.step).floor() + 2.0
-            };
-            if count > MAX_PLAN_POSITIONS as f64 {
-                return Err(Error::input(
-                    place(),
-                    format!(
-                        "axis {}: {}:{}:{} has {count:.3e} values; a plan has at most \
-                         {MAX_PLAN_POSITIONS} positions: use a larger step",
-                        ax.axis,
-                        crate::error::number(r.start),
-                        crate::error::number(r.end),
-                        crate::error::number(r.step)
-                    ),
-                ));
-            }
-            per_axis.push(
-                r.values()
-                    .into_iter()
-                    .map(|v| ax.from_file_units(v))
-                    .collect(),
-            );
+            per_axis.push(r.checked_values(ax).map_err(|m| Error::input(place(), m))?);
         }
         let total = per_axis.iter().map(|v| v.len() as f64).product::<f64>();
         if total > MAX_PLAN_POSITIONS as f64 {
@@ -383,26 +296,131 @@ impl Plan {
                 ),
             ));
         }
-        // Cartesian product, first chain axis slowest.
-        let mut positions = vec![Commands::default()];
-        for (k, values) in per_axis.iter().enumerate() {
-            positions = positions
-                .iter()
-                .flat_map(|c| {
-                    values.iter().map(move |&v| {
-                        let mut c = *c;
-                        c.0[k] = v;
-                        c
-                    })
-                })
-                .collect();
-        }
         Ok(Plan {
             name: name.to_string(),
-            positions,
+            positions: cartesian(&per_axis),
             reflectors: (0..machine.reflectors().len()).collect(),
             sequence: None,
         })
+    }
+}
+
+/// Every combination of one value per axis (internal units), first axis slowest.
+fn cartesian(per_axis: &[Vec<f64>]) -> Vec<Commands> {
+    let mut positions = vec![Commands::default()];
+    for (k, values) in per_axis.iter().enumerate() {
+        positions = positions
+            .iter()
+            .flat_map(|c| {
+                values.iter().map(move |&v| {
+                    let mut c = *c;
+                    c.0[k] = v;
+                    c
+                })
+            })
+            .collect();
+    }
+    positions
+}
+
+impl AxisRange {
+    /// One `AXIS=start:end:step` or `AXIS=value` of a grid (file units: mm or degrees).
+    fn parse(part: &str) -> Result<AxisRange> {
+        let place = || Place::file("plan").at_field("grid");
+        let (name, spec) = part.split_once('=').ok_or_else(|| {
+            Error::input(
+                place(),
+                format!("'{part}' is not AXIS=start:end:step or AXIS=value"),
+            )
+        })?;
+        let mut letters = name.trim().chars();
+        let axis = match (letters.next().and_then(Axis::from_letter), letters.next()) {
+            (Some(a), None) => a,
+            _ => {
+                return Err(Error::input(
+                    place(),
+                    format!("'{name}' is not an axis letter"),
+                ));
+            }
+        };
+        let not_a_range = || {
+            Error::input(
+                place(),
+                format!("'{spec}' (axis {axis}) is not start:end:step or a number"),
+            )
+        };
+        let nums: Vec<f64> = spec
+            .split(':')
+            .map(|s| s.trim().parse::<f64>())
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| not_a_range())?;
+        match nums.as_slice() {
+            [v] => Ok(AxisRange {
+                axis,
+                start: *v,
+                end: *v,
+                step: 0.0,
+            }),
+            [s, e, st] => Ok(AxisRange {
+                axis,
+                start: *s,
+                end: *e,
+                step: *st,
+            }),
+            _ => Err(not_a_range()),
+        }
+    }
+
+    /// The range's values on `ax` in internal units (mm, rad), or the message saying why they
+    /// cannot be: not start ≤ end with a positive step, outside the travel, or more values
+    /// than a plan may have (counted before anything is allocated: a step of 1e-9 mm would ask
+    /// for 10¹² values).
+    fn checked_values(&self, ax: &MachineAxis) -> std::result::Result<Vec<f64>, String> {
+        let r = self;
+        let text = || {
+            format!(
+                "{}:{}:{}",
+                crate::error::number(r.start),
+                crate::error::number(r.end),
+                crate::error::number(r.step)
+            )
+        };
+        let finite = r.start.is_finite() && r.end.is_finite() && r.step.is_finite();
+        if !finite || (r.start != r.end && (r.step <= 0.0 || r.end < r.start)) {
+            return Err(format!(
+                "axis {}: {} is not start ≤ end with a positive step",
+                ax.axis,
+                text()
+            ));
+        }
+        let (lo, hi) = (ax.to_file_units(ax.min), ax.to_file_units(ax.max));
+        let tol = 1e-9 * (hi - lo).abs().max(1.0);
+        if r.start < lo - tol || r.end > hi + tol {
+            return Err(format!(
+                "axis {}: {}..{} {} leaves the travel range [{lo}, {hi}]",
+                ax.axis,
+                crate::error::number(r.start),
+                crate::error::number(r.end),
+                ax.file_unit()
+            ));
+        }
+        let count = if r.start == r.end {
+            1.0
+        } else {
+            ((r.end - r.start) / r.step).floor() + 2.0
+        };
+        if count > MAX_PLAN_POSITIONS as f64 {
+            return Err(format!(
+                "axis {}: {} has {count:.3e} values; a plan has at most {MAX_PLAN_POSITIONS} \
+                 positions: use a larger step",
+                ax.axis,
+                text()
+            ));
+        }
+        Ok(r.values()
+            .into_iter()
+            .map(|v| ax.from_file_units(v))
+            .collect())
     }
 }
 

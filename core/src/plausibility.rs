@@ -39,6 +39,7 @@
 
 use crate::iso::Unit;
 use crate::model::Model;
+use crate::units::{UM_PER_MM, URAD_PER_RAD};
 use std::fmt;
 
 /// Largest plausible translation error (mm).
@@ -153,7 +154,34 @@ pub struct Context<'a> {
 pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausible> {
     let mut out = Vec::new();
     let k = if context.relaxed { 10.0 } else { 1.0 };
-    let tracker_start = context.tracker_start;
+    if let Some(emm) = context.emm_um
+        && beyond(emm, MAX_TRANSLATION_MM * UM_PER_MM)
+    {
+        out.push(Implausible {
+            name: "the fit's EMM".into(),
+            value: emm,
+            limit: MAX_TRANSLATION_MM * UM_PER_MM,
+            unit: "µm",
+        });
+    }
+    out.extend(implausible_errors(model, params, context, k));
+    out.extend(implausible_effects(model, params, context, k));
+    if let Some(start) = context.tracker_start {
+        out.extend(implausible_tracker_moves(model, params, start));
+    }
+    out.sort_by(|a, b| (b.value / b.limit).total_cmp(&(a.value / a.limit)));
+    out
+}
+
+/// The error functions whose peak over the travel (less its expanded uncertainty) is beyond
+/// `k` times its limit (µm, µrad).
+fn implausible_errors(
+    model: &Model,
+    params: &[f64],
+    context: &Context,
+    k: f64,
+) -> Vec<Implausible> {
+    let mut out = Vec::new();
     // Expanded uncertainty (k = 2) of a linear function with gradient g.
     let expanded = |g: &[(usize, f64)]| -> f64 {
         context.covariance_factor.map_or(0.0, |f| {
@@ -164,16 +192,6 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
                 .sqrt()
         })
     };
-    if let Some(emm) = context.emm_um
-        && beyond(emm, MAX_TRANSLATION_MM * 1e3)
-    {
-        out.push(Implausible {
-            name: "the fit's EMM".into(),
-            value: emm,
-            limit: MAX_TRANSLATION_MM * 1e3,
-            unit: "µm",
-        });
-    }
     for t in model.terms() {
         let ax = &model.machine().axes()[t.axis];
         let value = |u: f64, p: &[f64]| model.error_value(t.id, u, p).unwrap_or(0.0);
@@ -187,9 +205,9 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
                 |m, x| if x.0 > m.0 || x.0.is_nan() { x } else { m },
             );
         let (scale, limit, unit) = if t.id.unit() == Unit::Mm {
-            (1e3, k * MAX_TRANSLATION_MM * 1e3, "µm")
+            (UM_PER_MM, k * MAX_TRANSLATION_MM * UM_PER_MM, "µm")
         } else {
-            (1e6, k * MAX_ANGLE_RAD * 1e6, "µrad")
+            (URAD_PER_RAD, k * MAX_ANGLE_RAD * URAD_PER_RAD, "µrad")
         };
         // The gradient of the value at its peak (exact for the linear bases).
         let mut q = params.to_vec();
@@ -214,7 +232,18 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
             });
         }
     }
-    // Effect parameters, by group (screw.X.200.a/b, drift.x/y/z, reflector.R1.x/y/z, …).
+    out
+}
+
+/// The effect parameters beyond `k` times their limit, by group (screw.X.200.a/b,
+/// drift.x/y/z, reflector.R1.x/y/z, …); a rate judged by what it moves over the test's span.
+fn implausible_effects(
+    model: &Model,
+    params: &[f64],
+    context: &Context,
+    k: f64,
+) -> Vec<Implausible> {
+    let mut out = Vec::new();
     for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
         let per_hour = matches!(own, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
         let over_span = match context.time_span_h {
@@ -231,33 +260,37 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
             });
         }
     }
-    if let Some(start) = tracker_start {
-        let t = model.tracker_start();
-        let shift = (0..3)
-            .map(|k| (params[t + k] - start[t + k]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let turn = (3..6)
-            .map(|k| (params[t + k] - start[t + k]).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        if beyond(shift, MAX_TRACKER_SHIFT_MM) {
-            out.push(Implausible {
-                name: "tracker position (from its rigid fit)".into(),
-                value: shift * 1e3,
-                limit: MAX_TRACKER_SHIFT_MM * 1e3,
-                unit: "µm",
-            });
-        }
-        if beyond(turn, MAX_TRACKER_TURN_RAD) {
-            out.push(Implausible {
-                name: "tracker orientation (from its rigid fit)".into(),
-                value: turn * 1e6,
-                limit: MAX_TRACKER_TURN_RAD * 1e6,
-                unit: "µrad",
-            });
-        }
+    out
+}
+
+/// The tracker's moves from `start` (its rigid fit) beyond [`MAX_TRACKER_SHIFT_MM`] or
+/// [`MAX_TRACKER_TURN_RAD`] (reported in µm, µrad).
+fn implausible_tracker_moves(model: &Model, params: &[f64], start: &[f64]) -> Vec<Implausible> {
+    let mut out = Vec::new();
+    let t = model.tracker_start();
+    let shift = (0..3)
+        .map(|k| (params[t + k] - start[t + k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let turn = (3..6)
+        .map(|k| (params[t + k] - start[t + k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    if beyond(shift, MAX_TRACKER_SHIFT_MM) {
+        out.push(Implausible {
+            name: "tracker position (from its rigid fit)".into(),
+            value: shift * UM_PER_MM,
+            limit: MAX_TRACKER_SHIFT_MM * UM_PER_MM,
+            unit: "µm",
+        });
     }
-    out.sort_by(|a, b| (b.value / b.limit).total_cmp(&(a.value / a.limit)));
+    if beyond(turn, MAX_TRACKER_TURN_RAD) {
+        out.push(Implausible {
+            name: "tracker orientation (from its rigid fit)".into(),
+            value: turn * URAD_PER_RAD,
+            limit: MAX_TRACKER_TURN_RAD * URAD_PER_RAD,
+            unit: "µrad",
+        });
+    }
     out
 }

@@ -81,6 +81,12 @@ use std::f64::consts::PI;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+/// mm in one µm (`1e-3` bit for bit: the nearest double to 1/1000).
+pub(crate) const MM_PER_UM: f64 = 1.0 / crate::units::UM_PER_MM;
+
+/// rad in one µrad (`1e-6` bit for bit).
+pub(crate) const RAD_PER_URAD: f64 = 1.0 / crate::units::URAD_PER_RAD;
+
 /// The `format` field of a simulation record.
 pub const SIMULATION_FORMAT: &str = "volver-simulation";
 
@@ -121,6 +127,7 @@ pub use truth::Truth;
 /// Where the truth came from, for the record.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "source", rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum TruthSource {
     /// Drawn by [`Truth::random`].
     Random {
@@ -247,7 +254,56 @@ impl Simulation {
         }
     }
 
+    /// Checks the simulation before it runs: its plan against the machine, the observation, the
+    /// duration (s, returned), the noise and the effects.
     fn validate(&self) -> Result<f64> {
+        self.validate_plan()?;
+        let machine = self.truth.model.machine();
+        let place = |field: &str| Place::file("simulation").at_field(field.to_string());
+        let n = (self.plan.n_points() * machine.stations().len()) as f64;
+        if self.observe == crate::measure::Observation::Point
+            && let Some(st) = machine
+                .stations()
+                .iter()
+                .find(|s| s.observes == crate::machine::Observes::Range)
+        {
+            return Err(Error::input(
+                place("observe"),
+                format!(
+                    "station '{}' observes ranges only: simulate it with ranges (--observe range)",
+                    st.id
+                ),
+            ));
+        }
+        let duration = self.duration_s.unwrap_or(DEFAULT_SECONDS_PER_POINT * n);
+        if !(duration.is_finite() && duration >= 0.0) {
+            return Err(Error::input(
+                place("duration_s"),
+                format!("{duration} s is not a finite duration ≥ 0"),
+            ));
+        }
+        let nz = &self.noise;
+        let sigmas = [
+            nz.azimuth_urad,
+            nz.elevation_urad,
+            nz.range_um,
+            nz.range_um_per_m,
+        ];
+        if sigmas.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
+            return Err(Error::input(
+                place("noise"),
+                "every noise value (σ or bound) must be a finite number ≥ 0",
+            ));
+        }
+        for e in &self.effects {
+            e.validate(machine)?;
+        }
+        Ok(duration)
+    }
+
+    /// Checks the plan against the machine: some point measured, every step's position and
+    /// reflector, every reflector, every position within the travel.
+    fn validate_plan(&self) -> Result<()> {
         let machine = self.truth.model.machine();
         let place = |field: &str| Place::file("simulation").at_field(field.to_string());
         if self.plan.positions.is_empty() || self.plan.n_points() == 0 {
@@ -306,45 +362,7 @@ impl Simulation {
                 }
             }
         }
-        let n = (self.plan.n_points() * machine.stations().len()) as f64;
-        if self.observe == crate::measure::Observation::Point
-            && let Some(st) = machine
-                .stations()
-                .iter()
-                .find(|s| s.observes == crate::machine::Observes::Range)
-        {
-            return Err(Error::input(
-                place("observe"),
-                format!(
-                    "station '{}' observes ranges only: simulate it with ranges (--observe range)",
-                    st.id
-                ),
-            ));
-        }
-        let duration = self.duration_s.unwrap_or(DEFAULT_SECONDS_PER_POINT * n);
-        if !(duration.is_finite() && duration >= 0.0) {
-            return Err(Error::input(
-                place("duration_s"),
-                format!("{duration} s is not a finite duration ≥ 0"),
-            ));
-        }
-        let nz = &self.noise;
-        let sigmas = [
-            nz.azimuth_urad,
-            nz.elevation_urad,
-            nz.range_um,
-            nz.range_um_per_m,
-        ];
-        if sigmas.iter().any(|s| !(s.is_finite() && *s >= 0.0)) {
-            return Err(Error::input(
-                place("noise"),
-                "every noise value (σ or bound) must be a finite number ≥ 0",
-            ));
-        }
-        for e in &self.effects {
-            e.validate(machine)?;
-        }
-        Ok(duration)
+        Ok(())
     }
 }
 
@@ -369,7 +387,7 @@ impl Simulation {
                 let xi = (cmd.0[k] - ax.min) / (ax.max - ax.min);
                 let eta = (cmd.0[kb] - bx.min) / (bx.max - bx.min);
                 errors.component[k][component.direction()] +=
-                    amplitude_um * 1e-3 * (PI * xi).sin() * eta;
+                    amplitude_um * MM_PER_UM * (PI * xi).sin() * eta;
             }
         }
     }
@@ -384,16 +402,17 @@ impl Simulation {
         errors: &PointErrors<f64>,
     ) -> PointErrors<f64> {
         let mut out = *errors;
-        let t_h = t_s / 3600.0;
+        let t_h = t_s / crate::units::S_PER_H;
         for e in &self.effects {
             match e {
                 Effect::ThermalScale { axis, ppm_per_h } => {
                     let (k, _) = machine.axis(*axis).expect("validated: the axis exists");
-                    out.component[k][axis.direction()] += ppm_per_h * 1e-6 * cmd.0[k] * t_h;
+                    out.component[k][axis.direction()] +=
+                        ppm_per_h * (1.0 / crate::units::PPM) * cmd.0[k] * t_h;
                 }
                 Effect::TrackerDrift { rate_urad_per_h } => {
                     for (k, v) in rate_urad_per_h.iter().enumerate() {
-                        out.tracker[3 + k] += v * 1e-6 * t_h;
+                        out.tracker[3 + k] += v * RAD_PER_URAD * t_h;
                     }
                 }
                 Effect::StationDrift {
@@ -401,7 +420,7 @@ impl Simulation {
                     rate_um_per_h,
                 } if machine.station_named(Some(station)) == Ok(errors.station) => {
                     for (k, v) in rate_um_per_h.iter().enumerate() {
-                        out.tracker[k] += v * 1e-3 * t_h;
+                        out.tracker[k] += v * MM_PER_UM * t_h;
                     }
                 }
                 Effect::LocationDrift {
@@ -412,7 +431,7 @@ impl Simulation {
                     out.has_location[k] = true;
                     let across = (0..3).filter(|&c| c != axis.direction());
                     for (c, v) in across.zip(rate_um_per_h) {
-                        out.location[k][c] += v * 1e-3 * t_h;
+                        out.location[k][c] += v * MM_PER_UM * t_h;
                     }
                 }
                 _ => {}

@@ -103,6 +103,8 @@ pub fn function_metric_over(model: &Model, params: &[f64], span_h: Option<f64>) 
                 Unit::Rad | Unit::RadPerHour => LEVER_MM,
                 Unit::Ppm | Unit::PpmPerHour => 1.0 / UM_PER_MM,
                 Unit::Mm | Unit::MmPerHour => 1.0,
+                // A unit to come: weighted as a length.
+                _ => 1.0,
             };
             unit * time(j)
         },

@@ -536,6 +536,8 @@ pub fn hold_order(model: &Model) -> Vec<usize> {
             }
             Owner::Effect(_) => (7, 0),
             Owner::Tracker(_) | Owner::Station { .. } => (8, 0),
+            // An owner to come: held last, with the tracker.
+            _ => (8, 0),
         }
     };
     let mut order: Vec<usize> = (0..model.n_params()).collect();

@@ -193,6 +193,8 @@ fn eligible(model: &Model, j: usize, info: &ParamInfo, errors: ErrorScope) -> bo
     let rotary = match info.owner {
         Owner::Term { term, .. } => model.terms()[term].id.axis().is_rotary(),
         Owner::Tracker(_) | Owner::Station { .. } | Owner::Effect(_) => return true,
+        // An owner to come is not an error of an axis: kept, as the tracker and effects are.
+        _ => return true,
     };
     match errors {
         ErrorScope::All => true,

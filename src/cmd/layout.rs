@@ -151,6 +151,7 @@ fn print_layout(model: &Model) -> Result<()> {
     let mount = |t: &volver::core::machine::TrackerSetup| match t.mount {
         TrackerMount::Workpiece => "workpiece end of the chain",
         TrackerMount::Frame => "machine frame",
+        _ => "another mount",
     };
     if m.has_stations() {
         println!("\nStations (multilateration; each measurement names its own):");

@@ -353,6 +353,7 @@ fn print_record(
         }
         TruthSource::File { path } => println!("  true errors: from {path}"),
         TruthSource::Given => println!("  true errors: given"),
+        _ => println!("  true errors: another source"),
     }
     let n = &r.noise;
     println!(

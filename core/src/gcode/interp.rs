@@ -324,36 +324,7 @@ impl<'a> Reader<'a> {
                         ));
                     }
                 }
-                'G' | 'M' => {
-                    let code = self.code(w, place)?;
-                    let group = if w.letter == 'G' {
-                        codes::g_group(code)
-                    } else {
-                        codes::m_group(code)
-                    }
-                    .expect("checked by code()");
-                    // Non-modal G codes (group 0) may share a block, as may M7 and M8.
-                    let shared = (w.letter == 'G' && group == 0) || (w.letter == 'M' && group == 8);
-                    if !shared
-                        && let Some((_, _, first)) = groups
-                            .iter()
-                            .find(|(l, g, _)| *l == w.letter && *g == group)
-                    {
-                        return Err(refuse(
-                            place,
-                            &w.text,
-                            format!(
-                                "{first} and {} are both in the {} modal group: a block may hold \
-                                 one of them",
-                                w.text,
-                                codes::group_name(w.letter, group)
-                            ),
-                        ));
-                    }
-                    groups.push((w.letter, group, w.text.clone()));
-                    let list = if w.letter == 'G' { &mut p.g } else { &mut p.m };
-                    list.push((code, w.text.clone()));
-                }
+                'G' | 'M' => self.g_or_m_word(&mut p, &mut groups, w, place)?,
                 'X' | 'Y' | 'Z' | 'A' | 'B' | 'C' => self.axis_word(&mut p, w, place)?,
                 'U' | 'V' | 'W' => {
                     return Err(refuse(
@@ -387,6 +358,52 @@ impl<'a> Reader<'a> {
             }
         }
         Ok(p)
+    }
+
+    /// A G or M word: its code into the block's list, refused when a word of its modal group
+    /// is already there (`groups`: letter, group and word of those seen).
+    fn g_or_m_word(
+        &self,
+        p: &mut Parsed,
+        groups: &mut Vec<(char, u8, String)>,
+        w: &Word,
+        place: &Place,
+    ) -> Result<()> {
+        let code = self.code(w, place)?;
+        let group = if w.letter == 'G' {
+            codes::g_group(code)
+        } else {
+            codes::m_group(code)
+        }
+        .ok_or_else(|| {
+            refuse(
+                place,
+                &w.text,
+                format!("{} is not a code any control knows", w.text),
+            )
+        })?;
+        // Non-modal G codes (group 0) may share a block, as may M7 and M8.
+        let shared = (w.letter == 'G' && group == 0) || (w.letter == 'M' && group == 8);
+        if !shared
+            && let Some((_, _, first)) = groups
+                .iter()
+                .find(|(l, g, _)| *l == w.letter && *g == group)
+        {
+            return Err(refuse(
+                place,
+                &w.text,
+                format!(
+                    "{first} and {} are both in the {} modal group: a block may hold \
+                     one of them",
+                    w.text,
+                    codes::group_name(w.letter, group)
+                ),
+            ));
+        }
+        groups.push((w.letter, group, w.text.clone()));
+        let list = if w.letter == 'G' { &mut p.g } else { &mut p.m };
+        list.push((code, w.text.clone()));
+        Ok(())
     }
 
     /// A G or M code's value, refused (naming the word and what is known) when volver does not

@@ -127,6 +127,7 @@ pub struct Motion {
 /// What a block does, in order: compensated moves, and words written between them (the dwells
 /// and spindle words of an expanded cycle).
 #[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum Step {
     /// A compensated move.
     Move(Motion),

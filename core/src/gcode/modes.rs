@@ -22,6 +22,34 @@ impl Reader<'_> {
     /// Feed mode, plane, units, cutter compensation off, coordinate system, path control,
     /// distance modes, retract mode, and the dwell.
     pub(crate) fn modes(&mut self, p: &Parsed, block: &mut Block, place: &Place) -> Result<()> {
+        self.modal_codes(p, block);
+        if p.has('G', 40) && self.dwell(p, block, place)? {
+            return Ok(());
+        }
+        if let Some((v, w)) = p.other.get(&'S')
+            && *v < 0.0
+        {
+            return Err(refuse(place, w, format!("{w}: a spindle speed is ≥ 0")));
+        }
+        for letter in ['O', 'F', 'S'] {
+            if let Some((_, w)) = p.other.get(&letter) {
+                // An inverse-time F belongs to its compensated move's points (see movement);
+                // a block whose axis words a non-modal code takes (G53, G28 …) keeps it.
+                let inverse = letter == 'F' && self.feed == FeedMode::InverseTime;
+                let taken =
+                    p.g.iter()
+                        .any(|(g, _)| matches!(g, 100 | 280 | 300 | 431 | 520 | 530 | 920));
+                if !inverse || !p.any_axis() || taken {
+                    block.kept.push(w.clone());
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The block's G codes: the modes they set (feed mode, plane, units, coordinate system,
+    /// retract mode, distance modes), and the codes the output keeps as written.
+    fn modal_codes(&mut self, p: &Parsed, block: &mut Block) {
         for (g, w) in &p.g {
             match g {
                 930 => self.feed = FeedMode::InverseTime,
@@ -31,10 +59,10 @@ impl Reader<'_> {
                 200 => self.inch = true,
                 210 => self.inch = false,
                 540..=593 => {
-                    self.system = [540, 550, 560, 570, 580, 590, 591, 592, 593]
-                        .iter()
-                        .position(|c| c == g)
-                        .expect("coordinate system code");
+                    let systems = [540, 550, 560, 570, 580, 590, 591, 592, 593];
+                    if let Some(system) = systems.iter().position(|c| c == g) {
+                        self.system = system;
+                    }
                 }
                 980 => self.retract_r = false,
                 990 => self.retract_r = true,
@@ -62,46 +90,32 @@ impl Reader<'_> {
                 block.kept.push(w.clone());
             }
         }
-        if p.has('G', 40) {
-            if self.fanuc_dwell(p) {
-                let (_, g) = p.g.iter().find(|(g, _)| *g == 40).expect("G4");
+    }
+
+    /// The block's dwell `G4 P…` kept as written (a Fanuc `G04 X…` with its words); whether
+    /// the block is a Fanuc dwell, which nothing else of it follows.
+    fn dwell(&self, p: &Parsed, block: &mut Block, place: &Place) -> Result<bool> {
+        if self.fanuc_dwell(p) {
+            if let Some((_, g)) = p.g.iter().find(|(g, _)| *g == 40) {
                 block.kept.push(format!("{g} {}", self.words_text(p)));
-                return Ok(());
             }
-            let Some((_, pw)) = p.other.get(&'P') else {
-                let hint = if p.axes[0].is_some() {
-                    " (G4 X… is Fanuc's dwell in seconds, which RS274NGC controls refuse: write \
-                     G4 P…)"
-                } else {
-                    ""
-                };
-                return Err(refuse(
-                    place,
-                    "G4",
-                    format!("G4 without its dwell time P{hint}"),
-                ));
+            return Ok(true);
+        }
+        let Some((_, pw)) = p.other.get(&'P') else {
+            let hint = if p.axes[0].is_some() {
+                " (G4 X… is Fanuc's dwell in seconds, which RS274NGC controls refuse: write \
+                 G4 P…)"
+            } else {
+                ""
             };
-            block.kept.push(format!("G4 {pw}"));
-        }
-        if let Some((v, w)) = p.other.get(&'S')
-            && *v < 0.0
-        {
-            return Err(refuse(place, w, format!("{w}: a spindle speed is ≥ 0")));
-        }
-        for letter in ['O', 'F', 'S'] {
-            if let Some((_, w)) = p.other.get(&letter) {
-                // An inverse-time F belongs to its compensated move's points (see movement);
-                // a block whose axis words a non-modal code takes (G53, G28 …) keeps it.
-                let inverse = letter == 'F' && self.feed == FeedMode::InverseTime;
-                let taken =
-                    p.g.iter()
-                        .any(|(g, _)| matches!(g, 100 | 280 | 300 | 431 | 520 | 530 | 920));
-                if !inverse || !p.any_axis() || taken {
-                    block.kept.push(w.clone());
-                }
-            }
-        }
-        Ok(())
+            return Err(refuse(
+                place,
+                "G4",
+                format!("G4 without its dwell time P{hint}"),
+            ));
+        };
+        block.kept.push(format!("G4 {pw}"));
+        Ok(false)
     }
 
     /// A Fanuc-style dwell `G04 X<seconds>` (no P): its X is the time, not a position.

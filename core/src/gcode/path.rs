@@ -59,6 +59,46 @@ pub(crate) fn linear_points(
         .collect())
 }
 
+/// The centre (mm, plane coordinates) of the arc of radius `r` (mm; negative: the long arc)
+/// from `start` to `end`, turning clockwise or not; the chord must fit the radius (within `tol`).
+fn centre_from_radius(
+    start: [f64; 2],
+    end: [f64; 2],
+    r: f64,
+    clockwise: bool,
+    tol: f64,
+    place: &Place,
+) -> Result<(f64, f64)> {
+    let ([s1, s2], [e1, e2]) = (start, end);
+    let (dx, dy) = (e1 - s1, e2 - s2);
+    let chord = (dx * dx + dy * dy).sqrt();
+    if chord == 0.0 || chord > 2.0 * r.abs() + tol {
+        return Err(Error::input(
+            place.clone().at_field("R"),
+            format!("radius {r} mm cannot join points {chord:.4} mm apart"),
+        ));
+    }
+    let h = (r * r - chord * chord / 4.0).max(0.0).sqrt();
+    // The centre left of the chord for a counter-clockwise short arc.
+    let side = if clockwise == (r > 0.0) { -1.0 } else { 1.0 };
+    let (mx, my) = (s1 + dx / 2.0, s2 + dy / 2.0);
+    Ok((mx - side * h * dy / chord, my + side * h * dx / chord))
+}
+
+/// Checks that an arc's end lies on its circle: its radius `r1` at the end (mm) matches `r0` at
+/// the start. CAM output rounds centres: 2 µm, or 1e-4 of the radius, of mismatch is accepted.
+fn check_on_circle(r0: f64, r1: f64, place: &Place) -> Result<()> {
+    if (r0 - r1).abs() > 0.002_f64.max(1e-4 * r0.max(r1)) {
+        return Err(Error::input(
+            place.clone(),
+            format!(
+                "the arc's end is off its circle: radius {r0:.4} mm at the start, {r1:.4} mm at the end"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// The points of an arc in plane 0 (XY), 1 (ZX) or 2 (YZ): chords with sagitta ≤ `tol`.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn arc_points(
@@ -90,21 +130,7 @@ pub(crate) fn arc_points(
     let (k1, k2) = (k_of(d1)?, k_of(d2)?);
     let (s1, s2, e1, e2) = (from[k1], from[k2], to[k1], to[k2]);
     let (c1, c2) = match (centre[d1], centre[d2], radius) {
-        (None, None, Some(r)) => {
-            let (dx, dy) = (e1 - s1, e2 - s2);
-            let chord = (dx * dx + dy * dy).sqrt();
-            if chord == 0.0 || chord > 2.0 * r.abs() + tol {
-                return Err(Error::input(
-                    place.clone().at_field("R"),
-                    format!("radius {r} mm cannot join points {chord:.4} mm apart"),
-                ));
-            }
-            let h = (r * r - chord * chord / 4.0).max(0.0).sqrt();
-            // The centre left of the chord for a counter-clockwise short arc.
-            let side = if clockwise == (r > 0.0) { -1.0 } else { 1.0 };
-            let (mx, my) = (s1 + dx / 2.0, s2 + dy / 2.0);
-            (mx - side * h * dy / chord, my + side * h * dx / chord)
-        }
+        (None, None, Some(r)) => centre_from_radius([s1, s2], [e1, e2], r, clockwise, tol, place)?,
         (a, b, None) if a.is_some() || b.is_some() => {
             (s1 + a.unwrap_or(0.0), s2 + b.unwrap_or(0.0))
         }
@@ -121,15 +147,7 @@ pub(crate) fn arc_points(
     };
     let r0 = ((s1 - c1).powi(2) + (s2 - c2).powi(2)).sqrt();
     let r1 = ((e1 - c1).powi(2) + (e2 - c2).powi(2)).sqrt();
-    // CAM output rounds centres: 2 µm, or 1e-4 of the radius, of mismatch is accepted.
-    if (r0 - r1).abs() > 0.002_f64.max(1e-4 * r0.max(r1)) {
-        return Err(Error::input(
-            place.clone(),
-            format!(
-                "the arc's end is off its circle: radius {r0:.4} mm at the start, {r1:.4} mm at the end"
-            ),
-        ));
-    }
+    check_on_circle(r0, r1, place)?;
     let a0 = (s2 - c2).atan2(s1 - c1);
     let a1 = (e2 - c2).atan2(e1 - c1);
     let tau = std::f64::consts::TAU;

@@ -3,10 +3,6 @@
 
 use super::*;
 
-/// A field's variables, its functions' values at a point for each (a second set for a pair),
-/// and how many the first has.
-type FieldValues<S> = ([FieldVar; 2], [S; 4], [S; 4], usize);
-
 impl Model {
     /// Argument of a term's basis for a command: the angle (rad) for periodic bases, otherwise
     /// the position normalised to [−1, 1] over the axis range.
@@ -123,174 +119,6 @@ impl Model {
         let base = self.terms.len() + TRACKER_DOF;
         self.place_effects(&mut e, |i| value(base + i));
         e
-    }
-
-    /// Places the effects' values (`value(i)` for the i-th effect) into [`PointErrors`].
-    #[inline]
-    pub(super) fn place_effects<S: Real>(
-        &self,
-        e: &mut PointErrors<S>,
-        value: impl Fn(usize) -> S,
-    ) {
-        for (i, (slot, _)) in self.effects.iter().enumerate() {
-            let v = value(i);
-            match *slot {
-                EffectSlot::Drift(c) | EffectSlot::Field { c, .. } => e.tool_shift[c] += v,
-                EffectSlot::Reflector { c, .. } => e.reflector_delta[c] += v,
-                EffectSlot::RangeScale => e.range_scale = v,
-                EffectSlot::Screw { k, dir, .. } | EffectSlot::ThermalScale { k, dir } => {
-                    e.component[k][dir] += v
-                }
-                EffectSlot::LocationDrift { k, c } => e.location[k][c] += v,
-                EffectSlot::TrackerDrift(k) => e.tracker[k] += v,
-                EffectSlot::StationDrift { c, .. } => e.tracker[c] += v,
-            }
-        }
-    }
-
-    /// Whether the model needs the measurements' time stamps (thermal drift, scale growth,
-    /// location drift, a field over `t`).
-    pub fn needs_time(&self) -> bool {
-        self.effects.iter().any(|(slot, _)| match slot {
-            EffectSlot::Drift(_) | EffectSlot::ThermalScale { .. } => true,
-            EffectSlot::LocationDrift { .. }
-            | EffectSlot::TrackerDrift(_)
-            | EffectSlot::StationDrift { .. } => true,
-            EffectSlot::Field { vars, pair, .. } => {
-                vars[0] == FieldVar::Time || (*pair && vars[1] == FieldVar::Time)
-            }
-            _ => false,
-        })
-    }
-
-    /// The functions of a field variable at a point into `out` (its count returned).
-    #[inline]
-    fn field_functions<S: Real>(
-        &self,
-        var: FieldVar,
-        commands: &[S; MAX_AXES],
-        t_h: f64,
-        out: &mut [S; 4],
-    ) -> usize {
-        match var {
-            FieldVar::Linear(k) => {
-                let x = self.machine.axes()[k].normalise_at(commands[k]);
-                let x2 = x * x;
-                out[0] = x;
-                out[1] = (x2 * 3.0 - 1.0) * 0.5;
-                out[2] = (x2 * 5.0 - 3.0) * x * 0.5;
-                3
-            }
-            FieldVar::Periodic(k) => {
-                let (s1, c1) = commands[k].sin_cos();
-                let (s2, c2) = (commands[k] * 2.0).sin_cos();
-                *out = [c1, s1, c2, s2];
-                4
-            }
-            FieldVar::Time => {
-                out[0] = S::from(t_h);
-                out[1] = S::from(t_h * t_h);
-                2
-            }
-        }
-    }
-
-    /// Effect values at a point into `vals` (slots after the tracker's) and, when `jac` is
-    /// given, each effect parameter's ∂value/∂p into `jac[parameter]`.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn effect_values<S: Real>(
-        &self,
-        commands: &[S; MAX_AXES],
-        reflector: usize,
-        station: usize,
-        t_s: f64,
-        params: &[f64],
-        vals: &mut [S],
-        mut jac: Option<&mut [f64]>,
-    ) {
-        let base = self.terms.len() + TRACKER_DOF;
-        // A field's functions at this point, shared by its three components' slots (which
-        // follow one another).
-        let mut field: Option<FieldValues<S>> = None;
-        for (i, &(slot, j)) in self.effects.iter().enumerate() {
-            let mut set = |p: usize, g: f64| {
-                if let Some(jac) = jac.as_deref_mut() {
-                    jac[p] = g;
-                }
-            };
-            vals[base + i] = match slot {
-                EffectSlot::Drift(_) => {
-                    let t_h = t_s / 3600.0;
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::Reflector { reflector: r, .. } => {
-                    let on = if r == reflector { 1.0 } else { 0.0 };
-                    set(j, on);
-                    S::from(params[j] * on)
-                }
-                EffectSlot::RangeScale => {
-                    set(j, 1e-6);
-                    S::from(params[j] * 1e-6)
-                }
-                EffectSlot::Screw {
-                    k,
-                    period_mm,
-                    reference,
-                    ..
-                } => {
-                    let phase =
-                        (commands[k] - reference) * (2.0 * std::f64::consts::PI) / period_mm;
-                    let (sn, cs) = phase.sin_cos();
-                    set(j, sn.re());
-                    set(j + 1, cs.re());
-                    sn * params[j] + cs * params[j + 1]
-                }
-                EffectSlot::ThermalScale { k, .. } => {
-                    let g = 1e-6 * t_s / 3600.0;
-                    set(j, commands[k].re() * g);
-                    commands[k] * (params[j] * g)
-                }
-                EffectSlot::LocationDrift { .. } | EffectSlot::TrackerDrift(_) => {
-                    let t_h = t_s / 3600.0;
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::StationDrift { station: s, .. } => {
-                    let t_h = if s == station { t_s / 3600.0 } else { 0.0 };
-                    set(j, t_h);
-                    S::from(params[j] * t_h)
-                }
-                EffectSlot::Field { vars, pair, .. } => {
-                    // A single field holds its variable twice; a pair's two are distinct.
-                    if field.is_none_or(|f| f.0 != vars) {
-                        let t_h = t_s / 3600.0;
-                        let (mut a, mut b) = ([S::zero(); 4], [S::zero(); 4]);
-                        let na = self.field_functions(vars[0], commands, t_h, &mut a);
-                        if pair {
-                            self.field_functions(vars[1], commands, t_h, &mut b);
-                        }
-                        field = Some((vars, a, b, na));
-                    }
-                    let (_, a, b, na) = field.expect("set above");
-                    let mut v = S::zero();
-                    if pair {
-                        for (q, (x, y)) in [(0, 0), (0, 1), (1, 0), (1, 1)].into_iter().enumerate()
-                        {
-                            let phi = a[x] * b[y];
-                            set(j + q, phi.re());
-                            v += phi * params[j + q];
-                        }
-                    } else {
-                        for (q, phi) in a[..na].iter().enumerate() {
-                            set(j + q, phi.re());
-                            v += *phi * params[j + q];
-                        }
-                    }
-                    v
-                }
-            };
-        }
     }
 
     /// Predicted reflector position in the tracker frame (mm) for `commands` (chain order,
@@ -575,37 +403,9 @@ impl Model {
         );
         // Row 0 first holds ∂value(slot)/∂p_j for each parameter: a term's basis values.
         let mut vals = [0.0; MAX_SLOTS];
-        let mut g = [0.0; MAX_COEFFS];
-        let mut at = 0;
-        for grp in &self.groups {
-            let out = &mut vals[grp.terms.clone()];
-            let block = &mut jac[grp.params..grp.params + grp.terms.len() * grp.len];
-            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
-                Some(values) => {
-                    self.group_values_cached(grp, params, values, out);
-                    spread(values, block);
-                }
-                None => {
-                    self.group_values(grp, &commands.0, params, &mut g, out);
-                    spread(&g[..grp.len], block);
-                }
-            }
-        }
-        let m = self.terms.len() + TRACKER_DOF;
-        let pose = self.stations[station].pose;
-        vals[self.terms.len()..m].copy_from_slice(&params[pose..pose + TRACKER_DOF]);
-        if self.stations.len() > 1 || self.stations[0].offset.is_some() {
-            // Another station's pose and every range offset do not move this point (the
-            // offset enters after the chain, in the observation).
-            for b in &self.stations {
-                jac[b.pose..b.pose + TRACKER_DOF].fill(0.0);
-                if let Some(o) = b.offset {
-                    jac[o] = 0.0;
-                }
-            }
-        }
-        jac[pose..pose + TRACKER_DOF].fill(1.0);
-        let m = m + self.effects.len();
+        self.term_values_and_bases(commands, params, cached, &mut vals, jac);
+        self.tracker_values_and_bases(station, params, &mut vals, jac);
+        let m = self.terms.len() + TRACKER_DOF + self.effects.len();
         self.effect_values(
             &commands.0,
             reflector,
@@ -637,6 +437,58 @@ impl Model {
             r2[j] = g[2][s] * d;
         }
         point
+    }
+
+    /// The terms' values into `vals` and, into row 0 of `jac`, each term parameter's
+    /// ∂value/∂p: its basis value at the point (from `cached` regressors when given).
+    fn term_values_and_bases(
+        &self,
+        commands: &Commands,
+        params: &[f64],
+        cached: Option<PointRegressors<'_>>,
+        vals: &mut [f64; MAX_SLOTS],
+        jac: &mut [f64],
+    ) {
+        let mut g = [0.0; MAX_COEFFS];
+        let mut at = 0;
+        for grp in &self.groups {
+            let out = &mut vals[grp.terms.clone()];
+            let block = &mut jac[grp.params..grp.params + grp.terms.len() * grp.len];
+            match cached.and_then(|c| c.group(grp, &self.terms, &mut at)) {
+                Some(values) => {
+                    self.group_values_cached(grp, params, values, out);
+                    spread(values, block);
+                }
+                None => {
+                    self.group_values(grp, &commands.0, params, &mut g, out);
+                    spread(&g[..grp.len], block);
+                }
+            }
+        }
+    }
+
+    /// The pose of `station` into the tracker slots of `vals` and, into row 0 of `jac`, 1 for
+    /// its parameters and 0 for the other stations' poses and every range offset (which do not
+    /// move this point: the offset enters after the chain, in the observation).
+    fn tracker_values_and_bases(
+        &self,
+        station: usize,
+        params: &[f64],
+        vals: &mut [f64; MAX_SLOTS],
+        jac: &mut [f64],
+    ) {
+        let m = self.terms.len() + TRACKER_DOF;
+        let pose = self.stations[station].pose;
+        vals[self.terms.len()..m].copy_from_slice(&params[pose..pose + TRACKER_DOF]);
+        if self.stations.len() > 1 || self.stations[0].offset.is_some() {
+            for b in &self.stations {
+                jac[b.pose..b.pose + TRACKER_DOF].fill(0.0);
+                if let Some(o) = b.offset {
+                    jac[o] = 0.0;
+                }
+            }
+        }
+        jac[pose..pose + TRACKER_DOF].fill(1.0);
     }
 
     /// Second derivative of the predicted point along the parameter direction `dir`:

@@ -6,6 +6,7 @@ use super::*;
 /// How squareness and straightness share the slope they both describe (paper, section 6.1).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum SquarenessRule {
     /// The paper's rule: a squareness whose straightness partner is modelled (B0Z ↔ EXZ) is held
     /// at zero; the squareness is read from the straightness' slope ([`Model::squareness`]).

@@ -85,7 +85,7 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
         saa += (x - ma) * (x - ma);
         sbb += (y - mb) * (y - mb);
     }
-    if saa <= 0.0 || sbb <= 1e-300 {
+    if saa <= 0.0 || sbb <= crate::units::TINY {
         0.0
     } else {
         sab / (saa * sbb).sqrt()

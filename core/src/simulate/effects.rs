@@ -2,6 +2,7 @@
 //! ([`EFFECTS`]).
 
 use super::*;
+use crate::units::PPM;
 
 /// The largest value of an effect's parameter, in its unit (µm, µm/h, µrad, ppm, mm).
 pub const MAX_EFFECT_VALUE: f64 = 1e6;
@@ -9,6 +10,7 @@ pub const MAX_EFFECT_VALUE: f64 = 1e6;
 /// A physical effect outside the standard model (see the module documentation for formulas).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "effect", rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum Effect {
     /// Thermal drift of the tool point in the machine frame.
     ThermalDrift {
@@ -179,91 +181,331 @@ impl Effect {
     /// assert!(Effect::parse("ball-screw=X,10").unwrap_err().to_string().contains("AXIS,PERIOD_MM,AMP_UM"));
     /// ```
     pub fn parse(text: &str) -> Result<Effect> {
-        let place = || Place::file("--effect").at_field(text.to_string());
         let ids: Vec<&str> = EFFECTS.iter().map(|e| e.0).collect();
         let (id, args) = text.split_once('=').unwrap_or((text, ""));
         let id = id.trim();
         let Some(&(_, syntax, _)) = EFFECTS.iter().find(|e| e.0 == id) else {
             return Err(Error::input(
-                place(),
+                effect_place(text),
                 format!("unknown effect '{id}'; effects are {}", ids.join(", ")),
             ));
         };
-        let args: Vec<&str> = args
-            .split(',')
-            .map(str::trim)
-            .filter(|s| !s.is_empty())
-            .collect();
-        let bad = |why: String| Error::input(place(), format!("{why}; expected {syntax}"));
-        // Every value of an effect (µm, µm/h, µrad, ppm, mm) within 1e6 of its unit: a metre,
-        // a radian, a whole scale, beyond any machine's error.
-        let num = |s: &str| -> Result<f64> {
-            let v = s
-                .parse::<f64>()
-                .ok()
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| bad(format!("'{s}' is not a finite number")))?;
-            if v.abs() > MAX_EFFECT_VALUE {
-                return Err(bad(format!(
-                    "{} is beyond any machine's error (at most {MAX_EFFECT_VALUE:e} in the \
-                     effect's unit)",
-                    crate::error::number(v)
-                )));
-            }
-            Ok(v)
+        let args = Args {
+            text,
+            syntax,
+            values: args
+                .split(',')
+                .map(str::trim)
+                .filter(|s| !s.is_empty())
+                .collect(),
         };
-        let nums = |a: &[&str]| -> Result<Vec<f64>> { a.iter().map(|s| num(s)).collect() };
-        let letter = |s: &str| -> Result<Axis> {
-            let mut letters = s.chars();
-            match (letters.next().and_then(Axis::from_letter), letters.next()) {
-                (Some(a), None) => Ok(a),
-                _ => Err(bad(format!("'{s}' is not an axis letter"))),
-            }
+        match args.tracker_effect(id)? {
+            Some(effect) => Ok(effect),
+            None => args.machine_effect(id),
+        }
+    }
+
+    /// Checks the effect against a machine.
+    pub fn validate(&self, machine: &Machine) -> Result<()> {
+        let check = Check {
+            machine,
+            id: self.id(),
         };
-        let count = |n: usize| -> Result<()> {
-            if args.len() == n {
-                Ok(())
-            } else {
-                Err(bad(format!("{} values given", args.len())))
+        match self {
+            Effect::ThermalDrift { .. }
+            | Effect::TrackerDrift { .. }
+            | Effect::StationDrift { .. }
+            | Effect::TrackerTilt { .. }
+            | Effect::ReflectorOffset { .. }
+            | Effect::RangeScale { .. } => self.validate_tracker_side(&check),
+            _ => self.validate_machine_side(&check),
+        }
+    }
+
+    /// [`Effect::validate`] for the effects on the tracker, its stations and reflectors.
+    fn validate_tracker_side(&self, check: &Check) -> Result<()> {
+        let machine = check.machine;
+        match self {
+            Effect::ThermalDrift { rate_um_per_h } if !finite(rate_um_per_h) => {
+                check.fail("the drift rate must be finite")
             }
-        };
-        Ok(match id {
+            Effect::TrackerDrift { rate_urad_per_h } if !finite(rate_urad_per_h) => {
+                check.fail("the drift rates must be finite")
+            }
+            Effect::StationDrift {
+                station,
+                rate_um_per_h,
+            } => {
+                if !machine.has_stations() {
+                    check.fail(format!(
+                        "the machine {} has no [[station]] tables: a tracker drifting in \
+                         position is thermal-drift",
+                        machine.chain()
+                    ))
+                } else if let Err(why) = machine.station_named(Some(station)) {
+                    check.fail(why.to_string())
+                } else if !finite(rate_um_per_h) {
+                    check.fail("the drift rates must be finite")
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::TrackerTilt { rx_urad, ry_urad } if !finite(&[*rx_urad, *ry_urad]) => {
+                check.fail("the tilt must be finite")
+            }
+            Effect::ReflectorOffset {
+                reflector,
+                delta_um,
+            } => {
+                if machine.reflector_index(reflector).is_none() {
+                    let ids: Vec<&str> =
+                        machine.reflectors().iter().map(|r| r.id.as_str()).collect();
+                    check.fail(format!(
+                        "no reflector '{reflector}' in the machine (it has {})",
+                        ids.join(", ")
+                    ))
+                } else if !finite(delta_um) {
+                    check.fail("the offset error must be finite")
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::RangeScale { ppm } if !(ppm.is_finite() && *ppm > -PPM) => {
+                check.fail(format!("{ppm} ppm is not a finite scale above −10⁶ ppm"))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// [`Effect::validate`] for the effects on the machine's axes.
+    fn validate_machine_side(&self, check: &Check) -> Result<()> {
+        let machine = check.machine;
+        match self {
+            Effect::RotaryHarmonics {
+                max_order,
+                translation_um,
+                rotation_urad,
+            } => {
+                if !(2..=MAX_HARMONIC).contains(max_order) {
+                    check.fail(format!(
+                        "highest harmonic {max_order} is outside 2..={MAX_HARMONIC}"
+                    ))
+                } else if !finite(&[*translation_um, *rotation_urad]) {
+                    check.fail("the amplitudes must be finite")
+                } else if !machine.axes().iter().any(|a| a.axis.is_rotary()) {
+                    check.fail(format!(
+                        "the machine {} has no rotary axis",
+                        machine.chain()
+                    ))
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::BallScrew {
+                axis,
+                period_mm,
+                amplitude_um,
+            } => {
+                check.axis_of_kind(*axis, false)?;
+                if !(period_mm.is_finite() && *period_mm > 0.0) {
+                    check.fail(format!("the period {period_mm} mm must be positive"))
+                } else if !amplitude_um.is_finite() {
+                    check.fail("the amplitude must be finite")
+                } else {
+                    Ok(())
+                }
+            }
+            Effect::ThermalScale { axis, ppm_per_h } => {
+                check.axis_of_kind(*axis, false)?;
+                if ppm_per_h.is_finite() {
+                    Ok(())
+                } else {
+                    check.fail("the growth rate must be finite")
+                }
+            }
+            Effect::LocationDrift {
+                axis,
+                rate_um_per_h,
+            } => {
+                check.axis_of_kind(*axis, true)?;
+                if finite(rate_um_per_h) {
+                    Ok(())
+                } else {
+                    check.fail("the drift rates must be finite")
+                }
+            }
+            Effect::Coupling {
+                axis,
+                component,
+                by,
+                amplitude_um,
+            } => {
+                check.axis_of_kind(*axis, false)?;
+                if component.is_rotary() {
+                    check.fail(format!(
+                        "{component} is not a translation component (X, Y or Z)"
+                    ))
+                } else if machine.axis(*by).is_none() || by == axis {
+                    check.fail(format!("{by} is not another axis of {}", machine.chain()))
+                } else if !amplitude_um.is_finite() {
+                    check.fail("the amplitude must be finite")
+                } else {
+                    Ok(())
+                }
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+/// Whether every value is finite.
+fn finite(v: &[f64]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+/// Where an `--effect` argument's error is: the argument itself.
+fn effect_place(text: &str) -> Place {
+    Place::file("--effect").at_field(text.to_string())
+}
+
+/// The values of one `--effect` argument, with the readers that say what was expected.
+struct Args<'a> {
+    /// The whole argument (`ball-screw=X,10,3`).
+    text: &'a str,
+    /// The effect's syntax, for errors.
+    syntax: &'static str,
+    /// The comma-separated values, trimmed, empty ones dropped.
+    values: Vec<&'a str>,
+}
+
+impl Args<'_> {
+    /// An error saying `why` and the syntax expected.
+    fn bad(&self, why: String) -> Error {
+        Error::input(
+            effect_place(self.text),
+            format!("{why}; expected {}", self.syntax),
+        )
+    }
+
+    /// A value: finite and within [`MAX_EFFECT_VALUE`] of its unit (µm, µm/h, µrad, ppm, mm):
+    /// a metre, a radian, a whole scale, beyond any machine's error.
+    fn num(&self, s: &str) -> Result<f64> {
+        let v = s
+            .parse::<f64>()
+            .ok()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| self.bad(format!("'{s}' is not a finite number")))?;
+        if v.abs() > MAX_EFFECT_VALUE {
+            return Err(self.bad(format!(
+                "{} is beyond any machine's error (at most {MAX_EFFECT_VALUE:e} in the \
+                 effect's unit)",
+                crate::error::number(v)
+            )));
+        }
+        Ok(v)
+    }
+
+    /// The values from index `from` on, as numbers.
+    fn nums(&self, from: usize) -> Result<Vec<f64>> {
+        self.values[from..].iter().map(|s| self.num(s)).collect()
+    }
+
+    /// Value `i` as an axis letter.
+    fn letter(&self, i: usize) -> Result<Axis> {
+        let s = self.values[i];
+        let mut letters = s.chars();
+        match (letters.next().and_then(Axis::from_letter), letters.next()) {
+            (Some(a), None) => Ok(a),
+            _ => Err(self.bad(format!("'{s}' is not an axis letter"))),
+        }
+    }
+
+    /// Checks that there are `n` values.
+    fn count(&self, n: usize) -> Result<()> {
+        if self.values.len() == n {
+            Ok(())
+        } else {
+            Err(self.bad(format!("{} values given", self.values.len())))
+        }
+    }
+
+    /// The effects on the tracker, its stations and reflectors (`None`: `id` is another's).
+    fn tracker_effect(&self, id: &str) -> Result<Option<Effect>> {
+        let args = &self.values;
+        Ok(Some(match id {
             "thermal-drift" => {
-                count(3)?;
-                let v = nums(&args)?;
+                self.count(3)?;
+                let v = self.nums(0)?;
                 Effect::ThermalDrift {
                     rate_um_per_h: [v[0], v[1], v[2]],
                 }
             }
+            "tracker-tilt" => {
+                self.count(2)?;
+                let v = self.nums(0)?;
+                Effect::TrackerTilt {
+                    rx_urad: v[0],
+                    ry_urad: v[1],
+                }
+            }
+            "reflector-offset" => {
+                self.count(4)?;
+                let v = self.nums(1)?;
+                Effect::ReflectorOffset {
+                    reflector: args[0].to_string(),
+                    delta_um: [v[0], v[1], v[2]],
+                }
+            }
+            "tracker-drift" => {
+                self.count(3)?;
+                let v = self.nums(0)?;
+                Effect::TrackerDrift {
+                    rate_urad_per_h: [v[0], v[1], v[2]],
+                }
+            }
+            "station-drift" => {
+                self.count(4)?;
+                let v = self.nums(1)?;
+                Effect::StationDrift {
+                    station: args[0].to_string(),
+                    rate_um_per_h: [v[0], v[1], v[2]],
+                }
+            }
+            "range-scale" => {
+                self.count(1)?;
+                Effect::RangeScale {
+                    ppm: self.num(args[0])?,
+                }
+            }
+            _ => return Ok(None),
+        }))
+    }
+
+    /// The effects on the machine's axes (`id` is one of [`EFFECTS`]).
+    fn machine_effect(&self, id: &str) -> Result<Effect> {
+        let args = &self.values;
+        Ok(match id {
             "rotary-harmonics" => {
                 if args.len() != 1 && args.len() != 3 {
-                    return Err(bad(format!("{} values given", args.len())));
+                    return Err(self.bad(format!("{} values given", args.len())));
                 }
                 let max_order = args[0]
                     .parse::<usize>()
-                    .map_err(|_| bad(format!("'{}' is not a whole number", args[0])))?;
-                let amps = nums(&args[1..])?;
+                    .map_err(|_| self.bad(format!("'{}' is not a whole number", args[0])))?;
+                let amps = self.nums(1)?;
                 Effect::RotaryHarmonics {
                     max_order,
                     translation_um: amps.first().copied().unwrap_or(5.0),
                     rotation_urad: amps.get(1).copied().unwrap_or(10.0),
                 }
             }
-            "tracker-tilt" => {
-                count(2)?;
-                let v = nums(&args)?;
-                Effect::TrackerTilt {
-                    rx_urad: v[0],
-                    ry_urad: v[1],
-                }
-            }
             "ball-screw" => {
-                count(3)?;
-                let axis = letter(args[0])?;
-                let v = nums(&args[1..])?;
+                self.count(3)?;
+                let axis = self.letter(0)?;
+                let v = self.nums(1)?;
                 let (lo, hi) = crate::model::PERIOD_RANGE_MM;
                 if !(lo..=hi).contains(&v[0]) {
-                    return Err(bad(format!(
+                    return Err(self.bad(format!(
                         "the period {} mm is outside {lo} … {hi:e} mm",
                         crate::error::number(v[0])
                     )));
@@ -274,198 +516,61 @@ impl Effect {
                     amplitude_um: v[1],
                 }
             }
-            "reflector-offset" => {
-                count(4)?;
-                let v = nums(&args[1..])?;
-                Effect::ReflectorOffset {
-                    reflector: args[0].to_string(),
-                    delta_um: [v[0], v[1], v[2]],
-                }
-            }
             "thermal-scale" => {
-                count(2)?;
+                self.count(2)?;
                 Effect::ThermalScale {
-                    axis: letter(args[0])?,
-                    ppm_per_h: num(args[1])?,
+                    axis: self.letter(0)?,
+                    ppm_per_h: self.num(args[1])?,
                 }
             }
             "location-drift" => {
-                count(3)?;
-                let v = nums(&args[1..])?;
+                self.count(3)?;
+                let v = self.nums(1)?;
                 Effect::LocationDrift {
-                    axis: letter(args[0])?,
+                    axis: self.letter(0)?,
                     rate_um_per_h: [v[0], v[1]],
                 }
             }
-            "tracker-drift" => {
-                count(3)?;
-                let v = nums(&args)?;
-                Effect::TrackerDrift {
-                    rate_urad_per_h: [v[0], v[1], v[2]],
-                }
-            }
-            "station-drift" => {
-                count(4)?;
-                let v = nums(&args[1..])?;
-                Effect::StationDrift {
-                    station: args[0].to_string(),
-                    rate_um_per_h: [v[0], v[1], v[2]],
-                }
-            }
-            "coupling" => {
-                count(4)?;
-                Effect::Coupling {
-                    axis: letter(args[0])?,
-                    component: letter(args[1])?,
-                    by: letter(args[2])?,
-                    amplitude_um: num(args[3])?,
-                }
-            }
             _ => {
-                count(1)?;
-                Effect::RangeScale { ppm: num(args[0])? }
+                self.count(4)?;
+                Effect::Coupling {
+                    axis: self.letter(0)?,
+                    component: self.letter(1)?,
+                    by: self.letter(2)?,
+                    amplitude_um: self.num(args[3])?,
+                }
             }
         })
     }
+}
 
-    /// Checks the effect against a machine.
-    pub fn validate(&self, machine: &Machine) -> Result<()> {
-        let place = || Place::file("effects").at_field(self.id());
-        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        let fail = |m: String| Err(Error::input(place(), m));
-        // The axis is one of the machine's, rotary or linear as the effect needs.
-        let axis_of_kind = |axis: Axis, rotary: bool| -> Result<()> {
-            if axis.is_rotary() == rotary && machine.axis(axis).is_some() {
-                Ok(())
-            } else {
-                let kind = if rotary { "rotary" } else { "linear" };
-                fail(format!(
-                    "{axis} is not a {kind} axis of {}",
-                    machine.chain()
-                ))
-            }
-        };
-        match self {
-            Effect::ThermalDrift { rate_um_per_h } if !finite(rate_um_per_h) => {
-                fail("the drift rate must be finite".into())
-            }
-            Effect::TrackerDrift { rate_urad_per_h } if !finite(rate_urad_per_h) => {
-                fail("the drift rates must be finite".into())
-            }
-            Effect::StationDrift {
-                station,
-                rate_um_per_h,
-            } => {
-                if !machine.has_stations() {
-                    fail(format!(
-                        "the machine {} has no [[station]] tables: a tracker drifting in \
-                         position is thermal-drift",
-                        machine.chain()
-                    ))
-                } else if let Err(why) = machine.station_named(Some(station)) {
-                    fail(why.to_string())
-                } else if !finite(rate_um_per_h) {
-                    fail("the drift rates must be finite".into())
-                } else {
-                    Ok(())
-                }
-            }
-            Effect::RotaryHarmonics {
-                max_order,
-                translation_um,
-                rotation_urad,
-            } => {
-                if !(2..=MAX_HARMONIC).contains(max_order) {
-                    fail(format!(
-                        "highest harmonic {max_order} is outside 2..={MAX_HARMONIC}"
-                    ))
-                } else if !finite(&[*translation_um, *rotation_urad]) {
-                    fail("the amplitudes must be finite".into())
-                } else if !machine.axes().iter().any(|a| a.axis.is_rotary()) {
-                    fail(format!(
-                        "the machine {} has no rotary axis",
-                        machine.chain()
-                    ))
-                } else {
-                    Ok(())
-                }
-            }
-            Effect::TrackerTilt { rx_urad, ry_urad } if !finite(&[*rx_urad, *ry_urad]) => {
-                fail("the tilt must be finite".into())
-            }
-            Effect::BallScrew {
-                axis,
-                period_mm,
-                amplitude_um,
-            } => {
-                axis_of_kind(*axis, false)?;
-                if !(period_mm.is_finite() && *period_mm > 0.0) {
-                    fail(format!("the period {period_mm} mm must be positive"))
-                } else if !amplitude_um.is_finite() {
-                    fail("the amplitude must be finite".into())
-                } else {
-                    Ok(())
-                }
-            }
-            Effect::ReflectorOffset {
-                reflector,
-                delta_um,
-            } => {
-                if machine.reflector_index(reflector).is_none() {
-                    let ids: Vec<&str> =
-                        machine.reflectors().iter().map(|r| r.id.as_str()).collect();
-                    fail(format!(
-                        "no reflector '{reflector}' in the machine (it has {})",
-                        ids.join(", ")
-                    ))
-                } else if !finite(delta_um) {
-                    fail("the offset error must be finite".into())
-                } else {
-                    Ok(())
-                }
-            }
-            Effect::RangeScale { ppm } if !(ppm.is_finite() && *ppm > -1e6) => {
-                fail(format!("{ppm} ppm is not a finite scale above −10⁶ ppm"))
-            }
-            Effect::ThermalScale { axis, ppm_per_h } => {
-                axis_of_kind(*axis, false)?;
-                if ppm_per_h.is_finite() {
-                    Ok(())
-                } else {
-                    fail("the growth rate must be finite".into())
-                }
-            }
-            Effect::LocationDrift {
-                axis,
-                rate_um_per_h,
-            } => {
-                axis_of_kind(*axis, true)?;
-                if finite(rate_um_per_h) {
-                    Ok(())
-                } else {
-                    fail("the drift rates must be finite".into())
-                }
-            }
-            Effect::Coupling {
-                axis,
-                component,
-                by,
-                amplitude_um,
-            } => {
-                axis_of_kind(*axis, false)?;
-                if component.is_rotary() {
-                    fail(format!(
-                        "{component} is not a translation component (X, Y or Z)"
-                    ))
-                } else if machine.axis(*by).is_none() || by == axis {
-                    fail(format!("{by} is not another axis of {}", machine.chain()))
-                } else if !amplitude_um.is_finite() {
-                    fail("the amplitude must be finite".into())
-                } else {
-                    Ok(())
-                }
-            }
-            _ => Ok(()),
+/// An effect checked against a machine.
+struct Check<'a> {
+    /// The machine.
+    machine: &'a Machine,
+    /// The effect's id, the field of its errors.
+    id: &'static str,
+}
+
+impl Check<'_> {
+    /// The error `m` at the effect.
+    fn fail(&self, m: impl Into<String>) -> Result<()> {
+        Err(Error::input(
+            Place::file("effects").at_field(self.id),
+            m.into(),
+        ))
+    }
+
+    /// Checks that `axis` is one of the machine's, rotary or linear as the effect needs.
+    fn axis_of_kind(&self, axis: Axis, rotary: bool) -> Result<()> {
+        if axis.is_rotary() == rotary && self.machine.axis(axis).is_some() {
+            Ok(())
+        } else {
+            let kind = if rotary { "rotary" } else { "linear" };
+            self.fail(format!(
+                "{axis} is not a {kind} axis of {}",
+                self.machine.chain()
+            ))
         }
     }
 }

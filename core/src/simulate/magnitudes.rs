@@ -231,9 +231,9 @@ impl Magnitudes {
             .expect("every kind has a slot");
         // An ISO error is in mm or rad.
         if id.unit() == Unit::Mm {
-            v * 1e-3
+            v * super::MM_PER_UM
         } else {
-            v * 1e-6
+            v * super::RAD_PER_URAD
         }
     }
 

@@ -5,13 +5,7 @@ use super::*;
 use crate::machine::Commands;
 use crate::measure::Observation;
 use crate::plan::Step;
-use crate::units::{MS_PER_S, PPM, S_PER_H, UM_PER_MM, URAD_PER_RAD};
-
-/// mm in one µm (`1e-3`, bit for bit).
-const MM_PER_UM: f64 = 1.0 / UM_PER_MM;
-
-/// rad in one µrad (`1e-6`, bit for bit).
-const RAD_PER_URAD: f64 = 1.0 / URAD_PER_RAD;
+use crate::units::{MS_PER_S, PPM, S_PER_H};
 
 impl Simulation {
     /// Generates the measurements.
