@@ -925,7 +925,7 @@ pub fn read_points(
     };
     let raw: Vec<&str> = header.split(',').map(str::trim).collect();
     let (names, units): (Vec<&str>, Vec<Option<&str>>) =
-        raw.iter().map(|h| crate::measure::split_unit(h)).unzip();
+        raw.iter().map(|h| crate::csvio::split_unit(h)).unzip();
     let place = |line: usize, field: &str| Place::file(file).at_line(line).at_field(field);
     let mut id_col = None;
     let mut axis_col = vec![None; machine.axes().len()];
@@ -967,8 +967,7 @@ pub fn read_points(
         if let Some(c) = axis_col[k]
             && let Some(u) = units[c]
         {
-            crate::measure::check_unit(u, a.file_unit())
-                .map_err(|m| Error::input(place(h_i + 1, raw[c]), m))?;
+            crate::csvio::check_unit(u, a.file_unit(), place(h_i + 1, raw[c]))?;
         }
         if axis_col[k].is_none() {
             let l = a.axis.letter().to_string();
