@@ -22,6 +22,44 @@ use std::fmt;
 /// Most coefficients one error function may have.
 pub const MAX_COEFFS: usize = 32;
 
+/// Why [`Basis::new`] cannot build a basis.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum BasisError {
+    /// A degree or order that alone reaches [`MAX_COEFFS`] (checked before any count is computed).
+    #[error("{kind} of degree/order {degree}: at most {MAX_COEFFS} coefficients are supported")]
+    DegreeTooHigh {
+        /// The basis kind.
+        kind: BasisKind,
+        /// The degree or order asked for.
+        degree: usize,
+    },
+    /// A degree or order whose number of coefficients exceeds [`MAX_COEFFS`].
+    #[error(
+        "{kind} of degree/order {degree} has {count} coefficients; at most {MAX_COEFFS} are supported"
+    )]
+    TooManyCoefficients {
+        /// The basis kind.
+        kind: BasisKind,
+        /// The degree or order asked for.
+        degree: usize,
+        /// Its number of coefficients.
+        count: usize,
+    },
+    /// A periodic series of order 0.
+    #[error("{kind} needs an order of at least 1 (harmonics)")]
+    NoHarmonics {
+        /// The basis kind (fourier or sine).
+        kind: BasisKind,
+    },
+}
+
+impl From<BasisError> for String {
+    fn from(e: BasisError) -> String {
+        e.to_string()
+    }
+}
+
 /// The kind of a basis, as named in error-model files.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -84,7 +122,7 @@ pub struct Basis {
 impl Basis {
     /// A basis of a kind and degree (polynomials: degree; Chebyshev: degree = nodes − 1;
     /// periodic: order = number of harmonics; constant: ignored).
-    pub fn new(kind: BasisKind, degree: usize) -> Result<Basis, String> {
+    pub fn new(kind: BasisKind, degree: usize) -> Result<Basis, BasisError> {
         let degree = if kind == BasisKind::Constant {
             0
         } else {
@@ -93,9 +131,7 @@ impl Basis {
         // Checked before any count is computed: a degree near usize::MAX would wrap
         // `degree + 1` (or `1 + 2 · order`) to a small number.
         if degree >= MAX_COEFFS {
-            return Err(format!(
-                "{kind} of degree/order {degree}: at most {MAX_COEFFS} coefficients are supported"
-            ));
+            return Err(BasisError::DegreeTooHigh { kind, degree });
         }
         let b = Basis {
             kind,
@@ -103,13 +139,14 @@ impl Basis {
             card: Vec::new(),
         };
         if b.n_params() > MAX_COEFFS {
-            return Err(format!(
-                "{kind} of degree/order {degree} has {} coefficients; at most {MAX_COEFFS} are supported",
-                b.n_params()
-            ));
+            return Err(BasisError::TooManyCoefficients {
+                kind,
+                degree,
+                count: b.n_params(),
+            });
         }
         if kind.is_periodic() && degree == 0 {
-            return Err(format!("{kind} needs an order of at least 1 (harmonics)"));
+            return Err(BasisError::NoHarmonics { kind });
         }
         if kind == BasisKind::Chebyshev {
             let m = degree + 1;

@@ -163,26 +163,32 @@ impl<'a> Compensator<'a> {
         let m = model.machine();
         for h in held {
             if m.axis(*h).is_none() {
-                return Err(Error::Model(format!(
-                    "axis {h} is held but the machine ({}) has no such axis",
-                    m.chain()
-                )));
+                return Err(Error::MachineMismatch {
+                    message: format!(
+                        "axis {h} is held but the machine ({}) has no such axis",
+                        m.chain()
+                    ),
+                });
             }
         }
         let free: Vec<usize> = (0..m.axes().len())
             .filter(|&k| !held.contains(&m.axes()[k].axis))
             .collect();
         if free.len() > 3 {
-            return Err(Error::Model(format!(
-                "{} free axes for the three coordinates of the tool point: hold {} of them",
-                free.len(),
-                free.len() - 3
-            )));
+            return Err(Error::InvalidOption {
+                name: "hold",
+                message: format!(
+                    "{} free axes for the three coordinates of the tool point: hold {} of them",
+                    free.len(),
+                    free.len() - 3
+                ),
+            });
         }
         if free.is_empty() {
-            return Err(Error::Model(
-                "every axis is held: nothing left to compensate with".into(),
-            ));
+            return Err(Error::InvalidOption {
+                name: "hold",
+                message: "every axis is held: nothing left to compensate with".into(),
+            });
         }
         Ok(Compensator {
             model,
@@ -224,20 +230,25 @@ impl<'a> Compensator<'a> {
         let m = model.machine();
         if !is_five_axis(m) {
             let rotary = m.axes().iter().filter(|a| a.axis.is_rotary()).count();
-            return Err(Error::Model(format!(
-                "compensating the tool's orientation needs a five-axis machine (three linear and \
-                 two rotary axes); {} has {} axes, {rotary} rotary: compensate the tool point \
-                 alone",
-                m.chain(),
-                m.axes().len()
-            )));
+            return Err(Error::MachineMismatch {
+                message: format!(
+                    "compensating the tool's orientation needs a five-axis machine (three linear \
+                     and two rotary axes); {} has {} axes, {rotary} rotary: compensate the tool \
+                     point alone",
+                    m.chain(),
+                    m.axes().len()
+                ),
+            });
         }
         let len = crate::problem::norm(axis);
         if !(len.is_finite() && len > 1e-9) {
-            return Err(Error::Model(format!(
-                "the tool's axis {axis:?} is not a direction (a non-zero vector, in the frame of \
-                 the last tool-side axis)"
-            )));
+            return Err(Error::InvalidOption {
+                name: "tool_axis",
+                message: format!(
+                    "the tool's axis {axis:?} is not a direction (a non-zero vector, in the frame \
+                     of the last tool-side axis)"
+                ),
+            });
         }
         Ok(Compensator {
             model,
@@ -394,10 +405,12 @@ impl<'a> Compensator<'a> {
             let (r, jac) = self.residual_and_jacobian(&q, target, None);
             let d = crate::problem::norm([r[0], r[1], r[2]]);
             if !d.is_finite() {
-                return Err(Error::Model(format!(
-                    "compensation met a non-finite tool point at command {:?}",
-                    q.0
-                )));
+                return Err(Error::NonFinite {
+                    message: format!(
+                        "compensation met a non-finite tool point at command {:?}",
+                        q.0
+                    ),
+                });
             }
             error_mm.get_or_insert(d);
             if d < best.0 {
@@ -406,12 +419,13 @@ impl<'a> Compensator<'a> {
             if d <= NEWTON_TOLERANCE_MM {
                 break;
             }
-            let step = solve_step(&jac, &r[..3], self.free.len()).ok_or_else(|| {
-                Error::Model(format!(
-                    "compensation: the Jacobian of the tool point is singular at command {:?}",
-                    q.0
-                ))
-            })?;
+            let step =
+                solve_step(&jac, &r[..3], self.free.len()).ok_or_else(|| Error::Singular {
+                    message: format!(
+                        "compensation: the Jacobian of the tool point is singular at command {:?}",
+                        q.0
+                    ),
+                })?;
             for (i, &k) in self.free.iter().enumerate() {
                 q.0[k] -= step[i];
             }
@@ -464,10 +478,12 @@ impl<'a> Compensator<'a> {
         let (mut r, mut jac) = self.residual_and_jacobian(&q, target, Some(t));
         let mut cost = norms(&r);
         if !(cost.0.is_finite() && cost.1.is_finite()) {
-            return Err(Error::Model(format!(
-                "compensation met a non-finite tool point at command {:?}",
-                q.0
-            )));
+            return Err(Error::NonFinite {
+                message: format!(
+                    "compensation met a non-finite tool point at command {:?}",
+                    q.0
+                ),
+            });
         }
         let error_mm = crate::problem::norm([r[0], r[1], r[2]]);
         // Near the singularity the rotary axis the direction hardly depends on is held.
@@ -593,11 +609,15 @@ pub fn is_five_axis(machine: &crate::machine::Machine) -> bool {
 /// Refuses a parameter vector that is not `model`'s.
 fn check_params(model: &Model, params: &[f64]) -> Result<()> {
     if params.len() != model.n_params() {
-        return Err(Error::Model(format!(
-            "compensation needs {} parameters, got {}",
-            model.n_params(),
-            params.len()
-        )));
+        return Err(Error::ParameterCount {
+            expected: model.n_params(),
+            got: params.len(),
+            message: format!(
+                "compensation needs {} parameters, got {}",
+                model.n_params(),
+                params.len()
+            ),
+        });
     }
     Ok(())
 }

@@ -55,7 +55,12 @@ impl fmt::Display for Place {
 }
 
 /// Errors of the metrology core.
+///
+/// Every variant but [`Error::Io`] and [`Error::Input`] is a failure of a model, its data or its
+/// options rather than of a file's text; their `message` is the complete text printed (the
+/// variant says what kind of failure it is, for a caller that reacts to it).
 #[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
 pub enum Error {
     /// A file could not be read or written.
     #[error("{}: {source}", path.display())]
@@ -73,9 +78,81 @@ pub enum Error {
         /// What is wrong and what was expected.
         message: String,
     },
-    /// A model that cannot be built or evaluated (inconsistent choices, wrong parameter count).
-    #[error("{0}")]
-    Model(String),
+    /// More parameters than the model's fixed capacity beside the tracker pose.
+    #[error("{message}")]
+    TooManyParameters {
+        /// What is modelled and the capacity.
+        message: String,
+    },
+    /// A parameter vector whose length is not the model's parameter count.
+    #[error("{message}")]
+    ParameterCount {
+        /// The model's parameter count.
+        expected: usize,
+        /// The length given.
+        got: usize,
+        /// The complete message (who needs the parameters).
+        message: String,
+    },
+    /// A value that must be finite is not (a parameter, a simulated point, a tool point).
+    #[error("{message}")]
+    NonFinite {
+        /// What is not finite, and where.
+        message: String,
+    },
+    /// A linear system that cannot be solved (a singular Jacobian, a projection).
+    #[error("{message}")]
+    Singular {
+        /// Which system, and where.
+        message: String,
+    },
+    /// An option or argument outside its domain.
+    #[error("{message}")]
+    InvalidOption {
+        /// The option's name (`decimals`, `chord_tol_mm`, `step`, `hold`, `tool_axis`, …).
+        name: &'static str,
+        /// What is wrong and what is accepted.
+        message: String,
+    },
+    /// A request the machine cannot satisfy (an axis it lacks, an orientation it cannot set).
+    #[error("{message}")]
+    MachineMismatch {
+        /// What the machine lacks.
+        message: String,
+    },
+    /// A measurement the model cannot use: a station or reflector index the machine lacks, a
+    /// missing `t_s` where the model has thermal drift.
+    #[error("{message}")]
+    MeasurementMismatch {
+        /// The measurement's 1-based line in its file.
+        line: usize,
+        /// What does not match.
+        message: String,
+    },
+    /// A name that is not an ISO 230 error name.
+    #[error("'{name}' is not an ISO 230 error name")]
+    UnknownErrorName {
+        /// The name as given.
+        name: String,
+    },
+    /// Constraints of an error model that no parameter vector satisfies.
+    #[error("{message}")]
+    ContradictoryConstraints {
+        /// By how much they stay unsatisfied.
+        message: String,
+    },
+    /// Nothing to work on (no measured points).
+    #[error("{message}")]
+    NoData {
+        /// What is missing.
+        message: String,
+    },
+    /// A value that could not be serialised (a machine file written back as TOML).
+    #[error("{message}")]
+    Serialize {
+        /// What was written and the serialiser's error.
+        message: String,
+    },
 }
 
 impl Error {

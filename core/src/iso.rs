@@ -171,6 +171,63 @@ impl fmt::Display for Unit {
     }
 }
 
+/// A location error that does not exist for its axis ([`ErrorId::validate`]); the message says
+/// what is allowed.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum InvalidErrorId {
+    /// An offset along or a rotation about a rotary axis itself.
+    #[error(
+        "{id} is not a location error of {axis}: a rotary axis' location errors are the positions \
+         and orientations perpendicular to it ({allowed}); an offset along or about the axis \
+         itself is the constant term of E{component}{axis}"
+    )]
+    AlongRotaryAxis {
+        /// The error named.
+        id: ErrorId,
+        /// Its component.
+        component: Axis,
+        /// Its (rotary) axis.
+        axis: Axis,
+        /// The axis' location errors, comma-separated.
+        allowed: String,
+    },
+    /// A position offset of a linear axis.
+    #[error(
+        "{id} is not an error of linear axis {axis}: a position offset of a linear axis is \
+         absorbed by the axis offsets; its location errors are the squareness errors {allowed}"
+    )]
+    LinearAxisOffset {
+        /// The error named.
+        id: ErrorId,
+        /// Its (linear) axis.
+        axis: Axis,
+        /// The axis' squareness errors, comma-separated.
+        allowed: String,
+    },
+    /// A rotation of a linear axis about itself (its roll, not a squareness).
+    #[error(
+        "{id} is not a squareness error: a rotation of {axis} about itself is its roll \
+         E{component}{axis}; the squareness errors of {axis} are {allowed}"
+    )]
+    SelfSquareness {
+        /// The error named.
+        id: ErrorId,
+        /// Its component.
+        component: Axis,
+        /// Its (linear) axis.
+        axis: Axis,
+        /// The axis' squareness errors, comma-separated.
+        allowed: String,
+    },
+}
+
+impl From<InvalidErrorId> for String {
+    fn from(e: InvalidErrorId) -> String {
+        e.to_string()
+    }
+}
+
 /// An ISO 230 geometric error of one machine axis.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ErrorId {
@@ -253,41 +310,36 @@ impl ErrorId {
     /// a rotary axis are the two positions and two orientations perpendicular to it (X0C, Y0C,
     /// A0C, B0C for C); a linear axis has the two squareness errors perpendicular to it (A0Z,
     /// B0Z for Z). The message says what is allowed.
-    pub fn validate(self) -> Result<(), String> {
-        match self {
-            ErrorId::Component { .. } => Ok(()),
-            ErrorId::Location { component, axis } => {
-                let same_direction = component.direction() == axis.direction();
-                if axis.is_rotary() {
-                    if same_direction {
-                        Err(format!(
-                            "{self} is not a location error of {axis}: a rotary axis' location errors \
-                             are the positions and orientations perpendicular to it ({}); an offset \
-                             along or about the axis itself is the constant term of E{}{axis}",
-                            Self::location_names(axis).join(", "),
-                            component
-                        ))
-                    } else {
-                        Ok(())
-                    }
-                } else if !component.is_rotary() {
-                    Err(format!(
-                        "{self} is not an error of linear axis {axis}: a position offset of a linear \
-                         axis is absorbed by the axis offsets; its location errors are the squareness \
-                         errors {}",
-                        Self::location_names(axis).join(", ")
-                    ))
-                } else if same_direction {
-                    Err(format!(
-                        "{self} is not a squareness error: a rotation of {axis} about itself is its \
-                         roll E{component}{axis}; the squareness errors of {axis} are {}",
-                        Self::location_names(axis).join(", ")
-                    ))
-                } else {
-                    Ok(())
-                }
+    pub fn validate(self) -> Result<(), InvalidErrorId> {
+        let ErrorId::Location { component, axis } = self else {
+            return Ok(());
+        };
+        let allowed = || Self::location_names(axis).join(", ");
+        let same_direction = component.direction() == axis.direction();
+        if axis.is_rotary() {
+            if same_direction {
+                return Err(InvalidErrorId::AlongRotaryAxis {
+                    id: self,
+                    component,
+                    axis,
+                    allowed: allowed(),
+                });
             }
+        } else if !component.is_rotary() {
+            return Err(InvalidErrorId::LinearAxisOffset {
+                id: self,
+                axis,
+                allowed: allowed(),
+            });
+        } else if same_direction {
+            return Err(InvalidErrorId::SelfSquareness {
+                id: self,
+                component,
+                axis,
+                allowed: allowed(),
+            });
         }
+        Ok(())
     }
 
     /// The valid location/squareness names of an axis, e.g. `["X0C", "Y0C", "A0C", "B0C"]`.

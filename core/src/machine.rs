@@ -317,21 +317,82 @@ impl MachineAxis {
     /// let x = &m.axes()[0];
     /// assert_eq!(x.position_from_file(1400.0), Ok(1400.0));
     /// assert_eq!(
-    ///     x.position_from_file(1500.0).unwrap_err(),
+    ///     x.position_from_file(1500.0).unwrap_err().to_string(),
     ///     "1500 mm is outside the travel range [0, 1400] of axis X"
     /// );
     /// ```
-    pub fn position_from_file(&self, v: f64) -> std::result::Result<f64, String> {
+    pub fn position_from_file(&self, v: f64) -> std::result::Result<f64, OutOfTravel> {
         let (lo, hi) = (self.to_file_units(self.min), self.to_file_units(self.max));
         let tol = 1e-9 * (hi - lo).abs().max(1.0);
         if v < lo - tol || v > hi + tol {
-            return Err(format!(
-                "{v} {} is outside the travel range [{lo}, {hi}] of axis {}",
-                self.file_unit(),
-                self.axis
-            ));
+            return Err(OutOfTravel {
+                value: v,
+                unit: self.file_unit(),
+                lo,
+                hi,
+                axis: self.axis,
+            });
         }
         Ok(self.from_file_units(v))
+    }
+}
+
+/// A position outside an axis' travel (in the file's units: mm or deg).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{value} {unit} is outside the travel range [{lo}, {hi}] of axis {axis}")]
+pub struct OutOfTravel {
+    /// The position given.
+    pub value: f64,
+    /// Its unit: `mm` or `deg`.
+    pub unit: &'static str,
+    /// The travel's lower end.
+    pub lo: f64,
+    /// The travel's upper end.
+    pub hi: f64,
+    /// The axis.
+    pub axis: Axis,
+}
+
+impl From<OutOfTravel> for String {
+    fn from(e: OutOfTravel) -> String {
+        e.to_string()
+    }
+}
+
+/// A reflector or station a measurement names that the machine cannot give.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum NameError {
+    /// No reflector of that id.
+    #[error("reflector '{id}' is not in the machine file (known: {})", known.join(", "))]
+    UnknownReflector {
+        /// The id given.
+        id: String,
+        /// The machine's reflector ids.
+        known: Vec<String>,
+    },
+    /// No station of that id.
+    #[error("station '{id}' is not in the machine file (known: {})", known.join(", "))]
+    UnknownStation {
+        /// The id given.
+        id: String,
+        /// The machine's station ids.
+        known: Vec<String>,
+    },
+    /// No station named although the machine has several.
+    #[error(
+        "no station given: the machine file has {stations} stations, so every measurement names \
+         its own"
+    )]
+    StationNotGiven {
+        /// The machine's number of stations.
+        stations: usize,
+    },
+}
+
+impl From<NameError> for String {
+    fn from(e: NameError) -> String {
+        e.to_string()
     }
 }
 
@@ -719,18 +780,16 @@ impl Machine {
     /// let m = volver_core::machine::Machine::default_xcfz();
     /// assert_eq!(m.reflector_named("R2"), Ok(1));
     /// assert_eq!(
-    ///     m.reflector_named("R9").unwrap_err(),
+    ///     m.reflector_named("R9").unwrap_err().to_string(),
     ///     "reflector 'R9' is not in the machine file (known: R1, R2)"
     /// );
     /// ```
-    pub fn reflector_named(&self, id: &str) -> std::result::Result<usize, String> {
-        self.reflector_index(id).ok_or_else(|| {
-            let known: Vec<&str> = self.reflectors.iter().map(|r| r.id.as_str()).collect();
-            format!(
-                "reflector '{id}' is not in the machine file (known: {})",
-                known.join(", ")
-            )
-        })
+    pub fn reflector_named(&self, id: &str) -> std::result::Result<usize, NameError> {
+        self.reflector_index(id)
+            .ok_or_else(|| NameError::UnknownReflector {
+                id: id.to_string(),
+                known: self.reflectors.iter().map(|r| r.id.clone()).collect(),
+            })
     }
 
     /// This machine measured from `stations` instead of its tracker (or its stations): the
@@ -743,7 +802,7 @@ impl Machine {
     /// let multi = m.with_stations(layout).unwrap();
     /// assert_eq!(multi.stations().len(), 4);
     /// assert_eq!(multi.station_named(Some("S3")), Ok(2));
-    /// assert!(multi.station_named(None).unwrap_err().contains("4 stations"));
+    /// assert!(multi.station_named(None).unwrap_err().to_string().contains("4 stations"));
     /// ```
     pub fn with_stations(&self, stations: Vec<StationSpec>) -> Result<Machine> {
         let mut spec = self.spec.clone();
@@ -779,27 +838,22 @@ impl Machine {
     /// let m = volver_core::machine::Machine::default_xcfz();
     /// assert_eq!(m.station_named(Some("anything")), Ok(0));
     /// ```
-    pub fn station_named(&self, id: Option<&str>) -> std::result::Result<usize, String> {
+    pub fn station_named(&self, id: Option<&str>) -> std::result::Result<usize, NameError> {
         if !self.has_stations() {
             return Ok(0);
         }
         match id {
             None if self.stations.len() == 1 => Ok(0),
-            None => Err(format!(
-                "no station given: the machine file has {} stations, so every measurement \
-                 names its own",
-                self.stations.len()
-            )),
+            None => Err(NameError::StationNotGiven {
+                stations: self.stations.len(),
+            }),
             Some(id) => self
                 .stations
                 .iter()
                 .position(|s| s.id == id)
-                .ok_or_else(|| {
-                    let known: Vec<&str> = self.stations.iter().map(|s| s.id.as_str()).collect();
-                    format!(
-                        "station '{id}' is not in the machine file (known: {})",
-                        known.join(", ")
-                    )
+                .ok_or_else(|| NameError::UnknownStation {
+                    id: id.to_string(),
+                    known: self.stations.iter().map(|s| s.id.clone()).collect(),
                 }),
         }
     }
@@ -900,7 +954,12 @@ fn clearance_of<'a>(
         if out.iter().any(|(j, _)| *j == k) {
             return Err(fail(format!("axis {key} is given twice")));
         }
-        out.push((k, axes[k].position_from_file(value).map_err(fail)?));
+        out.push((
+            k,
+            axes[k]
+                .position_from_file(value)
+                .map_err(|e| fail(e.to_string()))?,
+        ));
     }
     if out.is_empty() {
         return Err((

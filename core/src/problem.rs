@@ -143,29 +143,40 @@ impl<'a> Problem<'a> {
     /// model's machine does not have.
     pub fn new(model: &'a Model, data: &'a MeasurementSet) -> Result<Problem<'a>> {
         if data.points.is_empty() {
-            return Err(Error::Model("no measured points".into()));
+            return Err(Error::NoData {
+                message: "no measured points".into(),
+            });
         }
         let n_refl = model.machine().reflectors().len();
         if model.needs_time()
             && let Some(p) = data.points.iter().find(|p| p.t_s.is_none())
         {
-            return Err(Error::Model(format!(
-                "the model has thermal drift, but the measurement of line {} has no t_s",
-                p.line
-            )));
+            return Err(Error::MeasurementMismatch {
+                line: p.line,
+                message: format!(
+                    "the model has thermal drift, but the measurement of line {} has no t_s",
+                    p.line
+                ),
+            });
         }
         let n_st = model.machine().stations().len();
         if let Some(p) = data.points.iter().find(|p| p.station_index >= n_st) {
-            return Err(Error::Model(format!(
-                "measurement of line {} uses station index {} but the machine has {n_st}",
-                p.line, p.station_index
-            )));
+            return Err(Error::MeasurementMismatch {
+                line: p.line,
+                message: format!(
+                    "measurement of line {} uses station index {} but the machine has {n_st}",
+                    p.line, p.station_index
+                ),
+            });
         }
         if let Some(p) = data.points.iter().find(|p| p.reflector >= n_refl) {
-            return Err(Error::Model(format!(
-                "measurement of line {} uses reflector index {} but the machine has {n_refl}",
-                p.line, p.reflector
-            )));
+            return Err(Error::MeasurementMismatch {
+                line: p.line,
+                message: format!(
+                    "measurement of line {} uses reflector index {} but the machine has {n_refl}",
+                    p.line, p.reflector
+                ),
+            });
         }
         let regressors =
             std::sync::Arc::new(model.regressors(data.points.iter().map(|p| &p.commands)));

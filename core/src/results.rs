@@ -159,11 +159,15 @@ impl ResultsFile {
     /// A results file for `params` of `model`. Non-finite values are refused.
     pub fn from_model(model: &Model, params: &[f64]) -> Result<ResultsFile> {
         if params.len() != model.n_params() {
-            return Err(Error::Model(format!(
-                "{} parameter values for a model of {} parameters",
-                params.len(),
-                model.n_params()
-            )));
+            return Err(Error::ParameterCount {
+                expected: model.n_params(),
+                got: params.len(),
+                message: format!(
+                    "{} parameter values for a model of {} parameters",
+                    params.len(),
+                    model.n_params()
+                ),
+            });
         }
         if let Some((info, v)) = model
             .params()
@@ -171,10 +175,12 @@ impl ResultsFile {
             .zip(params)
             .find(|(_, v)| !v.is_finite())
         {
-            return Err(Error::Model(format!(
-                "parameter {} is {v}; a results file holds finite values only",
-                info.name
-            )));
+            return Err(Error::NonFinite {
+                message: format!(
+                    "parameter {} is {v}; a results file holds finite values only",
+                    info.name
+                ),
+            });
         }
         Ok(ResultsFile {
             format: RESULTS_FORMAT.to_string(),

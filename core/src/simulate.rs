@@ -489,9 +489,11 @@ impl Simulation {
                     }
                 };
                 if measured.iter().any(|v| !v.is_finite()) {
-                    return Err(Error::Model(format!(
-                        "point {i} is not finite: the truth or an effect is out of bounds"
-                    )));
+                    return Err(Error::NonFinite {
+                        message: format!(
+                            "point {i} is not finite: the truth or an effect is out of bounds"
+                        ),
+                    });
                 }
                 let mut nominal_errors = nominal_errors;
                 if station > 0 {
@@ -671,8 +673,9 @@ impl Synthetic {
         let mut results = self.truth.to_results()?;
         results.machine.clone_from(&spec);
         results.save(&truth)?;
-        let toml_text = toml::to_string(&spec)
-            .map_err(|e| Error::Model(format!("writing the machine file: {e}")))?;
+        let toml_text = toml::to_string(&spec).map_err(|e| Error::Serialize {
+            message: format!("writing the machine file: {e}"),
+        })?;
         crate::fsio::write_atomic(
             &machine_path,
             format!(

@@ -82,14 +82,17 @@ fn is_angle(name: &str) -> bool {
 /// hold the end of the travel alone.
 fn check_step(step: f64, lo: f64, hi: f64, a: &crate::machine::MachineAxis) -> Result<()> {
     if step > hi - lo && hi > lo {
-        return Err(Error::Model(format!(
-            "a step of {} {unit} exceeds axis {}'s travel of {} {unit}: a table needs both ends of \
+        return Err(Error::InvalidOption {
+            name: "step",
+            message: format!(
+                "a step of {} {unit} exceeds axis {}'s travel of {} {unit}: a table needs both ends of \
              the travel and the positions between; use a step of at most the travel",
-            crate::error::number(step),
-            a.axis,
-            hi - lo,
-            unit = a.file_unit(),
-        )));
+                crate::error::number(step),
+                a.axis,
+                hi - lo,
+                unit = a.file_unit(),
+            ),
+        });
     }
     Ok(())
 }
@@ -105,17 +108,22 @@ impl ErrorTables {
         rotary_step: f64,
     ) -> Result<ErrorTables> {
         if params.len() != model.n_params() {
-            return Err(Error::Model(format!(
-                "tables need {} parameters, got {}",
-                model.n_params(),
-                params.len()
-            )));
+            return Err(Error::ParameterCount {
+                expected: model.n_params(),
+                got: params.len(),
+                message: format!(
+                    "tables need {} parameters, got {}",
+                    model.n_params(),
+                    params.len()
+                ),
+            });
         }
         let usable = |s: f64| s > 0.0 && s.is_finite();
         if !(usable(linear_step) && usable(rotary_step)) {
-            return Err(Error::Model(
-                "table steps must be positive and finite".into(),
-            ));
+            return Err(Error::InvalidOption {
+                name: "step",
+                message: "table steps must be positive and finite".into(),
+            });
         }
         let m = model.machine();
         let mut reference = Commands::default();
@@ -147,13 +155,16 @@ impl ErrorTables {
             let rows = ((hi - lo) / step).ceil() + 1.0;
             // `rows` is finite here (a positive finite step over a finite travel).
             if rows > MAX_TABLE_ROWS as f64 {
-                return Err(Error::Model(format!(
-                    "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table \
-                     has at most {MAX_TABLE_ROWS}: use a larger step",
-                    crate::error::number(step),
-                    a.file_unit(),
-                    a.axis
-                )));
+                return Err(Error::InvalidOption {
+                    name: "step",
+                    message: format!(
+                        "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table \
+                         has at most {MAX_TABLE_ROWS}: use a larger step",
+                        crate::error::number(step),
+                        a.file_unit(),
+                        a.axis
+                    ),
+                });
             }
             check_step(step, lo, hi, a)?;
             let mut positions = Vec::new();

@@ -250,9 +250,10 @@ impl Program {
     pub fn read(text: &str, file: &str, machine: &Machine, setup: &Setup) -> Result<Program> {
         let lin = &setup.lin;
         if !(lin.chord_tolerance_mm > 0.0 && lin.chord_tolerance_mm.is_finite()) {
-            return Err(Error::Model(
-                "the chord tolerance must be a positive length (mm)".into(),
-            ));
+            return Err(Error::InvalidOption {
+                name: "chord_tol_mm",
+                message: "the chord tolerance must be a positive length (mm)".into(),
+            });
         }
         let blocks = interp::Reader::new(machine, setup, file).read(text)?;
         Ok(Program {

@@ -110,11 +110,14 @@ impl Program {
         header: &str,
     ) -> Result<(String, Report)> {
         if options.decimals > MAX_DECIMALS {
-            return Err(Error::Model(format!(
-                "{} decimals: at most {MAX_DECIMALS} (1e-{MAX_DECIMALS} mm is far below any \
-                 machine's resolution)",
-                options.decimals
-            )));
+            return Err(Error::InvalidOption {
+                name: "decimals",
+                message: format!(
+                    "{} decimals: at most {MAX_DECIMALS} (1e-{MAX_DECIMALS} mm is far below any \
+                     machine's resolution)",
+                    options.decimals
+                ),
+            });
         }
         let mut w = Writer {
             program: self,

@@ -2,6 +2,7 @@
 //! constraints and the groups of terms that share their basis values.
 
 use super::*;
+use crate::basis::BasisError;
 
 impl Model {
     pub(super) fn build(
@@ -33,7 +34,8 @@ impl Model {
                 if terms.iter().any(|t| t.id == id) {
                     return Err(bad(format!("{id} is listed twice")));
                 }
-                let basis = term_basis(id, ax.axis.is_rotary(), entry).map_err(bad)?;
+                let basis =
+                    term_basis(id, ax.axis.is_rotary(), entry).map_err(|e| bad(e.to_string()))?;
                 let start = params.len();
                 let suffixes = basis.suffixes();
                 for (c, suffix) in suffixes.iter().enumerate() {
@@ -66,11 +68,13 @@ impl Model {
             }
         }
         if terms.len() + TRACKER_DOF > MAX_SLOTS {
-            return Err(Error::Model(format!(
-                "{} errors are modelled; at most {} fit beside the tracker pose",
-                terms.len(),
-                MAX_SLOTS - TRACKER_DOF
-            )));
+            return Err(Error::TooManyParameters {
+                message: format!(
+                    "{} errors are modelled; at most {} fit beside the tracker pose",
+                    terms.len(),
+                    MAX_SLOTS - TRACKER_DOF
+                ),
+            });
         }
         let tracker_start = params.len();
         let station_prefix = |s: usize| {
@@ -257,12 +261,15 @@ impl Model {
             }
         }
         if terms.len() + TRACKER_DOF + effects.len() > MAX_SLOTS {
-            return Err(Error::Model(format!(
-                "{} errors and {} effect values are modelled; at most {} fit beside the tracker pose",
-                terms.len(),
-                effects.len(),
-                MAX_SLOTS - TRACKER_DOF
-            )));
+            return Err(Error::TooManyParameters {
+                message: format!(
+                    "{} errors and {} effect values are modelled; at most {} fit beside the \
+                     tracker pose",
+                    terms.len(),
+                    effects.len(),
+                    MAX_SLOTS - TRACKER_DOF
+                ),
+            });
         }
         // The further stations' poses, then every station's range offset: after the effects,
         // so that a one-station model's layout is the tracker's alone.
@@ -515,56 +522,81 @@ pub(super) fn term_groups(terms: &[Term]) -> Vec<TermGroup> {
     groups
 }
 
+/// Why an `[[error]]` entry's basis is not meaningful for its error.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum TermBasisError {
+    /// A location or squareness error given a basis other than `constant`.
+    #[error("{id} is a location/squareness error, a constant: give it no basis (found '{found}')")]
+    ConstantWithBasis { id: ErrorId, found: BasisKind },
+    /// A component error without a basis.
+    #[error(
+        "{id} needs a basis: monomial, legendre or chebyshev with a degree, fourier or sine with an order, or constant"
+    )]
+    MissingBasis { id: ErrorId },
+    /// A periodic series on a linear axis.
+    #[error(
+        "{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)",
+        id.axis()
+    )]
+    PeriodicOnLinear { id: ErrorId, kind: BasisKind },
+    /// A periodic series without `order`.
+    #[error("{id}: a {kind} series needs `order` (the number of harmonics)")]
+    MissingOrder { id: ErrorId, kind: BasisKind },
+    /// Chebyshev with `nodes = 0`.
+    #[error("{id}: chebyshev needs at least one node")]
+    NoNodes { id: ErrorId },
+    /// Chebyshev with both `degree` and `nodes`.
+    #[error("{id}: give chebyshev either `degree` or `nodes`, not both")]
+    DegreeAndNodes { id: ErrorId },
+    /// Chebyshev with neither `degree` nor `nodes`.
+    #[error("{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)")]
+    MissingNodes { id: ErrorId },
+    /// A polynomial without `degree`.
+    #[error("{id}: a {kind} polynomial needs `degree`")]
+    MissingDegree { id: ErrorId, kind: BasisKind },
+    /// A basis that cannot be built (too many coefficients, no harmonics).
+    #[error("{id}: {source}")]
+    Basis { id: ErrorId, source: BasisError },
+}
+
 /// The basis of one `[[error]]` entry for an error, with the checks that make it meaningful.
 pub(super) fn term_basis(
     id: ErrorId,
     rotary_axis: bool,
     e: &ErrorTermSpec,
-) -> std::result::Result<Basis, String> {
+) -> std::result::Result<Basis, TermBasisError> {
+    let basis = |kind, degree| {
+        Basis::new(kind, degree).map_err(|source| TermBasisError::Basis { id, source })
+    };
     if let ErrorId::Location { .. } = id {
         return match e.basis {
-            None | Some(BasisKind::Constant) => Basis::new(BasisKind::Constant, 0),
-            Some(b) => Err(format!(
-                "{id} is a location/squareness error, a constant: give it no basis (found '{b}')"
-            )),
+            None | Some(BasisKind::Constant) => basis(BasisKind::Constant, 0),
+            Some(found) => Err(TermBasisError::ConstantWithBasis { id, found }),
         };
     }
     let Some(kind) = e.basis else {
-        return Err(format!(
-            "{id} needs a basis: monomial, legendre or chebyshev with a degree, fourier or sine with an order, or constant"
-        ));
+        return Err(TermBasisError::MissingBasis { id });
     };
     if kind.is_periodic() && !rotary_axis {
-        return Err(format!(
-            "{id}: a {kind} series is periodic in an angle; {} is a linear axis (use monomial, legendre or chebyshev)",
-            id.axis()
-        ));
+        return Err(TermBasisError::PeriodicOnLinear { id, kind });
     }
     let degree = match kind {
         BasisKind::Constant => 0,
-        BasisKind::Fourier | BasisKind::Sine => e.order.ok_or_else(|| {
-            format!("{id}: a {kind} series needs `order` (the number of harmonics)")
-        })?,
+        BasisKind::Fourier | BasisKind::Sine => {
+            e.order.ok_or(TermBasisError::MissingOrder { id, kind })?
+        }
         BasisKind::Chebyshev => match (e.degree, e.nodes) {
             (Some(d), None) => d,
             (None, Some(m)) if m >= 1 => m - 1,
-            (None, Some(_)) => return Err(format!("{id}: chebyshev needs at least one node")),
-            (Some(_), Some(_)) => {
-                return Err(format!(
-                    "{id}: give chebyshev either `degree` or `nodes`, not both"
-                ));
-            }
-            (None, None) => {
-                return Err(format!(
-                    "{id}: chebyshev needs `nodes` (or `degree` = nodes − 1)"
-                ));
-            }
+            (None, Some(_)) => return Err(TermBasisError::NoNodes { id }),
+            (Some(_), Some(_)) => return Err(TermBasisError::DegreeAndNodes { id }),
+            (None, None) => return Err(TermBasisError::MissingNodes { id }),
         },
-        BasisKind::Monomial | BasisKind::Legendre => e
-            .degree
-            .ok_or_else(|| format!("{id}: a {kind} polynomial needs `degree`"))?,
+        BasisKind::Monomial | BasisKind::Legendre => {
+            e.degree.ok_or(TermBasisError::MissingDegree { id, kind })?
+        }
     };
-    Basis::new(kind, degree).map_err(|m| format!("{id}: {m}"))
+    basis(kind, degree)
 }
 
 /// The variables of a field id (`X`, `X*Z`, `C*t`): one or two distinct axes of `machine` or

@@ -363,7 +363,7 @@ impl Effect {
                         machine.chain()
                     ))
                 } else if let Err(why) = machine.station_named(Some(station)) {
-                    fail(why)
+                    fail(why.to_string())
                 } else if !finite(rate_um_per_h) {
                     fail("the drift rates must be finite".into())
                 } else {

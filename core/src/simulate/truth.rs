@@ -231,9 +231,9 @@ pub(super) fn project(model: &Model, p: &mut [f64]) -> Result<()> {
     let aat = &a * a.transpose();
     let svd = aat.svd(true, true);
     let eps = 1e-12 * svd.singular_values.max();
-    let lambda = svd
-        .solve(&r, eps)
-        .map_err(|e| Error::Model(format!("projecting onto the constraints: {e}")))?;
+    let lambda = svd.solve(&r, eps).map_err(|e| Error::Singular {
+        message: format!("projecting onto the constraints: {e}"),
+    })?;
     let correction = a.transpose() * lambda;
     for (v, c) in p.iter_mut().zip(correction.iter()) {
         *v -= c;
@@ -246,9 +246,12 @@ pub(super) fn project(model: &Model, p: &mut [f64]) -> Result<()> {
     }
     let violation = model.constraints().max_violation(p);
     if violation > 1e-9 {
-        return Err(Error::Model(format!(
-            "the error model's constraints contradict each other (left unsatisfied by {violation:.3e})"
-        )));
+        return Err(Error::ContradictoryConstraints {
+            message: format!(
+                "the error model's constraints contradict each other (left unsatisfied by \
+                 {violation:.3e})"
+            ),
+        });
     }
     Ok(())
 }

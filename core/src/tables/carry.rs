@@ -48,16 +48,17 @@ impl ErrorTables {
         let m = model.machine();
         let mut e = PointErrors::<f64>::zero();
         let chain_index = |axis| {
-            m.axes().iter().position(|a| a.axis == axis).ok_or_else(|| {
-                Error::Model(format!(
-                    "the tables name axis {axis}, which the machine lacks"
-                ))
-            })
+            m.axes()
+                .iter()
+                .position(|a| a.axis == axis)
+                .ok_or_else(|| Error::MachineMismatch {
+                    message: format!("the tables name axis {axis}, which the machine lacks"),
+                })
         };
         for (name, v) in &self.constants {
             let id: ErrorId = name
                 .parse()
-                .map_err(|_| Error::Model(format!("'{name}' is not an ISO 230 error name")))?;
+                .map_err(|_| Error::UnknownErrorName { name: name.clone() })?;
             let k = chain_index(id.axis())?;
             e.location[k][id.component().index()] = *v;
             e.has_location[k] = true;
@@ -68,7 +69,7 @@ impl ErrorTables {
             for (name, values) in &t.errors {
                 let id: ErrorId = name
                     .parse()
-                    .map_err(|_| Error::Model(format!("'{name}' is not an ISO 230 error name")))?;
+                    .map_err(|_| Error::UnknownErrorName { name: name.clone() })?;
                 e.component[k][id.component().index()] = interpolate(&t.positions, values, at);
             }
         }
