@@ -256,19 +256,8 @@ impl Profile {
             return Err(Error::input(self.place("point"), no_header));
         };
         let reader = ExportReader::new(self, machine, table.header())?;
-        let mut points = Vec::new();
-        for row in table.rows() {
-            points.push(reader.measurement(&row?)?);
-        }
-        if points.is_empty() {
-            return Err(Error::input(
-                Place::file(file),
-                "the export has a header but no rows",
-            ));
-        }
-        crate::measure::refuse_copies(&points, file)?;
-        crate::measure::refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet::from_file_times(points))
+        let no_rows = "the export has a header but no rows";
+        crate::measure::read_rows(machine, &mut table, no_rows, |row| reader.measurement(row))
     }
 
     /// The profile's place at `field`.
@@ -389,25 +378,20 @@ impl<'a> ExportReader<'a> {
                  station_id)",
             ));
         }
-        let station_index = self
-            .machine
-            .station_named(station.as_deref())
-            .map_err(|m| Error::input(station_at(), m.to_string()))?;
-        crate::measure::observable(self.machine, station_index, observation, station_at)?;
         let t_s = match self.time {
             Some(col) if row.filled(col) => Some(row.number(col, "seconds")?),
             _ => None,
         };
-        Ok(Measurement {
-            commands,
-            reflector,
-            measured,
-            observation,
-            t_s,
-            station,
-            station_index,
-            line: row.line(),
-        })
+        let (read, observed) = ((commands, reflector), (measured, observation));
+        let line = row.line();
+        crate::measure::located(
+            self.machine,
+            read,
+            observed,
+            (t_s, station),
+            line,
+            station_at,
+        )
     }
 
     /// The commands and the reflector a row's point name gives through the pattern.
@@ -733,5 +717,65 @@ mod tests {
         assert!(e("{X").starts_with("p.toml: field 'pattern': pattern \"{X\": a '{' is not"));
         assert!(e("{X}-{X}").contains("{X} appears twice"));
         assert!(e("").contains("empty"));
+    }
+
+    /// An export read through the CSV layer: lines skipped, another delimiter, a quoted name
+    /// holding it, a short row, CR LF and blank lines; errors at the export's own line numbers.
+    #[test]
+    fn exports_are_read_through_the_csv_layer_at_their_own_lines() {
+        let m = Machine::default_xcfz();
+        let profile = Profile::from_toml_str(
+            "delimiter = \";\"\nskip_lines = 2\npoint = \"Name\"\npattern = \"{reflector};{X};{C};{Z}\"\n\
+             time = \"T\"\n[coordinates]\nx = \"X\"\ny = \"Y\"\nz = \"Z\"\nlength_unit = \"m\"\n",
+            "p.toml",
+        )
+        .unwrap();
+        let export = "title\r\ndate\r\nName;X;Y;Z;T\r\n\"R1;0;0;0\";0.95;0.075;1.45;3\r\n\r\n\
+                      \"R2;700;90;300\";1;2;3\r\n";
+        let set = profile.read(&m, export, "e.csv").unwrap();
+        assert_eq!(set.points.len(), 2);
+        assert_eq!((set.points[0].line, set.points[1].line), (4, 6));
+        assert!((set.points[0].measured[0] - 950.0).abs() < 1e-9);
+        assert_eq!((set.points[0].t_s, set.points[1].t_s), (Some(0.0), None));
+        assert_eq!(set.points[1].reflector, 1);
+        let bad = export.replace("0.075", "abc");
+        let e = profile.read(&m, &bad, "e.csv").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "e.csv:4: field 'Y': expected a number (a length), found \"abc\""
+        );
+        let e = profile.read(&m, "a\nb\n", "e.csv").unwrap_err().to_string();
+        assert!(
+            e.starts_with("p.toml: field 'skip_lines': skip_lines = 2"),
+            "{e}"
+        );
+        let e = profile
+            .read(&m, "a\nb\n\n", "e.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("column 'Name' is not in the header of e.csv (line 3: )"),
+            "{e}"
+        );
+        let twice = export.replace("Name;X;Y;Z;T", "Name;X;Y;Z;X");
+        let e = profile.read(&m, &twice, "e.csv").unwrap_err().to_string();
+        assert!(
+            e.contains("column 'X' appears 2 times in the header of e.csv (line 3, columns 2, 5)"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_bad_delimiter_is_refused_at_its_line() {
+        let e = Profile::from_toml_str(
+            "delimiter = \"ab\"\npoint = \"N\"\npattern = \"{X}\"\n[coordinates]\nd = \"D\"\n",
+            "p.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("p.toml:1: field 'delimiter': delimiter \"ab\""),
+            "{e}"
+        );
     }
 }

@@ -196,6 +196,54 @@ pub fn to_spherical(p: [f64; 3]) -> [f64; 3] {
     [p[1].atan2(p[0]), p[2].atan2(h), h.hypot(p[2])]
 }
 
+/// A measurement a file reader read from its `line`: its commands and reflector, its
+/// observation, its time and station id; the station found in `machine` and checked to give the
+/// observation (the errors at `place`, the row's station).
+pub(crate) fn located(
+    machine: &Machine,
+    (commands, reflector): (Commands, usize),
+    (measured, observation): ([f64; 3], Observation),
+    (t_s, station): (Option<f64>, Option<String>),
+    line: usize,
+    place: impl Fn() -> Place,
+) -> Result<Measurement> {
+    let station_index = machine
+        .station_named(station.as_deref())
+        .map_err(|m| Error::input(place(), m.to_string()))?;
+    observable(machine, station_index, observation, place)?;
+    Ok(Measurement {
+        commands,
+        reflector,
+        measured,
+        observation,
+        t_s,
+        station,
+        station_index,
+        line,
+    })
+}
+
+/// The measurement set of `table`'s rows, each read by `read`; a file without rows is refused
+/// (`no_rows` says so), and so are copied rows and stations the machine cannot place.
+pub(crate) fn read_rows(
+    machine: &Machine,
+    table: &mut csvio::Table,
+    no_rows: &str,
+    read: impl Fn(&csvio::Row) -> Result<Measurement>,
+) -> Result<MeasurementSet> {
+    let mut points = Vec::new();
+    for row in table.rows() {
+        points.push(read(&row?)?);
+    }
+    let file = table.header().file().to_string();
+    if points.is_empty() {
+        return Err(Error::input(Place::file(&file), no_rows));
+    }
+    refuse_copies(&points, &file)?;
+    refuse_unknown_stations(machine, &points, &file)?;
+    Ok(MeasurementSet::from_file_times(points))
+}
+
 /// Whether station `station` of `machine` can give `observation`: a range-only station gives
 /// no point; the error is at `place` (the row's station).
 pub(crate) fn observable(
@@ -251,19 +299,8 @@ impl MeasurementSet {
             machine,
             columns: read::Columns::of(machine, table.header())?,
         };
-        let mut points = Vec::new();
-        for row in table.rows() {
-            points.push(reader.measurement(&row?)?);
-        }
-        if points.is_empty() {
-            return Err(Error::input(
-                Place::file(file),
-                "the file has a header but no measurement rows",
-            ));
-        }
-        refuse_copies(&points, file)?;
-        refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet::from_file_times(points))
+        let no_rows = "the file has a header but no measurement rows";
+        read_rows(machine, &mut table, no_rows, |row| reader.measurement(row))
     }
 
     /// A set of points whose `t_s` are the file's stamps: counted from the earliest from now on,
@@ -528,5 +565,23 @@ mod tests {
             e.starts_with("d.csv:2") && e.contains("not valid CSV"),
             "{e}"
         );
+    }
+
+    /// Quoted cells, CR LF, blank and whitespace-only lines: read through the CSV layer, each
+    /// point at its own line; a station id that needs quotes is written quoted and read back.
+    #[test]
+    fn quoted_cells_and_blank_lines_are_read_and_ids_written_back() {
+        let csv = "X,C,Z,reflector,meas_x,meas_y,meas_z,station\r\n\r\n\
+                   0,0,0,\"R1\",950,75,1450,\"S 1, left\"\r\n   \r\n,,,,,,,\r\n\
+                   700,90,300,R2,1,2,3,\"S 1, left\"\r\n";
+        let s = MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap();
+        assert_eq!((s.points[0].line, s.points[1].line), (3, 6));
+        assert_eq!(s.points[0].station.as_deref(), Some("S 1, left"));
+        let written = s.to_csv_string(&m());
+        assert!(written.contains(",\"S 1, left\"\n"), "{written}");
+        let again = MeasurementSet::from_csv_str(&m(), &written, "w.csv").unwrap();
+        assert_eq!(again.points[1].station, s.points[1].station);
+        let e = err("X,C,Z,reflector,meas_x,meas_y,meas_z\n\n0,0,0,R1,1,2\n");
+        assert_eq!(e, "d.csv:3: not valid CSV: 6 fields where the header has 7");
     }
 }

@@ -197,24 +197,11 @@ impl RowReader<'_> {
             .station
             .map(|c| row.text(c).to_string())
             .filter(|s| !s.is_empty());
-        let station_index = machine
-            .station_named(station.as_deref())
-            .map_err(|m| Error::input(self.station_place(row), m.to_string()))?;
         self.refuse_two_observations(row)?;
-        let (measured, observation) = self.observation(row, station.is_some())?;
-        super::observable(machine, station_index, observation, || {
-            self.station_place(row)
-        })?;
-        Ok(Measurement {
-            commands,
-            reflector,
-            measured,
-            observation,
-            t_s,
-            station,
-            station_index,
-            line: row.line(),
-        })
+        let observed = self.observation(row, station.is_some())?;
+        let place = || self.station_place(row);
+        let (line, read) = (row.line(), (commands, reflector));
+        super::located(machine, read, observed, (t_s, station), line, place)
     }
 
     /// Where a row's station is: its cell, or the missing column.
