@@ -52,6 +52,12 @@ use crate::machine::Commands;
 use crate::model::Model;
 use num_dual::{DualNum, DualSVec64};
 
+mod points;
+mod step;
+pub use points::{ListedPoint, MAX_AXIS_VALUE, read_points, written};
+pub use step::solve_dense;
+use step::{ConstrainedStep, solve_step};
+
 /// Deviation below which Newton's iteration stops (mm).
 pub const NEWTON_TOLERANCE_MM: f64 = 1e-11;
 
@@ -442,8 +448,9 @@ impl<'a> Compensator<'a> {
     /// The tool point and direction from `programmed` by Gauss–Newton steps that meet the
     /// point's linearised equations and minimise the direction's residual over what they leave
     /// free, each accepted only when it brings the point closer (once it is there: the
-    /// direction), else with the direction's part damped in Marquardt's manner until it does. Near the singularity (the direction's sensitivity
-    /// to a rotary axis below `sin` [`SINGULAR_TILT_DEG`] at the programmed command) the exact
+    /// direction), else with the direction's part damped in Marquardt's manner until it does
+    /// ([`Compensator::damped_step`]). Near the singularity (the direction's sensitivity to a
+    /// rotary axis below `sin` [`SINGULAR_TILT_DEG`] at the programmed command) the exact
     /// solution needs a large turn of that rotary axis (up to half a turn of a table to tilt
     /// the tool by microradians): that axis keeps its programmed value, the other four meet
     /// the point exactly and the direction as closely as the tilt axis alone can. The command,
@@ -456,38 +463,51 @@ impl<'a> Compensator<'a> {
         t: [f64; 3],
     ) -> Result<(Commands, usize, f64, f64)> {
         let m = self.free.len();
-        // A step is judged first by the point, then by the direction: each step meets the
-        // point's linearised equations, and at the singularity the direction's residual stays
-        // and must not outweigh the point's last digits.
-        let norms = |r: &[f64; 6]| {
-            (
-                crate::problem::norm([r[0], r[1], r[2]]),
-                crate::problem::norm([r[3], r[4], r[5]]),
-            )
+        let (r, jac) = self.residual_and_jacobian(programmed, target, Some(t));
+        let mut at = Oriented {
+            q: *programmed,
+            cost: oriented_cost(&r),
+            r,
+            jac,
         };
-        let better = |new: (f64, f64), old: (f64, f64)| {
-            new.0.is_finite()
-                && new.1.is_finite()
-                && if old.0 > NEWTON_TOLERANCE_MM {
-                    new.0 < old.0
-                } else {
-                    new.0 <= NEWTON_TOLERANCE_MM && new.1 < old.1
-                }
-        };
-        let mut q = *programmed;
-        let (mut r, mut jac) = self.residual_and_jacobian(&q, target, Some(t));
-        let mut cost = norms(&r);
-        if !(cost.0.is_finite() && cost.1.is_finite()) {
+        if !(at.cost.0.is_finite() && at.cost.1.is_finite()) {
             return Err(Error::NonFinite {
                 message: format!(
                     "compensation met a non-finite tool point at command {:?}",
-                    q.0
+                    at.q.0
                 ),
             });
         }
         let error_mm = crate::problem::norm([r[0], r[1], r[2]]);
-        // Near the singularity the rotary axis the direction hardly depends on is held.
-        let held = (self.rotary_sensitivity(&jac) < SINGULAR_TILT_DEG.to_radians().sin())
+        let held = self.held_rotary(&at.jac);
+        let active: Vec<usize> = (0..m).filter(|&i| Some(i) != held).collect();
+        let mut lambda = 0.0_f64;
+        let mut steps = 0;
+        while steps < MAX_NEWTON_STEPS {
+            let r = &at.r;
+            let d = crate::problem::norm([r[0], r[1], r[2]]);
+            let d_dir = crate::problem::norm([r[3], r[4], r[5]]) / DIRECTION_LEVER_MM;
+            if d <= NEWTON_TOLERANCE_MM && d_dir <= NEWTON_TOLERANCE_RAD {
+                break;
+            }
+            let Some(split) = ConstrainedStep::new(&at.jac, r, m, &active) else {
+                break;
+            };
+            let Some(next) = self.damped_step(&mut at, &split, lambda, (target, t)) else {
+                break;
+            };
+            lambda = next;
+            steps += 1;
+        }
+        Ok((at.q, steps, error_mm, self.rotary_sensitivity(&at.jac)))
+    }
+
+    /// Near the singularity (the direction's sensitivity to the rotary axes below `sin`
+    /// [`SINGULAR_TILT_DEG`]), the free rotary axis (its index among the free axes) the
+    /// direction depends on least, which the oriented iteration holds; `None` elsewhere.
+    fn held_rotary(&self, jac: &[f64]) -> Option<usize> {
+        let m = self.free.len();
+        (self.rotary_sensitivity(jac) < SINGULAR_TILT_DEG.to_radians().sin())
             .then(|| {
                 let axes = self.model.machine().axes();
                 (0..m)
@@ -497,44 +517,42 @@ impl<'a> Compensator<'a> {
                         col(i).total_cmp(&col(j))
                     })
             })
-            .flatten();
-        let active: Vec<usize> = (0..m).filter(|&i| Some(i) != held).collect();
-        let mut lambda = 0.0_f64;
-        let mut steps = 0;
-        'newton: while steps < MAX_NEWTON_STEPS {
-            let d = crate::problem::norm([r[0], r[1], r[2]]);
-            let d_dir = crate::problem::norm([r[3], r[4], r[5]]) / DIRECTION_LEVER_MM;
-            if d <= NEWTON_TOLERANCE_MM && d_dir <= NEWTON_TOLERANCE_RAD {
-                break;
+            .flatten()
+    }
+
+    /// One step of the oriented iteration from `at` (replaced by the new command when the step
+    /// is accepted) with `split`'s direction part damped from `lambda` up, ten times more per
+    /// try, until the step is better ([`oriented_better`]); the damping to start the next step
+    /// from, or `None` when even a damping of 1e12 does not improve (only the cost's rounding is
+    /// left). `(target, t)`: the tool point (mm) and direction to meet.
+    fn damped_step(
+        &self,
+        at: &mut Oriented,
+        split: &ConstrainedStep,
+        lambda: f64,
+        (target, t): ([f64; 3], [f64; 3]),
+    ) -> Option<f64> {
+        let mut trial = lambda;
+        loop {
+            if let Some(step) = split.step(trial) {
+                let mut q = at.q;
+                for (i, &k) in self.free.iter().enumerate() {
+                    q.0[k] -= step[i];
+                }
+                let (r, jac) = self.residual_and_jacobian(&q, target, Some(t));
+                let cost = oriented_cost(&r);
+                if oriented_better(cost, at.cost) {
+                    *at = Oriented { q, r, jac, cost };
+                    return Some(if trial < 1e-9 { 0.0 } else { trial / 10.0 });
+                }
             }
-            let Some(split) = ConstrainedStep::new(&jac, &r, m, &active) else {
-                break;
-            };
-            let mut trial = lambda;
-            loop {
-                if let Some(step) = split.step(trial) {
-                    let mut qn = q;
-                    for (i, &k) in self.free.iter().enumerate() {
-                        qn.0[k] -= step[i];
-                    }
-                    let (rn, jn) = self.residual_and_jacobian(&qn, target, Some(t));
-                    let cn = norms(&rn);
-                    if better(cn, cost) {
-                        (q, r, jac, cost) = (qn, rn, jn, cn);
-                        lambda = if trial < 1e-9 { 0.0 } else { trial / 10.0 };
-                        steps += 1;
-                        continue 'newton;
-                    }
-                }
-                // No decrease (or a singular system): more damping of the direction's part,
-                // down to where the cost's rounding is all that is left.
-                trial = if trial == 0.0 { 1e-12 } else { trial * 10.0 };
-                if trial > 1e12 {
-                    break 'newton;
-                }
+            // No decrease (or a singular system): more damping of the direction's part,
+            // down to where the cost's rounding is all that is left.
+            trial = if trial == 0.0 { 1e-12 } else { trial * 10.0 };
+            if trial > 1e12 {
+                return None;
             }
         }
-        Ok((q, steps, error_mm, self.rotary_sensitivity(&jac)))
     }
 
     /// The residuals at `q` — the tool point's offset from `target` (mm) and, with a target
@@ -606,6 +624,40 @@ pub fn is_five_axis(machine: &crate::machine::Machine) -> bool {
     axes.len() == 5 && axes.iter().filter(|a| a.axis.is_rotary()).count() == 2
 }
 
+/// Where the oriented iteration stands: the command, its residuals (point in mm, direction
+/// times [`DIRECTION_LEVER_MM`]), their Jacobian over the free axes and the cost
+/// ([`oriented_cost`]).
+struct Oriented {
+    q: Commands,
+    r: [f64; 6],
+    jac: Vec<f64>,
+    cost: (f64, f64),
+}
+
+/// The oriented iteration's cost of residuals `r`: the point's distance (mm) and the
+/// direction's residual (mm at [`DIRECTION_LEVER_MM`]), judged in that order
+/// ([`oriented_better`]).
+fn oriented_cost(r: &[f64; 6]) -> (f64, f64) {
+    (
+        crate::problem::norm([r[0], r[1], r[2]]),
+        crate::problem::norm([r[3], r[4], r[5]]),
+    )
+}
+
+/// Whether cost `new` is better than `old`: first by the point, then (once the point is met to
+/// [`NEWTON_TOLERANCE_MM`]) by the direction. Each step meets the point's linearised equations,
+/// and at the singularity the direction's residual stays and must not outweigh the point's last
+/// digits.
+fn oriented_better(new: (f64, f64), old: (f64, f64)) -> bool {
+    new.0.is_finite()
+        && new.1.is_finite()
+        && if old.0 > NEWTON_TOLERANCE_MM {
+            new.0 < old.0
+        } else {
+            new.0 <= NEWTON_TOLERANCE_MM && new.1 < old.1
+        }
+}
+
 /// Refuses a parameter vector that is not `model`'s.
 fn check_params(model: &Model, params: &[f64]) -> Result<()> {
     if params.len() != model.n_params() {
@@ -647,190 +699,6 @@ fn unit(v: [f64; 3]) -> [f64; 3] {
 pub fn angle_between(a: [f64; 3], b: [f64; 3]) -> f64 {
     let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     crate::problem::norm(cross(a, b)).atan2(dot)
-}
-
-/// One Gauss–Newton step of the five-axis compensation, split: the tool point's three
-/// linearised equations met exactly (the least-norm step `s_p`), the direction's residual
-/// minimised over what they leave free (`s = s_p + N α`, N an orthonormal basis of the
-/// point's Jacobian's null space over the active axes), α damped by `λ` in Marquardt's manner.
-struct ConstrainedStep {
-    m: usize,
-    sp: Vec<f64>,
-    /// The null space's basis, one vector (length m) per column.
-    n: Vec<Vec<f64>>,
-    /// `NᵀJ_dᵀJ_d N` (k × k) and `NᵀJ_dᵀ(J_d s_p + r_d)`.
-    g: Vec<f64>,
-    h: Vec<f64>,
-}
-
-impl ConstrainedStep {
-    /// From the residuals `r` and their Jacobian `jac` (6 × m, row-major) over the `active`
-    /// axes (the others do not move); `None` when the point's equations are singular.
-    fn new(jac: &[f64], r: &[f64; 6], m: usize, active: &[usize]) -> Option<ConstrainedStep> {
-        let row = |c: usize| -> Vec<f64> {
-            (0..m)
-                .map(|i| {
-                    if active.contains(&i) {
-                        jac[c * m + i]
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        };
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        let jp: Vec<Vec<f64>> = (0..3).map(row).collect();
-        let jd: Vec<Vec<f64>> = (3..6).map(row).collect();
-        // s_p = J_pᵀ (J_p J_pᵀ)⁻¹ (r_p): the least-norm step meeting the point.
-        let mut gram: Vec<f64> = (0..9).map(|k| dot(&jp[k / 3], &jp[k % 3])).collect();
-        let mut y = vec![r[0], r[1], r[2]];
-        let y = solve_dense(&mut gram, &mut y, 3)?;
-        let sp: Vec<f64> = (0..m)
-            .map(|i| (0..3).map(|c| jp[c][i] * y[c]).sum())
-            .collect();
-        // The null space: the active unit vectors with the point's rows (orthonormalised)
-        // projected out, orthonormalised in turn.
-        let mut basis: Vec<Vec<f64>> = Vec::new();
-        for v in &jp {
-            let mut v = v.clone();
-            for b in &basis {
-                let c = dot(&v, b);
-                v.iter_mut().zip(b).for_each(|(x, y)| *x -= c * y);
-            }
-            let len = dot(&v, &v).sqrt();
-            v.iter_mut().for_each(|x| *x /= len);
-            basis.push(v);
-        }
-        let mut n: Vec<Vec<f64>> = Vec::new();
-        for &i in active {
-            let mut v = vec![0.0; m];
-            v[i] = 1.0;
-            for b in basis.iter().chain(&n) {
-                let c = dot(&v, b);
-                v.iter_mut().zip(b).for_each(|(x, y)| *x -= c * y);
-            }
-            let len = dot(&v, &v).sqrt();
-            if len > 1e-6 {
-                v.iter_mut().for_each(|x| *x /= len);
-                n.push(v);
-            }
-        }
-        let k = n.len();
-        // The direction's part: J_d N and J_d s_p − r_d (steps are subtracted from q).
-        let jdn: Vec<Vec<f64>> = (0..3)
-            .map(|c| n.iter().map(|v| dot(&jd[c], v)).collect())
-            .collect();
-        let rest: Vec<f64> = (0..3).map(|c| r[3 + c] - dot(&jd[c], &sp)).collect();
-        let g = (0..k * k)
-            .map(|e| (0..3).map(|c| jdn[c][e / k] * jdn[c][e % k]).sum())
-            .collect();
-        let h = (0..k)
-            .map(|a| (0..3).map(|c| jdn[c][a] * rest[c]).sum())
-            .collect();
-        Some(ConstrainedStep { m, sp, n, g, h })
-    }
-
-    /// The step (to subtract from the commands) at damping `lambda`; `None` when the
-    /// direction's system is singular.
-    fn step(&self, lambda: f64) -> Option<Vec<f64>> {
-        let k = self.n.len();
-        let mut alpha = vec![0.0; k];
-        if k > 0 {
-            let gmax = (0..k).map(|i| self.g[i * k + i]).fold(0.0_f64, f64::max);
-            let mut g = self.g.clone();
-            for i in 0..k {
-                g[i * k + i] += lambda * g[i * k + i].max(1e-12 * gmax);
-            }
-            alpha = solve_dense(&mut g, &mut self.h.clone(), k)?;
-        }
-        Some(
-            (0..self.m)
-                .map(|i| self.sp[i] + (0..k).map(|a| self.n[a][i] * alpha[a]).sum::<f64>())
-                .collect(),
-        )
-    }
-}
-
-/// `commands` as a controller gets them: each axis in file units (mm, degrees) with `decimals`
-/// decimals, and the commands those texts stand for (internal units), so that what is written
-/// can be verified.
-pub fn written(
-    machine: &crate::machine::Machine,
-    commands: &Commands,
-    decimals: usize,
-) -> (Vec<String>, Commands) {
-    let mut out = *commands;
-    let texts = machine
-        .axes()
-        .iter()
-        .enumerate()
-        .map(|(k, a)| {
-            let t = format!("{:.decimals$}", a.to_file_units(commands.0[k]));
-            out.0[k] = a.from_file_units(t.parse().expect("a formatted number parses"));
-            t
-        })
-        .collect();
-    (texts, out)
-}
-
-/// The Newton step `s` with `J s = r` when there are as many equations as free axes (three),
-/// or the least-squares step `JᵀJ s = Jᵀ r` (fewer free axes). `None` when the system is
-/// singular.
-fn solve_step(jac: &[f64], r: &[f64], m: usize) -> Option<Vec<f64>> {
-    let rows = r.len();
-    if rows == m {
-        return solve_dense(&mut jac.to_vec(), &mut r.to_vec(), m);
-    }
-    let mut a = vec![0.0; m * m];
-    let mut b = vec![0.0; m];
-    for i in 0..m {
-        for j in 0..m {
-            a[i * m + j] = (0..rows).map(|c| jac[c * m + i] * jac[c * m + j]).sum();
-        }
-        b[i] = (0..rows).map(|c| jac[c * m + i] * r[c]).sum();
-    }
-    solve_dense(&mut a, &mut b, m)
-}
-
-/// Solves the m × m system `a x = b` (row-major; both overwritten) by Gaussian elimination with
-/// partial pivoting; `None` when a pivot is not finite or below 1e-14 of the largest entry (a
-/// singular system). For the few unknowns of a Newton step.
-///
-/// ```
-/// let mut a = vec![2.0, 1.0, 1.0, 3.0];
-/// let mut b = vec![3.0, 5.0];
-/// let x = volver_core::compensate::solve_dense(&mut a, &mut b, 2).unwrap();
-/// assert!((x[0] - 0.8).abs() < 1e-15 && (x[1] - 1.4).abs() < 1e-15);
-/// assert!(volver_core::compensate::solve_dense(&mut vec![1.0, 2.0, 2.0, 4.0], &mut vec![1.0, 1.0], 2).is_none());
-/// ```
-pub fn solve_dense(a: &mut [f64], b: &mut [f64], m: usize) -> Option<Vec<f64>> {
-    let scale = a.iter().map(|v| v.abs()).fold(0.0, f64::max);
-    for col in 0..m {
-        let piv =
-            (col..m).max_by(|&i, &j| a[i * m + col].abs().total_cmp(&a[j * m + col].abs()))?;
-        if a[piv * m + col].abs() <= 1e-14 * scale || !a[piv * m + col].is_finite() {
-            return None;
-        }
-        if piv != col {
-            for j in 0..m {
-                a.swap(piv * m + j, col * m + j);
-            }
-            b.swap(piv, col);
-        }
-        for i in col + 1..m {
-            let f = a[i * m + col] / a[col * m + col];
-            for j in col..m {
-                a[i * m + j] -= f * a[col * m + j];
-            }
-            b[i] -= f * b[col];
-        }
-    }
-    let mut x = vec![0.0; m];
-    for i in (0..m).rev() {
-        let s: f64 = (i + 1..m).map(|j| a[i * m + j] * x[j]).sum();
-        x[i] = (b[i] - s) / a[i * m + i];
-    }
-    Some(x)
 }
 
 #[cfg(test)]
@@ -884,160 +752,4 @@ mod tests {
             }
         }
     }
-
-    #[test]
-    fn the_step_solves_small_systems() {
-        let jac = [2.0, 1.0, 0.0, 1.0, 3.0, 1.0, 0.0, 1.0, 4.0];
-        let r = [3.0, 5.0, 5.0];
-        let s = solve_step(&jac, &r, 3).unwrap();
-        for c in 0..3 {
-            let v: f64 = (0..3).map(|j| jac[c * 3 + j] * s[j]).sum();
-            assert!((v - r[c]).abs() < 1e-12);
-        }
-        assert!(solve_step(&[1.0, 2.0, 2.0, 4.0, 0.0, 0.0], &r, 2).is_none());
-    }
-}
-
-/// One programmed point of a point list.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ListedPoint {
-    /// 1-based line in the file.
-    pub line: usize,
-    /// The `id` column, when there is one.
-    pub id: Option<String>,
-    /// The programmed command (internal units, chain order).
-    pub commands: Commands,
-}
-
-/// Reads a point list: CSV with one column per machine axis, named by its letter (file units:
-/// mm, degrees), and an optional `id` column. A header may carry its unit (`C [deg]`), which
-/// must be the one volver reads ([`crate::measure::check_unit`]). Any other column, a missing or
-/// repeated axis, another unit, a value that is not a finite number or an empty list is refused
-/// with the file, line and column.
-///
-/// ```
-/// use volver_core::compensate::read_points;
-/// use volver_core::machine::Machine;
-/// let m = Machine::default_xcfz();
-/// let pts = read_points("id,X,C,Z\np1,100,90,50\n", "pts.csv", &m).unwrap();
-/// assert_eq!(pts[0].line, 2);
-/// assert!((pts[0].commands.0[1] - std::f64::consts::FRAC_PI_2).abs() < 1e-15);
-/// let err = read_points("X,C\n1,2\n", "pts.csv", &m).unwrap_err().to_string();
-/// assert!(err.contains("pts.csv:1") && err.contains("'Z'"));
-/// ```
-pub fn read_points(
-    text: &str,
-    file: &str,
-    machine: &crate::machine::Machine,
-) -> Result<Vec<ListedPoint>> {
-    use crate::error::Place;
-    // A byte-order mark (spreadsheets write one) is not part of the first column's name.
-    let text = crate::error::lf_lines(crate::error::without_bom(text));
-    let mut lines = text
-        .lines()
-        .enumerate()
-        .filter(|(_, l)| !l.trim().is_empty());
-    let Some((h_i, header)) = lines.next() else {
-        return Err(Error::input(
-            Place::file(file),
-            "empty file: expected a header with one column per axis (and an optional id)",
-        ));
-    };
-    let raw: Vec<&str> = header.split(',').map(str::trim).collect();
-    let (names, units): (Vec<&str>, Vec<Option<&str>>) =
-        raw.iter().map(|h| crate::measure::split_unit(h)).unzip();
-    let place = |line: usize, field: &str| Place::file(file).at_line(line).at_field(field);
-    let mut id_col = None;
-    let mut axis_col = vec![None; machine.axes().len()];
-    for (c, n) in names.iter().enumerate() {
-        let k = if *n == "id" {
-            None
-        } else {
-            let mut ch = n.chars();
-            let axis = match (ch.next(), ch.next()) {
-                (Some(l), None) => Axis::from_letter(l),
-                _ => None,
-            };
-            match axis.and_then(|a| machine.axis(a)) {
-                Some((k, _)) => Some(k),
-                None => {
-                    return Err(Error::input(
-                        place(h_i + 1, n),
-                        format!(
-                            "unexpected column '{n}': expected the axes of {} and an optional id",
-                            machine.chain()
-                        ),
-                    ));
-                }
-            }
-        };
-        let slot = match k {
-            None => &mut id_col,
-            Some(k) => &mut axis_col[k],
-        };
-        if slot.is_some() {
-            return Err(Error::input(
-                place(h_i + 1, n),
-                format!("column '{n}' appears twice"),
-            ));
-        }
-        *slot = Some(c);
-    }
-    for (k, a) in machine.axes().iter().enumerate() {
-        if let Some(c) = axis_col[k]
-            && let Some(u) = units[c]
-        {
-            crate::measure::check_unit(u, a.file_unit())
-                .map_err(|m| Error::input(place(h_i + 1, raw[c]), m))?;
-        }
-        if axis_col[k].is_none() {
-            let l = a.axis.letter().to_string();
-            return Err(Error::input(
-                place(h_i + 1, &l),
-                format!("missing column '{l}' (axis {l}, in {})", a.file_unit()),
-            ));
-        }
-    }
-    let mut out = Vec::new();
-    for (i, raw) in lines {
-        let cells: Vec<&str> = raw.split(',').map(str::trim).collect();
-        if cells.len() != names.len() {
-            return Err(Error::input(
-                Place::file(file).at_line(i + 1),
-                format!("{} fields, the header has {}", cells.len(), names.len()),
-            ));
-        }
-        let mut commands = Commands::default();
-        for (k, a) in machine.axes().iter().enumerate() {
-            let c = axis_col[k].expect("checked");
-            let v: f64 = match cells[c].parse::<f64>() {
-                Ok(v) if v.is_finite() && v.abs() <= crate::gcode::MAX_AXIS_VALUE => v,
-                _ => {
-                    return Err(Error::input(
-                        place(i + 1, names[c]),
-                        format!(
-                            "expected a finite number in {} of at most {:e} in magnitude \
-                             (beyond any machine's travel), found \"{}\"",
-                            a.file_unit(),
-                            crate::gcode::MAX_AXIS_VALUE,
-                            cells[c]
-                        ),
-                    ));
-                }
-            };
-            commands.0[k] = a.from_file_units(v);
-        }
-        out.push(ListedPoint {
-            line: i + 1,
-            id: id_col.map(|c| cells[c].to_string()),
-            commands,
-        });
-    }
-    if out.is_empty() {
-        return Err(Error::input(
-            Place::file(file).at_line(h_i + 1),
-            "a header but no points",
-        ));
-    }
-    Ok(out)
 }

@@ -42,6 +42,7 @@
 //! assert!((set.points[0].measured[0] - 950.0).abs() < 1e-9);
 //! ```
 
+use crate::csvio::{self, Format, Header, Row};
 use crate::error::{Error, Place, Result, from_toml};
 use crate::machine::{Commands, Machine};
 use crate::measure::{Measurement, MeasurementSet, Observation, from_spherical};
@@ -163,8 +164,7 @@ impl Profile {
             }
             p
         };
-        let delimiter = delimiter_of(spec.delimiter.as_deref())
-            .map_err(|m| Error::input(at("delimiter"), m))?;
+        let delimiter = delimiter_of(spec.delimiter.as_deref(), || at("delimiter"))?;
         let c = &spec.coordinates;
         let length_mm = match c.length_unit.as_deref().unwrap_or("mm") {
             "mm" => 1.0,
@@ -210,7 +210,7 @@ impl Profile {
                 "give the station as a column (station) or one id (station_id), not both",
             ));
         }
-        let pieces = parse_pattern(&spec.pattern).map_err(|m| Error::input(at("pattern"), m))?;
+        let pieces = parse_pattern(&spec.pattern, &at("pattern"))?;
         Ok(Profile {
             spec,
             file: file.to_string(),
@@ -241,14 +241,38 @@ impl Profile {
 
     /// Reads an export's text through the profile; `file` names it in messages.
     pub fn read(&self, machine: &Machine, text: &str, file: &str) -> Result<MeasurementSet> {
-        let spec = &self.spec;
-        let profile_at = |field: &str| Place::file(&self.file).at_field(field);
-        // The pattern's fields must be the machine's axes, once each, and the reflector.
+        self.check_pattern(machine)?;
+        let skip = self.spec.skip_lines;
+        let body = export_body(text, skip, file, || self.place("skip_lines"))?;
+        let format = Format {
+            delimiter: self.delimiter,
+            comments: false,
+            units_in_header: false,
+            ragged: true,
+            first_line: skip + 1,
+        };
+        let Some(mut table) = csvio::read(&body, file, format)? else {
+            let no_header = missing_column(&self.spec.point, &[], file, skip + 1);
+            return Err(Error::input(self.place("point"), no_header));
+        };
+        let reader = ExportReader::new(self, machine, table.header())?;
+        let no_rows = "the export has a header but no rows";
+        crate::measure::read_rows(machine, &mut table, no_rows, |row| reader.measurement(row))
+    }
+
+    /// The profile's place at `field`.
+    fn place(&self, field: &str) -> Place {
+        Place::file(&self.file).at_field(field)
+    }
+
+    /// Checks the pattern's fields against `machine`: its axes, once each, and the reflector
+    /// (which a machine with several reflectors needs).
+    fn check_pattern(&self, machine: &Machine) -> Result<()> {
         for axis in machine.axes() {
             let letter = axis.axis.letter().to_string();
             if !self.pieces.contains(&Piece::Field(letter.clone())) {
                 return Err(Error::input(
-                    profile_at("pattern"),
+                    self.place("pattern"),
                     format!(
                         "the pattern names no {{{letter}}}: a point's name must give every axis of \
                          {} and the reflector",
@@ -264,7 +288,7 @@ impl Profile {
                 && machine.axis_named(f).is_none()
             {
                 return Err(Error::input(
-                    profile_at("pattern"),
+                    self.place("pattern"),
                     format!(
                         "{{{f}}} is not an axis of {} (nor reflector or *)",
                         machine.chain()
@@ -275,40 +299,36 @@ impl Profile {
         let with_reflector = self.pieces.contains(&Piece::Field("reflector".into()));
         if !with_reflector && machine.reflectors().len() > 1 {
             return Err(Error::input(
-                profile_at("pattern"),
+                self.place("pattern"),
                 "the pattern names no {reflector}, and the machine has several reflectors",
             ));
         }
-        let body = export_body(text, spec.skip_lines, file)
-            .map_err(|m| Error::input(profile_at("skip_lines"), m))?;
-        let offset = spec.skip_lines;
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .delimiter(self.delimiter)
-            .trim(csv::Trim::All)
-            .flexible(true)
-            .from_reader(body.as_bytes());
-        let csv_err = |e: csv::Error| {
-            let mut place = Place::file(file);
-            if let Some(p) = e.position() {
-                place = place.at_line(p.line() as usize + offset);
-            }
-            Error::input(place, format!("not valid CSV: {e}"))
-        };
-        let headers: Vec<String> = rdr
-            .headers()
-            .map_err(csv_err)?
-            .iter()
-            .map(str::to_string)
-            .collect();
+        Ok(())
+    }
+}
+
+/// Reads an export's rows through a profile: the columns the profile names, found in the
+/// export's header.
+struct ExportReader<'a> {
+    profile: &'a Profile,
+    machine: &'a Machine,
+    point: usize,
+    kind: Kind,
+    station: Option<usize>,
+    time: Option<usize>,
+}
+
+impl<'a> ExportReader<'a> {
+    /// The columns of `header` that `profile` names, each once; the coordinates' columns one of
+    /// the three kinds.
+    fn new(profile: &'a Profile, machine: &'a Machine, header: &Header) -> Result<Self> {
+        let spec = &profile.spec;
         let column = |name: &str, field: &str| -> Result<usize> {
-            column_of(&headers, name, file, offset + 1)
-                .map_err(|m| Error::input(profile_at(field), m))
+            column_of(header, name, || profile.place(field))
         };
-        let point_col = column(&spec.point, "point")?;
-        let c = &spec.coordinates;
         let named =
             |v: &Option<String>, field: &str| v.as_deref().map(|n| column(n, field)).transpose();
+        let c = &spec.coordinates;
         let kind = match (
             named(&c.x, "coordinates.x")?,
             named(&c.y, "coordinates.y")?,
@@ -322,175 +342,186 @@ impl Profile {
             (None, None, None, None, None, Some(d)) => Kind::Range(d),
             _ => {
                 return Err(Error::input(
-                    profile_at("coordinates"),
+                    profile.place("coordinates"),
                     "give x, y and z, or hz, v and d, or d alone (a range)",
                 ));
             }
         };
-        let station_col = named(&spec.station, "station")?;
-        let time_col = named(&spec.time, "time")?;
-        let mut points = Vec::new();
-        for rec in rdr.records() {
-            let rec = rec.map_err(csv_err)?;
-            let line = rec.position().map_or(0, |p| p.line() as usize) + offset;
-            if rec.iter().all(str::is_empty) {
-                continue;
-            }
-            let at = |col: usize| {
-                Place::file(file)
-                    .at_line(line)
-                    .at_field(headers.get(col).cloned().unwrap_or_default())
-            };
-            let cell = |col: usize| rec.get(col).unwrap_or("");
-            let number = |col: usize, what: &str| -> Result<f64> {
-                let s = cell(col);
-                s.parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite())
-                    .ok_or_else(|| {
-                        Error::input(
-                            at(col),
-                            format!("expected a finite number ({what}), found \"{s}\""),
-                        )
-                    })
-            };
-            let name = cell(point_col);
-            let fields = match_pattern(&self.pieces, name).ok_or_else(|| {
-                Error::input(
-                    at(point_col),
-                    format!(
-                        "point name \"{name}\" does not follow the profile's pattern \"{}\"",
-                        spec.pattern
-                    ),
-                )
-            })?;
-            let mut commands = Commands::default();
-            let mut reflector = 0;
-            for (field, value) in &fields {
-                if field == "*" {
-                    continue;
-                }
-                if field == "reflector" {
-                    reflector = machine
-                        .reflector_named(value)
-                        .map_err(|m| Error::input(at(point_col), m))?;
-                    continue;
-                }
-                let (k, ax) = machine.axis_named(field).expect("checked with the pattern");
-                let v: f64 = value
-                    .parse()
-                    .ok()
-                    .filter(|v: &f64| v.is_finite())
-                    .ok_or_else(|| {
-                        Error::input(
-                            at(point_col),
-                            format!(
-                                "point name \"{name}\": {field} = \"{value}\" is not a number ({})",
-                                ax.file_unit()
-                            ),
-                        )
-                    })?;
-                commands.0[k] = ax.position_from_file(v).map_err(|m| {
-                    Error::input(at(point_col), format!("point name \"{name}\": {m}"))
-                })?;
-            }
-            let length = |col: usize| -> Result<f64> {
-                let v = number(col, "a length")? * self.length_mm;
-                if v.abs() > crate::measure::MAX_COORDINATE_MM {
-                    return Err(Error::input(
-                        at(col),
-                        format!(
-                            "{} mm is beyond any laser tracker's reach: check length_unit",
-                            crate::error::number(v)
-                        ),
-                    ));
-                }
-                Ok(v)
-            };
-            let distance = |col: usize| -> Result<f64> {
-                let d = length(col)?;
-                if d < 0.0 {
-                    return Err(Error::input(
-                        at(col),
-                        format!("a distance from the station is ≥ 0; found {d} mm"),
-                    ));
-                }
-                Ok(d)
-            };
-            let (measured, observation) = match kind {
-                Kind::Cartesian([x, y, z]) => {
-                    ([length(x)?, length(y)?, length(z)?], Observation::Point)
-                }
-                Kind::Spherical([h, v, d]) => {
-                    let mut hz = number(h, "an angle")? * self.angle_rad;
-                    if c.horizontal.as_deref() == Some("clockwise") {
-                        hz = -hz;
-                    }
-                    let mut el = number(v, "an angle")? * self.angle_rad;
-                    if c.vertical.as_deref() == Some("zenith") {
-                        el = std::f64::consts::FRAC_PI_2 - el;
-                    }
-                    if el.abs() > std::f64::consts::FRAC_PI_2 + 1e-12 {
-                        return Err(Error::input(
-                            at(v),
-                            "the vertical angle is beyond the vertical: check vertical and angle_unit",
-                        ));
-                    }
-                    (from_spherical(hz, el, distance(d)?), Observation::Point)
-                }
-                Kind::Range(d) => ([distance(d)?, 0.0, 0.0], Observation::Range),
-            };
-            let station = match (station_col, &spec.station_id) {
-                (Some(col), _) => Some(cell(col).to_string()).filter(|s| !s.is_empty()),
-                (None, Some(id)) => Some(id.clone()),
-                (None, None) => None,
-            };
-            let station_at = || {
-                station_col.map_or_else(|| Place::file(file).at_line(line).at_field("station"), at)
-            };
-            if observation == Observation::Range && station.is_none() {
-                return Err(Error::input(
-                    station_at(),
-                    "a range alone needs the station that measured it (the profile's station or \
-                     station_id)",
-                ));
-            }
-            let station_index = machine
-                .station_named(station.as_deref())
-                .map_err(|m| Error::input(station_at(), m))?;
-            crate::measure::observable(machine, station_index, observation)
-                .map_err(|m| Error::input(station_at(), m))?;
-            let t_s = match time_col {
-                Some(col) if !cell(col).is_empty() => Some(number(col, "seconds")?),
-                _ => None,
-            };
-            points.push(Measurement {
-                commands,
-                reflector,
-                measured,
-                observation,
-                t_s,
-                station,
-                station_index,
-                line,
-            });
-        }
-        if points.is_empty() {
+        Ok(ExportReader {
+            profile,
+            machine,
+            point: column(&spec.point, "point")?,
+            kind,
+            station: named(&spec.station, "station")?,
+            time: named(&spec.time, "time")?,
+        })
+    }
+
+    /// The measurement of `row`: the point's name read through the pattern, the observation
+    /// in mm, the station and the time.
+    fn measurement(&self, row: &Row) -> Result<Measurement> {
+        let (commands, reflector) = self.name_fields(row)?;
+        let (measured, observation) = self.observation(row)?;
+        let station = match (self.station, &self.profile.spec.station_id) {
+            (Some(col), _) => Some(row.text(col).to_string()).filter(|s| !s.is_empty()),
+            (None, Some(id)) => Some(id.clone()),
+            (None, None) => None,
+        };
+        let station_at = || {
+            self.station
+                .map_or_else(|| row.place_at("station"), |c| row.place(c))
+        };
+        if observation == Observation::Range && station.is_none() {
             return Err(Error::input(
-                Place::file(file),
-                "the export has a header but no rows",
+                station_at(),
+                "a range alone needs the station that measured it (the profile's station or \
+                 station_id)",
             ));
         }
-        crate::measure::refuse_copies(&points, file)?;
-        crate::measure::refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet::from_file_times(points))
+        let t_s = match self.time {
+            Some(col) if row.filled(col) => Some(row.number(col, "seconds")?),
+            _ => None,
+        };
+        let (read, observed) = ((commands, reflector), (measured, observation));
+        let line = row.line();
+        crate::measure::located(
+            self.machine,
+            read,
+            observed,
+            (t_s, station),
+            line,
+            station_at,
+        )
+    }
+
+    /// The commands and the reflector a row's point name gives through the pattern.
+    fn name_fields(&self, row: &Row) -> Result<(Commands, usize)> {
+        let col = self.point;
+        let name = row.text(col);
+        let fields = match_pattern(&self.profile.pieces, name).ok_or_else(|| {
+            row.error(
+                col,
+                format!(
+                    "point name \"{name}\" does not follow the profile's pattern \"{}\"",
+                    self.profile.spec.pattern
+                ),
+            )
+        })?;
+        let mut commands = Commands::default();
+        let mut reflector = 0;
+        for (field, value) in &fields {
+            match field.as_str() {
+                "*" => continue,
+                "reflector" => {
+                    reflector = self
+                        .machine
+                        .reflector_named(value)
+                        .map_err(|m| row.error(col, m))?;
+                    continue;
+                }
+                _ => {}
+            }
+            // Every other field is an axis of the machine (checked with the pattern).
+            let Some((k, ax)) = self.machine.axis_named(field) else {
+                continue;
+            };
+            let v = value
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    row.error(
+                        col,
+                        format!(
+                            "point name \"{name}\": {field} = \"{value}\" is not a number ({})",
+                            ax.file_unit()
+                        ),
+                    )
+                })?;
+            commands.0[k] = ax
+                .position_from_file(v)
+                .map_err(|m| row.error(col, format!("point name \"{name}\": {m}")))?;
+        }
+        Ok((commands, reflector))
+    }
+
+    /// The row's observation in the station's frame (mm): a point, or a range alone.
+    fn observation(&self, row: &Row) -> Result<([f64; 3], Observation)> {
+        Ok(match self.kind {
+            Kind::Cartesian([x, y, z]) => (
+                [
+                    self.length(row, x)?,
+                    self.length(row, y)?,
+                    self.length(row, z)?,
+                ],
+                Observation::Point,
+            ),
+            Kind::Spherical([h, v, d]) => {
+                let (hz, el) = self.angles(row, h, v)?;
+                (
+                    from_spherical(hz, el, self.distance(row, d)?),
+                    Observation::Point,
+                )
+            }
+            Kind::Range(d) => ([self.distance(row, d)?, 0.0, 0.0], Observation::Range),
+        })
+    }
+
+    /// A length in the profile's unit, converted to mm; beyond a tracker's reach is refused.
+    fn length(&self, row: &Row, col: usize) -> Result<f64> {
+        let v = row.number(col, "a length")? * self.profile.length_mm;
+        if v.abs() > crate::measure::MAX_COORDINATE_MM {
+            return Err(row.error(
+                col,
+                format!(
+                    "{} mm is beyond any laser tracker's reach: check length_unit",
+                    crate::error::number(v)
+                ),
+            ));
+        }
+        Ok(v)
+    }
+
+    /// A distance from the station (mm), not negative.
+    fn distance(&self, row: &Row, col: usize) -> Result<f64> {
+        let d = self.length(row, col)?;
+        if d < 0.0 {
+            return Err(row.error(
+                col,
+                format!("a distance from the station is ≥ 0; found {d} mm"),
+            ));
+        }
+        Ok(d)
+    }
+
+    /// The azimuth (from x towards y) and elevation (above the x–y plane) in rad of the
+    /// horizontal angle `h` and vertical angle `v` columns, as the profile states them.
+    fn angles(&self, row: &Row, h: usize, v: usize) -> Result<(f64, f64)> {
+        let c = &self.profile.spec.coordinates;
+        let angle_rad = self.profile.angle_rad;
+        let mut hz = row.number(h, "an angle")? * angle_rad;
+        if c.horizontal.as_deref() == Some("clockwise") {
+            hz = -hz;
+        }
+        let mut el = row.number(v, "an angle")? * angle_rad;
+        if c.vertical.as_deref() == Some("zenith") {
+            el = std::f64::consts::FRAC_PI_2 - el;
+        }
+        if el.abs() > std::f64::consts::FRAC_PI_2 + 1e-12 {
+            return Err(row.error(
+                v,
+                "the vertical angle is beyond the vertical: check vertical and angle_unit",
+            ));
+        }
+        Ok((hz, el))
     }
 }
 
 /// The byte a profile's `delimiter` names (`,` when absent; `"\\t"` or a tab for a tab): one
 /// ASCII character that is not a line end or other control character, a quote, a letter, a
-/// digit or a sign, which would split rows or numbers rather than fields.
-fn delimiter_of(text: Option<&str>) -> std::result::Result<u8, String> {
+/// digit or a sign, which would split rows or numbers rather than fields. The error is at
+/// `place` (the profile's `delimiter`).
+fn delimiter_of(text: Option<&str>, place: impl FnOnce() -> Place) -> Result<u8> {
     match text {
         None => Ok(b','),
         Some("\\t" | "\t") => Ok(b'\t'),
@@ -503,29 +534,26 @@ fn delimiter_of(text: Option<&str>) -> std::result::Result<u8, String> {
         {
             Ok(d.as_bytes()[0])
         }
-        Some(d) => Err(format!(
-            "delimiter {d:?}: one ASCII character that is not a line end, a quote, a letter, a \
-             digit or a sign (\",\", \";\", \"\\t\", \"|\" …)"
+        Some(d) => Err(Error::input(
+            place(),
+            format!(
+                "delimiter {d:?}: one ASCII character that is not a line end, a quote, a letter, \
+                 a digit or a sign (\",\", \";\", \"\\t\", \"|\" …)"
+            ),
         )),
     }
 }
 
-/// The column `name` of an export's `headers`: an error when it is missing (listing the header,
-/// cut short) or repeated (which one to read cannot be told). `line` is the header's line.
-fn column_of(
-    headers: &[String],
-    name: &str,
-    file: &str,
-    line: usize,
-) -> std::result::Result<usize, String> {
-    let found: Vec<usize> = (0..headers.len()).filter(|&i| headers[i] == name).collect();
-    match found[..] {
-        [i] => Ok(i),
-        [] => Err(format!(
-            "column '{name}' is not in the header of {file} (line {line}: {})",
-            header_list(headers)
-        )),
-        _ => Err(format!(
+/// The column `name` of an export's `header`: an error at `place` (the profile's field naming
+/// it) when it is missing (listing the header, cut short) or repeated (which one to read cannot
+/// be told).
+fn column_of(header: &Header, name: &str, place: impl FnOnce() -> Place) -> Result<usize> {
+    let (file, line) = (header.file(), header.line());
+    let found = header.columns_named(name);
+    let message = match found[..] {
+        [i] => return Ok(i),
+        [] => missing_column(name, header.names(), file, line),
+        _ => format!(
             "column '{name}' appears {} times in the header of {file} (line {line}, columns \
              {}): which one to read cannot be told; rename the columns in the export",
             found.len(),
@@ -534,19 +562,38 @@ fn column_of(
                 .map(|i| (i + 1).to_string())
                 .collect::<Vec<_>>()
                 .join(", ")
-        )),
-    }
+        ),
+    };
+    Err(Error::input(place(), message))
+}
+
+/// The message on column `name` missing from the header `names` of `file` at `line`.
+fn missing_column(name: &str, names: &[String], file: &str, line: usize) -> String {
+    format!(
+        "column '{name}' is not in the header of {file} (line {line}: {})",
+        header_list(names)
+    )
 }
 
 /// The export's text after its first `skip` lines: a byte-order mark removed, and CR LF and
 /// CR-only line ends (some exports write CR alone) read as LF, so that lines are counted as the
-/// export's viewer counts them. An error when nothing is left for the header.
-fn export_body(text: &str, skip: usize, file: &str) -> std::result::Result<String, String> {
+/// export's viewer counts them. An error at `place` (the profile's `skip_lines`) when nothing is
+/// left for the header.
+fn export_body(
+    text: &str,
+    skip: usize,
+    file: &str,
+    place: impl FnOnce() -> Place,
+) -> Result<String> {
     let text = crate::error::lf_lines(crate::error::without_bom(text));
     let lines = text.split_inclusive('\n').count();
     if skip >= lines {
-        return Err(format!(
-            "skip_lines = {skip}, but {file} has {lines} line(s): nothing is left for the header"
+        return Err(Error::input(
+            place(),
+            format!(
+                "skip_lines = {skip}, but {file} has {lines} line(s): nothing is left for the \
+                 header"
+            ),
         ));
     }
     Ok(text.split_inclusive('\n').skip(skip).collect())
@@ -570,8 +617,9 @@ fn header_list(headers: &[String]) -> String {
 }
 
 /// The pieces of a name pattern: literal text and `{field}`s; two fields in a row cannot be
-/// told apart, and a brace must close.
-fn parse_pattern(pattern: &str) -> std::result::Result<Vec<Piece>, String> {
+/// told apart, and a brace must close. The error is at `place` (the profile's `pattern`).
+fn parse_pattern(pattern: &str, place: &Place) -> Result<Vec<Piece>> {
+    let err = |m: String| Error::input(place.clone(), m);
     let mut pieces = Vec::new();
     let mut rest = pattern;
     while !rest.is_empty() {
@@ -579,19 +627,21 @@ fn parse_pattern(pattern: &str) -> std::result::Result<Vec<Piece>, String> {
             Some(0) => {
                 let end = rest
                     .find('}')
-                    .ok_or_else(|| format!("pattern \"{pattern}\": a '{{' is not closed"))?;
+                    .ok_or_else(|| err(format!("pattern \"{pattern}\": a '{{' is not closed")))?;
                 let field = rest[1..end].trim().to_string();
                 if field.is_empty() {
-                    return Err(format!("pattern \"{pattern}\": an empty {{}}"));
+                    return Err(err(format!("pattern \"{pattern}\": an empty {{}}")));
                 }
                 if matches!(pieces.last(), Some(Piece::Field(_))) {
-                    return Err(format!(
+                    return Err(err(format!(
                         "pattern \"{pattern}\": two fields in a row cannot be told apart; put text \
                          between them"
-                    ));
+                    )));
                 }
                 if field != "*" && pieces.contains(&Piece::Field(field.clone())) {
-                    return Err(format!("pattern \"{pattern}\": {{{field}}} appears twice"));
+                    return Err(err(format!(
+                        "pattern \"{pattern}\": {{{field}}} appears twice"
+                    )));
                 }
                 pieces.push(Piece::Field(field));
                 rest = &rest[end + 1..];
@@ -607,7 +657,7 @@ fn parse_pattern(pattern: &str) -> std::result::Result<Vec<Piece>, String> {
         }
     }
     if pieces.is_empty() {
-        return Err("the pattern is empty".into());
+        return Err(err("the pattern is empty".into()));
     }
     Ok(pieces)
 }
@@ -648,7 +698,8 @@ mod tests {
 
     #[test]
     fn patterns_split_names_into_fields() {
-        let p = parse_pattern("{reflector}_X{X}_C{C}_Z{Z}").unwrap();
+        let place = Place::file("p.toml").at_field("pattern");
+        let p = parse_pattern("{reflector}_X{X}_C{C}_Z{Z}", &place).unwrap();
         let f = match_pattern(&p, "R1_X-12.5_C90_Z300").unwrap();
         assert_eq!(
             f,
@@ -661,8 +712,70 @@ mod tests {
         );
         assert!(match_pattern(&p, "R1_X0_C0").is_none());
         assert!(match_pattern(&p, "R1_X0_C0_Z1_extra").is_some()); // Z takes the rest
-        assert!(parse_pattern("{X}{C}").is_err());
-        assert!(parse_pattern("{X").is_err());
-        assert!(parse_pattern("{X}-{X}").is_err());
+        let e = |p: &str| parse_pattern(p, &place).unwrap_err().to_string();
+        assert!(e("{X}{C}").contains("two fields in a row"));
+        assert!(e("{X").starts_with("p.toml: field 'pattern': pattern \"{X\": a '{' is not"));
+        assert!(e("{X}-{X}").contains("{X} appears twice"));
+        assert!(e("").contains("empty"));
+    }
+
+    /// An export read through the CSV layer: lines skipped, another delimiter, a quoted name
+    /// holding it, a short row, CR LF and blank lines; errors at the export's own line numbers.
+    #[test]
+    fn exports_are_read_through_the_csv_layer_at_their_own_lines() {
+        let m = Machine::default_xcfz();
+        let profile = Profile::from_toml_str(
+            "delimiter = \";\"\nskip_lines = 2\npoint = \"Name\"\npattern = \"{reflector};{X};{C};{Z}\"\n\
+             time = \"T\"\n[coordinates]\nx = \"X\"\ny = \"Y\"\nz = \"Z\"\nlength_unit = \"m\"\n",
+            "p.toml",
+        )
+        .unwrap();
+        let export = "title\r\ndate\r\nName;X;Y;Z;T\r\n\"R1;0;0;0\";0.95;0.075;1.45;3\r\n\r\n\
+                      \"R2;700;90;300\";1;2;3\r\n";
+        let set = profile.read(&m, export, "e.csv").unwrap();
+        assert_eq!(set.points.len(), 2);
+        assert_eq!((set.points[0].line, set.points[1].line), (4, 6));
+        assert!((set.points[0].measured[0] - 950.0).abs() < 1e-9);
+        assert_eq!((set.points[0].t_s, set.points[1].t_s), (Some(0.0), None));
+        assert_eq!(set.points[1].reflector, 1);
+        let bad = export.replace("0.075", "abc");
+        let e = profile.read(&m, &bad, "e.csv").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "e.csv:4: field 'Y': expected a number (a length), found \"abc\""
+        );
+        let e = profile.read(&m, "a\nb\n", "e.csv").unwrap_err().to_string();
+        assert!(
+            e.starts_with("p.toml: field 'skip_lines': skip_lines = 2"),
+            "{e}"
+        );
+        let e = profile
+            .read(&m, "a\nb\n\n", "e.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("column 'Name' is not in the header of e.csv (line 3: )"),
+            "{e}"
+        );
+        let twice = export.replace("Name;X;Y;Z;T", "Name;X;Y;Z;X");
+        let e = profile.read(&m, &twice, "e.csv").unwrap_err().to_string();
+        assert!(
+            e.contains("column 'X' appears 2 times in the header of e.csv (line 3, columns 2, 5)"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_bad_delimiter_is_refused_at_its_line() {
+        let e = Profile::from_toml_str(
+            "delimiter = \"ab\"\npoint = \"N\"\npattern = \"{X}\"\n[coordinates]\nd = \"D\"\n",
+            "p.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("p.toml:1: field 'delimiter': delimiter \"ab\""),
+            "{e}"
+        );
     }
 }

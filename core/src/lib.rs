@@ -11,6 +11,8 @@
 //!   structured Jacobian;
 //! - [`kinematics`]: the scalar-generic forward model (eq. 11 of the paper for XCFZ);
 //! - [`measure`]: measurement files (CSV);
+//! - [`csvio`]: the CSV layer every CSV reader reads through (header names to columns, units in
+//!   the header, a file, line and column for every bad cell);
 //! - [`results`]: results files (JSON);
 //! - [`plan`]: test plans (the paper's meshes and plain grids);
 //! - [`plausibility`]: identified sizes checked against stated physical limits;
@@ -45,6 +47,7 @@
 pub mod basis;
 pub mod chain;
 pub mod compensate;
+pub mod csvio;
 pub mod diagnose;
 pub mod dialect;
 pub mod error;

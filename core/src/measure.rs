@@ -12,7 +12,7 @@
 //! file's `[[station]]` tables; without them every row is the tracker's). Column order is free and extra columns are ignored, except a single-letter axis column for
 //! an axis the machine does not have, which is an error. A header may carry its unit in brackets
 //! or parentheses (`C [deg]`, `meas_x (mm)`); a unit other than the one volver reads is refused
-//! ([`check_unit`]), not converted. Measured coordinates beyond 1 km ([`MAX_COORDINATE_MM`]) are
+//! ([`crate::csvio::check_unit`]), not converted. Measured coordinates beyond 1 km ([`MAX_COORDINATE_MM`]) are
 //! refused as not being in mm. Every error names the file, the line and the column.
 //!
 //! ```
@@ -25,59 +25,15 @@
 //! assert_eq!(set.points[0].measured, [950.0, 75.0, 1450.0]);
 //! ```
 
+use crate::csvio::{self, Format};
 use crate::error::{Error, Place, Result};
-use crate::iso::Axis;
 use crate::machine::{Commands, Machine};
+use crate::units::S_PER_H;
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// Splits a column header into its name and an optional unit annotation in brackets or
-/// parentheses: `C [deg]` and `C(deg)` are column `C` in `deg`.
-///
-/// ```
-/// use volver_core::measure::split_unit;
-/// assert_eq!(split_unit("meas_x [mm]"), ("meas_x", Some("mm")));
-/// assert_eq!(split_unit("C(deg)"), ("C", Some("deg")));
-/// assert_eq!(split_unit("X"), ("X", None));
-/// ```
-pub fn split_unit(header: &str) -> (&str, Option<&str>) {
-    let h = header.trim();
-    for (open, close) in [('[', ']'), ('(', ')')] {
-        if let Some(body) = h.strip_suffix(close)
-            && let Some(i) = body.rfind(open)
-        {
-            return (body[..i].trim_end(), Some(body[i + 1..].trim()));
-        }
-    }
-    (h, None)
-}
-
-/// Checks a column's unit annotation against the unit volver reads that column in (`mm`, `deg`
-/// or `s`); `Err` says what was found and expected. volver converts nothing: a column in other
-/// units must be converted before it is read, so that a file in metres or radians is never
-/// taken for one in mm or degrees.
-///
-/// ```
-/// use volver_core::measure::check_unit;
-/// assert!(check_unit("°", "deg").is_ok() && check_unit("MM", "mm").is_ok());
-/// assert!(check_unit("rad", "deg").unwrap_err().contains("expected deg"));
-/// ```
-pub fn check_unit(found: &str, expected: &str) -> std::result::Result<(), String> {
-    let f = found.to_ascii_lowercase();
-    let same = match expected {
-        "deg" => matches!(f.as_str(), "deg" | "°" | "degree" | "degrees"),
-        "s" => matches!(f.as_str(), "s" | "sec" | "seconds"),
-        _ => f == expected,
-    };
-    if same {
-        Ok(())
-    } else {
-        Err(format!(
-            "unit '{found}', expected {expected}: volver reads linear positions and coordinates \
-             in mm, rotary positions in degrees and times in seconds, and converts nothing"
-        ))
-    }
-}
+mod read;
+pub(crate) use read::{axis_columns, read_commands};
 
 /// What one measurement observed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -153,8 +109,6 @@ pub struct MeasurementSet {
 /// the objective.
 pub const MAX_COORDINATE_MM: f64 = 1e6;
 
-const POINT_COLUMNS: [&str; 3] = ["meas_x", "meas_y", "meas_z"];
-
 /// Refuses a row that repeats another exactly (commands, reflector, station, every measured
 /// coordinate to the last digit): a copy, not a second reading. Two tracker readings never agree
 /// to the file's resolution, and a copy would fake a small repeat noise. Sorting by the bits:
@@ -222,30 +176,6 @@ pub(crate) fn refuse_unknown_stations(
     ))
 }
 
-/// Refuses a row that fills more than one observation's columns (`meas_x…` and `az_deg…`, or a
-/// point and a `range_mm` alone): which one was measured cannot be told, and reading one would
-/// silently drop the other. `filled` is the first filled column of each (point, spherical,
-/// range alone).
-fn refuse_two_observations(
-    filled: [Option<usize>; 3],
-    headers: &[String],
-    at: impl Fn(usize) -> Place,
-) -> Result<()> {
-    let given: Vec<usize> = filled.into_iter().flatten().collect();
-    if let [first, second, ..] = given[..] {
-        return Err(Error::input(
-            at(second),
-            format!(
-                "this row fills both '{}' and '{}': one observation per row (meas_x, meas_y, \
-                 meas_z; or az_deg, el_deg, range_mm; or range_mm alone), so which was measured \
-                 cannot be told; leave the other cells empty",
-                headers[first], headers[second]
-            ),
-        ));
-    }
-    Ok(())
-}
-
 /// A point from spherical coordinates in a station's frame: azimuth from x towards y and
 /// elevation above the x–y plane (rad), range (mm).
 ///
@@ -266,19 +196,71 @@ pub fn to_spherical(p: [f64; 3]) -> [f64; 3] {
     [p[1].atan2(p[0]), p[2].atan2(h), h.hypot(p[2])]
 }
 
+/// A measurement a file reader read from its `line`: its commands and reflector, its
+/// observation, its time and station id; the station found in `machine` and checked to give the
+/// observation (the errors at `place`, the row's station).
+pub(crate) fn located(
+    machine: &Machine,
+    (commands, reflector): (Commands, usize),
+    (measured, observation): ([f64; 3], Observation),
+    (t_s, station): (Option<f64>, Option<String>),
+    line: usize,
+    place: impl Fn() -> Place,
+) -> Result<Measurement> {
+    let station_index = machine
+        .station_named(station.as_deref())
+        .map_err(|m| Error::input(place(), m.to_string()))?;
+    observable(machine, station_index, observation, place)?;
+    Ok(Measurement {
+        commands,
+        reflector,
+        measured,
+        observation,
+        t_s,
+        station,
+        station_index,
+        line,
+    })
+}
+
+/// The measurement set of `table`'s rows, each read by `read`; a file without rows is refused
+/// (`no_rows` says so), and so are copied rows and stations the machine cannot place.
+pub(crate) fn read_rows(
+    machine: &Machine,
+    table: &mut csvio::Table,
+    no_rows: &str,
+    read: impl Fn(&csvio::Row) -> Result<Measurement>,
+) -> Result<MeasurementSet> {
+    let mut points = Vec::new();
+    for row in table.rows() {
+        points.push(read(&row?)?);
+    }
+    let file = table.header().file().to_string();
+    if points.is_empty() {
+        return Err(Error::input(Place::file(&file), no_rows));
+    }
+    refuse_copies(&points, &file)?;
+    refuse_unknown_stations(machine, &points, &file)?;
+    Ok(MeasurementSet::from_file_times(points))
+}
+
 /// Whether station `station` of `machine` can give `observation`: a range-only station gives
-/// no point; `Err` says why.
+/// no point; the error is at `place` (the row's station).
 pub(crate) fn observable(
     machine: &Machine,
     station: usize,
     observation: Observation,
-) -> std::result::Result<(), String> {
+    place: impl FnOnce() -> Place,
+) -> Result<()> {
     let st = &machine.stations()[station];
     if observation == Observation::Point && st.observes == crate::machine::Observes::Range {
-        return Err(format!(
-            "station '{}' observes ranges only (observes = \"range\" in the machine file), but \
-             this row gives a point",
-            st.id
+        return Err(Error::input(
+            place(),
+            format!(
+                "station '{}' observes ranges only (observes = \"range\" in the machine file), \
+                 but this row gives a point",
+                st.id
+            ),
         ));
     }
     Ok(())
@@ -306,300 +288,19 @@ impl MeasurementSet {
 
     /// Parses measurement CSV for `machine`; `file` names the source in messages.
     pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<MeasurementSet> {
-        let mut rdr = csv::ReaderBuilder::new()
-            .has_headers(true)
-            .trim(csv::Trim::All)
-            .flexible(false)
-            .from_reader(text.as_bytes());
-        let csv_err = |e: csv::Error| {
-            let line = e.position().map(|p| p.line() as usize);
-            let mut place = Place::file(file);
-            if let Some(l) = line {
-                place = place.at_line(l);
-            }
-            Error::input(place, format!("not valid CSV: {e}"))
-        };
-        let raw_headers: Vec<String> = rdr
-            .headers()
-            .map_err(csv_err)?
-            .iter()
-            .map(str::to_string)
-            .collect();
-        // Names without their unit annotations (`X [mm]`, `C (deg)`); the units are checked
-        // once the columns are known.
-        let (headers, units): (Vec<String>, Vec<Option<String>>) = raw_headers
-            .iter()
-            .map(|h| {
-                let (name, unit) = split_unit(h);
-                (name.to_string(), unit.map(str::to_string))
-            })
-            .unzip();
-        let header_place = |field: &str| Place::file(file).at_line(1).at_field(field);
-        if headers.iter().all(|h| h.is_empty()) {
+        let Some(mut table) = csvio::read(text, file, Format::default())? else {
             return Err(Error::input(
                 Place::file(file),
-                "empty file: expected a header line with the axis columns, reflector, meas_x, meas_y, meas_z",
+                "empty file: expected a header line with the axis columns, reflector, meas_x, \
+                 meas_y, meas_z",
             ));
-        }
-        let find = |name: &str| -> Result<Option<usize>> {
-            let mut it = headers
-                .iter()
-                .enumerate()
-                .filter(|(_, h)| h.as_str() == name);
-            let first = it.next().map(|(i, _)| i);
-            if it.next().is_some() {
-                return Err(Error::input(
-                    header_place(name),
-                    format!("column '{name}' appears twice in the header"),
-                ));
-            }
-            Ok(first)
         };
-        for h in &headers {
-            let mut chars = h.chars();
-            if let (Some(c), None) = (chars.next(), chars.next())
-                && let Some(a) = Axis::from_letter(c)
-                && c.is_ascii_uppercase()
-                && machine.axis(a).is_none()
-            {
-                return Err(Error::input(
-                    header_place(h),
-                    format!(
-                        "column '{h}' is an axis the machine ({}) does not have",
-                        machine.chain()
-                    ),
-                ));
-            }
-        }
-        let mut axis_cols = Vec::new();
-        for ax in machine.axes() {
-            let name = ax.axis.letter().to_string();
-            let Some(i) = find(&name)? else {
-                return Err(Error::input(
-                    header_place(&name),
-                    format!(
-                        "missing column '{name}' (axis {name} of {}, in {})",
-                        machine.chain(),
-                        ax.file_unit()
-                    ),
-                ));
-            };
-            axis_cols.push(i);
-        }
-        let refl_col = find("reflector")?.ok_or_else(|| {
-            Error::input(
-                header_place("reflector"),
-                "missing column 'reflector'; required: axis letters, reflector, and meas_x, \
-                 meas_y, meas_z or range_mm (with az_deg, el_deg for spherical points)",
-            )
-        })?;
-        let mut xyz = [None; 3];
-        for (k, name) in POINT_COLUMNS.iter().enumerate() {
-            xyz[k] = find(name)?;
-        }
-        let (az_col, el_col, range_col) = (find("az_deg")?, find("el_deg")?, find("range_mm")?);
-        let xyz: Option<[usize; 3]> = match xyz {
-            [Some(a), Some(b), Some(c)] => Some([a, b, c]),
-            [None, None, None] => None,
-            _ => {
-                let missing = POINT_COLUMNS
-                    .iter()
-                    .zip(xyz)
-                    .find(|(_, c)| c.is_none())
-                    .map_or("meas_x", |(n, _)| *n);
-                return Err(Error::input(
-                    header_place(missing),
-                    format!("missing column '{missing}': a point needs meas_x, meas_y and meas_z"),
-                ));
-            }
+        let reader = read::RowReader {
+            machine,
+            columns: read::Columns::of(machine, table.header())?,
         };
-        let spherical = match (az_col, el_col) {
-            (Some(a), Some(e)) => Some((a, e)),
-            (None, None) => None,
-            (a, _) => {
-                let missing = if a.is_none() { "az_deg" } else { "el_deg" };
-                return Err(Error::input(
-                    header_place(missing),
-                    format!(
-                        "missing column '{missing}': a spherical point needs az_deg and el_deg"
-                    ),
-                ));
-            }
-        };
-        if spherical.is_some() && range_col.is_none() {
-            return Err(Error::input(
-                header_place("range_mm"),
-                "missing column 'range_mm': a spherical point needs az_deg, el_deg and range_mm",
-            ));
-        }
-        if xyz.is_none() && range_col.is_none() {
-            return Err(Error::input(
-                header_place("meas_x"),
-                "missing column 'meas_x'; required: axis letters, reflector, and meas_x, meas_y, \
-                 meas_z or range_mm (with az_deg, el_deg for spherical points)",
-            ));
-        }
-        let t_col = find("t_s")?;
-        let st_col = find("station")?;
-        let mut expected: Vec<(usize, &str)> = axis_cols
-            .iter()
-            .zip(machine.axes())
-            .map(|(&c, ax)| (c, ax.file_unit()))
-            .collect();
-        expected.extend(xyz.iter().flatten().map(|&c| (c, "mm")));
-        expected.extend(range_col.map(|c| (c, "mm")));
-        expected.extend(
-            spherical
-                .iter()
-                .flat_map(|&(a, e)| [(a, "deg"), (e, "deg")]),
-        );
-        expected.extend(t_col.map(|c| (c, "s")));
-        for (c, unit) in expected {
-            if let Some(u) = &units[c] {
-                check_unit(u, unit).map_err(|m| Error::input(header_place(&raw_headers[c]), m))?;
-            }
-        }
-
-        let mut points = Vec::new();
-        for rec in rdr.records() {
-            let rec = rec.map_err(csv_err)?;
-            let line = rec.position().map_or(0, |p| p.line() as usize);
-            if rec.iter().all(str::is_empty) {
-                continue;
-            }
-            let at = |col: usize| {
-                Place::file(file)
-                    .at_line(line)
-                    .at_field(headers[col].clone())
-            };
-            let number = |col: usize, what: &str| -> Result<f64> {
-                let s = &rec[col];
-                let v: f64 = s.parse().map_err(|_| {
-                    Error::input(
-                        at(col),
-                        format!("expected a number ({what}), found \"{s}\""),
-                    )
-                })?;
-                if !v.is_finite() {
-                    return Err(Error::input(
-                        at(col),
-                        format!("expected a finite number ({what}), found \"{s}\""),
-                    ));
-                }
-                Ok(v)
-            };
-            let mut commands = Commands::default();
-            for (k, (&col, ax)) in axis_cols.iter().zip(machine.axes()).enumerate() {
-                let v = number(col, ax.file_unit())?;
-                commands.0[k] = ax
-                    .position_from_file(v)
-                    .map_err(|m| Error::input(at(col), m))?;
-            }
-            let id = &rec[refl_col];
-            let reflector = machine
-                .reflector_named(id)
-                .map_err(|m| Error::input(at(refl_col), m))?;
-            let coordinate = |col: usize| -> Result<f64> {
-                let v = number(col, "mm")?;
-                if v.abs() > MAX_COORDINATE_MM {
-                    return Err(Error::input(
-                        at(col),
-                        format!(
-                            "{} mm is beyond any laser tracker's reach ({MAX_COORDINATE_MM} mm): \
-                             coordinates are read in mm",
-                            crate::error::number(v)
-                        ),
-                    ));
-                }
-                Ok(v)
-            };
-            let filled = |c: Option<usize>| c.is_some_and(|c| !rec[c].is_empty());
-            let range = |col: usize| -> Result<f64> {
-                let v = coordinate(col)?;
-                if v < 0.0 {
-                    return Err(Error::input(
-                        at(col),
-                        format!("a range is a distance from the station, ≥ 0 mm; found {v}"),
-                    ));
-                }
-                Ok(v)
-            };
-            let t_s = match t_col {
-                Some(c) if !rec[c].is_empty() => Some(number(c, "seconds")?),
-                _ => None,
-            };
-            let station = st_col.map(|c| rec[c].to_string()).filter(|s| !s.is_empty());
-            let station_at =
-                || st_col.map_or_else(|| Place::file(file).at_line(line).at_field("station"), at);
-            let station_index = machine
-                .station_named(station.as_deref())
-                .map_err(|m| Error::input(station_at(), m))?;
-            refuse_two_observations(
-                [
-                    xyz.map(|c| c[0]).filter(|&c| filled(Some(c))),
-                    spherical.map(|s| s.0).filter(|&c| filled(Some(c))),
-                    range_col.filter(|&c| filled(Some(c)) && !filled(spherical.map(|s| s.0))),
-                ],
-                &headers,
-                at,
-            )?;
-            let (measured, observation) = if let Some(c) = xyz.filter(|c| filled(Some(c[0]))) {
-                (
-                    [coordinate(c[0])?, coordinate(c[1])?, coordinate(c[2])?],
-                    Observation::Point,
-                )
-            } else if let Some((a, e)) = spherical.filter(|&(a, _)| filled(Some(a))) {
-                let d = range(range_col.expect("checked with the header"))?;
-                let (az, el) = (number(a, "degrees")?, number(e, "degrees")?);
-                if el.abs() > 90.0 {
-                    return Err(Error::input(
-                        at(e),
-                        format!("an elevation lies in [-90, 90] degrees; found {el}"),
-                    ));
-                }
-                (
-                    from_spherical(az.to_radians(), el.to_radians(), d),
-                    Observation::Point,
-                )
-            } else if let Some(c) = range_col.filter(|&c| filled(Some(c))) {
-                if station.is_none() {
-                    return Err(Error::input(
-                        station_at(),
-                        "a range alone needs the station that measured it: give its id in the \
-                         station column",
-                    ));
-                }
-                ([range(c)?, 0.0, 0.0], Observation::Range)
-            } else {
-                let c = xyz.map_or_else(|| range_col.expect("one is present"), |c| c[0]);
-                return Err(Error::input(
-                    at(c),
-                    "no observation: give meas_x, meas_y, meas_z, or az_deg, el_deg, range_mm, or \
-                     range_mm alone",
-                ));
-            };
-            observable(machine, station_index, observation)
-                .map_err(|m| Error::input(station_at(), m))?;
-            points.push(Measurement {
-                commands,
-                reflector,
-                measured,
-                observation,
-                t_s,
-                station,
-                station_index,
-                line,
-            });
-        }
-        if points.is_empty() {
-            return Err(Error::input(
-                Place::file(file),
-                "the file has a header but no measurement rows",
-            ));
-        }
-        refuse_copies(&points, file)?;
-        refuse_unknown_stations(machine, &points, file)?;
-        Ok(MeasurementSet::from_file_times(points))
+        let no_rows = "the file has a header but no measurement rows";
+        read_rows(machine, &mut table, no_rows, |row| reader.measurement(row))
     }
 
     /// A set of points whose `t_s` are the file's stamps: counted from the earliest from now on,
@@ -649,7 +350,7 @@ impl MeasurementSet {
         let step = span / (n - 1) as f64;
         let guess = if step < 0.05 {
             "hours or minutes"
-        } else if step > 3.0 * 3600.0 {
+        } else if step > 3.0 * S_PER_H {
             "milliseconds or microseconds"
         } else {
             return None;
@@ -673,85 +374,107 @@ impl MeasurementSet {
     /// [`MeasurementSet::to_csv_string`] with the points written in `columns` (spherical: the
     /// angles in degrees with 12 decimals, the range with 9).
     pub fn to_csv_with(&self, machine: &Machine, columns: PointColumns) -> String {
-        let with_t = self.points.iter().any(|p| p.t_s.is_some());
-        let with_station = self.points.iter().any(|p| p.station.is_some());
-        let with_range = self
-            .points
-            .iter()
-            .any(|p| p.observation == Observation::Range);
-        let with_point = !with_range
-            || self
-                .points
-                .iter()
-                .any(|p| p.observation == Observation::Point);
-        let spherical = columns == PointColumns::Spherical;
+        let layout = Layout::of(self, columns);
+        let mut out = layout.header(machine);
+        for p in &self.points {
+            layout.row(&mut out, machine, p, self.time_origin_s);
+        }
+        out
+    }
+}
+
+/// The columns a measurement file is written with.
+struct Layout {
+    /// Points as `az_deg`, `el_deg`, `range_mm`.
+    spherical: bool,
+    /// Cartesian point columns (some point is a point, or no point is a range).
+    with_point: bool,
+    /// A `range_mm` column for ranges alone.
+    with_range: bool,
+    with_t: bool,
+    with_station: bool,
+}
+
+impl Layout {
+    /// The columns `set` needs, its points written in `columns`.
+    fn of(set: &MeasurementSet, columns: PointColumns) -> Layout {
+        let any = |f: fn(&Measurement) -> bool| set.points.iter().any(f);
+        let with_range = any(|p| p.observation == Observation::Range);
+        Layout {
+            spherical: columns == PointColumns::Spherical,
+            with_point: !with_range || any(|p| p.observation == Observation::Point),
+            with_range,
+            with_t: any(|p| p.t_s.is_some()),
+            with_station: any(|p| p.station.is_some()),
+        }
+    }
+
+    /// The header line: the axes in chain order, the reflector, the observation, time and
+    /// station columns.
+    fn header(&self, machine: &Machine) -> String {
         let mut out = String::new();
         for ax in machine.axes() {
             let _ = write!(out, "{},", ax.axis);
         }
         out.push_str("reflector");
-        if spherical {
+        if self.spherical {
             out.push_str(",az_deg,el_deg,range_mm");
         } else {
-            if with_point {
+            if self.with_point {
                 out.push_str(",meas_x,meas_y,meas_z");
             }
-            if with_range {
+            if self.with_range {
                 out.push_str(",range_mm");
             }
         }
-        if with_t {
+        if self.with_t {
             out.push_str(",t_s");
         }
-        if with_station {
+        if self.with_station {
             out.push_str(",station");
         }
         out.push('\n');
-        for p in &self.points {
-            for (k, ax) in machine.axes().iter().enumerate() {
-                let _ = write!(out, "{},", round_file(ax.to_file_units(p.commands.0[k])));
-            }
-            out.push_str(&machine.reflectors()[p.reflector].id);
-            let m = p.measured;
-            match (p.observation, spherical) {
-                (Observation::Range, true) => {
-                    let _ = write!(out, ",,,{:.9}", m[0]);
-                }
-                (Observation::Range, false) => {
-                    let empty = if with_point { ",,," } else { "" };
-                    let _ = write!(out, "{empty},{:.9}", m[0]);
-                }
-                (Observation::Point, true) => {
-                    let [az, el, d] = to_spherical(m);
-                    let _ = write!(
-                        out,
-                        ",{:.12},{:.12},{:.9}",
-                        az.to_degrees(),
-                        el.to_degrees(),
-                        d
-                    );
-                }
-                (Observation::Point, false) => {
-                    let _ = write!(out, ",{:.9},{:.9},{:.9}", m[0], m[1], m[2]);
-                    if with_range {
-                        out.push(',');
-                    }
-                }
-            }
-            if with_t {
-                let _ = write!(
-                    out,
-                    ",{}",
-                    p.t_s
-                        .map_or(String::new(), |t| format!("{:.3}", t + self.time_origin_s))
-                );
-            }
-            if with_station {
-                let _ = write!(out, ",{}", p.station.as_deref().unwrap_or(""));
-            }
-            out.push('\n');
-        }
         out
+    }
+
+    /// Writes point `p`'s row: positions in file units, ids quoted when they need it
+    /// ([`csvio::cell`]), the file's time stamp (`time_origin_s` added back).
+    fn row(&self, out: &mut String, machine: &Machine, p: &Measurement, time_origin_s: f64) {
+        for (k, ax) in machine.axes().iter().enumerate() {
+            let _ = write!(out, "{},", round_file(ax.to_file_units(p.commands.0[k])));
+        }
+        out.push_str(&csvio::cell(&machine.reflectors()[p.reflector].id));
+        let m = p.measured;
+        match (p.observation, self.spherical) {
+            (Observation::Range, true) => {
+                let _ = write!(out, ",,,{:.9}", m[0]);
+            }
+            (Observation::Range, false) => {
+                let empty = if self.with_point { ",,," } else { "" };
+                let _ = write!(out, "{empty},{:.9}", m[0]);
+            }
+            (Observation::Point, true) => {
+                let [az, el, d] = to_spherical(m);
+                let (az, el) = (az.to_degrees(), el.to_degrees());
+                let _ = write!(out, ",{az:.12},{el:.12},{d:.9}");
+            }
+            (Observation::Point, false) => {
+                let _ = write!(out, ",{:.9},{:.9},{:.9}", m[0], m[1], m[2]);
+                if self.with_range {
+                    out.push(',');
+                }
+            }
+        }
+        if self.with_t {
+            let t = p
+                .t_s
+                .map_or(String::new(), |t| format!("{:.3}", t + time_origin_s));
+            let _ = write!(out, ",{t}");
+        }
+        if self.with_station {
+            let _ = write!(out, ",{}", csvio::cell(p.station.as_deref().unwrap_or("")));
+        }
+        out.push('\n');
     }
 }
 
@@ -842,5 +565,23 @@ mod tests {
             e.starts_with("d.csv:2") && e.contains("not valid CSV"),
             "{e}"
         );
+    }
+
+    /// Quoted cells, CR LF, blank and whitespace-only lines: read through the CSV layer, each
+    /// point at its own line; a station id that needs quotes is written quoted and read back.
+    #[test]
+    fn quoted_cells_and_blank_lines_are_read_and_ids_written_back() {
+        let csv = "X,C,Z,reflector,meas_x,meas_y,meas_z,station\r\n\r\n\
+                   0,0,0,\"R1\",950,75,1450,\"S 1, left\"\r\n   \r\n,,,,,,,\r\n\
+                   700,90,300,R2,1,2,3,\"S 1, left\"\r\n";
+        let s = MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap();
+        assert_eq!((s.points[0].line, s.points[1].line), (3, 6));
+        assert_eq!(s.points[0].station.as_deref(), Some("S 1, left"));
+        let written = s.to_csv_string(&m());
+        assert!(written.contains(",\"S 1, left\"\n"), "{written}");
+        let again = MeasurementSet::from_csv_str(&m(), &written, "w.csv").unwrap();
+        assert_eq!(again.points[1].station, s.points[1].station);
+        let e = err("X,C,Z,reflector,meas_x,meas_y,meas_z\n\n0,0,0,R1,1,2\n");
+        assert_eq!(e, "d.csv:3: not valid CSV: 6 fields where the header has 7");
     }
 }

@@ -41,12 +41,14 @@
 //! assert!(t.max_difference(&back).unwrap() < 1e-9);
 //! ```
 
-use crate::error::{Error, Place, Result};
+use crate::error::{Error, Result};
 use crate::iso::{Axis, ErrorId};
 use crate::machine::Commands;
 use crate::model::Model;
+use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
 mod carry;
+mod read;
 pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
 
 /// The most rows of one axis' table (compensation tables have tens to thousands).
@@ -64,7 +66,7 @@ pub struct AxisTable {
 }
 
 /// Every exported error of a machine.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ErrorTables {
     /// The constants (location and squareness errors): name and value (mm or rad).
     pub constants: Vec<(String, f64)>,
@@ -97,6 +99,63 @@ fn check_step(step: f64, lo: f64, hi: f64, a: &crate::machine::MachineAxis) -> R
     Ok(())
 }
 
+/// Refuses parameters that are not `model`'s and table steps that are not positive and finite.
+fn check_arguments(
+    model: &Model,
+    params: &[f64],
+    linear_step: f64,
+    rotary_step: f64,
+) -> Result<()> {
+    if params.len() != model.n_params() {
+        return Err(Error::ParameterCount {
+            expected: model.n_params(),
+            got: params.len(),
+            message: format!(
+                "tables need {} parameters, got {}",
+                model.n_params(),
+                params.len()
+            ),
+        });
+    }
+    let usable = |s: f64| s > 0.0 && s.is_finite();
+    if !(usable(linear_step) && usable(rotary_step)) {
+        return Err(Error::InvalidOption {
+            name: "step",
+            message: "table steps must be positive and finite".into(),
+        });
+    }
+    Ok(())
+}
+
+/// The table's positions over axis `a`'s travel (file units), every `step` from its start and
+/// its end last; at most [`MAX_TABLE_ROWS`], and a step no larger than the travel.
+fn table_positions(a: &crate::machine::MachineAxis, step: f64) -> Result<Vec<f64>> {
+    let (lo, hi) = (a.to_file_units(a.min), a.to_file_units(a.max));
+    let rows = ((hi - lo) / step).ceil() + 1.0;
+    // `rows` is finite here (a positive finite step over a finite travel).
+    if rows > MAX_TABLE_ROWS as f64 {
+        return Err(Error::InvalidOption {
+            name: "step",
+            message: format!(
+                "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table has at \
+                 most {MAX_TABLE_ROWS}: use a larger step",
+                crate::error::number(step),
+                a.file_unit(),
+                a.axis
+            ),
+        });
+    }
+    check_step(step, lo, hi, a)?;
+    let mut positions = Vec::new();
+    let mut x = lo;
+    while x < hi - 1e-9 * step {
+        positions.push(x);
+        x = lo + step * positions.len() as f64;
+    }
+    positions.push(hi);
+    Ok(positions)
+}
+
 impl ErrorTables {
     /// Tables of `model` with errors `params`, every `linear_step` mm over a linear axis' travel
     /// and every `rotary_step` degrees over a rotary axis' (the last position is the end of the
@@ -107,24 +166,7 @@ impl ErrorTables {
         linear_step: f64,
         rotary_step: f64,
     ) -> Result<ErrorTables> {
-        if params.len() != model.n_params() {
-            return Err(Error::ParameterCount {
-                expected: model.n_params(),
-                got: params.len(),
-                message: format!(
-                    "tables need {} parameters, got {}",
-                    model.n_params(),
-                    params.len()
-                ),
-            });
-        }
-        let usable = |s: f64| s > 0.0 && s.is_finite();
-        if !(usable(linear_step) && usable(rotary_step)) {
-            return Err(Error::InvalidOption {
-                name: "step",
-                message: "table steps must be positive and finite".into(),
-            });
-        }
+        check_arguments(model, params, linear_step, rotary_step)?;
         let m = model.machine();
         let mut reference = Commands::default();
         for (k, a) in m.axes().iter().enumerate() {
@@ -151,29 +193,7 @@ impl ErrorTables {
             } else {
                 linear_step
             };
-            let (lo, hi) = (a.to_file_units(a.min), a.to_file_units(a.max));
-            let rows = ((hi - lo) / step).ceil() + 1.0;
-            // `rows` is finite here (a positive finite step over a finite travel).
-            if rows > MAX_TABLE_ROWS as f64 {
-                return Err(Error::InvalidOption {
-                    name: "step",
-                    message: format!(
-                        "a step of {} {} over axis {}'s travel gives {rows:.3e} rows; a table \
-                         has at most {MAX_TABLE_ROWS}: use a larger step",
-                        crate::error::number(step),
-                        a.file_unit(),
-                        a.axis
-                    ),
-                });
-            }
-            check_step(step, lo, hi, a)?;
-            let mut positions = Vec::new();
-            let mut x = lo;
-            while x < hi - 1e-9 * step {
-                positions.push(x);
-                x = lo + step * positions.len() as f64;
-            }
-            positions.push(hi);
+            let positions = table_positions(a, step)?;
             let ids = ErrorId::components_of(a.axis);
             let mut errors: Vec<(String, Vec<f64>)> = (0..6)
                 .filter(|&c| comps[c])
@@ -272,79 +292,6 @@ impl ErrorTables {
         s
     }
 
-    /// Reads [`ErrorTables::to_isg_csv`]'s format back; `file` names it in messages.
-    pub fn from_isg_csv(text: &str, file: &str) -> Result<ErrorTables> {
-        let mut out = ErrorTables {
-            constants: Vec::new(),
-            axes: Vec::new(),
-        };
-        let mut header: Option<(usize, Vec<String>)> = None;
-        for (i, raw) in text.lines().enumerate() {
-            let place = Place::file(file).at_line(i + 1);
-            let line = raw.split("//").next().unwrap_or("").trim();
-            if line.is_empty() {
-                continue;
-            }
-            if line == "#" {
-                header = None;
-                continue;
-            }
-            let cells: Vec<&str> = line.split_whitespace().collect();
-            let Some((_, names)) = &header else {
-                let names: Vec<String> = cells.iter().map(|c| c.to_string()).collect();
-                for n in &names[1.min(names.len())..] {
-                    n.parse::<ErrorId>().map_err(|e| {
-                        Error::input(
-                            place.clone().at_field(n.clone()),
-                            format!("not an ISO 230-1 error name: {e}"),
-                        )
-                    })?;
-                }
-                if let Some(axis) = single_axis(&names[0]) {
-                    out.axes.push(AxisTable {
-                        axis,
-                        positions: Vec::new(),
-                        errors: names[1..].iter().map(|n| (n.clone(), Vec::new())).collect(),
-                    });
-                } else {
-                    names[0].parse::<ErrorId>().map_err(|e| {
-                        Error::input(
-                            place.clone().at_field(names[0].clone()),
-                            format!("expected an axis letter or an ISO 230-1 error name: {e}"),
-                        )
-                    })?;
-                }
-                header = Some((i + 1, names));
-                continue;
-            };
-            if cells.len() != names.len() {
-                return Err(Error::input(
-                    place,
-                    format!(
-                        "{} values for the header's {} names",
-                        cells.len(),
-                        names.len()
-                    ),
-                ));
-            }
-            let vals = cells
-                .iter()
-                .zip(names)
-                .map(|(c, n)| parse_number(c, &place, n))
-                .collect::<Result<Vec<f64>>>()?;
-            if single_axis(&names[0]).is_some() {
-                let t = out.axes.last_mut().expect("table opened at its header");
-                t.positions.push(vals[0]);
-                for (e, v) in t.errors.iter_mut().zip(&vals[1..]) {
-                    e.1.push(*v);
-                }
-            } else {
-                out.constants.extend(names.iter().cloned().zip(vals));
-            }
-        }
-        Ok(out)
-    }
-
     /// The Etalon-exchange-style text (see the module documentation).
     pub fn to_etalon(&self) -> String {
         let mut s = String::from(
@@ -368,105 +315,16 @@ impl ErrorTables {
         s
     }
 
-    /// Reads [`ErrorTables::to_etalon`]'s format back; `file` names it in messages.
-    pub fn from_etalon(text: &str, file: &str) -> Result<ErrorTables> {
-        let mut out = ErrorTables {
-            constants: Vec::new(),
-            axes: Vec::new(),
-        };
-        let mut section: Option<ErrorId> = None;
-        let mut grid: Option<(Vec<f64>, Vec<f64>)> = None;
-        for (i, raw) in text.lines().enumerate() {
-            let place = Place::file(file).at_line(i + 1);
-            let line = raw.split("//").next().unwrap_or("").trim();
-            if line.is_empty() {
-                continue;
-            }
-            if let Some((pos, vals)) = grid.as_mut() {
-                if line.starts_with('}') {
-                    let id = section.expect("a grid is inside a section");
-                    let (pos, vals) = grid.take().expect("open grid");
-                    let axis = id.axis();
-                    if out.axes.last().is_none_or(|t| t.axis != axis) {
-                        out.axes.push(AxisTable {
-                            axis,
-                            positions: pos.clone(),
-                            errors: Vec::new(),
-                        });
-                    }
-                    let t = out.axes.last_mut().expect("just pushed");
-                    if t.positions.len() != pos.len()
-                        || t.positions
-                            .iter()
-                            .zip(&pos)
-                            .any(|(a, b)| (a - b).abs() > 1e-9)
-                    {
-                        return Err(Error::input(
-                            place,
-                            format!("{id}'s positions differ from the other errors of axis {axis}"),
-                        ));
-                    }
-                    t.errors.push((id.to_string(), vals));
-                    continue;
-                }
-                let cells: Vec<&str> = line.split_whitespace().collect();
-                if cells.len() != 2 {
-                    return Err(Error::input(
-                        place,
-                        "expected 'position value' in Gridpoints",
-                    ));
-                }
-                pos.push(parse_number(cells[0], &place, "position")?);
-                vals.push(parse_number(cells[1], &place, "value")?);
-                continue;
-            }
-            if let Some(name) = line.strip_prefix('[').and_then(|l| l.strip_suffix(']')) {
-                section = Some(name.parse::<ErrorId>().map_err(|e| {
-                    Error::input(
-                        place.clone().at_field(name),
-                        format!("not an ISO 230-1 error name: {e}"),
-                    )
-                })?);
-                continue;
-            }
-            let Some(id) = section else {
-                return Err(Error::input(place, "a value before any [NAME] section"));
-            };
-            let (key, value) = line
-                .split_once('=')
-                .map(|(k, v)| (k.trim(), v.trim()))
-                .ok_or_else(|| {
-                    Error::input(place.clone(), "expected 'VALUE = …' or 'Gridpoints = {'")
-                })?;
-            match key {
-                "VALUE" => out
-                    .constants
-                    .push((id.to_string(), parse_number(value, &place, "VALUE")?)),
-                "Gridpoints" if value == "{" => grid = Some((Vec::new(), Vec::new())),
-                _ => {
-                    return Err(Error::input(
-                        place.at_field(key),
-                        "expected 'VALUE = …' or 'Gridpoints = {'",
-                    ));
-                }
-            }
-        }
-        if grid.is_some() {
-            return Err(Error::input(
-                Place::file(file),
-                "the file ends inside a Gridpoints block (no closing '}')",
-            ));
-        }
-        Ok(out)
-    }
-
     /// The plain CSV text (see the module documentation): µm and µrad.
     pub fn to_plain_csv(&self) -> String {
         let mut s = String::from("error,axis,position,position_unit,value,value_unit\n");
         for (n, v) in &self.constants {
-            let id: ErrorId = n.parse().expect("ISO name");
+            // The axis of the error (empty for a name that is not one, which no reader gives).
+            let axis = n
+                .parse::<ErrorId>()
+                .map_or(String::new(), |id| id.axis().to_string());
             let (scale, unit, dec) = plain_unit(n);
-            s.push_str(&format!("{n},{},,,{:.dec$},{unit}\n", id.axis(), v * scale));
+            s.push_str(&format!("{n},{axis},,,{:.dec$},{unit}\n", v * scale));
         }
         for t in &self.axes {
             let pu = if t.axis.is_rotary() { "deg" } else { "mm" };
@@ -483,100 +341,6 @@ impl ErrorTables {
         }
         s
     }
-
-    /// Reads [`ErrorTables::to_plain_csv`]'s format back; `file` names it in messages.
-    pub fn from_plain_csv(text: &str, file: &str) -> Result<ErrorTables> {
-        let mut out = ErrorTables {
-            constants: Vec::new(),
-            axes: Vec::new(),
-        };
-        let mut lines = text.lines().enumerate();
-        match lines.next() {
-            Some((_, h)) if h.trim() == "error,axis,position,position_unit,value,value_unit" => {}
-            _ => {
-                return Err(Error::input(
-                    Place::file(file).at_line(1),
-                    "expected the header error,axis,position,position_unit,value,value_unit",
-                ));
-            }
-        }
-        for (i, raw) in lines {
-            let place = Place::file(file).at_line(i + 1);
-            if raw.trim().is_empty() {
-                continue;
-            }
-            let c: Vec<&str> = raw.split(',').map(str::trim).collect();
-            if c.len() != 6 {
-                return Err(Error::input(
-                    place,
-                    format!("{} fields, expected 6", c.len()),
-                ));
-            }
-            let id: ErrorId = c[0].parse().map_err(|e| {
-                Error::input(
-                    place.clone().at_field("error"),
-                    format!("not an ISO 230-1 error name: {e}"),
-                )
-            })?;
-            let scale = match c[5] {
-                // µm → mm, µrad → rad.
-                "um" => 1e-3,
-                "urad" => 1e-6,
-                other => {
-                    return Err(Error::input(
-                        place.at_field("value_unit"),
-                        format!("expected um or urad, found \"{other}\""),
-                    ));
-                }
-            };
-            if (c[5] == "urad") != id.component().is_rotary() {
-                return Err(Error::input(
-                    place.at_field("value_unit"),
-                    format!(
-                        "{id} is {}",
-                        if id.component().is_rotary() {
-                            "an angle (urad)"
-                        } else {
-                            "a length (um)"
-                        }
-                    ),
-                ));
-            }
-            let v = parse_number(c[4], &place, "value")? * scale;
-            if c[2].is_empty() {
-                out.constants.push((id.to_string(), v));
-                continue;
-            }
-            let p = parse_number(c[2], &place, "position")?;
-            let axis = id.axis();
-            if out.axes.last().is_none_or(|t| t.axis != axis) {
-                out.axes.push(AxisTable {
-                    axis,
-                    positions: Vec::new(),
-                    errors: Vec::new(),
-                });
-            }
-            let t = out.axes.last_mut().expect("just pushed");
-            if t.errors.last().is_none_or(|e| e.0 != c[0]) {
-                t.errors.push((id.to_string(), Vec::new()));
-            }
-            let n = t.errors.len();
-            if n == 1 {
-                t.positions.push(p);
-            } else if t
-                .positions
-                .get(t.errors[n - 1].1.len())
-                .is_none_or(|q| (q - p).abs() > 1e-9)
-            {
-                return Err(Error::input(
-                    place.at_field("position"),
-                    format!("{id}'s positions differ from the other errors of axis {axis}"),
-                ));
-            }
-            t.errors[n - 1].1.push(v);
-        }
-        Ok(out)
-    }
 }
 
 /// The plain CSV's factor from volver's units (mm, rad), its unit and its decimals for error
@@ -584,30 +348,12 @@ impl ErrorTables {
 /// 1e-12 of mm or rad as the other formats.
 fn plain_unit(name: &str) -> (f64, &'static str, usize) {
     if is_angle(name) {
-        (1e6, "urad", 6)
+        (URAD_PER_RAD, "urad", 6)
     } else {
-        (1e3, "um", 9)
-    }
-}
-
-fn single_axis(s: &str) -> Option<Axis> {
-    let mut it = s.chars();
-    match (it.next(), it.next()) {
-        (Some(c), None) => Axis::from_letter(c),
-        _ => None,
+        (UM_PER_MM, "um", 9)
     }
 }
 
 fn fmt_value(v: f64) -> String {
     format!("{v:.12}")
-}
-
-fn parse_number(s: &str, place: &Place, field: &str) -> Result<f64> {
-    match s.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok(v),
-        _ => Err(Error::input(
-            place.clone().at_field(field),
-            format!("expected a finite number, found \"{s}\""),
-        )),
-    }
 }

@@ -292,8 +292,9 @@ impl Program {
 /// The most decimals the writer writes.
 pub const MAX_DECIMALS: usize = 12;
 
-/// The largest axis position read (mm or degrees): 1 km, beyond any machine's travel.
-pub const MAX_AXIS_VALUE: f64 = 1e6;
+/// The largest axis position read (mm or degrees): 1 km, beyond any machine's travel (the point
+/// lists' bound, [`crate::compensate::MAX_AXIS_VALUE`]).
+pub use crate::compensate::MAX_AXIS_VALUE;
 
 /// The most points one move may be cut into.
 pub const MAX_MOVE_POINTS: usize = 100_000;

@@ -22,9 +22,11 @@
 
 use super::{Plan, Step};
 use crate::chain::MAX_AXES;
+use crate::csvio::{self, Format, Header, Row};
 use crate::dialect::{Dialect, MAX_DWELL_S};
 use crate::error::{Error, Place, Result};
 use crate::machine::{Commands, Machine};
+use crate::units::S_PER_H;
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -378,7 +380,7 @@ fn wait_note(options: &ProgramOptions, measurements: usize, stations: usize) -> 
             "at each pose: {settle}{spp} s per reflector measured there; the waits of the \
              measurements add up to {:.4} h, the plan's duration at {spp} s per point{}; moves \
              and settling come on top",
-            measurements as f64 * spp / 3600.0,
+            measurements as f64 * spp / S_PER_H,
             if stations > 1 {
                 format!(" for one of its {stations} stations: run the program from each")
             } else {
@@ -534,187 +536,149 @@ pub fn load(machine: &Machine, path: &Path) -> Result<Plan> {
 /// Parses a plan file for `machine`; `file` names the source in messages. The plan's name is
 /// the file's.
 pub fn from_csv_str(machine: &Machine, text: &str, file: &str) -> Result<Plan> {
-    // A byte-order mark (spreadsheets write one) is not part of the first column's name.
-    let text = crate::error::lf_lines(crate::error::without_bom(text));
-    // Comment lines are blanked (not removed) so that line numbers stay the file's.
-    let body: String = text
-        .lines()
-        .map(|l| {
-            if l.trim_start().starts_with('#') {
-                ""
-            } else {
-                l
-            }
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
-    let mut lines = body
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim()))
-        .filter(|(_, l)| !l.is_empty());
-    let Some((header_line, header)) = lines.next() else {
+    let format = Format {
+        comments: true,
+        ..Format::default()
+    };
+    let Some(mut table) = csvio::read(text, file, format)? else {
         return Err(Error::input(
             Place::file(file),
             "empty plan file: expected a header with the axis columns and reflector",
         ));
     };
-    // Names without their unit annotations (`X [mm]`, `C (deg)`), checked below.
-    let (names, units): (Vec<String>, Vec<Option<String>>) = header
-        .split(',')
-        .map(|h| {
-            let (name, unit) = crate::measure::split_unit(h);
-            (name.to_string(), unit.map(str::to_string))
-        })
-        .unzip();
-    let at_header = |field: &str| Place::file(file).at_line(header_line).at_field(field);
-    let column = |name: &str| -> Result<Option<usize>> {
-        let found: Vec<usize> = (0..names.len()).filter(|&i| names[i] == name).collect();
-        match found.as_slice() {
-            [] => Ok(None),
-            [i] => Ok(Some(*i)),
-            _ => Err(Error::input(
-                at_header(name),
-                format!("column '{name}' appears twice in the header"),
-            )),
-        }
-    };
-    let mut axis_cols = Vec::new();
-    for ax in machine.axes() {
-        let name = ax.axis.letter().to_string();
-        let col = column(&name)?.ok_or_else(|| {
-            Error::input(
-                at_header(&name),
-                format!(
-                    "missing column '{name}' (axis {name} of {}, in {})",
-                    machine.chain(),
-                    ax.file_unit()
-                ),
-            )
+    let mut reader = PlanReader::new(machine, table.header())?;
+    for row in table.rows() {
+        reader.add(&row?)?;
+    }
+    reader.finish(file)
+}
+
+/// A plan file's columns and the plan read from its rows so far.
+struct PlanReader<'m> {
+    machine: &'m Machine,
+    /// The axes' columns, in chain order.
+    axes: Vec<usize>,
+    reflector: usize,
+    order: Option<usize>,
+    /// The distinct poses, in order of first appearance.
+    positions: Vec<Commands>,
+    /// Each distinct pose's index, by its bits (a hash lookup: a million rows read in linear
+    /// time; `-0.0` is `0.0`).
+    index: HashMap<[u64; MAX_AXES], usize>,
+    sequence: Vec<Step>,
+    /// The reflectors measured.
+    used: Vec<usize>,
+}
+
+impl<'m> PlanReader<'m> {
+    /// The columns of `header`: the machine's axes, `reflector` and optionally `order`, nothing
+    /// else.
+    fn new(machine: &'m Machine, header: &Header) -> Result<PlanReader<'m>> {
+        let axes = crate::measure::axis_columns(machine, header)?;
+        let reflector = header.require("reflector", || {
+            "missing column 'reflector'; a plan file has the axis letters, reflector and \
+             optionally order"
+                .to_string()
         })?;
-        axis_cols.push(col);
-    }
-    for (&col, ax) in axis_cols.iter().zip(machine.axes()) {
-        if let Some(u) = &units[col] {
-            crate::measure::check_unit(u, ax.file_unit())
-                .map_err(|m| Error::input(at_header(&names[col]), m))?;
-        }
-    }
-    let refl_col = column("reflector")?.ok_or_else(|| {
-        Error::input(
-            at_header("reflector"),
-            "missing column 'reflector'; a plan file has the axis letters, reflector and optionally order",
-        )
-    })?;
-    let order_col = column("order")?;
-    if let Some(unknown) = names.iter().find(|n| {
-        n.as_str() != "reflector"
-            && n.as_str() != "order"
-            && !machine
+        let order = header.find("order")?;
+        let is_axis = |n: &str| {
+            machine
                 .axes()
                 .iter()
-                .any(|ax| ax.axis.letter().to_string() == **n)
-    }) {
-        return Err(Error::input(
-            at_header(unknown),
-            format!(
-                "unknown column '{unknown}': a plan file has the axes of {}, reflector and order",
-                machine.chain()
-            ),
-        ));
-    }
-    let mut positions: Vec<Commands> = Vec::new();
-    // Each distinct pose's index, by its bits (a hash lookup: a million rows read in linear
-    // time; `-0.0` is `0.0`).
-    let mut index: HashMap<[u64; MAX_AXES], usize> = HashMap::new();
-    let mut sequence = Vec::new();
-    let mut used = Vec::new();
-    for (line, row) in lines {
-        let fields: Vec<&str> = row.split(',').map(str::trim).collect();
-        let at = |col: usize| Place::file(file).at_line(line).at_field(names[col].clone());
-        if fields.len() != names.len() {
+                .any(|ax| ax.axis.letter().to_string() == n)
+        };
+        if let Some(unknown) = header
+            .names()
+            .iter()
+            .find(|n| n.as_str() != "reflector" && n.as_str() != "order" && !is_axis(n))
+        {
             return Err(Error::input(
-                Place::file(file).at_line(line),
+                header.place(unknown),
                 format!(
-                    "{} fields where the header has {}",
-                    fields.len(),
-                    names.len()
+                    "unknown column '{unknown}': a plan file has the axes of {}, reflector and \
+                     order",
+                    machine.chain()
                 ),
             ));
         }
-        let number = |col: usize, unit: &str| -> Result<f64> {
-            let s = fields[col];
-            match s.parse::<f64>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                _ => Err(Error::input(
-                    at(col),
-                    format!("expected a finite number ({unit}), found \"{s}\""),
-                )),
-            }
-        };
-        if let Some(c) = order_col {
-            let want = sequence.len() + 1;
-            if number(c, "count")? != want as f64 {
-                return Err(Error::input(
-                    at(c),
+        Ok(PlanReader {
+            machine,
+            axes,
+            reflector,
+            order,
+            positions: Vec::new(),
+            index: HashMap::new(),
+            sequence: Vec::new(),
+            used: Vec::new(),
+        })
+    }
+
+    /// Adds the measurement of `row`: its order checked, its pose found or added.
+    fn add(&mut self, row: &Row) -> Result<()> {
+        if let Some(c) = self.order {
+            let want = self.sequence.len() + 1;
+            if row.number(c, "count")? != want as f64 {
+                return Err(row.error(
+                    c,
                     format!(
                         "order {} where row {want} of the plan stands: the rows are measured in \
                          the file's order",
-                        fields[c]
+                        row.text(c)
                     ),
                 ));
             }
         }
-        let mut commands = Commands::default();
-        for (k, (&col, ax)) in axis_cols.iter().zip(machine.axes()).enumerate() {
-            let v = number(col, ax.file_unit())?;
-            commands.0[k] = ax
-                .position_from_file(v)
-                .map_err(|m| Error::input(at(col), m))?;
-        }
-        let id = fields[refl_col];
-        let reflector = machine
-            .reflector_named(id)
-            .map_err(|m| Error::input(at(refl_col), m))?;
-        let position = *index
+        let commands = crate::measure::read_commands(self.machine, row, &self.axes)?;
+        let reflector = self
+            .machine
+            .reflector_named(row.text(self.reflector))
+            .map_err(|m| row.error(self.reflector, m))?;
+        let positions = &mut self.positions;
+        let position = *self
+            .index
             .entry(commands.0.map(|v| (v + 0.0).to_bits()))
             .or_insert_with(|| {
                 positions.push(commands);
                 positions.len() - 1
             });
-        if !used.contains(&reflector) {
-            used.push(reflector);
+        if !self.used.contains(&reflector) {
+            self.used.push(reflector);
         }
-        sequence.push(Step {
+        self.sequence.push(Step {
             position,
             reflector,
         });
-        if sequence.len() > super::MAX_PLAN_POSITIONS {
+        if self.sequence.len() > super::MAX_PLAN_POSITIONS {
             return Err(Error::input(
-                Place::file(file).at_line(line),
+                row.place_of_row(),
                 format!(
                     "more than {} measurements: a plan has at most that many",
                     super::MAX_PLAN_POSITIONS
                 ),
             ));
         }
+        Ok(())
     }
-    if sequence.is_empty() {
-        return Err(Error::input(
-            Place::file(file),
-            "the plan file has a header but no measurement rows",
-        ));
+
+    /// The plan read, named after `file`; a file without rows is refused.
+    fn finish(mut self, file: &str) -> Result<Plan> {
+        if self.sequence.is_empty() {
+            return Err(Error::input(
+                Place::file(file),
+                "the plan file has a header but no measurement rows",
+            ));
+        }
+        self.used.sort_unstable();
+        let name = Path::new(file)
+            .file_name()
+            .map_or(file.to_string(), |n| n.to_string_lossy().into_owned());
+        Ok(Plan {
+            name,
+            positions: self.positions,
+            reflectors: self.used,
+            sequence: Some(self.sequence),
+        })
     }
-    used.sort_unstable();
-    let name = Path::new(file)
-        .file_name()
-        .map_or(file.to_string(), |n| n.to_string_lossy().into_owned());
-    Ok(Plan {
-        name,
-        positions,
-        reflectors: used,
-        sequence: Some(sequence),
-    })
 }
 
 #[cfg(test)]
