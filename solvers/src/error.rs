@@ -64,7 +64,7 @@ pub enum Error {
     /// An objective name that is not `phi` or `ve`.
     #[error("unknown objective '{0}': phi or ve")]
     UnknownObjective(String),
-    /// A phasing name not in [`crate::strategy::PHASINGS`].
+    /// A phasing name not in [`crate::engines::strategy::PHASINGS`].
     #[error("unknown phasing '{name}': {}", known.join(", "))]
     UnknownPhasing {
         /// The name asked for.

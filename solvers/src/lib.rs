@@ -14,37 +14,35 @@
 //! - [`init`]: the tracker pose's starting value by a rigid best fit (Kabsch);
 //! - [`nullspace`]: constraint elimination, `p = p₀ + N z`;
 //! - [`nist_suite`]: NIST's StRD nonlinear-regression suite, scored by the log relative error.
+//!
+//! The modules are grouped as [`engines`] (the engines, what they share — kernels, losses, the
+//! constraint-reduced coordinates, the polish, the gauge — and the strategies that drive them)
+//! and [`analysis`] (what is computed about a fit or a plan: identifiability, observability,
+//! uncertainty, priors, optimal design, candidates); both are re-exported at the crate root. The
+//! analyses use the engines, never the other way round.
 #![deny(missing_docs)]
 
-pub mod candidates;
-#[cfg(feature = "ceres")]
-pub mod ceres;
-#[cfg(feature = "clarabel")]
-pub mod clarabel;
-mod coordinates;
-pub mod design;
+pub mod analysis;
+pub mod engines;
 mod error;
-pub mod gauge;
-pub mod identifiability;
-pub mod init;
-// Hidden: the normal-equation kernels are public for the bench binary and the tests (kernel timings, block sizes), not as API.
-#[doc(hidden)]
-pub mod kernels;
-pub mod lm;
-mod loss;
-pub mod nist_suite;
-#[cfg(feature = "nlopt")]
-pub mod nlopt;
 pub mod nullspace;
-pub mod observability;
 pub mod options;
-pub mod polish;
-pub mod prior;
-mod run;
-pub mod strategy;
 pub mod summary;
-pub mod uncertainty;
 
+// The curated surface: each engine and analysis at the path its users know it by
+// (`volver_solvers::lm`, `volver_solvers::candidates` …), whichever group holds it.
+pub use analysis::{candidates, design, identifiability, observability, prior, uncertainty};
+#[cfg(feature = "ceres")]
+pub use engines::ceres;
+#[cfg(feature = "clarabel")]
+pub use engines::clarabel;
+#[cfg(feature = "nlopt")]
+pub use engines::nlopt;
+// Hidden: the normal-equation kernels are public for the bench binary and the tests (kernel
+// timings, block sizes), not as API.
+#[doc(hidden)]
+pub use engines::kernels;
+pub use engines::{gauge, init, lm, nist_suite, polish, strategy};
 pub use error::Error;
 pub use options::{Objective, Options};
 pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};
@@ -203,28 +201,28 @@ macro_rules! with_feature {
     };
 }
 
-with_feature!(LM_CLARABEL, "clarabel", crate::clarabel::Polished);
-with_feature!(CLARABEL, "clarabel", crate::clarabel::ProxLinear);
+with_feature!(LM_CLARABEL, "clarabel", crate::engines::clarabel::Polished);
+with_feature!(CLARABEL, "clarabel", crate::engines::clarabel::ProxLinear);
 with_feature!(CERES, "ceres", ceres::Ceres::default());
 with_feature!(
     NLOPT_LBFGS,
     "nlopt",
-    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Lbfgs)
+    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Lbfgs)
 );
 with_feature!(
     NLOPT_SLSQP,
     "nlopt",
-    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Slsqp)
+    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Slsqp)
 );
 with_feature!(
     NLOPT_MMA,
     "nlopt",
-    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Mma)
+    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Mma)
 );
 with_feature!(
     NLOPT_BOBYQA,
     "nlopt",
-    crate::nlopt::Nlopt::new(crate::nlopt::Algorithm::Bobyqa)
+    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Bobyqa)
 );
 
 /// Every engine volver knows, in the order [`engine_names`] and `volver compare` give them.
@@ -352,7 +350,7 @@ pub fn share_calling_thread() -> bool {
 /// Φ, ve, EMM and EMax of a problem at `params`.
 pub fn evaluate(problem: &dyn Residuals, params: &[f64]) -> Evaluation {
     // The modules on every core, summed in point order: the same bits as one thread.
-    evaluation_of(&crate::loss::norms_of(problem, params))
+    evaluation_of(&crate::engines::loss::norms_of(problem, params))
 }
 
 /// Whether two parameter vectors are the same to the bit.

@@ -19,6 +19,12 @@
 use faer::Mat;
 use volver_core::model::{Constraints, Model};
 
+/// The relative curvature of the scaled design below which a direction counts as not
+/// identified by the data: the analyses' default
+/// ([`crate::identifiability::RANK_TOLERANCE`] re-exports it) and the native LM's
+/// ([`crate::engines::lm::LevenbergMarquardt::rank_tolerance`]).
+pub const RANK_TOLERANCE: f64 = 1e-10;
+
 /// Why a constraint set cannot be eliminated.
 #[derive(Clone, Debug, thiserror::Error, PartialEq)]
 pub enum ConstraintError {

@@ -335,7 +335,7 @@ pub struct Summary {
     /// The criterion that stopped it.
     pub termination: Termination,
     /// Whether the engine ended with a Newton polish of the optimum under the task's
-    /// constraints ([`crate::polish::settle`]; the native LM on a converged Φ fit with nothing
+    /// constraints ([`crate::engines::polish::settle`]; the native LM on a converged Φ fit with nothing
     /// held), so that the identification need not polish it again.
     #[serde(default)]
     pub polished: bool,

@@ -4,7 +4,6 @@
 
 use super::codes::{self, KNOWN_G, KNOWN_M};
 use super::lex::{Word, program_lines, split_comments, words};
-use super::modes::Owner;
 use super::offsets::{LETTERS, Offsets};
 use super::path::linear_points;
 use super::{Block, MAX_AXIS_VALUE, MAX_PROGRAM_POINTS, Motion, Setup};
@@ -13,6 +12,17 @@ use crate::error::{Error, Place, Result};
 use crate::iso::Axis;
 use crate::machine::Machine;
 use std::collections::BTreeMap;
+
+/// What a block's axis words belong to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Owner {
+    /// The motion mode: a compensated move.
+    Motion,
+    /// A non-modal code that takes them for itself (G10, G28, G30, G43.1, G52, G92).
+    Taken,
+    /// `G53`: a move in machine coordinates, not compensated.
+    Machine,
+}
 
 /// The feed-rate mode in force.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

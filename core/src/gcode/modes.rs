@@ -3,20 +3,9 @@
 
 use super::Block;
 use super::codes;
-use super::interp::{FeedMode, Parsed, Reader, refuse};
+use super::interp::{FeedMode, Owner, Parsed, Reader, refuse};
 use super::offsets::LETTERS;
 use crate::error::{Place, Result};
-
-/// What a block's axis words belong to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Owner {
-    /// The motion mode: a compensated move.
-    Motion,
-    /// A non-modal code that takes them for itself (G10, G28, G30, G43.1, G52, G92).
-    Taken,
-    /// `G53`: a move in machine coordinates, not compensated.
-    Machine,
-}
 
 impl Reader<'_> {
     /// Feed mode, plane, units, cutter compensation off, coordinate system, path control,

@@ -1,6 +1,6 @@
 //! Prior magnitudes per error kind, and the maximum a posteriori (MAP) solution they give.
 //!
-//! By default volver fixes what the data cannot determine by the gauge's rule ([`crate::gauge`]:
+//! By default volver fixes what the data cannot determine by the gauge's rule ([`crate::engines::gauge`]:
 //! the unidentified combinations held at the reference, minimum norm in the function metric).
 //! A metrologist who knows how large a machine's errors of each kind plausibly are can say so
 //! instead: [`Priors`] gives each ISO 230 error kind (positioning, straightness, angular,
@@ -9,7 +9,7 @@
 //! prior is normal, centred on the reference (zero errors), with precision
 //! `M_w = Σ_f (mean square of f over its travel) / s_f²` ([`Priors::metric`]); the tracker's
 //! pose and the other effects' parameters have a flat prior unless `tracker` is given (mm, the
-//! same for its angles times [`crate::gauge::LEVER_MM`]).
+//! same for its angles times [`crate::engines::gauge::LEVER_MM`]).
 //!
 //! [`maximum_a_posteriori`] combines it with what the data say, linearised as in GUM: the data
 //! give the estimate `p̂` (on the gauge) with covariance `D Dᵀ` ([`Covariance::data`]) and say
@@ -21,8 +21,8 @@
 //! determine well the prior changes nothing; along one they do not determine, the prior decides
 //! and its U is the prior's; in between (nearly flat directions) the two are weighed.
 
-use crate::gauge::{Gauge, LEVER_MM, weighted_metric};
-use crate::uncertainty::Covariance;
+use crate::analysis::uncertainty::Covariance;
+use crate::engines::gauge::{Gauge, LEVER_MM, weighted_metric};
 use faer::{Mat, Side};
 use volver_core::iso::Unit;
 use volver_core::model::Model;
@@ -166,7 +166,7 @@ pub struct Posterior {
 
 /// The maximum a posteriori solution for priors `priors`, from the data's estimate `params`
 /// (on the gauge `gauge`, whose reference is the prior's centre) and its linearised covariance
-/// `cov` ([`crate::uncertainty::linear`]). `None` when a decomposition fails or a value is not
+/// `cov` ([`crate::analysis::uncertainty::linear`]). `None` when a decomposition fails or a value is not
 /// finite.
 ///
 /// ```

@@ -3,9 +3,9 @@
 //! start projected onto the constraints, and the watch for trial points where the model is not
 //! finite.
 
-use crate::coordinates::{Free, scaled_null_space};
-use crate::kernels::{Normal, accumulate};
-use crate::loss::norms;
+use crate::engines::coordinates::{Free, scaled_null_space};
+use crate::engines::kernels::{Normal, accumulate};
+use crate::engines::loss::norms;
 use crate::options::Options;
 use crate::summary::{At, Failure, Invalid, Summary, Termination};
 use crate::{Solution, Task, evaluate};
@@ -151,7 +151,7 @@ impl<'t, 'a> Run<'t, 'a> {
             });
             return Err(Box::new(run.finish(start.to_vec(), t)));
         }
-        run.start_norms = crate::loss::norms_of(problem, start);
+        run.start_norms = crate::engines::loss::norms_of(problem, start);
         run.summary.initial = crate::evaluation_of(&run.start_norms);
         run.summary.evaluations += 1;
         Ok(run)

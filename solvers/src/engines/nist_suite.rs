@@ -17,8 +17,8 @@ use volver_core::problem::{CurveFit, Residuals};
 
 /// The native LM as the suite runs it: no direction held as unidentifiable (the suite's
 /// problems are ill-conditioned on purpose: that is what it tests), and geodesic acceleration.
-pub fn lm() -> crate::lm::LevenbergMarquardt {
-    crate::lm::LevenbergMarquardt {
+pub fn lm() -> crate::engines::lm::LevenbergMarquardt {
+    crate::engines::lm::LevenbergMarquardt {
         rank_tolerance: 0.0,
         geodesic_acceleration: true,
         ..Default::default()

@@ -41,10 +41,10 @@
 //! # }
 //! ```
 
-use crate::coordinates::held_values;
-use crate::lm::irls::Continuation;
+use crate::engines::coordinates::held_values;
+use crate::engines::lm::irls::Continuation;
+use crate::engines::run::{Started, begin};
 use crate::options::{Objective, Options};
-use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -154,7 +154,7 @@ fn termination_of(s: &cs::Summary, evaluation_limit: bool) -> Termination {
 
 /// The parameter block's manifold: free, a subset held (every constraint holds one parameter),
 /// or the linear manifold `s₀ + N t` over the null space of `A D`.
-fn space_of(task: &Task, free: &crate::coordinates::Free) -> cs::Space {
+fn space_of(task: &Task, free: &crate::engines::coordinates::Free) -> cs::Space {
     let (n, nf) = (free.d.len(), free.n_free());
     if task.constraints.rows.is_empty() {
         cs::Space::Free
@@ -266,7 +266,7 @@ impl Ceres {
     fn stages(
         &self,
         cp: &mut cs::Problem<'_>,
-        run: &mut crate::run::Run,
+        run: &mut crate::engines::run::Run,
         progress: &mut Progress,
         phi0_mm: f64,
     ) -> Termination {
@@ -311,7 +311,7 @@ impl Ceres {
 /// evaluations before the first solve, `improved_pass` the last pass that improved), and the
 /// termination naming non-finite blocks when it failed.
 fn account(
-    run: &mut crate::run::Run,
+    run: &mut crate::engines::run::Run,
     cost: &Cost,
     (base, improved_pass): (usize, usize),
     termination: Termination,

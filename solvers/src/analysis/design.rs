@@ -7,14 +7,14 @@
 //! that point ([`TrackerNoise::whitening`]: the range weighs far above the angles) and reduced
 //! to the free coordinates `N` of the model's constraints. A design puts weights `w_i` (summing
 //! to one) on the candidates; `m` points give `F(w) = R + m Σ w_i F_i`, where `R` is a weak
-//! prior ([`crate::uncertainty::HELD_PRIOR_MM`] RMS in the function metric of
-//! [`crate::gauge`]) that keeps a direction no candidate sees from being infinitely uncertain:
+//! prior ([`crate::analysis::uncertainty::HELD_PRIOR_MM`] RMS in the function metric of
+//! [`crate::engines::gauge`]) that keeps a direction no candidate sees from being infinitely uncertain:
 //! a design that leaves one unidentified pays for it through the prior.
 //!
 //! - **I-optimal** ([`Criterion::I`]): the mean over a grid of the work volume of the variance
 //!   of the tool point after the set-up's rigid transform, `tr(Q F⁻¹)` with
 //!   `Q = (1/K) Σ_k G_kᵀ G_k` from the tool points' aligned Jacobians
-//!   ([`crate::uncertainty::ToolGrid::jacobian`]): what compensation at that tool offset
+//!   ([`crate::analysis::uncertainty::ToolGrid::jacobian`]): what compensation at that tool offset
 //!   inherits from the noise.
 //! - **V-optimal** ([`Criterion::V`]): the largest of those variances over the grid, approached
 //!   by I-optimal designs whose grid points are reweighted towards the largest variances.
@@ -30,7 +30,7 @@
 //!
 //! The information is that of the whitened least-squares estimate: it ranks designs. The
 //! uncertainty of what volver's Φ estimate of a designed plan gives is
-//! [`crate::uncertainty::linear`]'s, computed on the plan itself.
+//! [`crate::analysis::uncertainty::linear`]'s, computed on the plan itself.
 
 use crate::nullspace::NullSpace;
 use faer::{Mat, Side};
@@ -113,7 +113,7 @@ impl Space {
         grid: &[Commands],
     ) -> Option<Space> {
         let p0 = model.initial_params();
-        let data = crate::observability::nominal_data(model, candidates);
+        let data = crate::analysis::observability::nominal_data(model, candidates);
         let problem = Problem::new(model, &data).ok()?;
         let whitened = Whitened::new(problem.clone(), noise)?;
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
@@ -138,13 +138,13 @@ impl Space {
             let (i, within) = (r / per, r % per);
             rows[(within / 3) * m + i][(within % 3) * n + c]
         });
-        let a = crate::kernels::product(j.as_ref(), basis);
-        let tool_grid = crate::uncertainty::ToolGrid {
+        let a = crate::engines::kernels::product(j.as_ref(), basis);
+        let tool_grid = crate::analysis::uncertainty::ToolGrid {
             commands: grid.to_vec(),
             tool,
         };
         let g = tool_grid.jacobian(model, &p0, true);
-        let gz = crate::kernels::product(g.as_ref(), basis);
+        let gz = crate::engines::kernels::product(g.as_ref(), basis);
         let k = grid.len().max(1) as f64;
         let q = Mat::from_fn(nf, nf, |r, c| {
             (0..gz.nrows())
@@ -152,9 +152,9 @@ impl Space {
                 .sum::<f64>()
                 / k
         });
-        let metric = crate::gauge::function_metric(model, &p0);
-        let prior = crate::uncertainty::HELD_PRIOR_MM;
-        let mz = crate::kernels::sandwich(metric.as_ref(), basis);
+        let metric = crate::engines::gauge::function_metric(model, &p0);
+        let prior = crate::analysis::uncertainty::HELD_PRIOR_MM;
+        let mz = crate::engines::kernels::sandwich(metric.as_ref(), basis);
         let r = Mat::from_fn(nf, nf, |i, c| mz[(i, c)] / (prior * prior));
         Some(Space {
             a,
@@ -183,7 +183,7 @@ impl Space {
         let scaled = Mat::from_fn(per * self.m, nf, |row, col| {
             c[row / per].max(0.0).sqrt() * self.a[(row, col)]
         });
-        let ata = crate::kernels::product(scaled.transpose(), scaled.as_ref());
+        let ata = crate::engines::kernels::product(scaled.transpose(), scaled.as_ref());
         Mat::from_fn(nf, nf, |i, j| self.r[(i, j)] + ata[(i, j)])
     }
 
@@ -198,7 +198,7 @@ impl Space {
         let scaled = Mat::from_fn(nf, nf, |r, c| u[(r, c)] / s[c]);
         let logdet = (0..nf).map(|i| s[i].ln()).sum();
         Some((
-            crate::kernels::product(scaled.as_ref(), u.transpose()),
+            crate::engines::kernels::product(scaled.as_ref(), u.transpose()),
             logdet,
         ))
     }
@@ -206,7 +206,7 @@ impl Space {
     /// The variance of each grid point's tool point (summed over its coordinates, mm²) under
     /// the information of multiplicities `c`.
     fn point_variances(&self, inv: &Mat<f64>) -> Vec<f64> {
-        let p = crate::kernels::product(self.gz.as_ref(), inv.as_ref());
+        let p = crate::engines::kernels::product(self.gz.as_ref(), inv.as_ref());
         let nf = inv.nrows();
         (0..self.gz.nrows() / 3)
             .map(|k| {
@@ -227,7 +227,7 @@ impl Space {
         let scaled = Mat::from_fn(self.gz.nrows(), nf, |row, col| {
             omega[row / 3].sqrt() * self.gz[(row, col)]
         });
-        crate::kernels::product(scaled.transpose(), scaled.as_ref())
+        crate::engines::kernels::product(scaled.transpose(), scaled.as_ref())
     }
 
     /// The criterion of per-candidate multiplicities `c` (measurements of each candidate point):
@@ -318,13 +318,13 @@ impl Space {
             let (inv, _) = Space::inverse(&self.information(&c))?;
             let s = match q {
                 Some(q) => {
-                    let qi = crate::kernels::product(q.as_ref(), inv.as_ref());
-                    crate::kernels::product(inv.as_ref(), qi.as_ref())
+                    let qi = crate::engines::kernels::product(q.as_ref(), inv.as_ref());
+                    crate::engines::kernels::product(inv.as_ref(), qi.as_ref())
                 }
                 None => inv,
             };
             // d_i = Σ over the candidate's rows of a S aᵀ.
-            let p = crate::kernels::product(self.a.as_ref(), s.as_ref());
+            let p = crate::engines::kernels::product(self.a.as_ref(), s.as_ref());
             let nf = s.nrows();
             let d: Vec<f64> = (0..m)
                 .into_par_iter()

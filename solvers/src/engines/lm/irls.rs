@@ -6,7 +6,7 @@
 //!   Φ once its steps gain little ([`FIRST_GAIN`], then down to [`MAJORISING_GAIN`]), handed
 //!   back when the Newton model fails there ([`NEWTON_REFUSALS`]); a fit with scalar residuals
 //!   continues in ε from [`CONTINUATION`] × the initial fraction down to
-//!   [`SCALAR_FINAL_EPSILON`] (see [`crate::lm`]).
+//!   [`SCALAR_FINAL_EPSILON`] (see [`crate::engines::lm`]).
 //! * [`Continuation`], the Ceres and NLopt wrappers': a solve per ε, ε shrinking tenfold from
 //!   `irls_initial_epsilon × Φ₀` to `irls_final_epsilon × Φ`, the last solve with the run's
 //!   objective-change tolerance, the earlier ones with [`STAGE_TOLERANCE`].
@@ -60,7 +60,7 @@ pub(crate) fn epsilon(fraction: f64, phi_mm: f64) -> f64 {
     (fraction * phi_mm).max(TINY)
 }
 
-/// The model of the cost a step uses (see [`crate::lm`]).
+/// The model of the cost a step uses (see [`crate::engines::lm`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Stage {
     /// Φ's majorising stage: every point with its full curvature, ε following Φ.
@@ -125,7 +125,7 @@ impl Irls {
     /// A point's weight and radial reduction in the current stage's model, for a residual of
     /// module `r` (mm) among `np` points (the radial reduction only in the Newton stage).
     pub(crate) fn weight(&self, r: f64, np: usize) -> (f64, f64) {
-        let (w, c) = crate::loss::weight_of(self.objective, r, self.eps, np);
+        let (w, c) = crate::engines::loss::weight_of(self.objective, r, self.eps, np);
         (w, if self.stage == Stage::Newton { c } else { 0.0 })
     }
 

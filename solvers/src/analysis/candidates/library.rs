@@ -1,5 +1,5 @@
 //! The library of candidates: one family per kind of extension (the module table of
-//! [`crate::candidates`]), each a small builder that lists its members for a model, in the
+//! [`crate::analysis::candidates`]), each a small builder that lists its members for a model, in the
 //! order [`FAMILIES`] gives.
 //!
 //! The switches of the error model that a candidate turns on (a drift, the range's scale …) are

@@ -20,7 +20,7 @@
 //! ```
 
 use crate::Task;
-use crate::identifiability::{Identifiability, analyse};
+use crate::analysis::identifiability::{Identifiability, analyse};
 use volver_core::basis::BasisKind;
 use volver_core::chain::Side;
 use volver_core::iso::Axis;
@@ -548,7 +548,7 @@ pub fn hold_order(model: &Model) -> Vec<usize> {
 /// The parameters of `task` to hold so that what is left is identifiable at `params`, chosen
 /// greedily in `order` ([`hold_order`] for a machine model): each is held when holding it
 /// leaves one combination fewer that the design cannot identify (relative curvature below
-/// [`crate::identifiability::RANK_TOLERANCE`] in the engine's scaled coordinates), until none is
+/// [`crate::analysis::identifiability::RANK_TOLERANCE`] in the engine's scaled coordinates), until none is
 /// left. Each comes with the motion it makes with the others. Empty when the task is already
 /// identifiable; `None` when the Jacobian is not finite or a decomposition fails.
 ///
@@ -572,7 +572,8 @@ pub fn redundant_parameters(
     order: &[usize],
 ) -> Option<Vec<Redundancy>> {
     use volver_core::model::{Constraint, ConstraintKind};
-    let normal = crate::kernels::accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
+    let normal =
+        crate::engines::kernels::accumulate(&*task.problem, params, |_| (1.0, 0.0), false)?;
     let design = WeakDesign {
         h: &normal.h,
         params,
@@ -632,10 +633,10 @@ impl WeakDesign<'_> {
     }
 
     /// The directions (in the parameters' units) the design cannot identify under
-    /// `constraints`: relative curvature at most [`crate::identifiability::RANK_TOLERANCE`] in
+    /// `constraints`: relative curvature at most [`crate::analysis::identifiability::RANK_TOLERANCE`] in
     /// the engine's scaled coordinates. `None` when a decomposition fails.
     fn weak(&self, constraints: &volver_core::model::Constraints) -> Option<Vec<Vec<f64>>> {
-        use crate::coordinates::{reduce, scaled_null_space};
+        use crate::engines::coordinates::{reduce, scaled_null_space};
         let n = self.params.len();
         let (d, ns) = scaled_null_space(self.h, constraints, self.params);
         let ns = ns.ok()?;
@@ -650,7 +651,7 @@ impl WeakDesign<'_> {
         let basis = ns.basis();
         Some(
             (0..nf)
-                .filter(|&i| mu[i] <= crate::identifiability::RANK_TOLERANCE * mu_max)
+                .filter(|&i| mu[i] <= crate::analysis::identifiability::RANK_TOLERANCE * mu_max)
                 .map(|i| {
                     (0..n)
                         .map(|j| d[j] * (0..nf).map(|k| basis[(j, k)] * v[(k, i)]).sum::<f64>())

@@ -5,7 +5,7 @@ use super::novelty::{self, Expressible};
 use super::sizes::{Sizing, plausible};
 use super::{Candidate, Score, library};
 use crate::Task;
-use crate::coordinates::{Reduced, reduced_normal_under};
+use crate::engines::coordinates::{Reduced, reduced_normal_under};
 use faer::Side;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
 use volver_core::model::Model;
@@ -222,7 +222,7 @@ fn gauss_newton_steps(
 }
 
 /// [`gauss_newton_steps`] of the least squares weighted per point by `weight(‖r_i‖)` (as
-/// [`crate::kernels::accumulate`] takes it).
+/// [`crate::engines::kernels::accumulate`] takes it).
 fn weighted_steps(
     task: &Task,
     params: &[f64],
@@ -247,7 +247,7 @@ fn weighted_steps(
         let evd = match ridge {
             Some(w) => {
                 let wm = faer::Mat::from_fn(n, n, |i, j| if i == j { w[i] } else { 0.0 });
-                let (extra, _) = crate::coordinates::reduce(&d, basis, &wm, None);
+                let (extra, _) = crate::engines::coordinates::reduce(&d, basis, &wm, None);
                 ridged = (&hz + &extra).self_adjoint_eigen(Side::Lower).ok()?;
                 &ridged
             }
@@ -395,7 +395,7 @@ fn sort_and_merge(mut scores: Vec<Score>) -> Vec<Score> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::observability::nominal_data;
+    use crate::analysis::observability::nominal_data;
     use volver_core::iso::ErrorId;
     use volver_core::plan::Plan;
     use volver_core::units::PPM;

@@ -67,9 +67,9 @@ impl Lm<'_, '_, '_> {
 }
 
 impl Lm<'_, '_, '_> {
-    /// Φ: Newton polish of the converged point ([`crate::polish::settle`]).
+    /// Φ: Newton polish of the converged point ([`crate::engines::polish::settle`]).
     pub(super) fn polish(&mut self, task: &Task) {
-        if let Ok((q, report)) = crate::polish::settle_scaled(
+        if let Ok((q, report)) = crate::engines::polish::settle_scaled(
             task,
             &self.p,
             Some(&self.free.d),

@@ -4,7 +4,7 @@
 //! the unweighted normal matrix in those coordinates, whose weak directions the data cannot
 //! identify.
 
-use crate::kernels::accumulate;
+use crate::engines::kernels::accumulate;
 use crate::nullspace::NullSpace;
 use faer::{Mat, Side};
 use volver_core::model::Constraints;
@@ -159,7 +159,7 @@ pub(crate) fn reduce(
 ) -> (Mat<f64>, Vec<f64>) {
     let (n, nf) = (d.len(), basis.ncols());
     let hs = Mat::from_fn(n, n, |i, j| d[i] * h[(i, j)] * d[j]);
-    let hz = crate::kernels::sandwich(hs.as_ref(), basis);
+    let hz = crate::engines::kernels::sandwich(hs.as_ref(), basis);
     let gz = g.map_or_else(Vec::new, |g| {
         (0..nf)
             .map(|k| (0..n).map(|i| basis[(i, k)] * d[i] * g[i]).sum())

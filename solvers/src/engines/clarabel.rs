@@ -43,9 +43,9 @@
 //! assert!(b <= a * (1.0 + 1e-9) && b > 0.99 * a, "Φ: LM {a}, SOCP {b}");
 //! ```
 
-use crate::lm::LevenbergMarquardt;
+use crate::engines::lm::LevenbergMarquardt;
+use crate::engines::run::{Started, begin};
 use crate::options::{Objective, Options};
-use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::clarabel::algebra::CscMatrix;
@@ -289,7 +289,7 @@ fn model_value(objective: Objective, lin: &Linearisation, k: usize, delta: &[f64
 }
 
 fn objective_value(objective: Objective, norms: &[f64]) -> f64 {
-    crate::loss::cost_of(objective, norms, 0.0)
+    crate::engines::loss::cost_of(objective, norms, 0.0)
 }
 
 /// The smallest proximal weight μ (relative to the scaled sub-problem).
@@ -318,7 +318,7 @@ enum Next {
 struct Prox<'c, 'a, 'o> {
     task: &'c Task<'a>,
     options: &'o Options,
-    free: crate::coordinates::Free,
+    free: crate::engines::coordinates::Free,
     p: Vec<f64>,
     z: Vec<f64>,
     norms: Vec<f64>,
@@ -351,7 +351,7 @@ impl Prox<'_, '_, '_> {
         &mut self,
         lin: &Linearisation,
         delta: &[f64],
-        run: &mut crate::run::Run,
+        run: &mut crate::engines::run::Run,
         observer: &mut dyn Observer,
     ) -> Next {
         let (options, objective) = (self.options, self.options.objective);
@@ -370,7 +370,7 @@ impl Prox<'_, '_, '_> {
         }
         let p_new = self.free.step(&self.p, delta);
         run.summary.evaluations += 1;
-        let new = crate::loss::norms(&*self.task.problem, &p_new);
+        let new = crate::engines::loss::norms(&*self.task.problem, &p_new);
         let cost_new = new
             .as_ref()
             .map(|v| objective_value(objective, v))
@@ -437,7 +437,7 @@ impl Prox<'_, '_, '_> {
     fn trials(
         &mut self,
         lin: &Linearisation,
-        run: &mut crate::run::Run,
+        run: &mut crate::engines::run::Run,
         observer: &mut dyn Observer,
     ) -> Option<Termination> {
         let (options, k) = (self.options, self.free.n_free());

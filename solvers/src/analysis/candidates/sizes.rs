@@ -1,5 +1,5 @@
 //! The sizes of what a candidate adds beyond the current model, and whether they are
-//! plausible ([`crate::candidates::Score::size`], [`crate::candidates::Score::flag`]).
+//! plausible ([`crate::analysis::candidates::Score::size`], [`crate::analysis::candidates::Score::flag`]).
 
 use super::novelty::Expressible;
 use faer::Mat;
@@ -33,7 +33,7 @@ pub(super) struct Sizing<'a> {
 
 impl Sizing<'_> {
     /// The size of what the candidate adds beyond the current model when its extended model
-    /// steps from `start` to `q` ([`crate::candidates::Score::size`]), in the unit returned;
+    /// steps from `start` to `q` ([`crate::analysis::candidates::Score::size`]), in the unit returned;
     /// `None` when not finite.
     pub(super) fn size(&self, q: &[f64]) -> Option<(f64, Unit)> {
         let (model, extended, jac, start) = (self.model, self.extended, self.jac, self.start);
@@ -187,7 +187,7 @@ pub(super) fn plausible(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::observability::nominal_data;
+    use crate::analysis::observability::nominal_data;
     use volver_core::plan::Plan;
     use volver_core::simulate::DEFAULT_SECONDS_PER_POINT;
 

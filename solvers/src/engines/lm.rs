@@ -9,8 +9,8 @@
 //! fit is *refined* (least squares) or *polished* (Φ). Each stopping test is a predicate of its
 //! own.
 //!
-//! * **Passes** ([`crate::kernels`]): each pass runs over the points in blocks of
-//!   [`crate::kernels::BLOCK`] on every thread, reduced in a tree of fixed shape (the same bits
+//! * **Passes** ([`crate::engines::kernels`]): each pass runs over the points in blocks of
+//!   [`crate::engines::kernels::BLOCK`] on every thread, reduced in a tree of fixed shape (the same bits
 //!   whatever the threads); no dense Jacobian of the whole problem is kept. For Φ each block's weighted
 //!   Jacobian rows (3 per point) are multiplied into its `JᵀWJ`; for least squares (ve) they are
 //!   triangularised by a QR, with the residuals as one more column, and merged into the running
@@ -34,7 +34,7 @@
 //!   nothing.
 //! * **Refinement** (nothing held): after convergence, for least squares undamped Gauss–Newton
 //!   steps from the QR factor, while they contract and the cost is no worse than its rounding;
-//!   for Φ Newton steps judged by the exact gradient ([`crate::polish::settle`]): the optimum
+//!   for Φ Newton steps judged by the exact gradient ([`crate::engines::polish::settle`]): the optimum
 //!   of Φ interpolates some points (a residual at the kink of its norm), where the damped steps
 //!   slow down and stop on the objective-change test above it (5e-4 on test 1).
 //! * **Objectives.** ve (eq. 1) is plain least squares. Φ (eq. 12) is minimised on the
@@ -90,11 +90,13 @@ mod restrict;
 #[cfg(test)]
 mod tests;
 
-use crate::coordinates::Free;
-use crate::kernels::{accumulate, accumulate_weighted, damped_lstsq, normal_solve, solve_spd};
-use crate::loss::{cost_of, norms_of, weight_of};
+use crate::engines::coordinates::Free;
+use crate::engines::kernels::{
+    accumulate, accumulate_weighted, damped_lstsq, normal_solve, solve_spd,
+};
+use crate::engines::loss::{cost_of, norms_of, weight_of};
+use crate::engines::run::{Started, begin};
 use crate::options::{ACCELERATION_RATIO, Objective, Options};
-use crate::run::{Started, begin};
 use crate::summary::{At, Failure, Termination};
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use damping::Damping;
@@ -131,7 +133,7 @@ pub struct LevenbergMarquardt {
     /// drift to meaningless values while Φ creeps down by fractions of a nanometre. Once Φ
     /// falls below 1e-4 of its start (a nearly exact fit, where the Gauss–Newton model is exact
     /// too) the fraction shrinks in proportion, so an exact fit may use every direction.
-    /// Default [`crate::identifiability::RANK_TOLERANCE`], 1e-10 (a condition number of 10⁵ on
+    /// Default [`crate::nullspace::RANK_TOLERANCE`], 1e-10 (a condition number of 10⁵ on
     /// the scaled Jacobian); zero holds nothing.
     pub rank_tolerance: f64,
     /// Correct each step by geodesic acceleration (Transtrum & Sethna 2012): the exact second
@@ -139,13 +141,13 @@ pub struct LevenbergMarquardt {
     /// of strongly nonlinear models, and a step whose correction exceeds
     /// [`crate::options::ACCELERATION_RATIO`] of it (in the damping norm) is refused. It costs
     /// one Jacobian and one second-derivative pass per step tried. Default false: the machine
-    /// models are mildly nonlinear; the NIST suite ([`crate::nist_suite::lm`]) turns it on.
+    /// models are mildly nonlinear; the NIST suite ([`crate::engines::nist_suite::lm`]) turns it on.
     pub geodesic_acceleration: bool,
     /// Φ: polish a converged fit with nothing held by Newton steps judged by the exact
-    /// gradient ([`crate::polish::settle`]), so that where the damped steps stopped along
+    /// gradient ([`crate::engines::polish::settle`]), so that where the damped steps stopped along
     /// weakly identified directions does not show in the result (engines and starts then agree
     /// on the error functions to ~1e-9). On test 4 it is about half of a fit's time. Default
-    /// true; Monte Carlo replicas ([`crate::uncertainty::monte_carlo`]) turn it off: their
+    /// true; Monte Carlo replicas ([`crate::analysis::uncertainty::monte_carlo`]) turn it off: their
     /// spread is the noise's, a million times larger.
     pub polish: bool,
 }
@@ -153,7 +155,7 @@ pub struct LevenbergMarquardt {
 impl Default for LevenbergMarquardt {
     fn default() -> Self {
         LevenbergMarquardt {
-            rank_tolerance: crate::identifiability::RANK_TOLERANCE,
+            rank_tolerance: crate::nullspace::RANK_TOLERANCE,
             geodesic_acceleration: false,
             polish: true,
         }
@@ -210,7 +212,7 @@ enum Verdict {
 /// [`Lm::refine`] polishes a converged least-squares fit. The damping and the IRLS schedule are
 /// states of their own ([`Damping`], [`Irls`]).
 struct Lm<'t, 'a, 'o> {
-    run: crate::run::Run<'t, 'a>,
+    run: crate::engines::run::Run<'t, 'a>,
     problem: &'t (dyn Residuals + 'a),
     options: &'o Options,
     settings: LevenbergMarquardt,
@@ -390,7 +392,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// first pass (which does not depend on it), a new stage's unweighted equations formed in
     /// the same pass as its weighted ones (one evaluation of each point's Jacobian), then
     /// decomposed.
-    fn jacobian_pass(&mut self) -> Result<crate::kernels::Normal, Termination> {
+    fn jacobian_pass(&mut self) -> Result<crate::engines::kernels::Normal, Termination> {
         let iterations = self.run.summary.iterations;
         if self.run.summary.evaluations >= self.options.max_evaluations {
             return Err(Termination::EvaluationLimit);
@@ -438,7 +440,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         pending: Option<&Mat<f64>>,
     ) -> (
         Option<Option<(Vec<f64>, Mat<f64>)>>,
-        Option<crate::kernels::Normal>,
+        Option<crate::engines::kernels::Normal>,
     ) {
         let np = self.np();
         let weighted = |r: f64| self.irls.weight(r, np);
@@ -451,7 +453,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
                     let normal = both.pop();
                     let plain = both.pop().map(|plain| plain.h);
                     (
-                        plain.map(|h| crate::coordinates::design_of(&self.free, &h)),
+                        plain.map(|h| crate::engines::coordinates::design_of(&self.free, &h)),
                         normal,
                     )
                 }
@@ -459,7 +461,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
             }
         } else {
             rayon::join(
-                || pending.map(|h| crate::coordinates::design_of(&self.free, h)),
+                || pending.map(|h| crate::engines::coordinates::design_of(&self.free, h)),
                 || {
                     accumulate(
                         self.problem,

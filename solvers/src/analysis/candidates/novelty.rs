@@ -9,7 +9,7 @@
 //! adding a few hundred µm. Sizes and plausibility are measured on this new part
 //! ([`Expressible::novelty`]).
 
-use crate::coordinates::{held_values, reduced_normal};
+use crate::engines::coordinates::{held_values, reduced_normal};
 use faer::{Mat, Side};
 use volver_core::model::Model;
 use volver_core::problem::{Problem, Residuals};

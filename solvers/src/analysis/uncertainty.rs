@@ -4,7 +4,7 @@
 //! offset, raw or after the set-up's rigid transform.
 //!
 //! **Linearised.** The estimate solves `Σ_i J_iᵀ ψ(r_i) = 0` on the constraint set (the model's
-//! constraints and the gauge's, [`crate::gauge`]), with `ψ(r) = r/‖r‖` for Φ and `ψ(r) = r` for
+//! constraints and the gauge's, [`crate::engines::gauge`]), with `ψ(r) = r/‖r‖` for Φ and `ψ(r) = r` for
 //! ve. Its covariance is the sandwich `A⁻¹ B A⁻¹` of M-estimation, `A = Σ J_iᵀ E[∂ψ/∂r] J_i`,
 //! `B = Σ J_iᵀ E[ψ ψᵀ] J_i`, reduced to the free coordinates, with the expectations taken over
 //! the noise of each point: the tracker's spherical model ([`TrackerNoise`], azimuth, elevation
@@ -23,7 +23,7 @@
 //! again N times (the same engine, constraints and gauge), seeded, on every core; the spread of
 //! any quantity over the replicas is its Monte Carlo uncertainty.
 
-use crate::gauge::Gauge;
+use crate::engines::gauge::Gauge;
 use crate::nullspace::NullSpace;
 use crate::{Objective, Options, Silent, Task};
 use faer::{Mat, Side};
@@ -36,7 +36,7 @@ use volver_core::problem::{Problem, Residuals};
 use volver_core::random::Rng;
 use volver_core::results::UncertaintyRecord;
 
-/// Prior standard deviation (mm RMS of the error functions, angles × [`crate::gauge::LEVER_MM`],
+/// Prior standard deviation (mm RMS of the error functions, angles × [`crate::engines::gauge::LEVER_MM`],
 /// so 100 µm or 100 µrad) of each combination the gauge holds: the size a machine's unidentified
 /// combination may plausibly have, for quantities that depend on one.
 pub const HELD_PRIOR_MM: f64 = 0.1;
@@ -360,7 +360,7 @@ fn range_expectations(
 /// rule over its three deviates ([`volver_core::noise::Distribution::rule`], 16³ nodes; a deterministic
 /// quadrature, within 1 % of sampled means in the tests). No random draws: noise in these expectations would not share the
 /// normal matrix' structure, and the information matrix `A B⁻¹ A` that the priors
-/// ([`crate::prior`]) combine with would carry it from the strong directions into the weak ones.
+/// ([`crate::analysis::prior`]) combine with would carry it from the strong directions into the weak ones.
 fn expectations(
     objective: Objective,
     noise: NoiseModel,
@@ -453,7 +453,7 @@ pub fn monte_carlo(
 ) -> Result<MonteCarlo, crate::Error> {
     // No Newton polish of each replica: it moves a fit by ~1e-9 of its error functions, a
     // millionth of the spread measured here, and costs half of a replica's time.
-    let lm = crate::lm::LevenbergMarquardt {
+    let lm = crate::engines::lm::LevenbergMarquardt {
         polish: false,
         ..Default::default()
     };

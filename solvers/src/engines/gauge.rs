@@ -3,7 +3,7 @@
 //! Along a direction the data cannot identify (the tracker's pose against the table's errors,
 //! the turn of the tool about the line through two reflectors …) every value fits the data
 //! equally well, so an engine would leave it wherever its iteration stopped. volver fixes those
-//! values by a rule the user can read ([`crate::strategy::Strategy::gauge`], on by default):
+//! values by a rule the user can read ([`crate::engines::strategy::Strategy::gauge`], on by default):
 //!
 //! > the combinations of parameters the design cannot identify are held at their reference
 //! > values: the solution has no component along them, in the function metric, away from the
@@ -16,7 +16,7 @@
 //! of `(JᵀJ, M)` on the constraint set whose curvature is below [`TOLERANCE`] × the largest,
 //! with the Jacobian taken at the reference: they are a property of the design (model, plan,
 //! set-up), known before any engine runs and the same whatever it does. The engine solves
-//! under them as linear constraints, from the start moved onto them; [`crate::polish::settle`] then polishes
+//! under them as linear constraints, from the start moved onto them; [`crate::engines::polish::settle`] then polishes
 //! the result to the optimum with Newton steps judged by the gradient (the cost's rounding,
 //! ~1e-13 of Φ, would leave the weakest identified directions undetermined at ~1e-6). Both the
 //! metric and the generalised eigenproblem transform with the parameters (and are computed
@@ -36,7 +36,7 @@
 //! ```
 
 use crate::Task;
-use crate::kernels::sandwich;
+use crate::engines::kernels::sandwich;
 use faer::{Mat, Side};
 use volver_core::iso::Unit;
 use volver_core::model::{Constraint, ConstraintKind, Model};
@@ -114,7 +114,7 @@ pub fn function_metric_over(model: &Model, params: &[f64], span_h: Option<f64>) 
 /// A metric of the same form as [`function_metric`] with other weights: `pᵀ M p` is the sum
 /// over the error functions of the mean square of `term_scale(id) × value` at 65 evenly spaced
 /// positions of their travel, plus `(other_scale(j, info) × p_j)²` for every parameter `j` no
-/// error function covers. A scale of zero leaves its part out. [`crate::prior`] weighs each
+/// error function covers. A scale of zero leaves its part out. [`crate::analysis::prior`] weighs each
 /// function by one over its prior magnitude with it.
 pub fn weighted_metric(
     model: &Model,
@@ -251,7 +251,7 @@ pub fn gauge(task: &Task, reference: &[f64], at: &[f64], tolerance: f64) -> Opti
     let n = reference.len();
     // The design's pass and the metric (which does not depend on it) side by side.
     let (normal, metric) = rayon::join(
-        || crate::kernels::accumulate(problem, at, |_| (1.0, 0.0), false),
+        || crate::engines::kernels::accumulate(problem, at, |_| (1.0, 0.0), false),
         || match problem.machine() {
             Some(machine) => problem_metric(machine, at),
             None => Mat::from_fn(n, n, |i, j| if i == j { 1.0 } else { 0.0 }),

@@ -40,11 +40,11 @@
 //! # }
 //! ```
 
-use crate::coordinates::Free;
-use crate::lm::irls::Continuation;
-use crate::loss::{cost_and_gradient, cost_of, norms};
+use crate::engines::coordinates::Free;
+use crate::engines::lm::irls::Continuation;
+use crate::engines::loss::{cost_and_gradient, cost_of, norms};
+use crate::engines::run::{Started, begin};
 use crate::options::{Objective, Options};
-use crate::run::{Started, begin};
 use crate::summary::Termination;
 use crate::{Iteration, Observer, Solution, Solver, Task};
 use ::nlopt as nl;
@@ -93,8 +93,8 @@ struct State<'o> {
     gradients: usize,
     best: f64,
     nonfinite: Option<String>,
-    /// Non-finite objective calls, by call number, for [`crate::run::FiniteEdge`].
-    edge: crate::run::FiniteEdge,
+    /// Non-finite objective calls, by call number, for [`crate::engines::run::FiniteEdge`].
+    edge: crate::engines::run::FiniteEdge,
     observer: &'o mut dyn Observer,
 }
 

@@ -6,8 +6,8 @@
 //! Φ fit with it.
 
 use crate::Task;
-use crate::coordinates::Free;
-use crate::loss::{cost_of, norms, weight_of};
+use crate::engines::coordinates::Free;
+use crate::engines::loss::{cost_of, norms, weight_of};
 use crate::options::Objective;
 use faer::{Mat, Side};
 use volver_core::problem::Residuals;
@@ -160,12 +160,12 @@ fn free_coordinates(task: &Task, p: &[f64], scale: Option<&[f64]>) -> Result<Fre
     let (d, ns) = match scale {
         Some(d) => (
             d.to_vec(),
-            crate::coordinates::null_space_scaled_by(d, &task.constraints, p),
+            crate::engines::coordinates::null_space_scaled_by(d, &task.constraints, p),
         ),
         None => {
-            let plain = crate::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)
+            let plain = crate::engines::kernels::accumulate(problem, p, |_| (1.0, 0.0), false)
                 .ok_or(Unsettled::NotFinite)?;
-            crate::coordinates::scaled_null_space(&plain.h, &task.constraints, p)
+            crate::engines::coordinates::scaled_null_space(&plain.h, &task.constraints, p)
         }
     };
     let ns = ns.map_err(|_| Unsettled::Constraints)?;
@@ -271,7 +271,7 @@ impl<'t> Settle<'t> {
     fn step(&mut self) -> Result<Option<SettleStop>, Unsettled> {
         let (problem, objective, eps) = (self.problem, self.objective, self.eps);
         let np = problem.n_points();
-        let normal = crate::kernels::accumulate(
+        let normal = crate::engines::kernels::accumulate(
             problem,
             &self.x,
             |r| weight_of(objective, r, eps, np),
@@ -279,7 +279,7 @@ impl<'t> Settle<'t> {
         )
         .ok_or(Unsettled::NotFinite)?;
         self.report.jacobian_evaluations += 1;
-        let (hz, gz) = crate::coordinates::reduce(
+        let (hz, gz) = crate::engines::coordinates::reduce(
             &self.free.d,
             self.free.ns.basis(),
             &normal.h,
@@ -477,7 +477,7 @@ impl Negligible {
         match problem.machine() {
             Some(machine) => {
                 let model = machine.model();
-                let m = crate::gauge::problem_metric(machine, p);
+                let m = crate::engines::gauge::problem_metric(machine, p);
                 let t = model.tracker_start();
                 let pf: Vec<f64> = (0..n)
                     .map(|j| if (t..t + 6).contains(&j) { 0.0 } else { p[j] })

@@ -3,14 +3,14 @@
 //! parameter correlations, and the combinations of parameters the data cannot separate.
 //!
 //! The analysis works in the scaled, constraint-free coordinates of the engine
-//! ([`crate::lm`]): `p = D (s₀ + N z)` with `D` the inverse column norms of the Jacobian. The
+//! ([`crate::engines::lm`]): `p = D (s₀ + N z)` with `D` the inverse column norms of the Jacobian. The
 //! normal matrix `H_z = Nᵀ D JᵀJ D N` is eigen-decomposed; directions whose curvature is below
 //! `tolerance` × the largest are not identifiable and are reported by the parameters they
 //! move. The covariance of the rest is `σ² H_z⁺` with `σ²` the residual variance per
 //! coordinate, `Σ‖r‖² / (3n − rank)`, mapped back to the parameters.
 
 use crate::Task;
-use crate::coordinates::{Reduced, reduced_normal};
+use crate::engines::coordinates::{Reduced, reduced_normal};
 use faer::Side;
 use volver_core::model::{Constraint, ConstraintKind};
 use volver_core::units::TINY;
@@ -84,10 +84,7 @@ impl Identifiability {
     }
 }
 
-/// The relative curvature of the scaled design below which a direction counts as not
-/// identified by the data: the analyses' default, and the native LM's
-/// ([`crate::lm::LevenbergMarquardt::rank_tolerance`]).
-pub const RANK_TOLERANCE: f64 = 1e-10;
+pub use crate::nullspace::RANK_TOLERANCE;
 
 /// Analyses `task` (its problem and constraints) at `params`. `tolerance` is the relative
 /// curvature below which a direction counts as not identified ([`RANK_TOLERANCE`] by
@@ -270,7 +267,7 @@ fn hold_weak_once<'a>(task: &Task<'a>, params: &[f64], tolerance: f64) -> Option
         .collect();
     // The LM's design: curvatures μ and directions w = S₀ u in z. It steps only in the span of
     // the kept w; holding w_i means holding its coordinate c_i = (S₀⁻¹ u_i)ᵀ z.
-    let (mu, w) = crate::coordinates::design_from_reduced(&hz)?;
+    let (mu, w) = crate::engines::coordinates::design_from_reduced(&hz)?;
     let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
     let counted = task
         .constraints

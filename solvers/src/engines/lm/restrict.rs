@@ -3,8 +3,8 @@
 //! Moré's scaling of the damping.
 
 use super::*;
-use crate::coordinates::{design_from_reduced, reduce};
-use crate::kernels::{Factor, Normal, sandwich};
+use crate::engines::coordinates::{design_from_reduced, reduce};
+use crate::engines::kernels::{Factor, Normal, sandwich};
 
 /// A Jacobian pass restricted to the directions steps may take: the free coordinates' normal
 /// equations, the span of the identifiable design directions and the damping's scaling.
@@ -19,7 +19,7 @@ pub(super) struct Restricted {
     /// `S H_q S` and `S g_q`.
     pub(super) hp: Mat<f64>,
     pub(super) gp: Vec<f64>,
-    /// Least squares: `R_z = R D N`, `R' = R_z Q S` and `c` (see [`crate::kernels::Factor`]).
+    /// Least squares: `R_z = R D N`, `R' = R_z Q S` and `c` (see [`crate::engines::kernels::Factor`]).
     pub(super) factor: Option<(Mat<f64>, Mat<f64>, Vec<f64>)>,
 }
 

@@ -22,8 +22,8 @@
 //! while the rotary-axis errors are identified on another); [`cross_validate`] (the
 //! compensated error of a reference set, with only its tracker pose fitted, table 12).
 
-use crate::gauge::Gauge;
-use crate::init::init_tracker;
+use crate::engines::gauge::Gauge;
+use crate::engines::init::init_tracker;
 use crate::options::Options;
 use crate::summary::{Evaluation, Summary, Termination};
 use crate::{Observer, Solution, Solver, Task, evaluate, same_bits};
@@ -103,7 +103,7 @@ pub struct Strategy {
     /// Start the tracker pose from a rigid best fit ([`init_tracker`]).
     pub init_tracker: bool,
     /// Hold the combinations the design cannot identify by the stated rule of
-    /// [`crate::gauge`] (machine problems only). Without it, their values are wherever the
+    /// [`crate::engines::gauge`] (machine problems only). Without it, their values are wherever the
     /// engine stopped.
     pub gauge: bool,
 }
@@ -142,7 +142,7 @@ pub struct Identification {
     pub gauge_failed: Option<String>,
 }
 
-/// Why [`crate::gauge::gauge`] gave nothing: its pass or its decomposition failed.
+/// Why [`crate::engines::gauge::gauge`] gave nothing: its pass or its decomposition failed.
 pub const GAUGE_FAILED: &str = "the design's information at the reference could not be formed \
     (a Jacobian that is not finite there) or decomposed";
 
@@ -433,7 +433,12 @@ impl<'a, 'p> Run<'a, 'p> {
         {
             self.p.clone_from(&reference);
         }
-        let g = crate::gauge::gauge(task, &reference, &reference, crate::gauge::TOLERANCE);
+        let g = crate::engines::gauge::gauge(
+            task,
+            &reference,
+            &reference,
+            crate::engines::gauge::TOLERANCE,
+        );
         if g.is_none() {
             self.gauge_failed = Some(GAUGE_FAILED.to_string());
         }
@@ -460,7 +465,12 @@ impl<'a, 'p> Run<'a, 'p> {
             |j, info| eligible(model, j, info, errors),
             false,
         );
-        self.gauge = crate::gauge::gauge(&base, &reference, &reference, crate::gauge::TOLERANCE);
+        self.gauge = crate::engines::gauge::gauge(
+            &base,
+            &reference,
+            &reference,
+            crate::engines::gauge::TOLERANCE,
+        );
         match &self.gauge {
             Some(g) => {
                 self.p = g.project(&self.p);
@@ -516,7 +526,7 @@ fn gauge_reference(
 
 /// `sol` (of `task` under the gauge `g`'s constraints) settled on the gauge: moved along the
 /// held combinations onto it (a no-op when the engine kept the constraints) and polished to the
-/// optimum under its constraints ([`crate::polish::settle`]: Newton steps until the gradient, not
+/// optimum under its constraints ([`crate::engines::polish::settle`]: Newton steps until the gradient, not
 /// the cost's rounding, says it is there), so that the result does not depend on where the engine
 /// stopped along the weakly identified directions (not again when the engine polished it under
 /// them itself, [`Summary::polished`]). Its Newton steps and passes are added to the summary.
@@ -534,7 +544,7 @@ fn onto_gauge(task: &Task, g: &Gauge, sol: Solution, options: &Options) -> Solut
         }
         return out;
     }
-    out.params = match crate::polish::settle(
+    out.params = match crate::engines::polish::settle(
         &g.apply(task),
         &projected,
         options.objective,
@@ -611,7 +621,7 @@ pub fn identify(
 pub fn fit(problem: Problem) -> Identification {
     let start = problem.model().initial_params();
     identify(
-        &crate::lm::LevenbergMarquardt::default(),
+        &crate::engines::lm::LevenbergMarquardt::default(),
         problem,
         &start,
         &Strategy::default(),
@@ -743,7 +753,7 @@ pub fn cross_validate(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::lm::LevenbergMarquardt;
+    use crate::engines::lm::LevenbergMarquardt;
     use volver_core::plan::Plan;
     use volver_core::simulate::{Magnitudes, Simulation, Truth};
 
@@ -794,7 +804,7 @@ mod tests {
         let model = Model::default_xcfz();
         let plan = Plan::parse_grid(model.machine(), "X=0:1400:1400,C=0:180:180,Z=0:600:600")
             .expect("a grid");
-        let data = crate::observability::nominal_data(&model, &plan);
+        let data = crate::analysis::observability::nominal_data(&model, &plan);
         let start = model.initial_params();
         let none = Strategy {
             subloops: 0,
@@ -870,7 +880,7 @@ mod tests {
     fn cross_validation_keeps_the_machine_to_the_bit() {
         let model = Model::default_xcfz();
         let plan = Plan::preset(model.machine(), "test3").expect("a preset");
-        let data = crate::observability::nominal_data(&model, &plan);
+        let data = crate::analysis::observability::nominal_data(&model, &plan);
         let mut params = model.initial_params();
         let j = model.param_index("EXX.c1").expect("EXX is modelled");
         params[j] = 0.004;
