@@ -258,20 +258,14 @@ impl Judged<'_> {
     /// The effect parameters beyond `k` times their limit, by group (screw.X.200.a/b,
     /// drift.x/y/z, reflector.R1.x/y/z, …); a rate judged by what it moves over the test's span.
     fn implausible_effects(&self) -> Vec<Implausible> {
-        let Judged {
-            model,
-            params,
-            context,
-            k,
-        } = *self;
         let mut out = Vec::new();
-        for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
+        for (name, value, unit, own) in self.model.effect_sizes(self.params, |_| true) {
             let per_hour = matches!(own, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
-            let over_span = match context.time_span_h {
+            let over_span = match self.context.time_span_h {
                 Some(t) if per_hour && t > 0.0 => RATE_SPAN_H / t,
                 _ => 1.0,
             };
-            let limit = k * limit(own) * own.micro().0 * over_span;
+            let limit = self.k * limit(own) * own.micro().0 * over_span;
             if beyond(value, limit) {
                 out.push(Implausible {
                     name,
