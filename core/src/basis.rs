@@ -361,6 +361,33 @@ pub fn chebyshev_nodes(m: usize) -> Vec<f64> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn basis_errors_say_what_is_wrong() {
+        assert_eq!(
+            Basis::new(BasisKind::Fourier, 0),
+            Err(BasisError::NoHarmonics {
+                kind: BasisKind::Fourier
+            })
+        );
+        let e = Basis::new(BasisKind::Legendre, 40).unwrap_err();
+        assert_eq!(
+            e,
+            BasisError::DegreeTooHigh {
+                kind: BasisKind::Legendre,
+                degree: 40
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "legendre of degree/order 40: at most 32 coefficients are supported"
+        );
+        // 2 · 16 + 1 = 33 coefficients for a Fourier series of order 16.
+        assert_eq!(
+            Basis::new(BasisKind::Fourier, 16).unwrap_err().to_string(),
+            "fourier of degree/order 16 has 33 coefficients; at most 32 are supported"
+        );
+    }
     use super::*;
 
     fn fd_check(b: &Basis, x: f64, coeffs: &[f64]) {

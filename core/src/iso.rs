@@ -421,6 +421,40 @@ mod tests {
     use super::*;
 
     #[test]
+    fn invalid_location_errors_say_what_is_allowed() {
+        let id = ErrorId::Location {
+            component: Axis::X,
+            axis: Axis::Z,
+        };
+        let e = id.validate().unwrap_err();
+        assert!(matches!(
+            e,
+            InvalidErrorId::LinearAxisOffset { axis: Axis::Z, .. }
+        ));
+        assert_eq!(
+            e.to_string(),
+            "X0Z is not an error of linear axis Z: a position offset of a linear axis is absorbed \
+             by the axis offsets; its location errors are the squareness errors A0Z, B0Z"
+        );
+        let roll = ErrorId::Location {
+            component: Axis::C,
+            axis: Axis::Z,
+        };
+        assert!(matches!(
+            roll.validate(),
+            Err(InvalidErrorId::SelfSquareness { .. })
+        ));
+        let along = ErrorId::Location {
+            component: Axis::Z,
+            axis: Axis::C,
+        };
+        assert!(matches!(
+            along.validate(),
+            Err(InvalidErrorId::AlongRotaryAxis { .. })
+        ));
+    }
+
+    #[test]
     fn names_round_trip_with_digit_zero() {
         for s in [
             "EXX", "EYC", "ECZ", "X0C", "Y0C", "A0C", "B0C", "B0Z", "A0Z", "C0Y",

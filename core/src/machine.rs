@@ -755,6 +755,30 @@ mod tests {
     use super::*;
 
     #[test]
+    fn lookups_fail_with_typed_errors() {
+        let m = Machine::default_xcfz();
+        let e = m.axes()[0].position_from_file(-1.0).unwrap_err();
+        assert_eq!((e.lo, e.hi, e.unit, e.axis), (0.0, 1400.0, "mm", Axis::X));
+        assert_eq!(
+            m.reflector_named("R7"),
+            Err(NameError::UnknownReflector {
+                id: "R7".into(),
+                known: vec!["R1".into(), "R2".into()]
+            })
+        );
+        let layout = StationSpec::default_layout(&m, 3, Observes::Range);
+        let multi = m.with_stations(layout).unwrap();
+        assert_eq!(
+            multi.station_named(None),
+            Err(NameError::StationNotGiven { stations: 3 })
+        );
+        assert_eq!(
+            multi.station_named(Some("S9")).unwrap_err().to_string(),
+            "station 'S9' is not in the machine file (known: S1, S2, S3)"
+        );
+    }
+
+    #[test]
     fn default_machine_is_the_paper_grinder() {
         let m = Machine::default_xcfz();
         assert_eq!(m.chain().to_string(), "XCFZ");

@@ -429,6 +429,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn axis_ranges_parse_and_check_their_values() {
+        let r = AxisRange::parse("X=0:10:5").unwrap();
+        assert_eq!((r.axis, r.start, r.end, r.step), (Axis::X, 0.0, 10.0, 5.0));
+        let single = AxisRange::parse(" C = 90 ").unwrap();
+        assert_eq!((single.start, single.end, single.step), (90.0, 90.0, 0.0));
+        assert!(AxisRange::parse("X=1:2").is_err());
+        assert!(AxisRange::parse("Q=1").is_err());
+        let m = Machine::default_xcfz();
+        let c = &m.axes()[1];
+        // Degrees in, radians out.
+        let v = single.checked_values(c).unwrap();
+        assert_eq!(v, vec![90f64.to_radians()]);
+        let beyond = AxisRange::parse("X=0:2000:100").unwrap();
+        let e = beyond.checked_values(&m.axes()[0]).unwrap_err();
+        assert_eq!(e, "axis X: 0..2000 mm leaves the travel range [0, 1400]");
+    }
+
+    #[test]
     fn paper_meshes_have_the_paper_sizes() {
         let m = Machine::default_xcfz();
         let count = |n: &str| Plan::preset(&m, n).unwrap().positions.len();

@@ -164,8 +164,14 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
             unit: "µm",
         });
     }
-    out.extend(implausible_errors(model, params, context, k));
-    out.extend(implausible_effects(model, params, context, k));
+    let judged = Judged {
+        model,
+        params,
+        context,
+        k,
+    };
+    out.extend(judged.implausible_errors());
+    out.extend(judged.implausible_effects());
     if let Some(start) = context.tracker_start {
         out.extend(implausible_tracker_moves(model, params, start));
     }
@@ -173,94 +179,104 @@ pub fn check(model: &Model, params: &[f64], context: &Context) -> Vec<Implausibl
     out
 }
 
-/// The error functions whose peak over the travel (less its expanded uncertainty) is beyond
-/// `k` times its limit (µm, µrad).
-fn implausible_errors(
-    model: &Model,
-    params: &[f64],
-    context: &Context,
+/// The parameters judged, in their model and context, against `k` times the limits.
+struct Judged<'a> {
+    /// The model.
+    model: &'a Model,
+    /// Its parameter values.
+    params: &'a [f64],
+    /// What is known besides them.
+    context: &'a Context<'a>,
+    /// The factor on every limit (10 when relaxed).
     k: f64,
-) -> Vec<Implausible> {
-    let mut out = Vec::new();
-    // Expanded uncertainty (k = 2) of a linear function with gradient g.
-    let expanded = |g: &[(usize, f64)]| -> f64 {
-        context.covariance_factor.map_or(0.0, |f| {
-            2.0 * f
-                .iter()
-                .map(|c| g.iter().map(|&(j, gj)| c[j] * gj).sum::<f64>().powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-    };
-    for t in model.terms() {
-        let ax = &model.machine().axes()[t.axis];
-        let value = |u: f64, p: &[f64]| model.error_value(t.id, u, p).unwrap_or(0.0);
-        let (peak, at) = (0..=64)
-            .map(|i| {
-                let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
-                (value(u, params).abs(), u)
-            })
-            .fold(
-                (0.0, ax.min),
-                |m, x| if x.0 > m.0 || x.0.is_nan() { x } else { m },
-            );
-        let (scale, limit, unit) = if t.id.unit() == Unit::Mm {
-            (UM_PER_MM, k * MAX_TRANSLATION_MM * UM_PER_MM, "µm")
-        } else {
-            (URAD_PER_RAD, k * MAX_ANGLE_RAD * URAD_PER_RAD, "µrad")
-        };
-        // The gradient of the value at its peak (exact for the linear bases).
-        let mut q = params.to_vec();
-        let base = value(at, params);
-        let g: Vec<(usize, f64)> = t
-            .params
-            .clone()
-            .map(|j| {
-                q[j] += 1.0;
-                let d = value(at, &q) - base;
-                q[j] -= 1.0;
-                (j, d)
-            })
-            .collect();
-        let margin = expanded(&g);
-        if beyond((peak - margin) * scale, limit) {
-            out.push(Implausible {
-                name: t.id.to_string(),
-                value: peak * scale,
-                limit,
-                unit,
-            });
-        }
-    }
-    out
 }
 
-/// The effect parameters beyond `k` times their limit, by group (screw.X.200.a/b,
-/// drift.x/y/z, reflector.R1.x/y/z, …); a rate judged by what it moves over the test's span.
-fn implausible_effects(
-    model: &Model,
-    params: &[f64],
-    context: &Context,
-    k: f64,
-) -> Vec<Implausible> {
-    let mut out = Vec::new();
-    for (name, value, unit, own) in model.effect_sizes(params, |_| true) {
-        let per_hour = matches!(own, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
-        let over_span = match context.time_span_h {
-            Some(t) if per_hour && t > 0.0 => RATE_SPAN_H / t,
-            _ => 1.0,
+impl Judged<'_> {
+    /// The error functions whose peak over the travel (less its expanded uncertainty) is beyond
+    /// `k` times its limit (µm, µrad).
+    fn implausible_errors(&self) -> Vec<Implausible> {
+        let Judged {
+            model,
+            params,
+            context,
+            k,
+        } = *self;
+        let mut out = Vec::new();
+        // Expanded uncertainty (k = 2) of a linear function with gradient g.
+        let expanded = |g: &[(usize, f64)]| -> f64 {
+            context.covariance_factor.map_or(0.0, |f| {
+                2.0 * f
+                    .iter()
+                    .map(|c| g.iter().map(|&(j, gj)| c[j] * gj).sum::<f64>().powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
         };
-        let limit = k * limit(own) * own.micro().0 * over_span;
-        if beyond(value, limit) {
-            out.push(Implausible {
-                name,
-                value,
-                limit,
-                unit,
-            });
+        for t in model.terms() {
+            let ax = &model.machine().axes()[t.axis];
+            let value = |u: f64, p: &[f64]| model.error_value(t.id, u, p).unwrap_or(0.0);
+            let (peak, at) = (0..=64)
+                .map(|i| {
+                    let u = ax.min + (ax.max - ax.min) * i as f64 / 64.0;
+                    (value(u, params).abs(), u)
+                })
+                .fold(
+                    (0.0, ax.min),
+                    |m, x| if x.0 > m.0 || x.0.is_nan() { x } else { m },
+                );
+            let (scale, limit, unit) = if t.id.unit() == Unit::Mm {
+                (UM_PER_MM, k * MAX_TRANSLATION_MM * UM_PER_MM, "µm")
+            } else {
+                (URAD_PER_RAD, k * MAX_ANGLE_RAD * URAD_PER_RAD, "µrad")
+            };
+            // The gradient of the value at its peak (exact for the linear bases).
+            let mut q = params.to_vec();
+            let base = value(at, params);
+            let g: Vec<(usize, f64)> = t
+                .params
+                .clone()
+                .map(|j| {
+                    q[j] += 1.0;
+                    let d = value(at, &q) - base;
+                    q[j] -= 1.0;
+                    (j, d)
+                })
+                .collect();
+            let margin = expanded(&g);
+            if beyond((peak - margin) * scale, limit) {
+                out.push(Implausible {
+                    name: t.id.to_string(),
+                    value: peak * scale,
+                    limit,
+                    unit,
+                });
+            }
         }
+        out
     }
-    out
+
+    /// The effect parameters beyond `k` times their limit, by group (screw.X.200.a/b,
+    /// drift.x/y/z, reflector.R1.x/y/z, …); a rate judged by what it moves over the test's span.
+    fn implausible_effects(&self) -> Vec<Implausible> {
+        let mut out = Vec::new();
+        for (name, value, unit, own) in self.model.effect_sizes(self.params, |_| true) {
+            let per_hour = matches!(own, Unit::MmPerHour | Unit::RadPerHour | Unit::PpmPerHour);
+            let over_span = match self.context.time_span_h {
+                Some(t) if per_hour && t > 0.0 => RATE_SPAN_H / t,
+                _ => 1.0,
+            };
+            let limit = self.k * limit(own) * own.micro().0 * over_span;
+            if beyond(value, limit) {
+                out.push(Implausible {
+                    name,
+                    value,
+                    limit,
+                    unit,
+                });
+            }
+        }
+        out
+    }
 }
 
 /// The tracker's moves from `start` (its rigid fit) beyond [`MAX_TRACKER_SHIFT_MM`] or

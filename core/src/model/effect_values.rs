@@ -146,11 +146,11 @@ impl Model {
         params: &[f64],
         at: &mut EffectPoint<S>,
     ) -> S {
-        let t_h = at.t_s / S_PER_H;
         match slot {
             EffectSlot::Drift(_)
             | EffectSlot::LocationDrift { .. }
             | EffectSlot::TrackerDrift(_) => {
+                let t_h = at.t_s / S_PER_H;
                 at.set(j, t_h);
                 S::from(params[j] * t_h)
             }
@@ -181,7 +181,11 @@ impl Model {
                 at.commands[k] * (params[j] * g)
             }
             EffectSlot::StationDrift { station: s, .. } => {
-                let t_h = if s == at.station { t_h } else { 0.0 };
+                let t_h = if s == at.station {
+                    at.t_s / S_PER_H
+                } else {
+                    0.0
+                };
                 at.set(j, t_h);
                 S::from(params[j] * t_h)
             }

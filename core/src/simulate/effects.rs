@@ -616,3 +616,52 @@ impl fmt::Display for Effect {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn effect_arguments_are_read_and_refused_with_their_syntax() {
+        assert_eq!(
+            Effect::parse("thermal-scale=Z,5").unwrap(),
+            Effect::ThermalScale {
+                axis: Axis::Z,
+                ppm_per_h: 5.0
+            }
+        );
+        assert_eq!(
+            Effect::parse("range-scale=2").unwrap(),
+            Effect::RangeScale { ppm: 2.0 }
+        );
+        let e = Effect::parse("coupling=X,Y,Z").unwrap_err().to_string();
+        assert!(
+            e.ends_with("3 values given; expected coupling=AXIS,COMPONENT,BY,AMP_UM"),
+            "{e}"
+        );
+        let e = Effect::parse("ball-screw=Q,10,3").unwrap_err().to_string();
+        assert!(e.contains("'Q' is not an axis letter"), "{e}");
+        let e = Effect::parse("tracker-tilt=1,2e7").unwrap_err().to_string();
+        assert!(e.contains("beyond any machine's error"), "{e}");
+    }
+
+    #[test]
+    fn effects_are_checked_against_the_machine() {
+        let m = Machine::default_xcfz();
+        let rotary_screw = Effect::BallScrew {
+            axis: Axis::C,
+            period_mm: 10.0,
+            amplitude_um: 1.0,
+        };
+        let e = rotary_screw.validate(&m).unwrap_err().to_string();
+        assert!(e.contains("C is not a linear axis of XCFZ"), "{e}");
+        let drift = Effect::StationDrift {
+            station: "S1".into(),
+            rate_um_per_h: [1.0, 0.0, 0.0],
+        };
+        let e = drift.validate(&m).unwrap_err().to_string();
+        assert!(e.contains("has no [[station]] tables"), "{e}");
+        assert!(Effect::RangeScale { ppm: -2e6 }.validate(&m).is_err());
+        assert!(Effect::RangeScale { ppm: 3.0 }.validate(&m).is_ok());
+    }
+}
