@@ -61,7 +61,11 @@ pub fn to_csv(plan: &Plan, machine: &Machine, comment: &str) -> String {
             let v = (ax.to_file_units(c.0[k]) * 1e9).round() / 1e9;
             let _ = write!(out, ",{}", v + 0.0);
         }
-        let _ = writeln!(out, ",{}", machine.reflectors()[s.reflector].id);
+        let _ = writeln!(
+            out,
+            ",{}",
+            csvio::cell(&machine.reflectors()[s.reflector].id)
+        );
     }
     out
 }
