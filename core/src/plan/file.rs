@@ -12,7 +12,8 @@
 //! Columns (comma-separated, any order, names as in measurement files): one per axis of the
 //! machine in file units (mm, degrees; a unit annotation such as `X [mm]` is accepted), the
 //! `reflector` id, and optionally `order` (1, 2, 3 … in the file's row order: a check that rows
-//! were not sorted since they were written). Lines starting with `#` are comments. Rows with the
+//! were not sorted since they were written). Lines starting with `#` are comments, blank lines
+//! are skipped and cells may be quoted (the file is read through [`crate::csvio`]). Rows with the
 //! same axis values are the same pose: the plan's positions are its distinct poses in order of
 //! first appearance. Every error names the file, line and column.
 //!
