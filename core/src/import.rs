@@ -46,6 +46,7 @@ use crate::csvio::{self, Format, Header, Row};
 use crate::error::{Error, Place, Result, from_toml};
 use crate::machine::{Commands, Machine};
 use crate::measure::{Measurement, MeasurementSet, Observation, from_spherical};
+use crate::units::{MM_PER_M, UM_PER_MM};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -168,8 +169,8 @@ impl Profile {
         let c = &spec.coordinates;
         let length_mm = match c.length_unit.as_deref().unwrap_or("mm") {
             "mm" => 1.0,
-            "m" => 1000.0,
-            "um" | "µm" => 1e-3,
+            "m" => MM_PER_M,
+            "um" | "µm" => 1.0 / UM_PER_MM,
             "in" => 25.4,
             u => {
                 return Err(Error::input(

@@ -9,11 +9,14 @@
 //!   interferometer, or a tracker's range): it needs its `station`.
 //!
 //! Optional: `t_s` (seconds since the test started) and `station` (a station id of the machine
-//! file's `[[station]]` tables; without them every row is the tracker's). Column order is free and extra columns are ignored, except a single-letter axis column for
-//! an axis the machine does not have, which is an error. A header may carry its unit in brackets
-//! or parentheses (`C [deg]`, `meas_x (mm)`); a unit other than the one volver reads is refused
-//! ([`crate::csvio::check_unit`]), not converted. Measured coordinates beyond 1 km ([`MAX_COORDINATE_MM`]) are
-//! refused as not being in mm. Every error names the file, the line and the column.
+//! file's `[[station]]` tables; without them every row is the tracker's). Column order is free
+//! and extra columns are ignored, except a single-letter axis column for an axis the machine does
+//! not have, which is an error. A header may carry its unit in brackets or parentheses (`C [deg]`,
+//! `meas_x (mm)`); a unit other than the one volver reads is refused
+//! ([`crate::csvio::check_unit`]), not converted. Measured coordinates beyond 1 km
+//! ([`MAX_COORDINATE_MM`]) are refused as not being in mm. The file is read through
+//! [`crate::csvio`]: cells may be quoted, blank lines are skipped, and every error names the
+//! file, the line and the column.
 //!
 //! ```
 //! use volver_core::machine::Machine;

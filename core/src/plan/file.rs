@@ -12,7 +12,8 @@
 //! Columns (comma-separated, any order, names as in measurement files): one per axis of the
 //! machine in file units (mm, degrees; a unit annotation such as `X [mm]` is accepted), the
 //! `reflector` id, and optionally `order` (1, 2, 3 … in the file's row order: a check that rows
-//! were not sorted since they were written). Lines starting with `#` are comments. Rows with the
+//! were not sorted since they were written). Lines starting with `#` are comments, blank lines
+//! are skipped and cells may be quoted (the file is read through [`crate::csvio`]). Rows with the
 //! same axis values are the same pose: the plan's positions are its distinct poses in order of
 //! first appearance. Every error names the file, line and column.
 //!
@@ -61,7 +62,11 @@ pub fn to_csv(plan: &Plan, machine: &Machine, comment: &str) -> String {
             let v = (ax.to_file_units(c.0[k]) * 1e9).round() / 1e9;
             let _ = write!(out, ",{}", v + 0.0);
         }
-        let _ = writeln!(out, ",{}", machine.reflectors()[s.reflector].id);
+        let _ = writeln!(
+            out,
+            ",{}",
+            csvio::cell(&machine.reflectors()[s.reflector].id)
+        );
     }
     out
 }
