@@ -357,7 +357,7 @@ fn module_graphs(src: &Path) -> BTreeMap<Vec<String>, BTreeMap<String, BTreeSet<
         for mut target in referenced(&kept, &me) {
             // `crate::Name` re-exported by the root names the module it comes from.
             if let Some(m) = target.first().and_then(|n| reexported.get(n))
-                && !paths.contains(&target[..1].to_vec())
+                && !paths.contains(&target[..1])
             {
                 target = vec![m.clone()];
             }
