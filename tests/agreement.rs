@@ -111,6 +111,7 @@ fn objective_of(s: &Solution, objective: Objective) -> f64 {
     match objective {
         Objective::Phi => s.summary.reached.phi_mm,
         Objective::Ve => s.summary.reached.ve_mm2,
+        o => panic!("objective {o} is not in the agreement suite"),
     }
 }
 
@@ -168,6 +169,7 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
         let projected_start = match objective {
             Objective::Phi => problem.phi(&p0),
             Objective::Ve => problem.ve(&p0),
+            o => panic!("objective {o} is not in the agreement suite"),
         };
         let best_res = problem.residuals(&best.params);
         println!("  best: {best_name} {best_value:.12e}");
@@ -304,11 +306,13 @@ fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, 
         (true, _) => 0.0,
         (false, Objective::Phi) => tol.floor * c.initial,
         (false, Objective::Ve) => tol.floor * tol.floor * c.initial,
+        (false, o) => panic!("objective {o} is not in the agreement suite"),
     };
     let rel = match c.objective {
         Objective::Phi if c.scalar => tol.phi_scalar,
         Objective::Phi => tol.phi,
         Objective::Ve => tol.ve,
+        o => panic!("objective {o} is not in the agreement suite"),
     };
     check!(
         errors,
@@ -385,6 +389,7 @@ fn objective_of_initial(s: &Solution, objective: Objective) -> f64 {
     match objective {
         Objective::Phi => s.summary.initial.phi_mm,
         Objective::Ve => s.summary.initial.ve_mm2,
+        o => panic!("objective {o} is not in the agreement suite"),
     }
 }
 

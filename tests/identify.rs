@@ -657,6 +657,7 @@ fn geodesic_acceleration_reaches_the_same_fit_on_the_machine() {
         let cost = |p: &[f64]| match objective {
             Objective::Phi => problem.phi(p),
             Objective::Ve => problem.ve(p),
+            o => panic!("objective {o} is not in this test"),
         };
         let (a, b) = (cost(&plain.params), cost(&bent.params));
         assert!((a - b).abs() <= 1e-5 * a, "{objective}: {a} vs {b}");

@@ -159,6 +159,7 @@ fn the_design_is_optimal_for_its_criterion() {
             match criterion {
                 Criterion::I | Criterion::V => d.value <= v * 1.001,
                 Criterion::D => d.value >= v - 1e-3,
+                c => panic!("criterion {c:?} is not in this test"),
             }
         };
         let even = vec![points as f64 / n as f64; n];

@@ -459,7 +459,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         &sequence,
         format!(
             "{}-optimal, {} points",
-            criterion_name(request.criterion),
+            request.criterion.letter(),
             request.points
         ),
     );
@@ -590,15 +590,6 @@ fn visits_of(steps: &[Step], counts: &[usize], n_positions: usize) -> Vec<Visit>
         }
     }
     visits
-}
-
-/// The criterion's letter.
-fn criterion_name(c: Criterion) -> &'static str {
-    match c {
-        Criterion::I => "I",
-        Criterion::V => "V",
-        Criterion::D => "D",
-    }
 }
 
 /// The plan's model: the `given` machine with those of the `extra` reflectors that the plan

@@ -125,6 +125,8 @@ pub fn check_fit(
     let spec = match noise {
         NoiseModel::Tracker(n) => Some(n),
         NoiseModel::Residual => model.machine().tracker().noise,
+        // A noise model this check does not know: judged by the repeated points below.
+        _ => None,
     }
     .filter(|n| !n.is_none());
     if let Some(n) = spec

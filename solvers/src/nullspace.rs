@@ -27,6 +27,7 @@ pub const RANK_TOLERANCE: f64 = 1e-10;
 
 /// Why a constraint set cannot be eliminated.
 #[derive(Clone, Debug, thiserror::Error, PartialEq)]
+#[non_exhaustive]
 pub enum ConstraintError {
     /// No parameter vector satisfies every constraint.
     #[error("the constraints contradict each other: the closest point misses them by {residual:e}")]

@@ -8,6 +8,7 @@ use std::fmt;
 /// What is minimised.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
+#[non_exhaustive]
 pub enum Objective {
     /// Φ, the mean error module (eq. 12), the paper's choice: robust to outliers, not a sum of
     /// squares. The native engine minimises it by iteratively reweighted least squares.

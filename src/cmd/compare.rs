@@ -160,6 +160,8 @@ fn print_table(c: &Comparison, gauge: bool) {
         .map(|r| match objective {
             Objective::Phi => r.phi_mm,
             Objective::Ve => r.ve_mm2,
+            // An objective this table has no column for: no best is marked.
+            _ => f64::NAN,
         })
         .fold(f64::INFINITY, f64::min);
     for r in rows {

@@ -43,6 +43,7 @@ use volver_core::problem::{Problem, Residuals, Whitened};
 
 /// What a design minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[non_exhaustive]
 pub enum Criterion {
     /// The mean variance of the tool point over the work volume, after the set-up's transform.
     I,
@@ -51,6 +52,17 @@ pub enum Criterion {
     /// The largest variance of the tool point over the work volume, after the set-up's
     /// transform.
     V,
+}
+
+impl Criterion {
+    /// The criterion's letter (`I`, `V`, `D`), as plans name it.
+    pub fn letter(self) -> &'static str {
+        match self {
+            Criterion::I => "I",
+            Criterion::V => "V",
+            Criterion::D => "D",
+        }
+    }
 }
 
 impl std::str::FromStr for Criterion {

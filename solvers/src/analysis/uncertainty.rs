@@ -46,6 +46,7 @@ pub const K: f64 = 2.0;
 
 /// What the measurement noise is taken to be.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[non_exhaustive]
 pub enum NoiseModel {
     /// The tracker's spherical model, as `simulate --noise`.
     Tracker(TrackerNoise),

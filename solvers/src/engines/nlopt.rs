@@ -56,6 +56,7 @@ use volver_core::units::UM_PER_MM;
 
 /// NLopt algorithms volver offers.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum Algorithm {
     /// `LD_LBFGS`: limited-memory BFGS, in the free coordinates.
     Lbfgs,

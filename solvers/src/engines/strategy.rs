@@ -36,6 +36,7 @@ use volver_core::problem::{Problem, Residuals};
 /// The phase sequences of table 1 and tables 6 and 8.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "kebab-case")]
+#[non_exhaustive]
 pub enum Phasing {
     /// Everything at once.
     #[default]
