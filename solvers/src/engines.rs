@@ -21,3 +21,5 @@ pub mod nlopt;
 pub mod polish;
 pub(crate) mod run;
 pub mod strategy;
+#[cfg(test)]
+pub(crate) mod test_problems;

@@ -1,52 +1,14 @@
 //! [`settle`] on a location problem whose optima are known: the mean (ve) and the median (Φ).
 
 use super::*;
-use std::borrow::Cow;
-use volver_core::model::{Constraint, ConstraintKind, Constraints};
-
-/// One parameter p and observations y_i: residual i is `(p − y_i, 0, 0)`.
-#[derive(Debug)]
-struct Location {
-    y: Vec<f64>,
-}
-
-impl Residuals for Location {
-    fn n_params(&self) -> usize {
-        1
-    }
-
-    fn n_points(&self) -> usize {
-        self.y.len()
-    }
-
-    fn param_names(&self) -> Vec<String> {
-        vec!["p".into()]
-    }
-
-    fn constraints(&self) -> Cow<'_, Constraints> {
-        Cow::Owned(Constraints::default())
-    }
-
-    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
-        [params[0] - self.y[i], 0.0, 0.0]
-    }
-
-    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
-        jac.copy_from_slice(&[1.0, 0.0, 0.0]);
-        self.residual(i, params)
-    }
-
-    fn residual_second_directional(&self, _: usize, _: &[f64], _: &[f64]) -> [f64; 3] {
-        [0.0; 3]
-    }
-
-    fn observation_scale(&self, i: usize) -> f64 {
-        self.y[i].abs()
-    }
-}
+use crate::engines::test_problems::Location;
+use volver_core::model::{Constraint, ConstraintKind};
 
 fn task(y: &[f64]) -> Task<'static> {
-    Task::new(Location { y: y.to_vec() })
+    Task::new(Location {
+        y: y.to_vec(),
+        scalar: false,
+    })
 }
 
 #[test]
