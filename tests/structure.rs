@@ -203,34 +203,6 @@ fn non_test_lines(text: &str) -> usize {
     lines.len() - tests
 }
 
-/// The identifiers that follow `prefix` in `text` (`crate::x`, `crate::{x, y::z}`).
-fn paths_after(text: &str, prefix: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    for (i, _) in text.match_indices(prefix) {
-        let before = text[..i].chars().next_back();
-        if before.is_some_and(|ch| ch.is_alphanumeric() || ch == '_') {
-            continue;
-        }
-        let rest = &text[i + prefix.len()..];
-        if let Some(group) = rest.strip_prefix('{') {
-            let group = &group[..group.find('}').unwrap_or(group.len())];
-            for item in group.split(',') {
-                let item = item.trim();
-                let end = item
-                    .find(|ch: char| !(ch.is_alphanumeric() || ch == '_'))
-                    .unwrap_or(item.len());
-                out.push(item[..end].to_string());
-            }
-        } else {
-            let end = rest
-                .find(|ch: char| !(ch.is_alphanumeric() || ch == '_'))
-                .unwrap_or(rest.len());
-            out.push(rest[..end].to_string());
-        }
-    }
-    out
-}
-
 /// The names the crate root re-exports (`pub use error::{Error, Result};` → `Error` → `error`),
 /// so that `crate::Error` counts as an import of `error`.
 fn reexports(src: &Path) -> BTreeMap<String, String> {
@@ -510,10 +482,6 @@ fn the_checker_finds_a_cycle() {
     assert_eq!(
         cycles(&g),
         vec![vec!["a".to_string(), "b".into(), "c".into()]]
-    );
-    assert_eq!(
-        paths_after("use crate::{x, y::z};\nlet v = crate::w::f();", "crate::"),
-        vec!["x", "y", "w"]
     );
     // A file `a/c.rs` naming its sibling `super::b` and the top-level `crate::d::{e, f}`.
     let me = vec!["a".to_string(), "c".to_string()];
