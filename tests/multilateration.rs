@@ -410,7 +410,7 @@ fn bad_ranges_and_stations_are_refused_with_file_line_and_column() {
             "0,0,0,R1,1500,S1\n0,0,0,R2,1600,\n",
             "in.csv:3",
             "station",
-            "no station given",
+            "a range alone needs the station that measured it",
         ),
         // A station the machine file does not have.
         (

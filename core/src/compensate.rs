@@ -285,6 +285,16 @@ impl<'a> Compensator<'a> {
         self.model.tool_point(&commands.0, &self.tool, self.params)
     }
 
+    /// The model whose errors it compensates.
+    pub fn model(&self) -> &Model {
+        self.model
+    }
+
+    /// The tool point it compensates (mm, frame of the last tool-side axis).
+    pub fn tool(&self) -> [f64; 3] {
+        self.tool
+    }
+
     /// The tool's axis when its direction is compensated (unit, frame of the last tool-side
     /// axis).
     pub fn tool_axis(&self) -> Option<[f64; 3]> {

@@ -288,16 +288,23 @@ impl ResultsFile {
             values.push(rec.value);
         }
         if let Some(u) = &self.uncertainty {
-            check_uncertainty(u, model.n_params(), file)?;
+            u.check(model.n_params(), file)?;
         }
         Ok((model, values))
     }
 }
 
-/// Checks a results file's covariance record against a model of `n` parameters: finite columns
-/// of `n` values, at most `n` of them, at least one data column that is not zero (an emptied
-/// record would read as "U 0"; without the record the U is honestly unknown), a non-negative σ
-/// and held prior, and one name per held combination.
+impl UncertaintyRecord {
+    /// Checks the record against a model of `n` parameters (`file` names where it comes from in
+    /// the errors): finite columns of `n` values, at most `n` of them, at least one data column
+    /// that is not zero (an emptied record would read as "U 0"; without the record the U is
+    /// honestly unknown), a non-negative σ and held prior, and one name per held combination.
+    pub fn check(&self, n: usize, file: &str) -> Result<()> {
+        check_uncertainty(self, n, file)
+    }
+}
+
+/// [`UncertaintyRecord::check`].
 fn check_uncertainty(u: &UncertaintyRecord, n: usize, file: &str) -> Result<()> {
     let at = |field: &str| Place::file(file).at_field(format!("uncertainty.{field}"));
     for (field, v) in [("sigma_mm", u.sigma_mm), ("held_prior_mm", u.held_prior_mm)] {

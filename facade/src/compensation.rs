@@ -553,6 +553,47 @@ pub struct ToolPointU {
     pub why: String,
 }
 
+/// The record's rule for what the data do not determine, in words.
+fn gauge_words(record: &UncertaintyRecord) -> String {
+    if record.gauge.starts_with("none") {
+        record.gauge.clone()
+    } else if record.held_factor.is_empty() {
+        // A rule that leaves no combination to a separate prior: the priors of
+        // `identify --prior` (maximum a posteriori), stated as recorded.
+        record.gauge.split(':').next().unwrap_or("").to_string()
+    } else {
+        format!(
+            "held combinations at the reference, a prior of {:.0} µm RMS each",
+            record.held_prior_mm * UM_PER_MM
+        )
+    }
+}
+
+/// Refuses parameters that are not the model's (their count, a value not finite) and a tool
+/// point that is not three finite numbers.
+fn check_inputs(model: &Model, params: &[f64], tool: [f64; 3]) -> Result<()> {
+    if params.len() != model.n_params() {
+        return Err(Error::Mismatch(format!(
+            "{} parameter values for a model of {} parameters",
+            params.len(),
+            model.n_params()
+        )));
+    }
+    if let Some(j) = params.iter().position(|v| !v.is_finite()) {
+        return Err(Error::Request(format!(
+            "parameter {} is {}: the errors must be finite",
+            model.params()[j].name,
+            params[j]
+        )));
+    }
+    if !tool.iter().all(|c| c.is_finite()) {
+        return Err(Error::Request(format!(
+            "tool point {tool:?} mm: three finite numbers"
+        )));
+    }
+    Ok(())
+}
+
 /// The U of the compensated tool point `tool` of `model` at `params` (see [`ToolPointU`]).
 pub fn tool_point_u(
     model: &Model,
@@ -561,6 +602,8 @@ pub fn tool_point_u(
     tool: [f64; 3],
 ) -> Result<ToolPointU> {
     use volver_solvers::uncertainty::{Covariance, ToolGrid};
+    check_inputs(model, params, tool)?;
+    record.check(model.n_params(), "the uncertainty record")?;
     let cov = Covariance::from_record(record, model.n_params());
     let plan = crate::shared::default_grid(model.machine(), 5)?;
     let grid = ToolGrid {
@@ -577,18 +620,18 @@ pub fn tool_point_u(
     };
     let (ua, ia) = worst(&aligned);
     let (ur, _) = worst(&raw);
-    let gauge = if record.gauge.starts_with("none") {
-        record.gauge.clone()
-    } else if record.held_factor.is_empty() {
-        // A rule that leaves no combination to a separate prior: the priors of
-        // `identify --prior` (maximum a posteriori), stated as recorded.
-        record.gauge.split(':').next().unwrap_or("").to_string()
-    } else {
-        format!(
-            "held combinations at the reference, a prior of {:.0} µm RMS each",
-            record.held_prior_mm * UM_PER_MM
-        )
-    };
+    if aligned
+        .iter()
+        .chain(&raw)
+        .any(|u| !u.u95_max_mm().is_finite())
+    {
+        return Err(Error::Singular(
+            "the U of the compensated tool point is not finite at some command of the travel \
+             (a parameter or the record holds values the model cannot evaluate)"
+                .into(),
+        ));
+    }
+    let gauge = gauge_words(record);
     let held = aligned[ia]
         .worst_held
         .and_then(|c| record.held.get(c))

@@ -51,7 +51,7 @@ pub enum Error {
     Json(#[from] serde_json::Error),
     /// A request that cannot be served as asked: an option out of its range, options that
     /// exclude each other, a name that is none of the choices. The text names the option
-    /// (`--monte-carlo 1: give 2 … 500 replicas …`).
+    /// (`--monte-carlo 1: give 2 … 100000 replicas …`).
     #[error("{0}")]
     Request(String),
     /// Inputs that do not belong together: a truth for another machine, a candidate that the

@@ -1,7 +1,9 @@
 //! # volver
 //!
 //! Volumetric verification of multi-axis machine tools with a laser tracker. This crate is the
-//! facade over the workspace and the home of the `volver` command-line tool.
+//! library: the facade over the workspace and the workflows every `volver` subcommand calls
+//! (the command-line tool itself is the `volver-cli` package). Its functions return the typed
+//! [`Error`].
 //!
 //! - [`core`] (`volver-core`): machines, the ISO 230 errors, bases, error models, the forward
 //!   model and its exact Jacobian, measurement and results files;

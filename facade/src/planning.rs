@@ -149,10 +149,16 @@ fn with_reflectors(model: &Model, extra: &[ReflectorSpec]) -> Result<Model> {
         return Ok(model.clone());
     }
     let mut spec = model.machine().spec().clone();
+    let machines = spec.reflectors.len();
     for r in extra {
-        if spec.reflectors.iter().any(|x| x.id == r.id) {
+        if let Some(k) = spec.reflectors.iter().position(|x| x.id == r.id) {
+            let whose = if k < machines {
+                "one of the machine's reflectors"
+            } else {
+                "another candidate reflector"
+            };
             return Err(Error::Mismatch(format!(
-                "candidate reflector '{}' has the id of one of the machine's reflectors",
+                "candidate reflector '{}' has the id of {whose}",
                 r.id
             )));
         }
@@ -342,7 +348,7 @@ impl Request {
     /// positions per axis (one measures no error of an axis: the design's ratio went to 3e9),
     /// visits of the reference pose that leave room for the design, a positive measuring time
     /// per point, a finite tool offset and a tracker noise (without it every design is equally
-    /// good). [`plan`] calls it first.
+    /// good), at least one iteration of the design. [`plan`] calls it first.
     ///
     /// ```
     /// use volver::planning::Request;
@@ -381,6 +387,11 @@ impl Request {
                 self.tool
             )));
         }
+        if self.iterations == 0 {
+            return Err(Error::Request(
+                "0 iterations of the design algorithm: at least 1".into(),
+            ));
+        }
         if self.noise.is_none() {
             return Err(Error::Request(
                 "planning needs the tracker's noise (--noise or the machine file's [tracker] \
@@ -401,12 +412,17 @@ impl Request {
     /// ```
     pub fn points_for_hours(hours: f64, seconds_per_point: f64, stations: usize) -> Result<usize> {
         check_seconds_per_point(seconds_per_point)?;
+        if stations == 0 {
+            return Err(Error::Request(
+                "0 stations: a plan is measured by one station at least".into(),
+            ));
+        }
         if !(hours.is_finite() && hours > 0.0) {
             return Err(Error::Request(format!(
                 "--hours {hours}: a positive number of hours"
             )));
         }
-        Ok((hours * S_PER_H / seconds_per_point / stations.max(1) as f64) as usize)
+        Ok((hours * S_PER_H / seconds_per_point / stations as f64) as usize)
     }
 }
 

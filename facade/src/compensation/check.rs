@@ -159,6 +159,7 @@ pub fn check_on_truth(
     truth: &Compensator,
     grid: &[Commands],
 ) -> Result<TruthCheck> {
+    check_pair(comp, truth, grid)?;
     let mut g = Gathered::default();
     for programmed in grid {
         g.add(comp, truth, programmed)?;
@@ -181,6 +182,43 @@ pub fn check_on_truth(
         outside_travel: g.outside,
         near_singularity: g.singular,
     })
+}
+
+/// Refuses a check that could only give meaningless numbers: an empty grid, a truth of another
+/// machine (another chain or other axes), another tool point or tool axis, or a grid command
+/// outside the machine's axes (non-zero beyond its last axis).
+fn check_pair(comp: &Compensator, truth: &Compensator, grid: &[Commands]) -> Result<()> {
+    if grid.is_empty() {
+        return Err(Error::Request(
+            "an empty grid: a compensation is checked at one command at least".into(),
+        ));
+    }
+    let (m, t) = (comp.model().machine(), truth.model().machine());
+    if m.chain() != t.chain() || m.axes().len() != t.axes().len() {
+        return Err(Error::Mismatch(format!(
+            "the truth's machine has chain {}, the compensated one {}",
+            t.chain(),
+            m.chain()
+        )));
+    }
+    if comp.tool() != truth.tool() || comp.tool_axis() != truth.tool_axis() {
+        return Err(Error::Mismatch(format!(
+            "the truth is checked at tool point {:?} mm (axis {:?}), the compensation is for \
+             {:?} mm (axis {:?}): give both the same",
+            truth.tool(),
+            truth.tool_axis(),
+            comp.tool(),
+            comp.tool_axis()
+        )));
+    }
+    let n = m.axes().len();
+    if let Some(q) = grid.iter().find(|q| q.0[n..].iter().any(|v| *v != 0.0)) {
+        return Err(Error::Mismatch(format!(
+            "grid command {:?} has values beyond the machine's {n} axes: a grid of another machine",
+            q.0
+        )));
+    }
+    Ok(())
 }
 
 /// A grid over the travel for checking a compensation: `per_axis` positions per linear axis

@@ -57,7 +57,9 @@ impl Vouch {
 /// exceeds `max_u_um`, with the held combination that makes it and the measurement that would
 /// identify it; refused as well when the record says the fit was above the noise, where no
 /// interval holds, or when there is no record (a simulation's truth, a file edited by hand):
-/// nothing then vouches for the errors. The U is not computed without a record.
+/// nothing then vouches for the errors. The U is not computed without a record. An error, not a
+/// refusal: a `max_u_um` that is not a positive length, parameters that are not the model's, a
+/// tool point or a U that is not finite, a record of another model.
 ///
 /// ```
 /// use volver::compensation::{Statement, vouch};
@@ -74,6 +76,7 @@ pub fn vouch(
     tool: [f64; 3],
     max_u_um: f64,
 ) -> Result<Vouch> {
+    super::check_max_u(max_u_um)?;
     let mut statements = Vec::new();
     let Some(record) = record else {
         statements.push(Statement::Refusal {
