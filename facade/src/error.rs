@@ -18,8 +18,6 @@
 //! assert!(matches!(e.root(), Error::Core(volver::core::Error::Io { .. })));
 //! ```
 
-use std::path::PathBuf;
-
 /// The result of the library's workflows.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -35,14 +33,6 @@ pub enum Error {
     /// engine, a decomposition that failed.
     #[error(transparent)]
     Solver(#[from] volver_solvers::Error),
-    /// A file that could not be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The operating-system error.
-        source: std::io::Error,
-    },
     /// An operating-system error whose file is named by the [`Error::Context`] around it.
     #[error(transparent)]
     Os(#[from] std::io::Error),
@@ -119,10 +109,4 @@ impl<T, E: Into<Error>> Context<T> for std::result::Result<T, E> {
     fn with_context<C: Into<String>>(self, f: impl FnOnce() -> C) -> Result<T> {
         self.map_err(|e| e.into().context(f()))
     }
-}
-
-/// An I/O error on `path` as an [`Error::Io`].
-pub fn io(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Error {
-    let path = path.into();
-    move |source| Error::Io { path, source }
 }

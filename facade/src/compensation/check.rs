@@ -99,11 +99,14 @@ impl Gathered {
         Ok(())
     }
 
-    /// The direction check after the set-up's turn `r` (none without directions).
-    fn direction(&self, r: &[[f64; 3]; 3]) -> Option<DirectionCheck> {
+    /// The direction check after the set-up's turn (the rigid fit of the compensated tool
+    /// points onto their targets); none without directions.
+    fn direction(&self) -> Option<DirectionCheck> {
         if self.dirs.is_empty() {
             return None;
         }
+        let (a, b): (Vec<_>, Vec<_>) = self.after.iter().copied().unzip();
+        let (r, _) = rigid_fit(&a, &b);
         let dir_rigid: Vec<f64> = self
             .dirs
             .iter()
@@ -169,13 +172,12 @@ pub fn check_on_truth(
     // transform onto their targets (a constant shift and turn of the tool relative to the table
     // is taken up when the workpiece is set up and probed); the turn applies to the directions.
     let rigid = ErrorStats::after_rigid(&a, &b);
-    let (r, _) = rigid_fit(&a, &b);
     Ok(TruthCheck {
         grid: grid.to_vec(),
         before: stats(&g.before),
         after: stats(&g.after),
         rigid,
-        direction: g.direction(&r),
+        direction: g.direction(),
         worst_deviation_mm: g.worst,
         worst_direction_rad: g.worst_rad,
         worst_singular_rad: g.worst_singular_rad,
