@@ -239,7 +239,7 @@ fn tracker_on_the_frame() {
 #[test]
 fn whitened_residuals() {
     use volver::core::noise::TrackerNoise;
-    use volver::core::problem::{Problem, Residuals, Whitened};
+    use volver::core::problem::{Problem, Residuals};
     let m = Machine::default_xcfz();
     let model = Model::default_xcfz();
     let truth = volver::core::simulate::Truth::random_complete(
@@ -255,7 +255,7 @@ fn whitened_residuals() {
         .measurements;
     let problem = Problem::new(&model, &data).unwrap();
     let noise = TrackerNoise::from_text("normal:10,20,2,0.5").unwrap();
-    let w = Whitened::new(problem, &noise).unwrap();
+    let w = problem.whitened(Some(&noise)).unwrap();
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let p = random_params(&model, &mut rng);
     let n = model.n_params();
@@ -264,7 +264,7 @@ fn whitened_residuals() {
     let mut raw = vec![0.0; 3 * n];
     for i in (0..w.n_points()).step_by(97) {
         w.residual_and_jacobian(i, &p, &mut jac);
-        w.problem().residual_and_jacobian(i, &p, &mut raw);
+        w.plain().residual_and_jacobian(i, &p, &mut raw);
         // The whitening mixes the three rows: differences are judged against the column's
         // size times the whitening's gain (1e-6 relative, as the raw Jacobian's test).
         let rows = noise.whitening(data.points[i].measured).unwrap();

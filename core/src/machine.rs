@@ -576,6 +576,30 @@ impl Machine {
         &self.stations
     }
 
+    /// The noise station `k`'s own `[[station]]` table states; `None` when it states none (or
+    /// the machine has no `[[station]]` tables): the tracker's default noise — the `[tracker]`
+    /// table's or `--noise` — is then the station's.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// let m = Machine::default_xcfz();
+    /// assert_eq!(m.station_own_noise(0), None);
+    /// ```
+    pub fn station_own_noise(&self, k: usize) -> Option<crate::noise::TrackerNoise> {
+        let stated = self.spec.stations.get(k)?.noise.is_some();
+        stated.then(|| self.stations.get(k)?.setup.noise).flatten()
+    }
+
+    /// Station `k`'s noise: its own ([`Machine::station_own_noise`]), else `default` (the
+    /// tracker's: the `[tracker]` table's or `--noise`).
+    pub fn station_noise_or(
+        &self,
+        k: usize,
+        default: crate::noise::TrackerNoise,
+    ) -> crate::noise::TrackerNoise {
+        self.station_own_noise(k).unwrap_or(default)
+    }
+
     /// Whether the machine file gives `[[station]]` tables (measurements then name their
     /// station).
     pub fn has_stations(&self) -> bool {

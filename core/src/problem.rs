@@ -27,6 +27,7 @@ use crate::error::{Error, Result};
 use crate::measure::MeasurementSet;
 use crate::metrics::ErrorStats;
 use crate::model::{Constraints, Model, Regressors};
+use crate::noise::TrackerNoise;
 use std::borrow::Cow;
 
 /// Residuals an engine can minimise: `n_points` 3-vectors that depend on `n_params`
@@ -79,6 +80,13 @@ pub trait Residuals: Send + Sync + std::fmt::Debug {
     /// range alone): its curvature in Φ's smoothed objective is all radial, ε²/(r² + ε²)^³ᐟ²,
     /// which the native LM reaches by continuation in ε. `false` by default.
     fn scalar(&self, _i: usize) -> bool {
+        false
+    }
+
+    /// Whether the residuals are in units of the measuring noise ([`Problem::whitened`]): what
+    /// the noise-weighted objectives (maximum likelihood, whitened Φ) minimise. `false` by
+    /// default.
+    fn whitened(&self) -> bool {
         false
     }
 
@@ -136,6 +144,17 @@ pub struct Problem<'a> {
     model: &'a Model,
     data: &'a MeasurementSet,
     regressors: std::sync::Arc<Regressors>,
+    /// The whitening of every point's residual, when the problem is whitened
+    /// ([`Problem::whitened`]).
+    weights: Option<std::sync::Arc<Weights>>,
+}
+
+/// The whitening of a problem's residuals: one 3 × 3 matrix per point and the tracker's default
+/// noise it was formed with.
+#[derive(Debug)]
+struct Weights {
+    noise: Option<TrackerNoise>,
+    rows: Vec<[[f64; 3]; 3]>,
 }
 
 impl<'a> Problem<'a> {
@@ -184,7 +203,129 @@ impl<'a> Problem<'a> {
             model,
             data,
             regressors,
+            weights: None,
         })
+    }
+
+    /// The same problem with its residuals in units of the measuring noise: each point's
+    /// residual and Jacobian rows multiplied by the whitening of its station's noise at the
+    /// measured point ([`TrackerNoise::whitening`]; a range by `1/σ` of its range), so that a
+    /// least-squares fit weighs every point and direction by its noise — the maximum-likelihood
+    /// estimate under normal noise — and Φ of these residuals is the mean Mahalanobis distance.
+    /// Φ and ve of the whitened residuals are dimensionless.
+    ///
+    /// A station's noise is the one its own `[[station]]` table states
+    /// ([`crate::machine::Machine::station_own_noise`]), else `default` (the tracker's: the
+    /// `[tracker]` table's or `--noise`). `Err` names the station without any, or a noise-free
+    /// one (which weighs nothing).
+    ///
+    /// ```
+    /// use volver_core::model::Model;
+    /// use volver_core::noise::TrackerNoise;
+    /// use volver_core::problem::{Problem, Residuals};
+    /// let model = Model::default_xcfz();
+    /// let data = volver_core::measure::MeasurementSet::from_csv_str(
+    ///     model.machine(),
+    ///     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.01,75,1450\n",
+    ///     "inline.csv",
+    /// ).unwrap();
+    /// let problem = Problem::new(&model, &data).unwrap();
+    /// let noise = TrackerNoise::from_text("normal:10,10,2,0").unwrap();
+    /// let w = problem.whitened(Some(&noise)).unwrap();
+    /// let (p, r) = (model.initial_params(), problem.residual(0, &model.initial_params()));
+    /// let (rw, axes) = (w.residual(0, &p), noise.axes(data.points[0].measured));
+    /// for k in 0..3 {
+    ///     let along = (0..3).map(|c| axes[k].0[c] * r[c]).sum::<f64>();
+    ///     assert!((rw[k] - along / axes[k].1).abs() < 1e-9);
+    /// }
+    /// assert!(w.is_whitened() && !w.plain().is_whitened());
+    /// assert!(problem.whitened(None).is_err()); // no noise stated anywhere
+    /// ```
+    pub fn whitened(&self, default: Option<&TrackerNoise>) -> Result<Problem<'a>> {
+        let machine = self.model.machine();
+        let mut noises = Vec::with_capacity(machine.stations().len());
+        for (k, st) in machine.stations().iter().enumerate() {
+            let noise = machine.station_own_noise(k).or(default.copied());
+            let named = || match st.id.as_str() {
+                "" => "the tracker".to_string(),
+                id => format!("station '{id}'"),
+            };
+            match noise {
+                Some(n) if !n.is_none() => noises.push(n),
+                Some(_) => {
+                    return Err(Error::InvalidOption {
+                        name: "noise",
+                        message: format!(
+                            "{} is noise-free: a noise-weighted fit needs its noise (σ > 0)",
+                            named()
+                        ),
+                    });
+                }
+                None => {
+                    return Err(Error::InvalidOption {
+                        name: "noise",
+                        message: format!(
+                            "{} has no stated noise: a noise-weighted fit (objective ml or \
+                             phi-w) needs it: give --noise, the machine file's [tracker] noise \
+                             or the station's own noise",
+                            named()
+                        ),
+                    });
+                }
+            }
+        }
+        let rows = self
+            .data
+            .points
+            .iter()
+            .map(|p| noises[p.station_index].whitening(p.measured))
+            .collect::<Option<Vec<_>>>()
+            .ok_or_else(|| Error::NonFinite {
+                message: "the noise's whitening is not finite at a measured point".into(),
+            })?;
+        Ok(Problem {
+            weights: Some(std::sync::Arc::new(Weights {
+                noise: default.copied(),
+                rows,
+            })),
+            ..self.clone()
+        })
+    }
+
+    /// The problem without its whitening (itself when it has none): residuals in mm.
+    pub fn plain(&self) -> Problem<'a> {
+        Problem {
+            weights: None,
+            ..self.clone()
+        }
+    }
+
+    /// Whether the residuals are whitened ([`Problem::whitened`]).
+    pub fn is_whitened(&self) -> bool {
+        self.weights.is_some()
+    }
+
+    /// The tracker's default noise the problem was whitened with (`None`: plain, or every
+    /// station states its own).
+    pub fn noise(&self) -> Option<&TrackerNoise> {
+        self.weights.as_ref().and_then(|w| w.noise.as_ref())
+    }
+
+    /// The whitening `W_i` of point `i` (row-major; the identity when the problem is plain).
+    pub fn whitening_of(&self, i: usize) -> [[f64; 3]; 3] {
+        match &self.weights {
+            Some(w) => w.rows[i],
+            None => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        }
+    }
+
+    /// `W_i v`: the whitening of point `i` applied to `v` (mm); `v` itself when the problem is
+    /// plain.
+    pub fn whiten(&self, i: usize, v: [f64; 3]) -> [f64; 3] {
+        match &self.weights {
+            Some(w) => w.rows[i].map(|row| row[0] * v[0] + row[1] * v[1] + row[2] * v[2]),
+            None => v,
+        }
     }
 
     /// Checks that the measured points have the size the machine gives them, which catches a
@@ -358,10 +499,11 @@ impl Residuals for Problem<'_> {
 
     fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
         let m = &self.data.points[i];
-        minus(
+        let r = minus(
             self.model.observe_cached(&self.regressors, i, m, params),
             m.measured,
-        )
+        );
+        self.whiten(i, r)
     }
 
     fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
@@ -369,16 +511,29 @@ impl Residuals for Problem<'_> {
         let x = self
             .model
             .observe_with_jacobian_cached(&self.regressors, i, m, params, jac);
-        minus(x, m.measured)
+        if let Some(w) = &self.weights {
+            whiten_rows(&w.rows[i], jac);
+        }
+        self.whiten(i, minus(x, m.measured))
     }
 
     fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
-        self.model
-            .observe_second_directional(&self.data.points[i], params, dir)
+        let d = self
+            .model
+            .observe_second_directional(&self.data.points[i], params, dir);
+        self.whiten(i, d)
     }
 
     fn observation_scale(&self, i: usize) -> f64 {
-        norm(self.data.points[i].measured)
+        let gain = match &self.weights {
+            Some(w) => w.rows[i].iter().map(|row| norm(*row)).fold(0.0, f64::max),
+            None => 1.0,
+        };
+        norm(self.data.points[i].measured) * gain
+    }
+
+    fn whitened(&self) -> bool {
+        self.is_whitened()
     }
 
     fn scalar(&self, i: usize) -> bool {
@@ -390,118 +545,14 @@ impl Residuals for Problem<'_> {
     }
 }
 
-/// A machine problem's residuals in units of its tracker's noise: each residual and its
-/// Jacobian rows multiplied by the whitening of the noise at the measured point
-/// ([`crate::noise::TrackerNoise::whitening`]), so that a least-squares fit weighs every point and
-/// direction by its noise (angular noise grows with the distance). Φ and ve of these residuals
-/// are dimensionless.
-///
-/// ```
-/// use volver_core::model::Model;
-/// use volver_core::noise::TrackerNoise;
-/// use volver_core::problem::{Problem, Residuals, Whitened};
-/// let model = Model::default_xcfz();
-/// let data = volver_core::measure::MeasurementSet::from_csv_str(
-///     model.machine(),
-///     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.01,75,1450\n",
-///     "inline.csv",
-/// ).unwrap();
-/// let problem = Problem::new(&model, &data).unwrap();
-/// let noise = TrackerNoise::from_text("normal:10,10,2,0").unwrap();
-/// let w = Whitened::new(problem.clone(), &noise).unwrap();
-/// let (p, r) = (model.initial_params(), problem.residual(0, &model.initial_params()));
-/// let (rw, axes) = (w.residual(0, &p), noise.axes(data.points[0].measured));
-/// for k in 0..3 {
-///     let along = (0..3).map(|c| axes[k].0[c] * r[c]).sum::<f64>();
-///     assert!((rw[k] - along / axes[k].1).abs() < 1e-9);
-/// }
-/// ```
-#[derive(Clone, Debug)]
-pub struct Whitened<'a> {
-    problem: Problem<'a>,
-    noise: crate::noise::TrackerNoise,
-    rows: std::sync::Arc<Vec<[[f64; 3]; 3]>>,
-}
-
-impl<'a> Whitened<'a> {
-    /// The whitened residuals of `problem` under the tracker noise `noise`; `None` for a
-    /// noise-free tracker.
-    pub fn new(problem: Problem<'a>, noise: &crate::noise::TrackerNoise) -> Option<Whitened<'a>> {
-        let rows = problem
-            .data()
-            .points
-            .iter()
-            .map(|p| noise.whitening(p.measured))
-            .collect::<Option<Vec<_>>>()?;
-        Some(Whitened {
-            problem,
-            noise: *noise,
-            rows: std::sync::Arc::new(rows),
-        })
-    }
-
-    /// The problem whose residuals these are.
-    pub fn problem(&self) -> &Problem<'a> {
-        &self.problem
-    }
-
-    /// The noise they are whitened by.
-    pub fn noise(&self) -> &crate::noise::TrackerNoise {
-        &self.noise
-    }
-
-    /// `W_i v` for point `i`.
-    pub fn apply(&self, i: usize, v: [f64; 3]) -> [f64; 3] {
-        self.rows[i].map(|w| w[0] * v[0] + w[1] * v[1] + w[2] * v[2])
-    }
-}
-
-impl Residuals for Whitened<'_> {
-    fn n_params(&self) -> usize {
-        self.problem.n_params()
-    }
-
-    fn n_points(&self) -> usize {
-        self.problem.n_points()
-    }
-
-    fn param_names(&self) -> Vec<String> {
-        self.problem.param_names()
-    }
-
-    fn constraints(&self) -> Cow<'_, Constraints> {
-        self.problem.constraints()
-    }
-
-    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
-        self.apply(i, self.problem.residual(i, params))
-    }
-
-    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
-        let r = self.problem.residual_and_jacobian(i, params, jac);
-        let n = self.n_params();
-        let w = &self.rows[i];
-        for j in 0..n {
-            let col = [jac[j], jac[n + j], jac[2 * n + j]];
-            for (c, row) in w.iter().enumerate() {
-                jac[c * n + j] = row[0] * col[0] + row[1] * col[1] + row[2] * col[2];
-            }
+/// `jac` (row-major 3 × n) replaced by `w · jac`.
+fn whiten_rows(w: &[[f64; 3]; 3], jac: &mut [f64]) {
+    let n = jac.len() / 3;
+    for j in 0..n {
+        let col = [jac[j], jac[n + j], jac[2 * n + j]];
+        for (c, row) in w.iter().enumerate() {
+            jac[c * n + j] = row[0] * col[0] + row[1] * col[1] + row[2] * col[2];
         }
-        self.apply(i, r)
-    }
-
-    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
-        self.apply(i, self.problem.residual_second_directional(i, params, dir))
-    }
-
-    fn scalar(&self, i: usize) -> bool {
-        self.problem.scalar(i)
-    }
-
-    fn observation_scale(&self, i: usize) -> f64 {
-        let w = &self.rows[i];
-        let gain = w.iter().map(|row| norm(*row)).fold(0.0, f64::max);
-        self.problem.observation_scale(i) * gain
     }
 }
 

@@ -317,15 +317,20 @@ pub fn identify(
     };
     let observability =
         volver_solvers::observability::observe(model, data, &model.initial_params());
+    let fitted = fitted_problem(&problem, options.objective, settings.noise)?;
     let mut id = volver_solvers::strategy::identify(
         solver.as_ref(),
-        problem.clone(),
+        fitted.clone(),
         &model.initial_params(),
         &strategy,
         options,
         observer,
     );
     let (covariance, rule) = uncertainty_of(&problem, &mut id, settings)?;
+    if settings.priors.is_some() && fitted.is_whitened() {
+        // The posterior's evaluation with the whitened objective's value too.
+        id.reached = volver_solvers::evaluate(&fitted, &id.params);
+    }
     let mut results = ResultsFile::from_model(model, &id.params)?;
     results.time_origin_s = model.needs_time().then_some(data.time_origin_s);
     if let Some(cov) = &covariance {
@@ -368,6 +373,43 @@ pub fn identify(
         with_priors: settings.priors.is_some(),
         id,
     })
+}
+
+/// The residuals the estimator of `objective` weighs: `problem`'s own (mm) for Φ and ve,
+/// whitened by each station's noise for ml and phi-w — its own noise where the machine file
+/// states one, else `noise` (`--noise` or the `[tracker]` table's); `Err` names a station
+/// without any.
+///
+/// ```
+/// # use volver::core::{measure::MeasurementSet, model::Model, noise::TrackerNoise, problem::Problem};
+/// # use volver::solvers::{Objective, uncertainty::NoiseModel};
+/// let model = Model::default_xcfz();
+/// let csv = "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950.003,75.004,1450\n";
+/// let data = MeasurementSet::from_csv_str(model.machine(), csv, "inline.csv").unwrap();
+/// let problem = Problem::new(&model, &data).unwrap();
+/// let tracker = NoiseModel::Tracker(TrackerNoise::PAPER);
+/// let ml = volver::identification::fitted_problem(&problem, Objective::Ml, tracker).unwrap();
+/// assert!(ml.is_whitened());
+/// assert!(!volver::identification::fitted_problem(&problem, Objective::Phi, tracker).unwrap().is_whitened());
+/// // No noise stated anywhere: ml cannot weigh the points.
+/// let err = volver::identification::fitted_problem(&problem, Objective::Ml, NoiseModel::Residual);
+/// assert!(err.unwrap_err().to_string().contains("--noise"));
+/// ```
+pub fn fitted_problem<'a>(
+    problem: &Problem<'a>,
+    objective: Objective,
+    noise: NoiseModel,
+) -> Result<Problem<'a>> {
+    if !objective.whitened() {
+        return Ok(problem.plain());
+    }
+    let default = match noise {
+        NoiseModel::Tracker(t) => Some(t),
+        _ => None,
+    };
+    problem
+        .whitened(default.as_ref())
+        .map_err(|e| Error::Request(format!("--objective {objective}: {e}")))
 }
 
 /// The rule of the values the data do not determine, as outputs state it: the priors' rule

@@ -61,8 +61,15 @@ pub enum Error {
     /// An iteration or evaluation limit of zero.
     #[error("options.max_iterations and max_evaluations must be ≥ 1")]
     NoLimit,
-    /// An objective name that is not `phi` or `ve`.
-    #[error("unknown objective '{0}': phi or ve")]
+    /// A noise-weighted objective (`ml`, `phi-w`) asked of residuals that are not whitened.
+    #[error(
+        "objective {0} weighs the residuals by their noise, but these are not whitened: give the \
+         engine Problem::whitened residuals (the identification does, from --noise or the \
+         machine file's noise)"
+    )]
+    NotWhitened(crate::Objective),
+    /// An objective name that is not `phi`, `ve`, `ml` or `phi-w`.
+    #[error("unknown objective '{0}': phi, ve, ml or phi-w")]
     UnknownObjective(String),
     /// A phasing name not in [`crate::engines::strategy::PHASINGS`].
     #[error("unknown phasing '{name}': {}", known.join(", "))]

@@ -126,7 +126,8 @@ pub struct Iteration {
     pub evaluations: usize,
     /// Current objective (smoothed Φ_ε or ve).
     pub cost: f64,
-    /// Current EMM (µm).
+    /// Current EMM (µm) of the residuals the engine is given: for whitened residuals
+    /// (objectives ml, phi-w) their mean module × 1000, dimensionless.
     pub emm_um: f64,
     /// Damping λ used for the step.
     pub damping: f64,
@@ -350,7 +351,33 @@ pub fn share_calling_thread() -> bool {
 /// Φ, ve, EMM and EMax of a problem at `params`.
 pub fn evaluate(problem: &dyn Residuals, params: &[f64]) -> Evaluation {
     // The modules on every core, summed in point order: the same bits as one thread.
-    evaluation_of(&crate::engines::loss::norms_of(problem, params))
+    evaluation_with(
+        problem,
+        &crate::engines::loss::norms_of(problem, params),
+        params,
+    )
+}
+
+/// [`evaluate`] from the residual modules of `problem` at `params` already computed: of
+/// residuals in mm, those; of whitened ones, the objective values from them and Φ, ve and the
+/// statistics from a pass over the plain residuals (mm).
+pub(crate) fn evaluation_with(
+    problem: &dyn Residuals,
+    norms: &[f64],
+    params: &[f64],
+) -> Evaluation {
+    match problem.machine().filter(|_| problem.whitened()) {
+        Some(machine) => {
+            let white = evaluation_of(norms);
+            let plain = machine.plain();
+            Evaluation {
+                phi_w: Some(white.phi_mm),
+                ve_w: Some(white.ve_mm2),
+                ..evaluation_of(&crate::engines::loss::norms_of(&plain, params))
+            }
+        }
+        None => evaluation_of(norms),
+    }
 }
 
 /// Whether two parameter vectors are the same to the bit.
@@ -365,5 +392,7 @@ pub(crate) fn evaluation_of(norms: &[f64]) -> Evaluation {
         phi_mm: norms.iter().sum::<f64>() / n,
         ve_mm2: norms.iter().map(|r| r * r).sum::<f64>() / n,
         stats: volver_core::metrics::ErrorStats::of_modules(norms.iter().copied()),
+        phi_w: None,
+        ve_w: None,
     }
 }

@@ -16,6 +16,48 @@ pub enum Objective {
     Phi,
     /// ve, the mean squared error module (eq. 1): ordinary least squares.
     Ve,
+    /// The maximum-likelihood estimate under the stated noise: ve of the residuals whitened
+    /// by each point's noise (the tracker's spherical model at the point, each station's own; a
+    /// range by its range σ) — least squares weighted by the inverse noise covariance, the
+    /// efficient estimator under normal noise. The engines minimise ve of the residuals they
+    /// are given and refuse this objective on residuals that are not whitened
+    /// (`Problem::whitened`); the identification whitens them.
+    Ml,
+    /// Φ of the whitened residuals (the mean Mahalanobis distance): Φ's robustness to outliers
+    /// with the noise's weighting. Whitened residuals as for [`Objective::Ml`].
+    #[serde(rename = "phi-w")]
+    PhiW,
+}
+
+impl Objective {
+    /// Every objective, in the order the CLI lists them.
+    pub const ALL: [Objective; 4] = [
+        Objective::Phi,
+        Objective::Ve,
+        Objective::Ml,
+        Objective::PhiW,
+    ];
+
+    /// The loss the engines apply to the residuals they are given: [`Objective::Phi`] (the mean
+    /// module) for Φ and whitened Φ, [`Objective::Ve`] (the mean squared module) for ve and ml.
+    ///
+    /// ```
+    /// use volver_solvers::Objective;
+    /// assert_eq!(Objective::Ml.loss(), Objective::Ve);
+    /// assert_eq!(Objective::PhiW.loss(), Objective::Phi);
+    /// assert!(Objective::Ml.whitened() && !Objective::Phi.whitened());
+    /// ```
+    pub fn loss(self) -> Objective {
+        match self {
+            Objective::Phi | Objective::PhiW => Objective::Phi,
+            Objective::Ve | Objective::Ml => Objective::Ve,
+        }
+    }
+
+    /// Whether it weighs the residuals by their noise (needs whitened residuals).
+    pub fn whitened(self) -> bool {
+        matches!(self, Objective::Ml | Objective::PhiW)
+    }
 }
 
 impl fmt::Display for Objective {
@@ -23,6 +65,8 @@ impl fmt::Display for Objective {
         f.write_str(match self {
             Objective::Phi => "phi",
             Objective::Ve => "ve",
+            Objective::Ml => "ml",
+            Objective::PhiW => "phi-w",
         })
     }
 }
@@ -33,6 +77,8 @@ impl std::str::FromStr for Objective {
         match s {
             "phi" | "Φ" => Ok(Objective::Phi),
             "ve" => Ok(Objective::Ve),
+            "ml" => Ok(Objective::Ml),
+            "phi-w" | "phiw" | "Φw" => Ok(Objective::PhiW),
             _ => Err(crate::Error::UnknownObjective(s.to_string())),
         }
     }

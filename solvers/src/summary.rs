@@ -300,6 +300,27 @@ pub struct Evaluation {
     pub ve_mm2: f64,
     /// EMM and EMax (µm).
     pub stats: ErrorStats,
+    /// Φ of the residuals whitened by their noise (dimensionless) when the solve weighed them
+    /// by it (objectives `ml`, `phi-w`); Φ, ve and the statistics above stay those of the
+    /// residuals in mm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub phi_w: Option<f64>,
+    /// ve of the whitened residuals (dimensionless), as [`Evaluation::phi_w`].
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ve_w: Option<f64>,
+}
+
+impl Evaluation {
+    /// The value of `objective` (Φ in mm, ve in mm², ml's and whitened Φ's dimensionless; NaN
+    /// for a noise-weighted objective not evaluated on whitened residuals).
+    pub fn cost(&self, objective: Objective) -> f64 {
+        match objective {
+            Objective::Phi => self.phi_mm,
+            Objective::Ve => self.ve_mm2,
+            Objective::Ml => self.ve_w.unwrap_or(f64::NAN),
+            Objective::PhiW => self.phi_w.unwrap_or(f64::NAN),
+        }
+    }
 }
 
 /// One solve (one phase of a strategy).
@@ -342,12 +363,9 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// The final objective value (Φ in mm or ve in mm²).
+    /// The final objective value (Φ in mm, ve in mm², ml's and whitened Φ's dimensionless).
     pub fn final_cost(&self) -> f64 {
-        match self.objective {
-            Objective::Phi => self.reached.phi_mm,
-            Objective::Ve => self.reached.ve_mm2,
-        }
+        self.reached.cost(self.objective)
     }
 
     /// Final EMM as a percentage of the initial EMM (the paper's residual error).

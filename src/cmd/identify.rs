@@ -19,7 +19,9 @@ pub struct IdentifyArgs {
     /// nlopt-bobyqa (feature `nlopt`); `volver compare` runs them all.
     #[arg(long, default_value = "lm")]
     solver: String,
-    /// Objective: phi (mean error module, eq. 12) or ve (mean squared error, eq. 1).
+    /// Objective: phi (mean error module, eq. 12), ve (mean squared error, eq. 1), ml (maximum
+    /// likelihood: least squares on the residuals whitened by each station's noise, `--noise` or
+    /// the machine file's) or phi-w (Φ of the whitened residuals: robust and noise-weighted).
     #[arg(long, default_value = "phi")]
     objective: String,
     /// The tracker's noise for the uncertainty the results file records: paper, none,
@@ -107,7 +109,15 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     if !a.json {
         announce(&model, &data, &settings)?;
     }
-    let mut outcome = identify(&model, &data, &settings, &mut Progress { quiet: a.json })?;
+    let mut outcome = identify(
+        &model,
+        &data,
+        &settings,
+        &mut Progress {
+            quiet: a.json,
+            whitened: settings.options.objective.whitened(),
+        },
+    )?;
     outcome.noise_error = noise;
     if !a.no_history {
         let path = history_path(&a);

@@ -70,11 +70,22 @@ impl Inputs {
 /// Prints one line per accepted step to stderr.
 pub struct Progress {
     pub quiet: bool,
+    /// The engine is given whitened residuals (objectives ml, phi-w): its "EMM" is their mean
+    /// module, in units of the noise.
+    pub whitened: bool,
 }
 
 impl Observer for Progress {
     fn iteration(&mut self, it: &Iteration) {
-        if !self.quiet && it.accepted {
+        if !self.quiet && it.accepted && self.whitened {
+            eprintln!(
+                "  iteration {:>4}  evaluations {:>5}  mean whitened module {:>10.6}  λ {:.1e}",
+                it.iteration,
+                it.evaluations,
+                it.emm_um / volver::core::units::UM_PER_MM,
+                it.damping
+            );
+        } else if !self.quiet && it.accepted {
             eprintln!(
                 "  iteration {:>4}  evaluations {:>5}  EMM {:>12.6} µm  λ {:.1e}",
                 it.iteration, it.evaluations, it.emm_um, it.damping

@@ -232,7 +232,9 @@ impl Sampler<'_> {
         let offset = self.truth.model.stations()[station]
             .offset
             .map_or(0.0, |o| self.truth.params[o]);
-        let (clean, measured) = self.observe(point, offset);
+        // Each station with its own noise when the machine file states one.
+        let noise = self.machine.station_noise_or(station, self.sim.noise);
+        let (clean, measured) = self.observe(point, offset, noise);
         if measured.iter().any(|v| !v.is_finite()) {
             return Err(Error::NonFinite {
                 message: format!(
@@ -270,7 +272,12 @@ impl Sampler<'_> {
 
     /// The observation of `point` (mm) by a station with range offset `offset` (mm): without
     /// and with noise.
-    fn observe(&mut self, point: [f64; 3], offset: f64) -> ([f64; 3], [f64; 3]) {
+    fn observe(
+        &mut self,
+        point: [f64; 3],
+        offset: f64,
+        noise: TrackerNoise,
+    ) -> ([f64; 3], [f64; 3]) {
         match self.sim.observe {
             Observation::Point => {
                 let clean = if offset == 0.0 {
@@ -279,13 +286,13 @@ impl Sampler<'_> {
                     let len = point.iter().map(|v| v * v).sum::<f64>().sqrt();
                     point.map(|v| v * (1.0 + offset / len))
                 };
-                (clean, self.sim.noise.apply(clean, &mut self.noise_rng))
+                (clean, noise.apply(clean, &mut self.noise_rng))
             }
             Observation::Range => {
                 // The noise's angles turn the point, its range part alone moves it along the
                 // line of sight: the noisy reading's distance.
                 let d = point.iter().map(|v| v * v).sum::<f64>().sqrt() + offset;
-                let noisy = self.sim.noise.apply([d, 0.0, 0.0], &mut self.noise_rng);
+                let noisy = noise.apply([d, 0.0, 0.0], &mut self.noise_rng);
                 let read = noisy.iter().map(|v| v * v).sum::<f64>().sqrt();
                 ([d, 0.0, 0.0], [read, 0.0, 0.0])
             }

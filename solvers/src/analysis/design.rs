@@ -39,7 +39,7 @@ use volver_core::machine::Commands;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::Plan;
-use volver_core::problem::{Problem, Residuals, Whitened};
+use volver_core::problem::{Problem, Residuals};
 
 /// What a design minimises.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -127,7 +127,7 @@ impl Space {
         let p0 = model.initial_params();
         let data = crate::analysis::observability::nominal_data(model, candidates);
         let problem = Problem::new(model, &data).ok()?;
-        let whitened = Whitened::new(problem.clone(), noise)?;
+        let whitened = problem.whitened(Some(noise)).ok()?;
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
         let (n, nf, rows_total) = (p0.len(), ns.n_free(), problem.n_points());
         let stations = model.machine().stations().len();

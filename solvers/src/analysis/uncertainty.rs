@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use volver_core::machine::Commands;
 use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
-use volver_core::noise::TrackerNoise;
+use volver_core::noise::{Distribution, TrackerNoise};
 use volver_core::problem::{Problem, Residuals};
 use volver_core::random::Rng;
 use volver_core::results::UncertaintyRecord;
@@ -64,19 +64,38 @@ impl std::fmt::Display for NoiseModel {
 }
 
 impl NoiseModel {
-    /// One draw of the measurement error at `x` (tracker frame, mm); `sigma_mm` is the isotropic
-    /// σ of [`NoiseModel::Residual`].
-    fn draw(&self, x: [f64; 3], sigma_mm: f64, rng: &mut Rng) -> [f64; 3] {
+    /// One noisy reading of `x`, what the measurement `m` observes without noise (a point in its
+    /// station's frame, or `[range, 0, 0]`), mm: the tracker's model of `m`'s station (its own
+    /// noise when the machine file states one, `machine`), or the isotropic σ `sigma_mm` of
+    /// [`NoiseModel::Residual`]; a range moves by the noise's range part alone, as the
+    /// generator's.
+    fn read(
+        &self,
+        machine: &volver_core::machine::Machine,
+        m: &volver_core::measure::Measurement,
+        x: [f64; 3],
+        sigma_mm: f64,
+        rng: &mut Rng,
+    ) -> [f64; 3] {
+        let range = m.observation == volver_core::measure::Observation::Range;
         match self {
             NoiseModel::Tracker(t) => {
-                let y = t.apply(x, rng);
-                [y[0] - x[0], y[1] - x[1], y[2] - x[2]]
+                let t = machine.station_noise_or(m.station_index, *t);
+                if range {
+                    let y = t.apply([x[0], 0.0, 0.0], rng);
+                    [volver_core::problem::norm(y), 0.0, 0.0]
+                } else {
+                    t.apply(x, rng)
+                }
             }
-            NoiseModel::Residual => [
-                sigma_mm * rng.normal(),
-                sigma_mm * rng.normal(),
-                sigma_mm * rng.normal(),
-            ],
+            NoiseModel::Residual => {
+                let e = [rng.normal(), rng.normal(), rng.normal()].map(|v| sigma_mm * v);
+                if range {
+                    [x[0] + e[0], 0.0, 0.0]
+                } else {
+                    [x[0] + e[0], x[1] + e[1], x[2] + e[2]]
+                }
+            }
         }
     }
 }
@@ -222,14 +241,15 @@ pub fn linear(
 ) -> Option<Covariance> {
     let n = params.len();
     let npts = problem.n_points();
-    let mut task = Task::new(problem.clone());
+    let (plain, fitted) = fitted_residuals(problem, objective, noise)?;
+    let mut task = Task::new(plain.clone());
     if let Some(g) = gauge {
         task = g.apply(&task);
     }
     let ns = NullSpace::from_constraints(&task.constraints, params).ok()?;
     let nf = ns.n_free();
     let basis = ns.basis();
-    let residuals = problem.residuals(params);
+    let residuals = plain.residuals(params);
     let sq: f64 = residuals
         .iter()
         .map(|r| r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
@@ -241,14 +261,16 @@ pub fn linear(
     let sigma_mm = (sq / coordinates.saturating_sub(nf).max(1) as f64).sqrt();
     let mut a = Mat::<f64>::zeros(nf, nf);
     let mut b = Mat::<f64>::zeros(nf, nf);
-    // The Gauss rule over the tracker's deviates, once (the isotropic normal needs none).
-    let rule = match noise {
-        NoiseModel::Tracker(t) => t.distribution.rule(),
-        NoiseModel::Residual => Vec::new(),
+    // The Gauss rules over the tracker's deviates, once (the isotropic normal needs none).
+    let rules = match noise {
+        NoiseModel::Tracker(_) => [Distribution::Normal.rule(), Distribution::Uniform.rule()],
+        NoiseModel::Residual => [Vec::new(), Vec::new()],
     };
     let mut jac = vec![0.0; 3 * n];
+    let (loss, machine) = (objective.loss(), problem.model().machine());
     for i in 0..npts {
-        problem.residual_and_jacobian(i, params, &mut jac);
+        // The residuals the estimator weighs (whitened for ml and phi-w) and their Jacobian.
+        fitted.residual_and_jacobian(i, params, &mut jac);
         if jac.iter().any(|v| !v.is_finite()) {
             return None;
         }
@@ -256,11 +278,24 @@ pub fn linear(
         let jz = Mat::from_fn(3, nf, |c, k| {
             (0..n).map(|j| jac[c * n + j] * basis[(j, k)]).sum::<f64>()
         });
-        let x = problem.data().points[i].measured;
+        let point = &problem.data().points[i];
+        let x = point.measured;
+        // The point's own station's noise, and the whitening the estimator applied to it.
+        let noise_i = match noise {
+            NoiseModel::Tracker(t) => {
+                NoiseModel::Tracker(machine.station_noise_or(point.station_index, t))
+            }
+            NoiseModel::Residual => NoiseModel::Residual,
+        };
+        let w = fitted.whitening_of(i);
         let (ea, eb) = if problem.scalar(i) {
-            range_expectations(objective, noise, x[0], sigma_mm)
+            range_expectations(loss, noise_i, x[0], sigma_mm, w[0][0])
         } else {
-            expectations(objective, noise, x, sigma_mm, &rule)
+            let rule = match noise_i {
+                NoiseModel::Tracker(t) if t.distribution == Distribution::Uniform => &rules[1],
+                _ => &rules[0],
+            };
+            expectations(loss, noise_i, x, sigma_mm, rule, &w)
         };
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
@@ -281,6 +316,26 @@ pub fn linear(
         sigma_mm,
         noise,
     })
+}
+
+/// The residuals in mm and those the estimator of `objective` weighs: the same for Φ and ve,
+/// whitened by each station's noise for ml and phi-w (`None` without a tracker noise model to
+/// whiten by, or when the whitening fails).
+fn fitted_residuals<'a>(
+    problem: &Problem<'a>,
+    objective: Objective,
+    noise: NoiseModel,
+) -> Option<(Problem<'a>, Problem<'a>)> {
+    let plain = problem.plain();
+    if !objective.whitened() {
+        return Some((plain.clone(), plain));
+    }
+    let fitted = match noise {
+        _ if problem.is_whitened() => problem.clone(),
+        NoiseModel::Tracker(t) => problem.whitened(Some(&t)).ok()?,
+        NoiseModel::Residual => return None,
+    };
+    Some((plain, fitted))
 }
 
 /// A factor `F` of the sandwich `A⁺ B A⁺ = F Fᵀ` (both `nf × nf`, symmetric, `B` positive
@@ -321,12 +376,14 @@ fn sandwich_factor(a: &Mat<f64>, b: &Mat<f64>) -> Option<Mat<f64>> {
 /// residual, and only the noise's range part moves it. Least squares: `E[∂ψ/∂r] = 1`,
 /// `E[ψ²] = σ²`; Φ (the absolute value, an L1 fit): `E[∂ψ/∂r] = 2 f(0)`, the density of the
 /// range noise at zero (`1/(σ√(2π))` for a normal, `1/(2a)` for a uniform on ±a), and
-/// `E[ψ²] = 1`.
+/// `E[ψ²] = 1`. The estimator weighs the residual by `scale` (1/σ of the range for ml and
+/// phi-w, 1 else): `E[∂ψ/∂r]` and `E[ψ²]` are then those of the scaled residual.
 fn range_expectations(
     objective: Objective,
     noise: NoiseModel,
     range: f64,
     sigma_mm: f64,
+    scale: f64,
 ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
     let (sigma, density0) = match noise {
         NoiseModel::Residual => (
@@ -349,9 +406,10 @@ fn range_expectations(
         m[0][0] = v;
         m
     };
-    match objective {
-        Objective::Ve => (one(1.0), one(sigma * sigma)),
-        Objective::Phi => (one(2.0 * density0), one(1.0)),
+    if objective.loss() == Objective::Ve {
+        (one(1.0), one((scale * sigma).powi(2)))
+    } else {
+        (one(2.0 * density0 / scale), one(1.0))
     }
 }
 
@@ -362,12 +420,16 @@ fn range_expectations(
 /// quadrature, within 1 % of sampled means in the tests). No random draws: noise in these expectations would not share the
 /// normal matrix' structure, and the information matrix `A B⁻¹ A` that the priors
 /// ([`crate::analysis::prior`]) combine with would carry it from the strong directions into the weak ones.
+///
+/// The estimator weighs the residual by `w` (its whitening for ml and phi-w, the identity
+/// else): the expectations are those of `w r`.
 fn expectations(
     objective: Objective,
     noise: NoiseModel,
     x: [f64; 3],
     sigma_mm: f64,
     rule: &[(f64, f64)],
+    w: &[[f64; 3]; 3],
 ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
     let diag = |v: f64| {
         let mut m = [[0.0; 3]; 3];
@@ -377,14 +439,15 @@ fn expectations(
         m
     };
     let tracker = match noise {
+        // Weighted only with a tracker model (`fitted_residuals`): w is the identity here.
+        NoiseModel::Residual if objective.loss() == Objective::Ve => {
+            return (diag(1.0), diag(sigma_mm * sigma_mm));
+        }
         NoiseModel::Residual => {
-            return match objective {
-                Objective::Ve => (diag(1.0), diag(sigma_mm * sigma_mm)),
-                Objective::Phi => (
-                    diag(2.0 / 3.0 * (2.0 / std::f64::consts::PI).sqrt() / sigma_mm),
-                    diag(1.0 / 3.0),
-                ),
-            };
+            return (
+                diag(2.0 / 3.0 * (2.0 / std::f64::consts::PI).sqrt() / sigma_mm),
+                diag(1.0 / 3.0),
+            );
         }
         NoiseModel::Tracker(t) => t,
     };
@@ -393,10 +456,11 @@ fn expectations(
     for &(za, wa) in rule {
         for &(ze, we) in rule {
             for &(zr, wr) in rule {
-                let w = wa * we * wr;
+                let weight = wa * we * wr;
                 let y = tracker.apply_deviates(x, [za, ze, zr]);
-                let r = [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
-                match objective {
+                let d = [x[0] - y[0], x[1] - y[1], x[2] - y[2]];
+                let r = w.map(|row| row[0] * d[0] + row[1] * d[1] + row[2] * d[2]);
+                match objective.loss() {
                     Objective::Phi => {
                         let nr = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
                         if nr == 0.0 {
@@ -406,16 +470,16 @@ fn expectations(
                         for p in 0..3 {
                             for q in 0..3 {
                                 let id = if p == q { 1.0 } else { 0.0 };
-                                ea[p][q] += w * (id - u[p] * u[q]) / nr;
-                                eb[p][q] += w * u[p] * u[q];
+                                ea[p][q] += weight * (id - u[p] * u[q]) / nr;
+                                eb[p][q] += weight * u[p] * u[q];
                             }
                         }
                     }
-                    Objective::Ve => {
+                    _ => {
                         for p in 0..3 {
-                            ea[p][p] += w;
+                            ea[p][p] += weight;
                             for q in 0..3 {
-                                eb[p][q] += w * r[p] * r[q];
+                                eb[p][q] += weight * r[p] * r[q];
                             }
                         }
                     }
@@ -468,11 +532,13 @@ pub fn monte_carlo(
     }
     crate::engine_with(engine, lm)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
+    // What each measurement observes (its station's point, or range) by the fitted model.
     let predicted: Vec<[f64; 3]> = data
         .points
         .iter()
-        .map(|p| model.predict_at(&p.commands, p.reflector, p.t_s.unwrap_or(0.0), params))
+        .map(|p| model.observe(p, params))
         .collect();
+
     let t0 = std::time::Instant::now();
     let runs: Vec<Option<Vec<f64>>> = (0..n)
         .into_par_iter()
@@ -481,13 +547,13 @@ pub fn monte_carlo(
             let mut rng = Rng::new(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (r as u64 + 1));
             let mut set = data.clone();
             for (p, x) in set.points.iter_mut().zip(&predicted) {
-                let e = noise.draw(*x, sigma_mm, &mut rng);
-                p.measured = [x[0] + e[0], x[1] + e[1], x[2] + e[2]];
+                p.measured = noise.read(model.machine(), p, *x, sigma_mm, &mut rng);
             }
             let out = Problem::new(model, &set).ok().and_then(|problem| {
+                let task = weighed(problem, noise, options.objective)?;
                 let task = match gauge {
-                    Some(g) => g.apply(&Task::new(problem)),
-                    None => Task::new(problem),
+                    Some(g) => g.apply(&task),
+                    None => task,
                 };
                 let sol = solver.solve(&task, params, options, &mut Silent);
                 (!sol.summary.termination.failed()).then_some(sol.params)
@@ -502,6 +568,18 @@ pub fn monte_carlo(
         failed,
         time_s: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// The task of a replica's `problem`: its residuals whitened by `noise` when `objective`
+/// weighs them by it (`None` when they cannot be).
+fn weighed<'a>(problem: Problem<'a>, noise: NoiseModel, objective: Objective) -> Option<Task<'a>> {
+    if !objective.whitened() {
+        return Some(Task::new(problem));
+    }
+    match noise {
+        NoiseModel::Tracker(t) => problem.whitened(Some(&t)).ok().map(Task::new),
+        NoiseModel::Residual => None,
+    }
 }
 
 /// Replicas of a fit.

@@ -203,9 +203,10 @@ impl Progress<'_, '_, '_> {
             self.improved_pass = passes;
         }
         if it.iteration > 0 {
-            let objective_now = match self.options.objective {
-                Objective::Ve => 2.0 * it.cost / np as f64,
-                Objective::Phi => it.cost / np as f64 + self.eps,
+            let objective_now = if self.options.objective.loss() == Objective::Ve {
+                2.0 * it.cost / np as f64
+            } else {
+                it.cost / np as f64 + self.eps
             };
             let emm_um = if self.wants {
                 let p: Vec<f64> = params.iter().zip(self.d).map(|(s, d)| s * d).collect();
@@ -367,11 +368,12 @@ impl Solver for Ceres {
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
         let d = &free.d;
         let s0: Vec<f64> = p0.iter().zip(d).map(|(p, d)| p / d).collect();
-        let loss = match options.objective {
-            Objective::Ve => cs::Loss::None,
-            Objective::Phi => cs::Loss::Module {
+        let loss = if options.objective.loss() == Objective::Ve {
+            cs::Loss::None
+        } else {
+            cs::Loss::Module {
                 epsilon: Continuation::new(options, phi0).eps(),
-            },
+            }
         };
         let cost = Cost {
             problem,

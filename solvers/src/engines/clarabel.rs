@@ -140,9 +140,10 @@ fn step(
     sub: &Subproblem,
 ) -> Result<Vec<f64>, String> {
     let settings = settings()?;
-    let program = match objective {
-        Objective::Phi => phi_program(lin, k, sub),
-        Objective::Ve => ve_program(lin, k, sub),
+    let program = if objective.loss() == Objective::Ve {
+        ve_program(lin, k, sub)
+    } else {
+        phi_program(lin, k, sub)
     };
     solve_cone(program, settings, k)
 }
@@ -280,9 +281,10 @@ fn model_value(objective: Objective, lin: &Linearisation, k: usize, delta: &[f64
             *vd = lin.r[3 * i + d] + row.iter().zip(delta).map(|(a, b)| a * b).sum::<f64>();
         }
         let m = norm(v);
-        sum += match objective {
-            Objective::Phi => m,
-            Objective::Ve => m * m,
+        sum += if objective.loss() == Objective::Ve {
+            m * m
+        } else {
+            m
         };
     }
     sum / np as f64

@@ -55,6 +55,8 @@ pub fn held_tracker_values(problem: &Problem) -> [bool; 6] {
 /// needs a rotation too large for the small angles of eq. 9 (more than 0.05 rad): the
 /// machine file's tracker `orientation_deg` is then wrong.
 pub fn init_tracker(problem: &Problem, params: &[f64]) -> Result<Vec<f64>, crate::Error> {
+    // A start from the points themselves (mm), whatever weighting the fit applies.
+    let problem = &problem.plain();
     let model = problem.model();
     if model.stations().len() > 1 || (0..problem.n_points()).any(|i| problem.scalar(i)) {
         return Ok(init_stations(problem, params));

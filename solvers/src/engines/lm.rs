@@ -270,7 +270,7 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         // design; for Φ it is refreshed at the start of every IRLS stage (a nonlinear basis,
         // such as a sine's phase at zero amplitude, becomes identifiable as the fit moves).
         // The first pass decomposes it.
-        let objective = options.objective;
+        let objective = options.objective.loss();
         let np = norms0.len();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
         let scalar = (0..task.problem.n_points()).any(|i| task.problem.scalar(i));
@@ -782,13 +782,13 @@ impl Solver for LevenbergMarquardt {
                 }
             }
         };
-        if options.objective == Objective::Ve
+        if options.objective.loss() == Objective::Ve
             && termination.converged()
             && lm.run.summary.unidentifiable == 0
         {
             lm.refine(observer);
         }
-        if options.objective == Objective::Phi
+        if options.objective.loss() == Objective::Phi
             && self.polish
             && termination.converged()
             && lm.run.summary.unidentifiable == 0

@@ -1,4 +1,5 @@
-//! The objectives as the engines see them: the smoothed cost from the residual modules, each
+//! The objectives as the engines see them (each by its [`Objective::loss`] on the residuals
+//! given, whitened or not): the smoothed cost from the residual modules, each
 //! point's weight in the Gauss–Newton model, the residual modules of a parameter vector and the
 //! exact gradient of the cost.
 
@@ -9,15 +10,14 @@ use volver_core::problem::Residuals;
 /// The smoothed objective from residual modules: ve, or `Φ_ε = (1/n) Σ √(‖r‖² + ε²)`.
 pub(crate) fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
     let n = norms.len() as f64;
-    match objective {
-        Objective::Ve => norms.iter().map(|r| r * r).sum::<f64>() / n,
-        Objective::Phi => {
-            norms
-                .iter()
-                .map(|r| (r * r + eps * eps).sqrt())
-                .sum::<f64>()
-                / n
-        }
+    if objective.loss() == Objective::Ve {
+        norms.iter().map(|r| r * r).sum::<f64>() / n
+    } else {
+        norms
+            .iter()
+            .map(|r| (r * r + eps * eps).sqrt())
+            .sum::<f64>()
+            / n
     }
 }
 
@@ -25,12 +25,11 @@ pub(crate) fn cost_of(objective: Objective, norms: &[f64], eps: f64) -> f64 {
 /// point's loss with respect to ‖r‖², over n (so that `Σ w_i J_iᵀ r_i` is the gradient), and the
 /// radial reduction c of its Hessian.
 pub(crate) fn weight_of(objective: Objective, r: f64, eps: f64, n: usize) -> (f64, f64) {
-    match objective {
-        Objective::Ve => (2.0 / n as f64, 0.0),
-        Objective::Phi => {
-            let s = r * r + eps * eps;
-            (1.0 / (s.sqrt() * n as f64), r * r / s)
-        }
+    if objective.loss() == Objective::Ve {
+        (2.0 / n as f64, 0.0)
+    } else {
+        let s = r * r + eps * eps;
+        (1.0 / (s.sqrt() * n as f64), r * r / s)
     }
 }
 

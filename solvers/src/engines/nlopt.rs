@@ -162,7 +162,7 @@ impl Solver for Nlopt {
         };
         let callback = Callback {
             problem,
-            objective: options.objective,
+            objective: options.objective.loss(),
             vars: &vars,
             state: RefCell::new(State {
                 eps: Continuation::new(options, phi0).eps(),

@@ -127,7 +127,7 @@ pub(crate) fn settle_scaled(
     irls_final_epsilon: f64,
 ) -> Result<(Vec<f64>, Settled), Unsettled> {
     let free = free_coordinates(task, p, scale)?;
-    let mut settle = Settle::start(&*task.problem, free, objective, irls_final_epsilon)?;
+    let mut settle = Settle::start(&*task.problem, free, objective.loss(), irls_final_epsilon)?;
     if settle.free.n_free() == 0 {
         settle.report.decrement = 0.0;
         settle.report.stop = SettleStop::NoFreeParameters;
@@ -223,9 +223,10 @@ impl<'t> Settle<'t> {
             .map(|i| problem.observation_scale(i))
             .fold(0.0_f64, f64::max);
         let floor = 16.0 * f64::EPSILON * scale / (np as f64).sqrt()
-            * match objective {
-                Objective::Phi => 1.0,
-                Objective::Ve => 2.0 * cost.sqrt(),
+            * if objective.loss() == Objective::Ve {
+                2.0 * cost.sqrt()
+            } else {
+                1.0
             };
         // What a step changes that any output can see: the error functions (and the tracker
         // pose) in the gauge's function metric, against the size of the error functions

@@ -137,6 +137,13 @@ impl<'t, 'a> Run<'t, 'a> {
             t0: Instant::now(),
             start_norms: Vec::new(),
         };
+        if options.objective.whitened() && !problem.whitened() {
+            let e = crate::Error::NotWhitened(options.objective);
+            return Err(Box::new(run.finish(
+                start.to_vec(),
+                Termination::InvalidInput(Invalid::Refused(e)),
+            )));
+        }
         if let Err(e) = options.validate() {
             return Err(Box::new(run.finish(
                 start.to_vec(),
@@ -152,7 +159,7 @@ impl<'t, 'a> Run<'t, 'a> {
             return Err(Box::new(run.finish(start.to_vec(), t)));
         }
         run.start_norms = crate::engines::loss::norms_of(problem, start);
-        run.summary.initial = crate::evaluation_of(&run.start_norms);
+        run.summary.initial = crate::evaluation_with(problem, &run.start_norms, start);
         run.summary.evaluations += 1;
         Ok(run)
     }

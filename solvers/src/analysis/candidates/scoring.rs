@@ -10,7 +10,7 @@ use faer::Side;
 use volver_core::basis::{BasisKind, chebyshev_nodes};
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
-use volver_core::problem::{Problem, Residuals, Whitened};
+use volver_core::problem::{Problem, Residuals};
 use volver_core::units::UM_PER_MM;
 
 /// Scores every candidate of the library at the solution `params` of `problem`'s model and
@@ -274,34 +274,32 @@ fn weighted_steps(
     Some((steps, rank))
 }
 
-/// What the candidates are scored on: the problem's residuals, whitened by the tracker's noise
-/// when it is known ([`Whitened`]: each point and direction weighed by its noise).
+/// What the candidates are scored on: the problem's residuals, whitened by each station's
+/// noise when it is known ([`Problem::whitened`]: each point and direction weighed by its
+/// noise), beside the plain problem (mm) the EMM is measured on.
 #[derive(Clone, Debug)]
-enum Scored<'a> {
-    Plain(Problem<'a>),
-    Whitened(Whitened<'a>),
+struct Scored<'a> {
+    plain: Problem<'a>,
+    scored: Problem<'a>,
 }
 
 impl<'a> Scored<'a> {
     fn new(problem: Problem<'a>, noise: Option<&TrackerNoise>) -> Scored<'a> {
-        match noise.and_then(|n| Whitened::new(problem.clone(), n)) {
-            Some(w) => Scored::Whitened(w),
-            None => Scored::Plain(problem),
+        let scored = noise
+            .and_then(|n| problem.whitened(Some(n)).ok())
+            .unwrap_or_else(|| problem.clone());
+        Scored {
+            plain: problem,
+            scored,
         }
     }
 
     fn task(&self) -> Task<'a> {
-        match self {
-            Scored::Plain(p) => Task::new(p.clone()),
-            Scored::Whitened(w) => Task::new(w.clone()),
-        }
+        Task::new(self.scored.clone())
     }
 
     fn problem(&self) -> &Problem<'a> {
-        match self {
-            Scored::Plain(p) => p,
-            Scored::Whitened(w) => w.problem(),
-        }
+        &self.plain
     }
 
     /// The residuals' sum of squares (in the scoring's units) and EMM (µm) predicted to first
@@ -323,10 +321,7 @@ impl<'a> Scored<'a> {
                 let lin: [f64; 3] = std::array::from_fn(|c| {
                     r[c] + (0..n).map(|j| jac[c * n + j] * delta[j]).sum::<f64>()
                 });
-                let scored = match self {
-                    Scored::Plain(_) => lin,
-                    Scored::Whitened(w) => w.apply(i, lin),
-                };
+                let scored = self.scored.whiten(i, lin);
                 *rss += scored.iter().map(|v| v * v).sum::<f64>();
                 *sum += volver_core::problem::norm(lin);
             }
@@ -346,7 +341,7 @@ impl<'a> Scored<'a> {
 /// EMM above the current one). A refit can reach at least as low; a candidate is never
 /// predicted to raise the EMM of the Φ fit it extends.
 fn predicted_emm(problem: &Problem, start: &[f64], tolerance: f64) -> Option<f64> {
-    let plain = Scored::Plain(problem.clone());
+    let plain = Scored::new(problem.clone(), None);
     let task = plain.task();
     let modules: Vec<f64> = problem
         .residuals(start)

@@ -94,7 +94,7 @@ impl Irls {
     /// The schedule at the start, Φ = `phi0_mm`: least squares in its only (Newton) stage, Φ in
     /// the majorising stage at ε = `irls_initial_epsilon × Φ₀`.
     pub(crate) fn new(options: &Options, scalar: bool, phi0_mm: f64) -> Irls {
-        let objective = options.objective;
+        let objective = options.objective.loss();
         Irls {
             objective,
             initial_fraction: options.irls_initial_epsilon,
@@ -256,7 +256,7 @@ impl Continuation {
     /// The first solve's ε: `irls_initial_epsilon × Φ₀` (Φ₀ = `phi0_mm`).
     pub(crate) fn new(options: &Options, phi0_mm: f64) -> Continuation {
         Continuation {
-            objective: options.objective,
+            objective: options.objective.loss(),
             final_fraction: options.irls_final_epsilon,
             eps: epsilon(options.irls_initial_epsilon, phi0_mm),
             last: epsilon(options.irls_final_epsilon, phi0_mm),
