@@ -109,7 +109,8 @@ pub struct Report {
     /// The tool offset (mm).
     pub tool_mm: [f64; 3],
     /// Predicted U (k = 2) of the identified tool point over the volume after the set-up's
-    /// transform: mean and largest over the grid (µm, largest coordinate at each point).
+    /// transform, identified by the Φ estimate (the paper's, `identify`'s default): mean and
+    /// largest over the grid (µm, largest coordinate at each point).
     pub u95_mean_um: f64,
     /// See `u95_mean_um`.
     pub u95_max_um: f64,
@@ -128,6 +129,10 @@ pub struct Report {
     pub reference_visits: usize,
     /// The largest correlation of time with an axis function, and which.
     pub aliasing: (f64, String),
+    /// Every estimator's expected RMS tool-point error over the grid (3-D, after the
+    /// set-up's transform, k = 1, µm) beside the Cramér–Rao limit of the plan and noise; `None`
+    /// when it cannot be formed.
+    pub efficiency: Option<crate::uncertainty::EfficiencyU>,
     /// Wall time of the planning (s).
     pub time_s: f64,
 }
@@ -294,6 +299,31 @@ impl Nominal {
         Ok(Nominal { data, gauge })
     }
 
+    /// Every estimator's expected error on the tool point `tool` over `grid` beside the
+    /// Cramér–Rao limit of the plan under `noise` (see [`volver_solvers::efficiency`]).
+    fn efficiency(
+        &self,
+        model: &Model,
+        noise: &TrackerNoise,
+        tool: [f64; 3],
+        grid: &[Commands],
+    ) -> Result<Option<crate::uncertainty::EfficiencyU>> {
+        let problem = Problem::new(model, &self.data)?;
+        let tg = ToolGrid {
+            commands: grid.to_vec(),
+            tool,
+        };
+        Ok(volver_solvers::efficiency::compare(
+            &problem,
+            self.gauge.as_ref(),
+            &model.initial_params(),
+            NoiseModel::Tracker(*noise),
+            &tg,
+        )
+        .as_ref()
+        .map(crate::uncertainty::EfficiencyU::from))
+    }
+
     /// The predicted U (k = 2, µm) of the tool point `tool` over `grid` after the set-up's
     /// transform for the plan identified by volver's Φ estimate under `noise`: mean and
     /// largest of each point's largest coordinate.
@@ -326,6 +356,12 @@ impl Nominal {
         let mean = us.iter().sum::<f64>() / us.len().max(1) as f64;
         Ok((mean, us.iter().copied().fold(0.0, f64::max)))
     }
+}
+
+/// The duration (h) of `n` measurements at `seconds_per_point` from every station of `model`
+/// (each measures the plan).
+fn duration_h(model: &Model, n: usize, seconds_per_point: f64) -> f64 {
+    (n * model.machine().stations().len()) as f64 * seconds_per_point / S_PER_H
 }
 
 /// Refuses a reflector list that names a reflector twice (`test4/R1+R1`): a plan measures each
@@ -440,8 +476,7 @@ fn check_seconds_per_point(seconds: f64) -> Result<()> {
 pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     request.validate()?;
     let t0 = std::time::Instant::now();
-    let given = model;
-    let full = with_reflectors(model, &request.extra_reflectors)?;
+    let (given, full) = (model, with_reflectors(model, &request.extra_reflectors)?);
     let model = &full;
     let machine = model.machine();
     let candidates = checked_candidates(machine, request.per_axis)?;
@@ -480,8 +515,10 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
         ),
     );
     let nominal = Nominal::of(model, &planned)?;
-    let (u95_mean_um, u95_max_um) =
-        nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?;
+    let ((u95_mean_um, u95_max_um), efficiency) = (
+        nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?,
+        nominal.efficiency(model, &request.noise, request.tool, &grid.positions)?,
+    );
     let unidentified = crate::shared::held_text(model, nominal.gauge.as_ref());
     let unidentifiable_by_candidates =
         crate::shared::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
@@ -497,9 +534,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             poses: planned.positions.len(),
             reflectors: reflector_counts(machine, &planned),
             candidates: space.len(),
-            // Every station measures the plan.
-            duration_h: (n * model.machine().stations().len()) as f64 * request.seconds_per_point
-                / S_PER_H,
+            duration_h: duration_h(model, n, request.seconds_per_point),
             equivalence: design.equivalence,
             iterations: design.iterations,
             tool_mm: request.tool,
@@ -511,6 +546,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             reference: file_units_rounded(machine, &candidates.positions[reference.position]),
             reference_visits: visits_of_reference,
             aliasing: order::aliasing(machine, &planned.positions, &planned.steps()),
+            efficiency,
             time_s: t0.elapsed().as_secs_f64(),
         },
         plan: reindex(planned, machine, plan_model.machine()),

@@ -36,6 +36,8 @@ pub struct Request {
     pub tool: [f64; 3],
     /// Monte Carlo replicas besides the linearised uncertainty, and their seed.
     pub monte_carlo: Option<(usize, u64)>,
+    /// The estimator: Φ (the paper's, default), ve, ml or whitened Φ.
+    pub objective: volver_solvers::Objective,
 }
 
 impl Request {
@@ -49,6 +51,7 @@ impl Request {
             grid: default_grid(model.machine(), 5)?,
             tool: crate::shared::reflector_centroid(model),
             monte_carlo: None,
+            objective: volver_solvers::Objective::Phi,
         })
     }
 }
@@ -78,6 +81,9 @@ pub struct Assessment {
     pub with_priors: bool,
     /// The fit against the noise: the intervals hold only for a complete model.
     pub model_check: volver_core::results::ModelCheck,
+    /// Every estimator's expected tool-point error on the grid beside the Cramér–Rao limit
+    /// (with a tracker noise model; `None` with the residuals' σ or when it cannot be formed).
+    pub efficiency: Option<volver_solvers::efficiency::Efficiency>,
 }
 
 /// Fits `model` to `data` with the gauge stated, and assesses the uncertainty `request` asks
@@ -100,18 +106,15 @@ pub fn assess(
     use volver_solvers::uncertainty::{ToolGrid, linear};
     let solver = volver_solvers::engine(&request.engine)?;
     let problem = volver_core::problem::Problem::new(model, data)?;
-    let options = volver_solvers::Options::default();
-    check_replicas(request)?;
-    if request.priors.is_some() && request.monte_carlo.is_some() {
-        return Err(Error::Request(
-            "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
-             the posterior of the priors is stated linearised only (run them apart)"
-                .into(),
-        ));
-    }
+    let options = volver_solvers::Options {
+        objective: request.objective,
+        ..Default::default()
+    };
+    check_request(request)?;
+    let fitted = crate::identification::fitted_problem(&problem, options.objective, request.noise)?;
     let mut id = volver_solvers::strategy::identify(
         solver.as_ref(),
-        problem.clone(),
+        fitted,
         &model.initial_params(),
         &volver_solvers::strategy::Strategy::default(),
         &options,
@@ -154,7 +157,15 @@ pub fn assess(
             .map(|_| volver_solvers::gauge::RULE.to_string()),
     };
     let model_check = check_fit(&problem, &id, request.noise);
+    let efficiency = volver_solvers::efficiency::compare(
+        &problem,
+        id.gauge.as_ref(),
+        &id.params,
+        request.noise,
+        &grid,
+    );
     Ok(Assessment {
+        efficiency,
         model_check,
         id,
         covariance,
@@ -196,6 +207,34 @@ pub struct Report {
     pub model_check: volver_core::results::ModelCheck,
     /// [`volver_core::results::ModelCheck::statement`].
     pub model_statement: String,
+    /// The estimator fitted (`phi`, `ve`, `ml`, `phi-w`).
+    pub objective: String,
+    /// Every estimator's expected RMS tool-point error (3-D, after the set-up's transform,
+    /// k = 1, µm) on the grid and the Cramér–Rao limit, with a tracker noise model.
+    pub efficiency: Option<EfficiencyU>,
+}
+
+/// [`volver_solvers::efficiency::Efficiency`] in µm, for the JSON report.
+#[derive(Clone, Debug, serde::Serialize)]
+#[non_exhaustive]
+pub struct EfficiencyU {
+    /// The Cramér–Rao limit (µm).
+    pub cramer_rao_um: f64,
+    /// Each estimator's name and expected error (µm).
+    pub estimators: Vec<(String, f64)>,
+}
+
+impl From<&volver_solvers::efficiency::Efficiency> for EfficiencyU {
+    fn from(e: &volver_solvers::efficiency::Efficiency) -> EfficiencyU {
+        EfficiencyU {
+            cramer_rao_um: e.limit_mm * UM_PER_MM,
+            estimators: e
+                .estimators
+                .iter()
+                .map(|(o, v)| (o.to_string(), v * UM_PER_MM))
+                .collect(),
+        }
+    }
 }
 
 /// A parameter's value and standard uncertainties.
@@ -345,6 +384,8 @@ impl Assessment {
                 .collect(),
             model_check: self.model_check.clone(),
             model_statement: self.model_check.statement(),
+            objective: request.objective.to_string(),
+            efficiency: self.efficiency.as_ref().map(EfficiencyU::from),
             monte_carlo: self.monte_carlo.as_ref().zip(request.monte_carlo).map(
                 |((mc, _, _), (_, seed))| MonteCarloRun {
                     replicas: mc.samples.len(),
@@ -415,12 +456,19 @@ pub fn monte_carlo_ratio(us: &[volver_solvers::uncertainty::PointUncertainty], m
     ratios.iter().sum::<f64>() / ratios.len() as f64
 }
 
-/// Refuses a number of Monte Carlo replicas outside 2 … [`MAX_REPLICAS`] before the fit runs
+/// Refuses Monte Carlo with priors, and a number of replicas outside 2 … [`MAX_REPLICAS`], before the fit runs
 /// (a count from the command line is bounded before anything is allocated for it).
 ///
 /// [`MAX_REPLICAS`]: volver_solvers::uncertainty::MAX_REPLICAS
-fn check_replicas(request: &Request) -> Result<()> {
+fn check_request(request: &Request) -> Result<()> {
     use volver_solvers::uncertainty::MAX_REPLICAS;
+    if request.priors.is_some() && request.monte_carlo.is_some() {
+        return Err(Error::Request(
+            "--monte-carlo with --prior: the Monte Carlo replicas re-fit the data's estimator; \
+             the posterior of the priors is stated linearised only (run them apart)"
+                .into(),
+        ));
+    }
     match request.monte_carlo {
         Some((n, _)) if !(2..=MAX_REPLICAS).contains(&n) => Err(Error::Request(format!(
             "--monte-carlo {n}: give 2 … {MAX_REPLICAS} replicas (a standard deviation needs \
@@ -445,7 +493,10 @@ fn monte_carlo_run(
     let Some((n, seed)) = request.monte_carlo else {
         return Ok(None);
     };
-    let options = volver_solvers::Options::default();
+    let options = volver_solvers::Options {
+        objective: request.objective,
+        ..Default::default()
+    };
     let base = grid.points(model, &id.params);
     let mc = monte_carlo(
         &request.engine,

@@ -6,6 +6,7 @@
 
 pub mod candidates;
 pub mod design;
+pub mod efficiency;
 pub mod identifiability;
 pub mod observability;
 pub mod prior;

@@ -67,7 +67,7 @@ pub enum Error {
          engine Problem::whitened residuals (the identification does, from --noise or the \
          machine file's noise)"
     )]
-    NotWhitened(crate::Objective),
+    NotWhitened(String),
     /// An objective name that is not `phi`, `ve`, `ml` or `phi-w`.
     #[error("unknown objective '{0}': phi, ve, ml or phi-w")]
     UnknownObjective(String),

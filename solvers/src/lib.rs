@@ -31,7 +31,9 @@ pub mod summary;
 
 // The curated surface: each engine and analysis at the path its users know it by
 // (`volver_solvers::lm`, `volver_solvers::candidates` …), whichever group holds it.
-pub use analysis::{candidates, design, identifiability, observability, prior, uncertainty};
+pub use analysis::{
+    candidates, design, efficiency, identifiability, observability, prior, uncertainty,
+};
 #[cfg(feature = "ceres")]
 pub use engines::ceres;
 #[cfg(feature = "clarabel")]

@@ -94,6 +94,39 @@ impl Observer for Progress {
     }
 }
 
+/// Every estimator's expected tool-point error `e` beside the Cramér–Rao limit, the one
+/// `fitted` marked.
+pub fn print_efficiency(
+    e: &volver::uncertainty::EfficiencyU,
+    fitted: Option<volver::solvers::Objective>,
+) {
+    println!(
+        "\n  estimators on this plan and noise: expected RMS tool-point error over the grid (3-D, \
+         after the set-up's transform, k = 1, from the data)"
+    );
+    println!(
+        "    {:<43} {:>9.3} µm",
+        "Cramér–Rao limit (of unbiased estimators)", e.cramer_rao_um
+    );
+    for (name, v) in &e.estimators {
+        let what = match name.as_str() {
+            "phi" => "phi (the paper's Φ)",
+            "ve" => "ve (least squares)",
+            "ml" => "ml (maximum likelihood)",
+            "phi-w" => "phi-w (Φ of whitened residuals)",
+            other => other,
+        };
+        let mark = match fitted {
+            Some(o) if o.to_string() == *name => "  ← fitted",
+            _ => "",
+        };
+        println!(
+            "    {what:<43} {v:>9.3} µm  {:>5.2} × the limit{mark}",
+            v / e.cramer_rao_um
+        );
+    }
+}
+
 /// A length in µm for tables: fixed-point, or scientific when below 0.01 µm.
 pub fn um(v: f64) -> String {
     if v != 0.0 && v.abs() < 0.01 {

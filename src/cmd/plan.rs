@@ -239,6 +239,12 @@ fn print_planned(
         "  predicted U (k = 2) of the identified tool point after the set-up's transform: mean {:.2} µm, largest {:.2} µm over the volume",
         r.u95_mean_um, r.u95_max_um
     );
+    if let Some(e) = &r.efficiency {
+        super::print_efficiency(e, None);
+        println!(
+            "  (U above is the Φ estimate's, identify's default; --objective ml reaches the limit)\n"
+        );
+    }
     println!(
         "  order: shuffled; time's largest correlation with an axis function {:.3} ({}); reference pose {:?} visited {} times",
         r.aliasing.0, r.aliasing.1, r.reference, r.reference_visits

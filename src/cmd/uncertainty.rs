@@ -43,6 +43,11 @@ pub struct UncertaintyArgs {
     /// Engine (`lm`, …).
     #[arg(long, default_value = "lm")]
     solver: String,
+    /// The estimator fitted and assessed: phi (default), ve, ml or phi-w (as `identify
+    /// --objective`); every estimator's expected error is printed beside the Cramér–Rao limit
+    /// whatever the choice.
+    #[arg(long, default_value = "phi")]
+    objective: String,
     /// Print one JSON object.
     #[arg(long)]
     json: bool,
@@ -76,6 +81,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
         .then(|| volver::solvers::prior::Priors::parse(&a.prior))
         .transpose()?;
     request.monte_carlo = a.monte_carlo.map(|n| (n, a.seed));
+    request.objective = a.objective.parse()?;
     request.grid = grid_of(&machine, a.grid.as_deref())?;
     request.tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
     let quiet = a.json;
@@ -107,6 +113,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     println!("{}", noise_used.text());
     print_parameters(&assessment, &model);
     print_tool_point(&assessment, &model, &request);
+    print_efficiency(&assessment, &request);
     let check = &assessment.model_check;
     let label = if check.above_noise {
         "WARNING"
@@ -115,6 +122,21 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     };
     println!("\n  {label}: {}", check.statement());
     Ok(())
+}
+
+/// Every estimator's expected tool-point error beside the Cramér–Rao limit, or why there is
+/// none.
+fn print_efficiency(a: &Assessment, request: &Request) {
+    match &a.efficiency {
+        Some(e) => super::print_efficiency(
+            &volver::uncertainty::EfficiencyU::from(e),
+            Some(request.objective),
+        ),
+        None => println!(
+            "\n  estimators against the Cramér–Rao limit: not stated (it needs the tracker's noise \
+             model: --noise or the machine file's [tracker] noise)"
+        ),
+    }
 }
 
 /// The fit, the noise model and the gauge, in words.

@@ -267,7 +267,7 @@ pub fn linear(
         NoiseModel::Residual => [Vec::new(), Vec::new()],
     };
     let mut jac = vec![0.0; 3 * n];
-    let (loss, machine) = (objective.loss(), problem.model().machine());
+    let loss = objective.loss();
     for i in 0..npts {
         // The residuals the estimator weighs (whitened for ml and phi-w) and their Jacobian.
         fitted.residual_and_jacobian(i, params, &mut jac);
@@ -278,25 +278,7 @@ pub fn linear(
         let jz = Mat::from_fn(3, nf, |c, k| {
             (0..n).map(|j| jac[c * n + j] * basis[(j, k)]).sum::<f64>()
         });
-        let point = &problem.data().points[i];
-        let x = point.measured;
-        // The point's own station's noise, and the whitening the estimator applied to it.
-        let noise_i = match noise {
-            NoiseModel::Tracker(t) => {
-                NoiseModel::Tracker(machine.station_noise_or(point.station_index, t))
-            }
-            NoiseModel::Residual => NoiseModel::Residual,
-        };
-        let w = fitted.whitening_of(i);
-        let (ea, eb) = if problem.scalar(i) {
-            range_expectations(loss, noise_i, x[0], sigma_mm, w[0][0])
-        } else {
-            let rule = match noise_i {
-                NoiseModel::Tracker(t) if t.distribution == Distribution::Uniform => &rules[1],
-                _ => &rules[0],
-            };
-            expectations(loss, noise_i, x, sigma_mm, rule, &w)
-        };
+        let (ea, eb) = point_expectations(&fitted, i, (loss, noise), sigma_mm, &rules);
         let ea = Mat::from_fn(3, 3, |r, c| ea[r][c]);
         let eb = Mat::from_fn(3, 3, |r, c| eb[r][c]);
         a += jz.transpose() * (&ea * &jz);
@@ -316,6 +298,38 @@ pub fn linear(
         sigma_mm,
         noise,
     })
+}
+
+/// [`expectations`] (or [`range_expectations`]) at point `i` of `fitted` (the residuals the
+/// estimator weighs): its own station's noise, and the whitening applied to it; `rules` are the
+/// Gauss rules of the normal and the uniform distribution.
+fn point_expectations(
+    fitted: &Problem,
+    i: usize,
+    (loss, noise): (Objective, NoiseModel),
+    sigma_mm: f64,
+    rules: &[Vec<(f64, f64)>; 2],
+) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
+    let point = &fitted.data().points[i];
+    let x = point.measured;
+    let noise_i = match noise {
+        NoiseModel::Tracker(t) => NoiseModel::Tracker(
+            fitted
+                .model()
+                .machine()
+                .station_noise_or(point.station_index, t),
+        ),
+        NoiseModel::Residual => NoiseModel::Residual,
+    };
+    let w = fitted.whitening_of(i);
+    if fitted.scalar(i) {
+        return range_expectations(loss, noise_i, x[0], sigma_mm, w[0][0]);
+    }
+    let rule = match noise_i {
+        NoiseModel::Tracker(t) if t.distribution == Distribution::Uniform => &rules[1],
+        _ => &rules[0],
+    };
+    expectations(loss, noise_i, x, sigma_mm, rule, &w)
 }
 
 /// The residuals in mm and those the estimator of `objective` weighs: the same for Φ and ve,
@@ -414,7 +428,8 @@ fn range_expectations(
 }
 
 /// `E[∂ψ/∂r]` and `E[ψψᵀ]` at a point measured at `x` (the residual at the truth is minus the
-/// noise). For the isotropic normal, in closed form: `ve` gives `I` and `σ² I`; `Φ` gives
+/// noise). Least squares (ve, ml) in closed form: `I` and the noise's covariance `W Σ Wᵀ` at the
+/// point (linearised along its axes; σ² I for the isotropic normal). For the isotropic normal `Φ` gives
 /// `(2/3) E[1/‖r‖] I = (2/3) √(2/π)/σ I` and `I/3`. For the tracker's model, by a product Gauss
 /// rule over its three deviates ([`volver_core::noise::Distribution::rule`], 16³ nodes; a deterministic
 /// quadrature, within 1 % of sampled means in the tests). No random draws: noise in these expectations would not share the
@@ -451,6 +466,20 @@ fn expectations(
         }
         NoiseModel::Tracker(t) => t,
     };
+    if objective.loss() == Objective::Ve {
+        // Least squares: E[∂ψ/∂r] = I and E[ψψᵀ] = W Σ Wᵀ, Σ the noise's covariance at the
+        // point along its linearised axes (σ² of each), in closed form.
+        let mut eb = [[0.0; 3]; 3];
+        for (u, s) in tracker.axes(x) {
+            let wu = w.map(|row| row[0] * u[0] + row[1] * u[1] + row[2] * u[2]);
+            for p in 0..3 {
+                for q in 0..3 {
+                    eb[p][q] += s * s * wu[p] * wu[q];
+                }
+            }
+        }
+        return (diag(1.0), eb);
+    }
     let mut ea = [[0.0; 3]; 3];
     let mut eb = [[0.0; 3]; 3];
     for &(za, wa) in rule {
@@ -836,33 +865,42 @@ pub fn remove_rigid(points: &[[f64; 3]], d: &mut [f64]) {
 mod tests {
     use super::*;
 
-    /// Sample means of `E[∂ψ/∂r]` and `E[ψψᵀ]` over `draws` seeded draws of the noise.
+    const IDENTITY: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+
+    /// Sample means of `E[∂ψ/∂r]` and `E[ψψᵀ]` over `draws` seeded draws of the noise, the
+    /// residual weighed by `w`.
     fn sampled(
         objective: Objective,
         noise: NoiseModel,
         x: [f64; 3],
         sigma: f64,
         draws: usize,
+        w: &[[f64; 3]; 3],
     ) -> ([[f64; 3]; 3], [[f64; 3]; 3]) {
         let mut rng = Rng::new(7);
         let (mut ea, mut eb) = ([[0.0; 3]; 3], [[0.0; 3]; 3]);
-        let w = 1.0 / draws as f64;
+        let weight = 1.0 / draws as f64;
         for _ in 0..draws {
-            let e = noise.draw(x, sigma, &mut rng);
-            let r = [-e[0], -e[1], -e[2]];
+            let e = match noise {
+                NoiseModel::Tracker(t) => {
+                    let y = t.apply(x, &mut rng);
+                    [y[0] - x[0], y[1] - x[1], y[2] - x[2]]
+                }
+                NoiseModel::Residual => {
+                    [rng.normal(), rng.normal(), rng.normal()].map(|v| sigma * v)
+                }
+            };
+            let r = w.map(|row| -(row[0] * e[0] + row[1] * e[1] + row[2] * e[2]));
             let nr = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
             for p in 0..3 {
                 for q in 0..3 {
                     let id = if p == q { 1.0 } else { 0.0 };
-                    match objective {
-                        Objective::Phi => {
-                            ea[p][q] += w * (id - r[p] * r[q] / (nr * nr)) / nr;
-                            eb[p][q] += w * r[p] * r[q] / (nr * nr);
-                        }
-                        Objective::Ve => {
-                            ea[p][q] += w * id;
-                            eb[p][q] += w * r[p] * r[q];
-                        }
+                    if objective.loss() == Objective::Phi {
+                        ea[p][q] += weight * (id - r[p] * r[q] / (nr * nr)) / nr;
+                        eb[p][q] += weight * r[p] * r[q] / (nr * nr);
+                    } else {
+                        ea[p][q] += weight * id;
+                        eb[p][q] += weight * r[p] * r[q];
                     }
                 }
             }
@@ -871,8 +909,9 @@ mod tests {
     }
 
     /// The closed forms and the Gauss rules agree with 400 000 draws (within 1 % of each
-    /// matrix' largest entry, the draws' own scatter being ~0.3 %), for both objectives, the
-    /// isotropic normal and the tracker's normal and uniform models at a near and a far point.
+    /// matrix' largest entry, the draws' own scatter being ~0.3 %), for every objective (ml and
+    /// phi-w weighed by the tracker's whitening at the point), the isotropic normal and the
+    /// tracker's normal and uniform models at a near and a far point.
     #[test]
     fn expectations_match_sampled_means() {
         let uniform = TrackerNoise::PAPER;
@@ -880,7 +919,7 @@ mod tests {
             distribution: volver_core::noise::Distribution::Normal,
             ..TrackerNoise::PAPER
         };
-        for objective in [Objective::Phi, Objective::Ve] {
+        for objective in Objective::ALL {
             for noise in [
                 NoiseModel::Residual,
                 NoiseModel::Tracker(uniform),
@@ -888,12 +927,17 @@ mod tests {
             ] {
                 for x in [[900.0, -400.0, 300.0], [3500.0, 1200.0, -800.0]] {
                     let sigma = 0.02;
-                    let rule = match noise {
-                        NoiseModel::Tracker(t) => t.distribution.rule(),
-                        NoiseModel::Residual => Vec::new(),
+                    let (rule, w) = match noise {
+                        NoiseModel::Tracker(t) if objective.whitened() => {
+                            (t.distribution.rule(), t.whitening(x).unwrap())
+                        }
+                        NoiseModel::Tracker(t) => (t.distribution.rule(), IDENTITY),
+                        // The residuals' σ weighs nothing: the weighted objectives need a model.
+                        NoiseModel::Residual if objective.whitened() => continue,
+                        NoiseModel::Residual => (Vec::new(), IDENTITY),
                     };
-                    let (qa, qb) = expectations(objective, noise, x, sigma, &rule);
-                    let (sa, sb) = sampled(objective, noise, x, sigma, 400_000);
+                    let (qa, qb) = expectations(objective, noise, x, sigma, &rule, &w);
+                    let (sa, sb) = sampled(objective, noise, x, sigma, 400_000, &w);
                     for (q, s) in [(qa, sa), (qb, sb)] {
                         let big = s.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
                         for p in 0..3 {

@@ -138,7 +138,7 @@ impl<'t, 'a> Run<'t, 'a> {
             start_norms: Vec::new(),
         };
         if options.objective.whitened() && !problem.whitened() {
-            let e = crate::Error::NotWhitened(options.objective);
+            let e = crate::Error::NotWhitened(options.objective.to_string());
             return Err(Box::new(run.finish(
                 start.to_vec(),
                 Termination::InvalidInput(Invalid::Refused(e)),
