@@ -25,6 +25,7 @@ pub mod comparison;
 pub mod compensation;
 pub mod diagnosis;
 pub mod error;
+pub mod estimators;
 pub mod history;
 pub mod identification;
 pub mod inputs;
