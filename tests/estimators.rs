@@ -24,7 +24,7 @@ use volver::core::simulate::{Magnitudes, Simulation, Truth};
 use volver::identification::fitted_problem;
 use volver::solvers::efficiency::{cramer_rao, expected_rms_mm, realised_rms_mm};
 use volver::solvers::lm::LevenbergMarquardt;
-use volver::solvers::strategy::{Strategy, identify};
+use volver::solvers::strategy::{Identification, Strategy, identify};
 use volver::solvers::uncertainty::{NoiseModel, ToolGrid, linear};
 use volver::solvers::{Objective, Options, Silent};
 
@@ -76,28 +76,9 @@ fn judge(
 ) {
     let model = &case.model;
     let problem = Problem::new(model, data).unwrap();
-    let fitted = fitted_problem(&problem, objective, noise).unwrap();
-    let options = Options {
-        objective,
-        max_iterations: 1000,
-        max_evaluations: 10_000,
-        ..Options::default()
-    };
     let t0 = std::time::Instant::now();
-    let id = identify(
-        &LevenbergMarquardt::default(),
-        fitted,
-        &model.initial_params(),
-        &Strategy::default(),
-        &options,
-        &mut Silent,
-    );
+    let id = fit(&problem, objective, noise);
     tally.time_s += t0.elapsed().as_secs_f64();
-    assert!(
-        id.termination.converged(),
-        "{objective}: {}",
-        id.termination
-    );
     let cov = linear(&problem, id.gauge.as_ref(), &id.params, objective, noise).unwrap();
     let limit = cramer_rao(&problem, id.gauge.as_ref(), &id.params, noise).unwrap();
     let base = case.grid.points(model, &id.params);
@@ -116,6 +97,32 @@ fn judge(
     tally.expected2 += expected_rms_mm(&case.grid, model, &id.params, &cov).powi(2);
     tally.limit2 += expected_rms_mm(&case.grid, model, &id.params, &limit).powi(2);
     tally.runs += 1;
+}
+
+/// The native LM's fit of `problem` by `objective` (residuals whitened by `noise` for the
+/// weighted ones), converged.
+fn fit(problem: &Problem, objective: Objective, noise: NoiseModel) -> Identification {
+    let fitted = fitted_problem(problem, objective, noise).unwrap();
+    let options = Options {
+        objective,
+        max_iterations: 1000,
+        max_evaluations: 10_000,
+        ..Options::default()
+    };
+    let id = identify(
+        &LevenbergMarquardt::default(),
+        fitted,
+        &problem.model().initial_params(),
+        &Strategy::default(),
+        &options,
+        &mut Silent,
+    );
+    assert!(
+        id.termination.converged(),
+        "{objective}: {}",
+        id.termination
+    );
+    id
 }
 
 /// Runs `objectives` on `replicas` truths of `case` under `noise` (seeds from `seed0`).
@@ -225,21 +232,7 @@ fn ml_reaches_the_cramer_rao_limit_of_test_4_with_normal_and_paper_noise() {
     ignore = "release only: cargo test --release --test estimators"
 )]
 fn ml_reaches_the_limit_for_a_250_mm_tool_with_a_candidate_reflector() {
-    use volver::planning::{Request, plan};
-    let model = Model::default_xcfz();
-    let tool = [-30.0, 75.0, -250.0];
-    let planned = plan(
-        &model,
-        &Request {
-            tool,
-            extra_reflectors: vec![volver::core::machine::ReflectorSpec {
-                id: "R3".into(),
-                offset: tool,
-            }],
-            ..Request::default()
-        },
-    )
-    .unwrap();
+    let (tool, planned) = common::planned_for_a_250_mm_tool();
     let mut grid = common::tool_grid(planned.model.machine());
     grid.tool = tool;
     let case = Case {
@@ -269,4 +262,77 @@ fn replicas() -> u64 {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(20)
+}
+
+/// Each weighted estimator's Monte Carlo U (GUM-S1: its own fit repeated on re-simulated noise,
+/// whitened alike) agrees with its linearised U on test 4 (mean ratio within ±10 % over the
+/// grid, 40 replicas), and its k = 2 intervals cover the truth in 90–99 % of the grid's
+/// coordinates over 10 truths (20 replicas each, a wider scatter than the linearised ones).
+#[test]
+#[cfg_attr(
+    debug_assertions,
+    ignore = "release only: cargo test --release --test estimators"
+)]
+fn weighted_estimators_monte_carlo_agrees_with_their_linear_u_and_covers() {
+    use volver::solvers::uncertainty::monte_carlo;
+    let case = test4();
+    let model = &case.model;
+    let noise = TrackerNoise::from_text("normal:30,30,4,0.8").unwrap();
+    let tracker = NoiseModel::Tracker(noise);
+    for objective in [Objective::Ml, Objective::PhiW] {
+        let options = Options {
+            objective,
+            ..Options::default()
+        };
+        let (mut inside, mut total, mut ratios) = (0, 0, Vec::new());
+        for r in 0..10u64 {
+            let seed = 4800 + r;
+            let truth =
+                Truth::random(model.machine(), model.spec(), &Magnitudes::default(), seed).unwrap();
+            let mut sim = Simulation::new(case.plan.clone(), truth.clone(), seed);
+            sim.noise = noise;
+            let data = sim.run().unwrap().measurements;
+            let problem = Problem::new(model, &data).unwrap();
+            let id = fit(&problem, objective, tracker);
+            let cov = linear(&problem, id.gauge.as_ref(), &id.params, objective, tracker).unwrap();
+            let replicas = if r == 0 { 40 } else { 20 };
+            let runs = monte_carlo(
+                "lm",
+                model,
+                &data,
+                &id.params,
+                tracker,
+                cov.sigma_mm,
+                id.gauge.as_ref(),
+                &options,
+                replicas,
+                seed,
+                &|_| {},
+            )
+            .unwrap();
+            assert_eq!(runs.failed, 0, "{objective}: replicas failed");
+            let base = case.grid.points(model, &id.params);
+            let umc = case.grid.monte_carlo_u95(model, &runs, &base, true);
+            if r == 0 {
+                let ul = case.grid.uncertainty(model, &id.params, &cov, true);
+                let ul: Vec<f64> = ul.iter().flat_map(|p| p.u95_data_mm).collect();
+                ratios = umc.iter().zip(&ul).map(|(m, l)| m / l).collect();
+            }
+            let dev = case
+                .grid
+                .deviations(&truth.model, &truth.params, &base, true);
+            inside += dev.iter().zip(&umc).filter(|(d, u)| d.abs() <= **u).count();
+            total += dev.len();
+        }
+        let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+        let coverage = inside as f64 / total as f64;
+        eprintln!(
+            "{objective}: Monte Carlo / linearised U mean {mean:.3}, MC coverage {coverage:.3}"
+        );
+        assert!((0.9..1.1).contains(&mean), "{objective}: mean ratio {mean}");
+        assert!(
+            (0.90..=0.99).contains(&coverage),
+            "{objective}: Monte Carlo coverage {coverage}"
+        );
+    }
 }

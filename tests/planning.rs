@@ -285,20 +285,7 @@ fn a_plan_without_noise_or_points_is_refused() {
     ignore = "release only: cargo test --release --test planning"
 )]
 fn the_planned_test_halves_test_4s_tool_point_error_with_an_honest_u_and_finds_drift() {
-    let model = Model::default_xcfz();
-    let tool = [-30.0, 75.0, -250.0];
-    let planned = plan(
-        &model,
-        &Request {
-            tool,
-            extra_reflectors: vec![volver::core::machine::ReflectorSpec {
-                id: "R3".into(),
-                offset: tool,
-            }],
-            ..Request::default()
-        },
-    )
-    .unwrap();
+    let (tool, planned) = common::planned_for_a_250_mm_tool();
     assert_eq!(planned.plan.n_points(), 1040);
     let m = planned.model.machine();
     assert_eq!(

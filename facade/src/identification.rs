@@ -145,6 +145,9 @@ pub struct Report {
     pub phi_final_mm: f64,
     /// ve (mm²) at the end.
     pub ve_final_mm2: f64,
+    /// The final value of the objective minimised: Φ (mm), ve (mm²), or for ml and phi-w the
+    /// whitened residuals' ve and Φ (dimensionless, in units of the noise).
+    pub objective_final: f64,
     /// Final EMM as a percentage of the initial.
     pub residual_percent: f64,
     /// The measurements' noise error (µm) when the truth is known.
@@ -609,6 +612,7 @@ impl Outcome {
             emax_final_um: id.reached.stats.emax_um,
             phi_final_mm: id.reached.phi_mm,
             ve_final_mm2: id.reached.ve_mm2,
+            objective_final: id.reached.cost(self.objective),
             residual_percent: id.residual_percent(),
             noise_error_um: self.noise_error.map(|s| s.emm_um),
             noise_emax_um: self.noise_error.map(|s| s.emax_um),

@@ -382,18 +382,17 @@ fn print_estimators(model2: &Model, out: &Synthetic) -> Result<()> {
         grid.commands.len()
     );
     println!(
-        "     {:<8} {:>14} {:>15} {:>14} {:>9} {:>8}",
-        "", "error µm (RMS)", "expected µm", "U95 max µm", "EMM µm", "time s"
+        "     {:<8} {:>14} {:>15} {:>14} {:>9}",
+        "", "error µm (RMS)", "expected µm", "U95 max µm", "EMM µm"
     );
     for r in &s.rows {
         println!(
-            "     {:<8} {:>14} {:>15.2} {:>14.2} {:>9.2} {:>8.2}",
+            "     {:<8} {:>14} {:>15.2} {:>14.2} {:>9.2}",
             r.objective.to_string(),
             r.realised_um.map_or("-".into(), |v| format!("{v:.2}")),
             r.expected_um,
             r.u95_max_um,
-            r.emm_um,
-            r.time_s
+            r.emm_um
         );
     }
     println!(

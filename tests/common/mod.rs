@@ -158,3 +158,24 @@ pub fn found_on_most_seeds(claim: &str, first: u64, case: impl Fn(u64)) {
         "{claim}: holds on {held} of {SEEDS} seeds: {failed:?}"
     );
 }
+
+/// A 250 mm tool below the reflectors (off the R1–R2 line, about which test 4 cannot see the
+/// tool side turn) and the test `volver plan` designs for it with a candidate reflector R3 at
+/// the tool (1 040 points, the default request otherwise).
+#[allow(dead_code)]
+pub fn planned_for_a_250_mm_tool() -> ([f64; 3], volver::planning::Planned) {
+    let tool = [-30.0, 75.0, -250.0];
+    let planned = volver::planning::plan(
+        &volver::core::model::Model::default_xcfz(),
+        &volver::planning::Request {
+            tool,
+            extra_reflectors: vec![volver::core::machine::ReflectorSpec {
+                id: "R3".into(),
+                offset: tool,
+            }],
+            ..volver::planning::Request::default()
+        },
+    )
+    .unwrap();
+    (tool, planned)
+}
