@@ -1,13 +1,18 @@
-//! The solver agreement suite: every engine of the build minimises the same Φ (and ve) under
-//! the same constraints and must reach the same fit.
+//! The solver agreement suite: every engine of the build minimises the same Φ (and ve, and the
+//! noise-weighted `ml` and `phi-w`) under the same constraints and must reach the same fit.
 //!
 //! Problems: the paper's tests 1–5 with the paper's model (Legendre cubics for the linear
 //! axes, first harmonics for C; tests 1 and 2 with only the axes they move), and test 4 with
 //! the linear axes in monomial and Chebyshev bases; each noise-free (the truth is inside the model) and with the
 //! paper's tracker noise; and ranges alone from four stations (an L1 fit under Φ: measured,
 //! Clarabel's SOCP reaches its optimum, the native LM's continuation in ε stops 1.27e-5 above
-//! it on the noisy ranges, within its bound of 3e-5 there); each objective. Every engine
-//! starts from the same point (errors zero, tracker by a rigid fit).
+//! it on the noisy ranges, within its bound of 3e-5 there); Φ and ve on each. The
+//! noise-weighted objectives run on the noisy data of test 4 (whitened by the paper's tracker
+//! noise they carry) and of the four stations' ranges (each range by the interferometer's σ at
+//! its length): every engine gets the whitened residuals (`Problem::whitened`), is judged on
+//! the objective's own value (`Evaluation::cost`: ml as ve, phi-w as Φ, with their tolerances)
+//! and on the residuals in mm. Every engine starts from the same point (errors zero, tracker
+//! by a rigid fit).
 //!
 //! The paper's model is not fully identifiable on these plans (test 1 never turns C; on test 4
 //! six combinations have a curvature below 1e-10 of the largest). Along such flat directions
@@ -259,7 +264,9 @@ fn check_objectives(
 fn largest_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     a.iter()
         .zip(b)
-        .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt())
+        .map(|(a, b)| {
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
         .fold(0.0, f64::max)
 }
 
@@ -545,6 +552,112 @@ fn volver_compare_prints_every_engine_and_json() {
         err.contains("unknown solver 'simplex'") && err.contains("lm"),
         "{err}"
     );
+}
+
+/// `volver compare --objective ml` (and phi-w) gives the engines the residuals whitened by the
+/// noise (`--noise`, else the machine file's `[tracker] noise`), says so, and prints the
+/// objective's own value beside Φ and ve, the best judged on it; without any noise it is a
+/// clear error naming `--noise`, and `--noise` with an objective that does not weigh by it is
+/// refused.
+#[test]
+fn volver_compare_weighs_ml_and_phi_w_by_the_noise() {
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "ml",
+        "--engines",
+        "lm,clarabel",
+        "--gauge",
+        "--max-iterations",
+        "30",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["objective"], "ml");
+    // The embedded machine file's noise: the paper's tracker.
+    let noise = v["noise"].as_str().unwrap();
+    assert!(noise.contains("uniform:30,30,4,0.8"), "{noise}");
+    let rows = v["engines"].as_array().unwrap();
+    let values: Vec<f64> = rows.iter().map(|r| r["value"].as_f64().unwrap()).collect();
+    // ve of the whitened residuals: ~1 per coordinate, 3 per point at the optimum (the
+    // start is far above), not ve in mm² (~3e-3).
+    for (r, value) in rows.iter().zip(&values) {
+        assert!((1.0..10.0).contains(value), "{r}");
+        assert!(r["ve_mm2"].as_f64().unwrap() < 0.1, "{r}");
+    }
+    // On the gauge the two reach the same optimum.
+    assert!((values[0] / values[1] - 1.0).abs() < 1e-6, "{values:?}");
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "phi-w",
+        "--noise",
+        "normal:20,20,5,1",
+        "--engines",
+        "lm",
+        "--max-iterations",
+        "30",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("residuals whitened by tracker normal:20,20,5,1"),
+        "{text}"
+    );
+    assert!(
+        text.contains("phi-w") && text.contains("best phi-w: "),
+        "{text}"
+    );
+    // --noise with an objective that does not weigh by it.
+    let out = common::volver(&["compare", "--objective", "ve", "--noise", "paper"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--noise") && err.contains("objective ve"),
+        "{err}"
+    );
+    // A machine file without a noise, and no --noise: ml cannot weigh the points.
+    let dir = std::env::temp_dir().join(format!("volver-compare-ml-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |f: &str| dir.join(f).display().to_string();
+    common::simulate(&d("sim"), &["--plan", "test3", "--seed", "5"]);
+    let machine: String = volver::core::machine::DEFAULT_MACHINE_TOML
+        .lines()
+        .filter(|l| !l.starts_with("noise ="))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(d("bare.toml"), machine).unwrap();
+    std::fs::write(d("model.toml"), volver::core::model::DEFAULT_MODEL_TOML).unwrap();
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "ml",
+        "--machine",
+        &d("bare.toml"),
+        "--model",
+        &d("model.toml"),
+        "--data",
+        &d("sim/measurements.csv"),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--objective ml")
+            && err.contains("no stated noise")
+            && err.contains("--noise"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -223,7 +223,11 @@ fn a_whitened_fit_holds_the_same_combinations_at_the_same_reference() {
             },
             &mut Silent,
         );
-        assert!(id.termination.converged(), "{objective}: {}", id.termination);
+        assert!(
+            id.termination.converged(),
+            "{objective}: {}",
+            id.termination
+        );
         id
     };
     let plain = fit(problem.clone(), Objective::Phi);
@@ -240,7 +244,11 @@ fn a_whitened_fit_holds_the_same_combinations_at_the_same_reference() {
     for objective in [Objective::Ml, Objective::PhiW] {
         let id = fit(whitened.clone(), objective);
         let gw = id.gauge.as_ref().expect("the whitened fit has a gauge");
-        assert_eq!(gw.held.len(), g.held.len(), "{objective}: held combinations");
+        assert_eq!(
+            gw.held.len(),
+            g.held.len(),
+            "{objective}: held combinations"
+        );
         let dref = gw
             .reference
             .iter()
@@ -275,7 +283,13 @@ fn a_whitened_fit_holds_the_same_combinations_at_the_same_reference() {
             g.held.len()
         );
         assert!(dref < 1e-12, "{objective}: reference moved by {dref}");
-        assert!(outside < 1e-8, "{objective}: held directions differ by {outside}");
-        assert!(along < 1e-9, "{objective}: offsets {along} mm along Φ's held combinations");
+        assert!(
+            outside < 1e-8,
+            "{objective}: held directions differ by {outside}"
+        );
+        assert!(
+            along < 1e-9,
+            "{objective}: offsets {along} mm along Φ's held combinations"
+        );
     }
 }

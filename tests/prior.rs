@@ -371,7 +371,7 @@ fn identify_with_priors_and_ml_gives_the_map_of_the_ml_posterior() {
     };
     settings.noise = noise;
     let mut with_priors = settings.clone();
-    with_priors.priors = Some(pr.clone());
+    with_priors.priors = Some(pr);
     for seed in 21..=24 {
         let (_, data) = replica(seed, &Magnitudes::default().scaled(0.5));
         let estimate = identify(&model, &data, &settings, &mut Silent).unwrap();
@@ -384,14 +384,23 @@ fn identify_with_priors_and_ml_gives_the_map_of_the_ml_posterior() {
         let problem = Problem::new(&model, &data).unwrap();
         let whitened = problem.whitened(Some(&TrackerNoise::PAPER)).unwrap();
         let white = volver::solvers::evaluate(&whitened, &map.id.params);
-        assert_eq!(map.id.reached.ve_w, white.ve_w, "seed {seed}: the MAP's whitened ve");
+        assert_eq!(
+            map.id.reached.ve_w, white.ve_w,
+            "seed {seed}: the MAP's whitened ve"
+        );
         let gauge = estimate.id.gauge.as_ref().unwrap();
         let p_hat = &estimate.id.params;
         let cov = linear(&problem, Some(gauge), p_hat, Objective::Ml, noise).unwrap();
         let gradient = posterior_gradient(&whitened, &pr, (gauge, p_hat), &cov);
         // The MAP point an unweighted posterior would give from the same estimate.
-        let plain_cov = linear(&problem, Some(gauge), p_hat, Objective::Ve, NoiseModel::Residual)
-            .unwrap();
+        let plain_cov = linear(
+            &problem,
+            Some(gauge),
+            p_hat,
+            Objective::Ve,
+            NoiseModel::Residual,
+        )
+        .unwrap();
         let unweighted = maximum_a_posteriori(&model, Some(gauge), p_hat, &plain_cov, &pr).unwrap();
         let (g0, g1, gu) = (
             gradient(p_hat),
@@ -404,7 +413,10 @@ fn identify_with_priors_and_ml_gives_the_map_of_the_ml_posterior() {
             g1 / g0
         );
         assert!(g1 < 5e-3 * g0, "seed {seed}: gradient {g0:.3e} → {g1:.3e}");
-        assert!(g1 < 0.1 * gu, "seed {seed}: {g1:.3e} against {gu:.3e} unweighted");
+        assert!(
+            g1 < 0.1 * gu,
+            "seed {seed}: {g1:.3e} against {gu:.3e} unweighted"
+        );
     }
 }
 
@@ -426,7 +438,11 @@ fn posterior_gradient<'a>(
         .chain(gauge.held.iter().map(|h| h.direction.clone()))
         .collect();
     let ns = NullSpace::from_constraints(&whitened.constraints(), &gauge.reference).unwrap();
-    assert_eq!(ns.n_free(), e.len(), "the directions span the constraint set");
+    assert_eq!(
+        ns.n_free(),
+        e.len(),
+        "the directions span the constraint set"
+    );
     move |p: &[f64]| {
         let mut g = vec![0.0; n];
         let mut jac = vec![0.0; 3 * n];
