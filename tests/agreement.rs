@@ -1,13 +1,18 @@
-//! The solver agreement suite: every engine of the build minimises the same Φ (and ve) under
-//! the same constraints and must reach the same fit.
+//! The solver agreement suite: every engine of the build minimises the same Φ (and ve, and the
+//! noise-weighted `ml` and `phi-w`) under the same constraints and must reach the same fit.
 //!
 //! Problems: the paper's tests 1–5 with the paper's model (Legendre cubics for the linear
 //! axes, first harmonics for C; tests 1 and 2 with only the axes they move), and test 4 with
 //! the linear axes in monomial and Chebyshev bases; each noise-free (the truth is inside the model) and with the
 //! paper's tracker noise; and ranges alone from four stations (an L1 fit under Φ: measured,
 //! Clarabel's SOCP reaches its optimum, the native LM's continuation in ε stops 1.27e-5 above
-//! it on the noisy ranges, within its bound of 3e-5 there); each objective. Every engine
-//! starts from the same point (errors zero, tracker by a rigid fit).
+//! it on the noisy ranges, within its bound of 3e-5 there); Φ and ve on each. The
+//! noise-weighted objectives run on the noisy data of test 4 (whitened by the paper's tracker
+//! noise they carry) and of the four stations' ranges (each range by the interferometer's σ at
+//! its length): every engine gets the whitened residuals (`Problem::whitened`), is judged on
+//! the objective's own value (`Evaluation::cost`: ml as ve, phi-w as Φ, with their tolerances)
+//! and on the residuals in mm. Every engine starts from the same point (errors zero, tracker
+//! by a rigid fit).
 //!
 //! The paper's model is not fully identifiable on these plans (test 1 never turns C; on test 4
 //! six combinations have a curvature below 1e-10 of the largest). Along such flat directions
@@ -107,12 +112,9 @@ fn paper_model(basis: &str, linear: bool, rotary: bool) -> Model {
 
 const LEGENDRE: &str = "basis = \"legendre\"\ndegree = 3";
 
+/// The value of `objective` an engine reached (Φ mm, ve mm², ml's and phi-w's dimensionless).
 fn objective_of(s: &Solution, objective: Objective) -> f64 {
-    match objective {
-        Objective::Phi => s.summary.reached.phi_mm,
-        Objective::Ve => s.summary.reached.ve_mm2,
-        o => panic!("objective {o} is not in the agreement suite"),
-    }
+    s.summary.reached.cost(objective)
 }
 
 /// A claimed limit must have been reached; a failure is never accepted.
@@ -142,17 +144,63 @@ fn check_honest(errors: &mut Vec<String>, name: &str, s: &Solution, options: &Op
 }
 
 fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) -> Vec<String> {
+    check_objectives(
+        label,
+        model,
+        data,
+        noisy,
+        &[Objective::Phi, Objective::Ve],
+        None,
+    )
+}
+
+/// [`check_objectives`] on the noise-weighted objectives `ml` and `phi-w`: every engine given
+/// the residuals whitened by `noise` (each station's noise, `Problem::whitened`), judged on the
+/// objective's own (dimensionless) value and on the residuals in mm.
+fn check_weighted(
+    label: &str,
+    model: &Model,
+    data: &MeasurementSet,
+    noise: &TrackerNoise,
+) -> Vec<String> {
+    check_objectives(
+        label,
+        model,
+        data,
+        true,
+        &[Objective::Ml, Objective::PhiW],
+        Some(noise),
+    )
+}
+
+/// Every engine on every objective of `objectives` (whitened by `noise` when the objective
+/// weighs by it), each judged against the best exact engine.
+fn check_objectives(
+    label: &str,
+    model: &Model,
+    data: &MeasurementSet,
+    noisy: bool,
+    objectives: &[Objective],
+    noise: Option<&TrackerNoise>,
+) -> Vec<String> {
     let mut errors = Vec::new();
     let problem = Problem::new(model, data).unwrap();
     let start = init_tracker(&problem, &model.initial_params()).unwrap();
-    for objective in [Objective::Phi, Objective::Ve] {
+    for &objective in objectives {
         let options = Options {
             objective,
             max_iterations: 500,
             max_evaluations: 5000,
             ..Options::default()
         };
-        let (gauge, initial) = gauged(&problem, &start, &options, label);
+        // The residuals the objective weighs: whitened by each station's noise for ml and
+        // phi-w, in mm for Φ and ve.
+        let fitted = if objective.whitened() {
+            problem.whitened(noise).unwrap()
+        } else {
+            problem.clone()
+        };
+        let (gauge, initial) = gauged(&fitted, &start, &options, label);
         // Every engine first; the best objective of the exact engines is the reference.
         let runs = run_every_engine(&gauge, &start, &options);
         let (best_name, best) = runs
@@ -166,23 +214,16 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
         // each engine projects in its own scaled metric, so this is one such projection).
         let ns = NullSpace::from_constraints(&gauge.constraints, &start).unwrap();
         let p0 = ns.expand(&vec![0.0; ns.n_free()]);
-        let projected_start = match objective {
-            Objective::Phi => problem.phi(&p0),
-            Objective::Ve => problem.ve(&p0),
-            o => panic!("objective {o} is not in the agreement suite"),
+        let projected_start = match objective.loss() {
+            Objective::Phi => fitted.phi(&p0),
+            _ => fitted.ve(&p0),
         };
+        // Residuals are compared in mm whatever the objective weighs.
         let best_res = problem.residuals(&best.params);
         println!("  best: {best_name} {best_value:.12e}");
         for (name, options, s) in &runs {
             let value = objective_of(s, objective);
-            let res = problem.residuals(&s.params);
-            let dr = res
-                .iter()
-                .zip(&best_res)
-                .map(|(a, b)| {
-                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-                })
-                .fold(0.0, f64::max);
+            let dr = largest_difference(&problem.residuals(&s.params), &best_res);
             let viol_model = model.constraints().max_violation(&s.params);
             let viol_gauge = gauge.constraints.max_violation(&s.params);
             println!(
@@ -217,6 +258,16 @@ fn check_case(label: &str, model: &Model, data: &MeasurementSet, noisy: bool) ->
         }
     }
     errors
+}
+
+/// The largest distance between corresponding residuals of `a` and `b` (mm).
+fn largest_difference(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| {
+            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+        })
+        .fold(0.0, f64::max)
 }
 
 /// `problem`'s task with the weak directions of a first LM fit from `start` held (gauge
@@ -302,17 +353,17 @@ fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, 
     // the optimum is then at the rounding of the measurement file, where relative
     // differences mean nothing); ve is a square, hence the squared floor. A noisy fit is
     // judged relative to the best alone.
-    let floor = match (c.noisy, c.objective) {
+    // The noise-weighted objectives are judged as their loss: ml as ve, phi-w as Φ.
+    let loss = c.objective.loss();
+    let floor = match (c.noisy, loss) {
         (true, _) => 0.0,
         (false, Objective::Phi) => tol.floor * c.initial,
-        (false, Objective::Ve) => tol.floor * tol.floor * c.initial,
-        (false, o) => panic!("objective {o} is not in the agreement suite"),
+        (false, _) => tol.floor * tol.floor * c.initial,
     };
-    let rel = match c.objective {
+    let rel = match loss {
         Objective::Phi if c.scalar => tol.phi_scalar,
         Objective::Phi => tol.phi,
-        Objective::Ve => tol.ve,
-        o => panic!("objective {o} is not in the agreement suite"),
+        _ => tol.ve,
     };
     check!(
         errors,
@@ -386,11 +437,7 @@ fn tolerance(name: &str) -> Option<Tolerance> {
 }
 
 fn objective_of_initial(s: &Solution, objective: Objective) -> f64 {
-    match objective {
-        Objective::Phi => s.summary.initial.phi_mm,
-        Objective::Ve => s.summary.initial.ve_mm2,
-        o => panic!("objective {o} is not in the agreement suite"),
-    }
+    s.summary.initial.cost(objective)
 }
 
 fn check_plan(plan: &str, seed: u64) {
@@ -507,6 +554,112 @@ fn volver_compare_prints_every_engine_and_json() {
     );
 }
 
+/// `volver compare --objective ml` (and phi-w) gives the engines the residuals whitened by the
+/// noise (`--noise`, else the machine file's `[tracker] noise`), says so, and prints the
+/// objective's own value beside Φ and ve, the best judged on it; without any noise it is a
+/// clear error naming `--noise`, and `--noise` with an objective that does not weigh by it is
+/// refused.
+#[test]
+fn volver_compare_weighs_ml_and_phi_w_by_the_noise() {
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "ml",
+        "--engines",
+        "lm,clarabel",
+        "--gauge",
+        "--max-iterations",
+        "30",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["objective"], "ml");
+    // The embedded machine file's noise: the paper's tracker.
+    let noise = v["noise"].as_str().unwrap();
+    assert!(noise.contains("uniform:30,30,4,0.8"), "{noise}");
+    let rows = v["engines"].as_array().unwrap();
+    let values: Vec<f64> = rows.iter().map(|r| r["value"].as_f64().unwrap()).collect();
+    // ve of the whitened residuals: ~1 per coordinate, 3 per point at the optimum (the
+    // start is far above), not ve in mm² (~3e-3).
+    for (r, value) in rows.iter().zip(&values) {
+        assert!((1.0..10.0).contains(value), "{r}");
+        assert!(r["ve_mm2"].as_f64().unwrap() < 0.1, "{r}");
+    }
+    // On the gauge the two reach the same optimum.
+    assert!((values[0] / values[1] - 1.0).abs() < 1e-6, "{values:?}");
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "phi-w",
+        "--noise",
+        "normal:20,20,5,1",
+        "--engines",
+        "lm",
+        "--max-iterations",
+        "30",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("residuals whitened by tracker normal:20,20,5,1"),
+        "{text}"
+    );
+    assert!(
+        text.contains("phi-w") && text.contains("best phi-w: "),
+        "{text}"
+    );
+    // --noise with an objective that does not weigh by it.
+    let out = common::volver(&["compare", "--objective", "ve", "--noise", "paper"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--noise") && err.contains("objective ve"),
+        "{err}"
+    );
+    // A machine file without a noise, and no --noise: ml cannot weigh the points.
+    let dir = std::env::temp_dir().join(format!("volver-compare-ml-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let d = |f: &str| dir.join(f).display().to_string();
+    common::simulate(&d("sim"), &["--plan", "test3", "--seed", "5"]);
+    let machine: String = volver::core::machine::DEFAULT_MACHINE_TOML
+        .lines()
+        .filter(|l| !l.starts_with("noise ="))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(d("bare.toml"), machine).unwrap();
+    std::fs::write(d("model.toml"), volver::core::model::DEFAULT_MODEL_TOML).unwrap();
+    let out = common::volver(&[
+        "compare",
+        "--objective",
+        "ml",
+        "--machine",
+        &d("bare.toml"),
+        "--model",
+        &d("model.toml"),
+        "--data",
+        &d("sim/measurements.csv"),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--objective ml")
+            && err.contains("no stated noise")
+            && err.contains("--noise"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn every_engine_reports_invalid_input_instead_of_panicking() {
     let model = Model::default_xcfz();
@@ -549,11 +702,92 @@ fn every_engine_reports_invalid_input_instead_of_panicking() {
     }
 }
 
+/// A noise-weighted objective on residuals in mm is refused by every engine before it steps:
+/// invalid input naming the objective and the cause (not whitened), the start returned as it
+/// was — never a panic, never a silent ve or Φ fit. The same engines accept the whitened
+/// residuals.
+#[test]
+fn every_engine_refuses_a_weighted_objective_on_unwhitened_residuals() {
+    let model = Model::default_xcfz();
+    let data = data("test3", true, 3);
+    let problem = Problem::new(&model, &data).unwrap();
+    let plain = Task::new(problem.clone());
+    let whitened = Task::new(problem.whitened(Some(&TrackerNoise::PAPER)).unwrap());
+    let start = init_tracker(&problem, &model.initial_params()).unwrap();
+    for name in engine_names() {
+        let e = engine(name).unwrap();
+        for objective in [Objective::Ml, Objective::PhiW] {
+            let options = Options {
+                objective,
+                max_iterations: 2,
+                max_evaluations: 20,
+                ..Options::default()
+            };
+            let s = e.solve(&plain, &start, &options, &mut Silent);
+            let t = &s.summary.termination;
+            let text = t.to_string();
+            assert!(
+                matches!(t, Termination::InvalidInput(_))
+                    && text.contains(&format!("objective {objective}"))
+                    && text.contains("not whitened"),
+                "{name} {objective} on residuals in mm: {text}"
+            );
+            assert_eq!(s.params, start, "{name} {objective}: moved the parameters");
+            assert_eq!(s.summary.iterations, 0, "{name} {objective}: iterated");
+            // The whitened residuals are taken (a step or two within the limits above).
+            let s = e.solve(&whitened, &start, &options, &mut Silent);
+            assert!(
+                !s.summary.termination.failed(),
+                "{name} {objective} on whitened residuals: {}",
+                s.summary.termination
+            );
+            assert!(
+                s.summary.reached.cost(objective).is_finite(),
+                "{name} {objective}: no whitened value"
+            );
+        }
+    }
+}
+
 /// Ranges alone from four stations (120 poses, a tracing interferometer's noise, the
 /// stations' positions and range offsets identified): every engine takes the scalar residuals
 /// as it takes points, and they agree as on the tracker's points.
 #[test]
 fn engines_agree_on_ranges_from_four_stations() {
+    let mut errors = Vec::new();
+    for noisy in [false, true] {
+        let (model, data, _) = ranges_case(noisy);
+        let label = format!("ranges {}", if noisy { "noisy" } else { "noise-free" });
+        errors.extend(check_case(&label, &model, &data, noisy));
+    }
+    assert!(errors.is_empty(), "{}", errors.join("\n"));
+}
+
+/// The noise-weighted objectives on test 4 with the paper's tracker noise (the data's own,
+/// seed 24 as `engines_agree_on_test4`): every engine on the residuals whitened by it, the same
+/// optimum to the tolerances of ve (ml) and Φ (phi-w).
+#[test]
+fn engines_agree_on_ml_and_phi_w_on_test4() {
+    let model = paper_model(LEGENDRE, true, true);
+    let data = data("test4", true, 24);
+    let errors = check_weighted("test4 noisy", &model, &data, &TrackerNoise::PAPER);
+    assert!(errors.is_empty(), "{}", errors.join("\n"));
+}
+
+/// The noise-weighted objectives on the four stations' noisy ranges, each range weighed by
+/// the interferometer's σ at its length: whitened Φ is a weighted L1 fit, judged as Φ on
+/// ranges.
+#[test]
+fn engines_agree_on_ml_and_phi_w_on_ranges_from_four_stations() {
+    let (model, data, noise) = ranges_case(true);
+    let errors = check_weighted("ranges noisy", &model, &data, &noise);
+    assert!(errors.is_empty(), "{}", errors.join("\n"));
+}
+
+/// The four-station range case: the model (stations' positions and range offsets identified),
+/// the ranges of 120 poses (X 5, C 6, Z 4 positions: enough for the cubics and first
+/// harmonics; seed 26) and the interferometer noise they carry when `noisy`.
+fn ranges_case(noisy: bool) -> (Model, MeasurementSet, TrackerNoise) {
     use volver::core::machine::{Observes, StationSpec};
     use volver::core::measure::Observation;
     let xcfz = Machine::default_xcfz();
@@ -572,20 +806,10 @@ fn engines_agree_on_ranges_from_four_stations() {
         26,
     )
     .unwrap();
-    let mut errors = Vec::new();
-    for noisy in [false, true] {
-        // 120 poses (X 5, C 6, Z 4 positions: enough for the cubics and first harmonics).
-        let plan = Plan::parse_grid(&multi, "X=0:1400:350,C=0:300:60,Z=0:600:200").unwrap();
-        let mut sim = Simulation::new(plan, truth.clone(), 26);
-        sim.noise = if noisy {
-            TrackerNoise::from_text("normal:0,0,0.1,0.15").unwrap()
-        } else {
-            TrackerNoise::NONE
-        };
-        sim.observe = Observation::Range;
-        let data = sim.run().unwrap().measurements;
-        let label = format!("ranges {}", if noisy { "noisy" } else { "noise-free" });
-        errors.extend(check_case(&label, &model, &data, noisy));
-    }
-    assert!(errors.is_empty(), "{}", errors.join("\n"));
+    let plan = Plan::parse_grid(&multi, "X=0:1400:350,C=0:300:60,Z=0:600:200").unwrap();
+    let mut sim = Simulation::new(plan, truth, 26);
+    let noise = TrackerNoise::from_text("normal:0,0,0.1,0.15").unwrap();
+    sim.noise = if noisy { noise } else { TrackerNoise::NONE };
+    sim.observe = Observation::Range;
+    (model, sim.run().unwrap().measurements, noise)
 }

@@ -23,9 +23,16 @@ pub struct CompareArgs {
     /// embedded machine (seed 7, the paper's noise).
     #[arg(long)]
     data: Option<PathBuf>,
-    /// Objective: phi (mean error module) or ve (mean squared module).
+    /// Objective: phi (mean error module), ve (mean squared module), ml (maximum likelihood:
+    /// least squares on the residuals whitened by each station's noise) or phi-w (Φ of the
+    /// whitened residuals).
     #[arg(long, default_value = "phi")]
     objective: String,
+    /// The tracker's noise that ml and phi-w weigh the residuals by: paper, normal:…, uniform:…
+    /// or mpe:… (as `identify --noise`). Default: the machine file's `[tracker] noise` (a
+    /// station's own noise where its table states one).
+    #[arg(long)]
+    noise: Option<String>,
     /// Engines to run, comma-separated; every engine of this build when absent.
     #[arg(long, value_delimiter = ',')]
     engines: Vec<String>,
@@ -95,6 +102,9 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
                 "--suite runs its own problems: drop --data, --machine, --model, --gauge"
             );
         }
+        if a.noise.is_some() {
+            anyhow::bail!("--suite runs its own problems (objective ve): drop --noise");
+        }
         return nist_suite(&a);
     }
     let (model, data, source) = match &a.data {
@@ -122,12 +132,19 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         }
     };
     let objective: Objective = a.objective.parse()?;
+    if a.noise.is_some() && !objective.whitened() {
+        anyhow::bail!(
+            "--noise weighs the residuals of --objective ml or phi-w; objective {objective} \
+             does not use it"
+        );
+    }
     let options = a.limits(Options {
         objective,
         ..Options::default()
     })?;
+    let (noise, _) = volver::inputs::noise_rule(a.noise.as_deref(), model.machine())?;
     let engines = a.engines(&[], volver::solvers::engine)?;
-    let c = compare(&model, &data, &source, &engines, &options, a.gauge)?;
+    let c = compare(&model, &data, &source, &engines, &options, a.gauge, noise)?;
     if a.json {
         let v = serde_json::to_value(&c)?;
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -137,36 +154,45 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
     Ok(())
 }
 
-/// The comparison as a table.
+/// The comparison as a table: Φ, ve and EMM in mm and µm, and for the noise-weighted
+/// objectives their own (dimensionless) value, which the best is judged on.
 fn print_table(c: &Comparison, gauge: bool) {
     let (objective, held, rows) = (c.objective, c.gauge_directions_held, &c.engines);
     let source = &c.data;
     println!(
-        "volver compare — {source}: {} points, {} parameters, objective {objective}{}",
+        "volver compare — {source}: {} points, {} parameters, objective {objective}{}{}",
         c.points,
         c.parameters,
+        match &c.noise {
+            Some(n) => format!(" (residuals whitened by {n})"),
+            None => String::new(),
+        },
         if gauge {
             format!(", {held} unidentifiable direction(s) held")
         } else {
             String::new()
         }
     );
+    // The objective's own column when it is neither Φ nor ve.
+    let own = objective.whitened();
+    let own_header = if own {
+        format!(" {:>17}", objective.to_string())
+    } else {
+        String::new()
+    };
     println!(
-        "\n  {:<12} {:>17} {:>17} {:>10} {:>6} {:>6} {:>9}  termination",
+        "\n  {:<12}{own_header} {:>17} {:>17} {:>10} {:>6} {:>6} {:>9}  termination",
         "engine", "Φ mm", "ve mm²", "EMM µm", "iter", "eval", "time s"
     );
-    let best = rows
-        .iter()
-        .map(|r| match objective {
-            Objective::Phi => r.phi_mm,
-            Objective::Ve => r.ve_mm2,
-            // An objective this table has no column for: no best is marked.
-            _ => f64::NAN,
-        })
-        .fold(f64::INFINITY, f64::min);
+    let best = rows.iter().map(|r| r.value).fold(f64::INFINITY, f64::min);
     for r in rows {
+        let own_value = if own {
+            format!(" {:>17.12}", r.value)
+        } else {
+            String::new()
+        };
         println!(
-            "  {:<12} {:>17.12} {:>17.14} {:>10.4} {:>6} {:>6} {:>9.3}  {}",
+            "  {:<12}{own_value} {:>17.12} {:>17.14} {:>10.4} {:>6} {:>6} {:>9.3}  {}",
             r.engine,
             r.phi_mm,
             r.ve_mm2,
@@ -177,8 +203,13 @@ fn print_table(c: &Comparison, gauge: bool) {
             r.termination
         );
     }
+    let unit = match objective {
+        Objective::Phi => " mm",
+        Objective::Ve => " mm²",
+        _ => " (whitened, dimensionless)",
+    };
     println!(
-        "\n  best {objective}: {best:.12e}; NLopt counts objective calls as iterations; lm+clarabel adds both runs."
+        "\n  best {objective}: {best:.12e}{unit}; NLopt counts objective calls as iterations; lm+clarabel adds both runs."
     );
 }
 
