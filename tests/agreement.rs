@@ -365,6 +365,17 @@ fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, 
         Objective::Phi => tol.phi,
         _ => tol.ve,
     };
+    let (rel, residual_mm) = match (c.objective.whitened(), c.scalar) {
+        (true, true) => (
+            rel.max(tol.weighted_scalar),
+            tol.residual_mm.max(tol.weighted_residual_mm),
+        ),
+        (true, false) => (
+            rel.max(tol.weighted),
+            tol.residual_mm.max(tol.weighted_residual_mm),
+        ),
+        (false, _) => (rel, tol.residual_mm),
+    };
     check!(
         errors,
         value - c.best_value <= rel * c.best_value + floor,
@@ -374,7 +385,7 @@ fn judge(errors: &mut Vec<String>, tag: &str, name: &str, c: &Case, value: f64, 
     );
     check!(
         errors,
-        dr < tol.residual_mm,
+        dr < residual_mm,
         "{tag}: residuals differ from the best's by {dr} mm"
     );
 }
@@ -391,6 +402,14 @@ struct Tolerance {
     floor: f64,
     /// Largest difference of a residual from the best's (mm).
     residual_mm: f64,
+    /// Relative excess allowed on the noise-weighted objectives (ml, phi-w) on points, when
+    /// larger than the loss' own (0: the loss' own).
+    weighted: f64,
+    /// The same on ranges alone.
+    weighted_scalar: f64,
+    /// Largest residual difference (mm) on the noise-weighted objectives, when larger than
+    /// `residual_mm`.
+    weighted_residual_mm: f64,
 }
 
 fn comparison_only(name: &str) -> bool {
@@ -405,6 +424,9 @@ fn tolerance(name: &str) -> Option<Tolerance> {
         ve: 1e-6,
         floor: 1e-6,
         residual_mm: 1e-3,
+        weighted: 0.0,
+        weighted_scalar: 0.0,
+        weighted_residual_mm: 0.0,
     };
     match name {
         // The SOCP and Ceres reach the exact optimum, and the LM polished by the SOCP.
@@ -423,14 +445,24 @@ fn tolerance(name: &str) -> Option<Tolerance> {
             ve: 1e-9,
             floor: 1e-5,
             residual_mm: 3.5e-2,
+            // ml on ranges: 4.1e-9 measured (its ve bound is 1e-9).
+            weighted: 1e-8,
+            ..exact
         }),
-        // SQP on the smoothed Φ: 3.1e-9 on points, 6.2e-5 on ranges, residuals 24 nm.
+        // SQP on the smoothed Φ: 3.1e-9 on points, 6.2e-5 on ranges, residuals 24 nm. On the
+        // whitened residuals it creeps and stops on NLopt's objective-change test early
+        // (restarted where it stopped it ends there again; with that test off it reaches the
+        // optimum after 20 000 evaluations): measured 3.7e-7 (ml) and 1.5e-6 (phi-w) on test
+        // 4, 4.1e-3 on the ranges' phi-w, residuals 217 nm.
         "nlopt-slsqp" => Some(Tolerance {
             phi: 1e-8,
             phi_scalar: 1.5e-4,
             ve: 1e-9,
             floor: 1e-5,
             residual_mm: 5e-5,
+            weighted: 3e-6,
+            weighted_scalar: 1e-2,
+            weighted_residual_mm: 5e-4,
         }),
         _ => None,
     }
