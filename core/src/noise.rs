@@ -70,10 +70,11 @@ impl Distribution {
     ///
     /// ```
     /// use volver_core::noise::Distribution;
-    /// for d in [Distribution::Normal, Distribution::Uniform] {
+    /// // The quadrature rule gets the normal's to 0.4 % (16 nodes), the uniform's exactly.
+    /// for (d, within) in [(Distribution::Normal, 0.015), (Distribution::Uniform, 1e-12)] {
     ///     let (rule, s2) = (d.rule(), d.sigma(1.0).powi(2));
     ///     let fourth: f64 = rule.iter().map(|(x, w)| w * x.powi(4)).sum();
-    ///     assert!((fourth / (s2 * s2) - d.kurtosis()).abs() < 2e-3, "{d:?}");
+    ///     assert!((fourth / (s2 * s2) - d.kurtosis()).abs() < within, "{d:?} {fourth}");
     /// }
     /// ```
     pub fn kurtosis(self) -> f64 {
