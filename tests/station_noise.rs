@@ -171,4 +171,11 @@ fn the_noise_rule_names_each_stations_noise() {
         "{}",
         used.source
     );
+    let (_, used) = volver::inputs::noise_rule(Some("paper"), &every).unwrap();
+    assert_eq!(used.model, "each station's own");
+    assert!(
+        used.source.starts_with("--noise, which no station takes"),
+        "{}",
+        used.source
+    );
 }

@@ -215,7 +215,8 @@ pub struct NoiseVerdict {
     /// The repeated points against the specification, when the data have repeats.
     pub repeats: Option<RepeatCheck>,
     /// With several stations, each station's stated noise beside what its residuals show, in
-    /// the machine's order; empty with one.
+    /// the machine's order; empty (and absent from the JSON) with one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub stations: Vec<StationVerdict>,
 }
 
@@ -334,7 +335,8 @@ pub struct Bin {
     pub emax_um: f64,
     /// Mean residual per component (µm).
     pub mean_um: [f64; 3],
-    /// What the tracker's noise leaves in this bin (µm), when its specification is given.
+    /// What the noise leaves in this bin (µm; each point by its station's noise), when its
+    /// specification is given.
     pub noise_um: Option<f64>,
 }
 

@@ -185,7 +185,9 @@ pub fn demo_test4(model: &Model) -> Result<Synthetic> {
 pub struct NoiseUsed {
     /// The noise model, in words.
     pub model: String,
-    /// Where it comes from: `--noise`, the machine file's `[tracker] noise`, or the residuals.
+    /// Where it comes from: `--noise`, the machine file's `[tracker] noise`, each station's own,
+    /// or the residuals; where stations state their own noise, each station's (`S2: its own
+    /// normal:0,0,0.5,1; S3: the tracker's …`).
     pub source: String,
     /// When a specified noise and the data disagree (the fit's EMM clearly above or below
     /// what the noise leaves at these points), what that means; `None` when they agree or the
@@ -253,6 +255,9 @@ pub fn noise_rule(
     };
     let words = crate::shared::station_noise_words(machine, default.as_ref());
     let source = match (words, default) {
+        (Some(w), Some(_)) if every_own && given.is_some() => {
+            format!("{source}, which no station takes (each states its own): {w}")
+        }
         (Some(w), Some(_)) => format!("{source}; by station, {w}"),
         (Some(w), None) => format!(
             "{source}; the stations' own noise ({w}) is not used: not every station states one"
@@ -260,7 +265,7 @@ pub fn noise_rule(
         (None, _) => source,
     };
     let used = NoiseUsed {
-        model: if every_own && given.is_none() && file.is_none() {
+        model: if every_own {
             "each station's own".to_string()
         } else {
             model.to_string()

@@ -292,15 +292,16 @@ fn print_noise(d: &Diagnosis) {
     let repeats = d.noise_estimate_um.zip(d.repeat_pairs);
     match (&d.noise, repeats) {
         (Some(n), _) => {
+            let label = if n.stations.is_empty() {
+                format!("tracker noise {}", n.model)
+            } else if n.stations.iter().all(|s| s.own) {
+                "the stations' noise (each its own)".to_string()
+            } else {
+                format!("the stations' noise (by default {})", n.model)
+            };
             println!(
-                "  {} {}: its noise error here is {} µm, a complete model's fit leaves {} ± {} \
+                "  {label}: its noise error here is {} µm, a complete model's fit leaves {} ± {} \
                  µm (k = 2); this fit is {:.3} × that — {}",
-                if n.stations.is_empty() {
-                    "tracker noise"
-                } else {
-                    "noise (by default)"
-                },
-                n.model,
                 um(n.noise_error_um),
                 um(n.expected_fit_um),
                 um(n.u95_um),
