@@ -1,8 +1,9 @@
-//! Where a model fails: its residuals broken down by axis position, reflector, time and tracker
-//! distance, periodograms against an axis, the largest outliers, the noise estimated from
-//! repeated points, and what the tracker's noise specification leaves at a set of points
-//! ([`noise_level`]). The first part of the diagnosis loop; candidates for the missing effect
-//! come next.
+//! Where a model fails: its residuals broken down by axis position, reflector, station, time
+//! and tracker distance, periodograms against an axis, the largest outliers, the noise estimated
+//! from repeated points, what the noise specification leaves at a set of points
+//! ([`noise_level`], each point by its station's noise) and the noise each station's residuals
+//! show against its own ([`station_noises`]). The first part of the diagnosis loop; candidates
+//! for the missing effect come next.
 //!
 //! ```
 //! use volver_core::diagnose::{by_axis, largest};
@@ -183,6 +184,32 @@ pub fn by_reflector(problem: &Problem, residuals: &[[f64; 3]]) -> Breakdown {
     }
 }
 
+/// By station (several tracker stations: multilateration), in the machine's order.
+pub fn by_station(problem: &Problem, residuals: &[[f64; 3]]) -> Breakdown {
+    let stations = problem.model().machine().stations();
+    let bins = (0..stations.len())
+        .filter_map(|k| {
+            let points: Vec<usize> = (0..residuals.len())
+                .filter(|&i| problem.data().points[i].station_index == k)
+                .collect();
+            (!points.is_empty()).then(|| {
+                bin_of(
+                    stations[k].id.clone(),
+                    k as f64,
+                    k as f64,
+                    points,
+                    residuals,
+                )
+            })
+        })
+        .collect();
+    Breakdown {
+        by: "station".into(),
+        unit: String::new(),
+        bins,
+    }
+}
+
 /// By measurement time `t_s` (seconds), when every point has one.
 pub fn by_time(problem: &Problem, residuals: &[[f64; 3]], max_bins: usize) -> Option<Breakdown> {
     let t: Option<Vec<f64>> = problem.data().points.iter().map(|p| p.t_s).collect();
@@ -201,13 +228,18 @@ pub fn by_distance(problem: &Problem, residuals: &[[f64; 3]], max_bins: usize) -
 }
 
 /// Every breakdown `volver diagnose` and the report show: by each axis (up to 24 bins), by
-/// reflector, by time when every point has one, and by distance (8 bins).
+/// reflector, by station when there are several, by time when every point has one, and by
+/// distance (8 bins).
 pub fn breakdowns(problem: &Problem, residuals: &[[f64; 3]]) -> Vec<Breakdown> {
-    let n_axes = problem.model().machine().axes().len();
+    let machine = problem.model().machine();
+    let n_axes = machine.axes().len();
     let mut all: Vec<Breakdown> = (0..n_axes)
         .map(|k| by_axis(problem, residuals, k, 24))
         .collect();
     all.push(by_reflector(problem, residuals));
+    if machine.stations().len() > 1 {
+        all.push(by_station(problem, residuals));
+    }
     all.extend(by_time(problem, residuals, 8));
     all.push(by_distance(problem, residuals, 8));
     all
@@ -409,7 +441,7 @@ pub fn repeat_pairs(problem: &Problem) -> Vec<(usize, usize)> {
 }
 
 /// What the tracker's noise alone leaves at a set of points, from its specification
-/// ([`TrackerNoise::module_moments`] at each measured point).
+/// ([`TrackerNoise::module_moments`] at each measured point, each by its station's noise).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseLevel {
     /// The expected EMM of the noise itself at these points (µm): the noise error.
@@ -434,17 +466,170 @@ impl NoiseLevel {
     }
 }
 
-/// The mean and variance of the noise's module at every measured point of `problem` (mm, mm²).
-pub fn noise_moments(problem: &Problem, noise: &TrackerNoise) -> Vec<(f64, f64)> {
+/// The noise of station `k` of `problem`'s machine: its own `[[station]]` table's
+/// ([`crate::machine::Machine::station_own_noise`]), else `default` (the tracker's: `--noise`
+/// or the `[tracker]` table's); `None` when it has neither, or a noise-free one.
+pub fn station_noise_of(
+    problem: &Problem,
+    k: usize,
+    default: Option<&TrackerNoise>,
+) -> Option<TrackerNoise> {
+    let machine = problem.model().machine();
+    machine
+        .station_own_noise(k)
+        .or(default.copied())
+        .filter(|n| !n.is_none())
+}
+
+/// The mean and variance of the noise's module at every measured point of `problem` (mm, mm²),
+/// each by its station's noise ([`station_noise_of`]: its own, else `default`), a range by the
+/// range part alone; `None` when a point's station has no noise.
+///
+/// ```
+/// use volver_core::diagnose::noise_moments;
+/// use volver_core::noise::TrackerNoise;
+/// let model = volver_core::model::Model::default_xcfz();
+/// let data = volver_core::measure::MeasurementSet::from_csv_str(
+///     model.machine(),
+///     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950,75,1450\n",
+///     "inline.csv",
+/// ).unwrap();
+/// let problem = volver_core::problem::Problem::new(&model, &data).unwrap();
+/// let n = TrackerNoise::PAPER;
+/// assert_eq!(noise_moments(&problem, Some(&n)).unwrap()[0], n.module_moments([950.0, 75.0, 1450.0]));
+/// assert!(noise_moments(&problem, None).is_none());
+/// ```
+pub fn noise_moments(problem: &Problem, default: Option<&TrackerNoise>) -> Option<Vec<(f64, f64)>> {
+    let stations = problem.model().machine().stations().len();
+    let noises: Vec<Option<TrackerNoise>> = (0..stations)
+        .map(|k| station_noise_of(problem, k, default))
+        .collect();
     problem
         .data()
         .points
         .iter()
-        .map(|p| match p.observation {
-            crate::measure::Observation::Point => noise.module_moments(p.measured),
-            crate::measure::Observation::Range => noise.range_moments(p.measured[0]),
+        .map(|p| {
+            let noise = noises[p.station_index]?;
+            Some(match p.observation {
+                crate::measure::Observation::Point => noise.module_moments(p.measured),
+                crate::measure::Observation::Range => noise.range_moments(p.measured[0]),
+            })
         })
         .collect()
+}
+
+/// The noise one station's residuals show against its stated noise ([`station_noises`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StationNoise {
+    /// The station (its index in the machine's stations).
+    pub station: usize,
+    /// Its stated noise: its own, else the tracker's default.
+    pub noise: TrackerNoise,
+    /// Whether that is its own `[[station]]` table's.
+    pub own: bool,
+    /// Its measurements.
+    pub points: usize,
+    /// Its residual coordinates (3 per point, 1 per range alone).
+    pub coordinates: usize,
+    /// What the fit leaves of them: its coordinates less its points' leverages.
+    pub dof: f64,
+    /// The stated noise's σ per residual coordinate at its points (µm, RMS over them).
+    pub stated_um: f64,
+    /// The factor of the stated noise its residuals show, 1 at the noise: `√(Σ‖W_i r_i‖² /
+    /// dof)` over its points, the residuals whitened by the stated noise (`W_i`,
+    /// [`TrackerNoise::whitening`]; a range by `1/σ` of its range) and left by a least-squares
+    /// fit that weighs each station by its factor (variance components). Under normal noise,
+    /// the maximum-likelihood factor of the stated σ.
+    pub scale: f64,
+    /// The standard deviation of `scale` over the noise: `√((κ − 1)/dof) / 2` for the
+    /// distribution's kurtosis κ ([`crate::noise::Distribution::kurtosis`]).
+    pub scale_sd: f64,
+}
+
+impl StationNoise {
+    /// The σ per coordinate its residuals show (µm): `scale × stated_um`.
+    pub fn shown_um(&self) -> f64 {
+        self.scale * self.stated_um
+    }
+
+    /// How many standard deviations `scale` lies above 1.
+    pub fn z(&self) -> f64 {
+        (self.scale - 1.0) / self.scale_sd.max(1e-12)
+    }
+}
+
+/// What each station's residuals show against its stated noise (its own, else `default`;
+/// [`StationNoise`]), from `components`: per station of the machine, the factor of its stated
+/// noise its residuals show and the degrees of freedom behind it (what
+/// `volver_solvers::identifiability::variance_components` gives on [`Problem::whitened`], the
+/// points grouped by station: a quiet station is not judged noisier for the noise a noisier one
+/// pushes into the fit). One per station that measured, in the machine's order; `None` when
+/// one of them has no noise.
+///
+/// ```
+/// use volver_core::diagnose::station_noises;
+/// use volver_core::noise::TrackerNoise;
+/// let model = volver_core::model::Model::default_xcfz();
+/// let data = volver_core::measure::MeasurementSet::from_csv_str(
+///     model.machine(),
+///     "reflector,X,C,Z,meas_x,meas_y,meas_z\nR1,0,0,0,950,75,1450\nR2,0,0,0,900,75,1400\n",
+///     "inline.csv",
+/// ).unwrap();
+/// let problem = volver_core::problem::Problem::new(&model, &data).unwrap();
+/// let noise = TrackerNoise::from_text("normal:10,10,2,0").unwrap();
+/// // Residuals twice the stated noise, from 4.5 degrees of freedom of 6 coordinates.
+/// let s = station_noises(&problem, Some(&noise), &[(2.0, 4.5)]).unwrap();
+/// assert_eq!((s[0].points, s[0].coordinates, s[0].own, s[0].scale), (2, 6, false, 2.0));
+/// assert!((s[0].shown_um() / s[0].stated_um - 2.0).abs() < 1e-12);
+/// assert!((s[0].scale_sd - (2.0f64 / 4.5).sqrt() / 2.0).abs() < 1e-12); // normal: κ = 3
+/// ```
+pub fn station_noises(
+    problem: &Problem,
+    default: Option<&TrackerNoise>,
+    components: &[(f64, f64)],
+) -> Option<Vec<StationNoise>> {
+    let machine = problem.model().machine();
+    let points = &problem.data().points;
+    let mut out = Vec::new();
+    for k in 0..machine.stations().len() {
+        let mine: Vec<&crate::measure::Measurement> =
+            points.iter().filter(|p| p.station_index == k).collect();
+        if mine.is_empty() {
+            continue;
+        }
+        let noise = station_noise_of(problem, k, default)?;
+        let &(scale, dof) = components.get(k)?;
+        // Σ of stated variances (mm²) and coordinates.
+        let (mut var, mut m) = (0.0, 0usize);
+        for p in &mine {
+            match p.observation {
+                crate::measure::Observation::Range => {
+                    var += noise.range_sigma_mm(p.measured[0]).powi(2);
+                    m += 1;
+                }
+                crate::measure::Observation::Point => {
+                    var += noise
+                        .axes(p.measured)
+                        .iter()
+                        .map(|a| a.1 * a.1)
+                        .sum::<f64>();
+                    m += 3;
+                }
+            }
+        }
+        out.push(StationNoise {
+            station: k,
+            noise,
+            own: machine.station_own_noise(k).is_some(),
+            points: mine.len(),
+            coordinates: m,
+            dof,
+            stated_um: (var / m as f64).sqrt() * UM_PER_MM,
+            scale,
+            scale_sd: ((noise.distribution.kurtosis() - 1.0) / dof.max(1.0)).sqrt() / 2.0,
+        });
+    }
+    Some(out)
 }
 
 /// The noise level over the points `points` (indices into `moments`, as [`noise_moments`]

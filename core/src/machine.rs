@@ -46,8 +46,12 @@
 //! mount = "workpiece"
 //! position = [353.55, 353.55, 0.0]
 //! observes = "range"                # "point" (a tracker) or "range" (a tracing interferometer)
-//! noise = "normal:0,0,0.1,0.15"     # optional, recorded (the tools use one noise model)
+//! noise = "normal:0,0,0.1,0.15"     # optional: its own noise, else the [tracker] table's
 //! ```
+//!
+//! Each station's own noise is the one the generator draws, the noise-weighted fits whiten
+//! by, the diagnosis judges its residuals against, and the design and the uncertainty weigh it
+//! by: a tracker and a tracing interferometer in one fit each count by their own model.
 //!
 //! Internally every length is in mm and every angle in rad; degrees exist only in files.
 
@@ -124,7 +128,9 @@ pub struct TrackerSpec {
     pub orientation_deg: [f64; 3],
     /// The tracker's noise as `--noise` reads it ([`crate::noise::TrackerNoise::from_text`]:
     /// `uniform:30,30,4,0.8`, `normal:…`, `mpe:15,6` …): what `volver diagnose` compares the fit
-    /// with. Absent: the diagnosis can only estimate the noise from repeated points.
+    /// with; with `[[station]]` tables, the noise of every station that states none of its own.
+    /// Absent (and no station's own): the diagnosis can only estimate the noise from repeated
+    /// points.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<String>,
 }
@@ -251,11 +257,11 @@ pub struct StationSpec {
     /// What it observes (`point` or `range`).
     #[serde(default)]
     pub observes: Observes,
-    /// Its noise as `--noise` reads it; absent: the `[tracker]` table's (`normal:0,0,0.1,0.15`
-    /// is an interferometer of U(k = 2) = 0.2 µm + 0.3 µm/m). Recorded in
-    /// [`TrackerSetup::noise`]: the generator, the diagnosis, the design and the uncertainty use
-    /// one noise model for every station (`--noise`, or the `[tracker]` table's), of which a
-    /// range takes the range part.
+    /// Its noise as `--noise` reads it; absent: the tracker's default (`--noise`, or the
+    /// `[tracker]` table's). `normal:0,0,0.1,0.15` is an interferometer of U(k = 2) = 0.2 µm +
+    /// 0.3 µm/m. Each station's own noise is used by the generator, the noise-weighted fits
+    /// (`ml`, `phi-w`), the diagnosis (its noise verdict per station), the design and the
+    /// uncertainty ([`Machine::station_own_noise`]); a range takes its range part alone.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noise: Option<String>,
 }
@@ -417,7 +423,8 @@ pub struct TrackerSetup {
     pub position: [f64; 3],
     /// Base rotation R0 (row-major 3×3), applied as R0ᵀ before the small rotation of eq. 9.
     pub base_rotation: [[f64; 3]; 3],
-    /// Its noise, when the machine file states it.
+    /// Its noise, when the machine file states it: a station's own, else the `[tracker]`
+    /// table's ([`Machine::default_noise`] is the latter alone).
     pub noise: Option<crate::noise::TrackerNoise>,
 }
 
@@ -588,6 +595,28 @@ impl Machine {
     pub fn station_own_noise(&self, k: usize) -> Option<crate::noise::TrackerNoise> {
         let stated = self.spec.stations.get(k)?.noise.is_some();
         stated.then(|| self.stations.get(k)?.setup.noise).flatten()
+    }
+
+    /// The tracker's default noise: the `[tracker]` table's, which every station without its
+    /// own takes; `None` when the table states none. Not [`Machine::tracker`]'s noise, which
+    /// is the first station's own when it states one.
+    ///
+    /// ```
+    /// use volver_core::machine::{Machine, Observes, StationSpec};
+    /// use volver_core::noise::TrackerNoise;
+    /// let m = Machine::default_xcfz();
+    /// assert_eq!(m.default_noise(), Some(TrackerNoise::PAPER));
+    /// let mut layout = StationSpec::default_layout(&m, 2, Observes::Range);
+    /// layout[0].noise = Some("normal:0,0,0.1,0.15".into());
+    /// let multi = m.with_stations(layout).unwrap();
+    /// assert_eq!(multi.default_noise(), Some(TrackerNoise::PAPER));
+    /// assert_eq!(multi.tracker().noise.unwrap().to_string(), "normal:0,0,0.1,0.15");
+    /// assert_eq!(multi.station_noise_or(1, TrackerNoise::PAPER), TrackerNoise::PAPER);
+    /// ```
+    pub fn default_noise(&self) -> Option<crate::noise::TrackerNoise> {
+        // Validated with the machine: a noise it states reads.
+        let text = self.spec.tracker.noise.as_deref()?;
+        crate::noise::TrackerNoise::from_text(text).ok()
     }
 
     /// Station `k`'s noise: its own ([`Machine::station_own_noise`]), else `default` (the

@@ -102,7 +102,7 @@ fn main() -> Result<()> {
         &volver::core::problem::Problem::new(&model, &data)?,
         &first.id.params,
         volver::solvers::identifiability::RANK_TOLERANCE,
-        model.machine().tracker().noise.as_ref(),
+        model.machine().default_noise().as_ref(),
     );
     let html = volver::report::html(&input)?;
     volver::core::fsio::write_atomic(&out.join("report.html"), html)?;

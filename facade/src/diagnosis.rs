@@ -4,13 +4,16 @@
 //! the fit is at the noise, and which candidate effects most likely are missing, ranked by ΔBIC.
 //! [`Diagnosis`] is what `volver diagnose --json` prints; [`iterate`] runs the loop to the end.
 //!
-//! **The noise verdict.** With the tracker's noise specification (the machine file's
-//! `[tracker] noise`, or [`diagnose_with`]'s argument) the noise error it implies at these very
-//! points is computed, and what a complete model's fit leaves (the noise less what the fit's
-//! identified directions absorb); the fit is at the noise, above it or far below it, overall and
-//! in every bin of every breakdown — without needing repeated points. When the data have
-//! repeats, the noise they give is compared with the specification's at those points. The
-//! candidates are then scored on residuals whitened by each point's noise.
+//! **The noise verdict.** With the noise specification (the machine file's `[tracker] noise`,
+//! or [`diagnose_with`]'s argument; with several stations, each station's own `noise` where it
+//! states one) the noise error it implies at these very points is computed, each point by its
+//! station's noise (a range by the range part alone), and what a complete model's fit leaves
+//! (the noise less what the fit's identified directions absorb); the fit is at the noise, above
+//! it or far below it, overall and in every bin of every breakdown — without needing repeated
+//! points. With several stations, the σ each station's residuals show is set beside the σ its
+//! noise states ([`StationVerdict`]): a station noisier or quieter than stated stands out. When
+//! the data have repeats, the noise they give is compared with the specification's at those
+//! points. The candidates are then scored on residuals whitened by each point's noise.
 //!
 //! ```
 //! let model = volver::core::model::Model::default_xcfz();
@@ -62,8 +65,8 @@ pub struct Diagnosis {
     pub noise_estimate_um: Option<f64>,
     /// The repeated points behind it.
     pub repeat_pairs: Option<usize>,
-    /// The fit against the tracker's noise specification; `None` when none is given (no
-    /// `[tracker] noise` in the machine file, no `--noise`).
+    /// The fit against the noise specification; `None` when none is given (no `[tracker]
+    /// noise` in the machine file, no `--noise`, and not every station states its own).
     pub noise: Option<NoiseVerdict>,
     /// The residuals' EMM per bin of each axis, reflector, time and tracker distance.
     pub breakdowns: Vec<Breakdown>,
@@ -186,10 +189,11 @@ pub fn iterate(
     }
 }
 
-/// The fit against what the tracker's noise leaves ([`volver_core::diagnose::NoiseLevel`]).
+/// The fit against what the noise leaves ([`volver_core::diagnose::NoiseLevel`]).
 #[derive(Clone, Debug, Serialize)]
 pub struct NoiseVerdict {
-    /// The noise model, as `--noise` reads it.
+    /// The tracker's noise model, as `--noise` reads it; with several stations, each station's
+    /// is in [`NoiseVerdict::stations`] (`each station's own` when there is no default).
     pub model: String,
     /// The expected EMM of the noise itself at these points (µm): the noise error.
     pub noise_error_um: f64,
@@ -210,6 +214,68 @@ pub struct NoiseVerdict {
     pub above: Vec<BinAbove>,
     /// The repeated points against the specification, when the data have repeats.
     pub repeats: Option<RepeatCheck>,
+    /// With several stations, each station's stated noise beside what its residuals show, in
+    /// the machine's order; empty (and absent from the JSON) with one.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub stations: Vec<StationVerdict>,
+}
+
+/// One station's stated noise beside the noise its residuals show
+/// ([`volver_core::diagnose::StationNoise`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct StationVerdict {
+    /// The station's id.
+    pub station: String,
+    /// Its stated noise, as `--noise` reads it.
+    pub model: String,
+    /// Whether that is its own `[[station]]` table's (else the tracker's default).
+    pub own: bool,
+    /// Its measurements.
+    pub points: usize,
+    /// The stated noise's σ per residual coordinate at its points (µm, RMS over them).
+    pub stated_um: f64,
+    /// The σ per coordinate its residuals show (µm): `scale × stated_um`.
+    pub shown_um: f64,
+    /// Shown over stated: the factor of its stated σ its whitened residuals show (1 at the
+    /// noise).
+    pub scale: f64,
+    /// The expanded uncertainty (k = 2) of `scale` over the noise.
+    pub scale_u95: f64,
+    /// Where it stands: more than [`ABOVE_NOISE_Z`] standard deviations of `scale` above or
+    /// below 1, or at the noise.
+    pub standing: Standing,
+}
+
+impl StationVerdict {
+    fn of(machine: &volver_core::machine::Machine, s: &diagnose::StationNoise) -> StationVerdict {
+        StationVerdict {
+            station: machine.stations()[s.station].id.clone(),
+            model: s.noise.to_string(),
+            own: s.own,
+            points: s.points,
+            stated_um: s.stated_um,
+            shown_um: s.shown_um(),
+            scale: s.scale,
+            scale_u95: 2.0 * s.scale_sd,
+            standing: Standing::of_z(s.z()),
+        }
+    }
+
+    /// The station in words: `S2 (its own normal:0,0,0.5,1, 1040 points): σ 2.71 µm shown,
+    /// 2.65 µm stated (1.02 ± 0.04 ×)`.
+    pub fn text(&self) -> String {
+        format!(
+            "{} ({} {}, {} points): σ {} µm shown, {} µm stated ({:.2} ± {:.2} ×)",
+            self.station,
+            if self.own { "its own" } else { "the tracker's" },
+            self.model,
+            self.points,
+            um(self.shown_um),
+            um(self.stated_um),
+            self.scale,
+            self.scale_u95
+        )
+    }
 }
 
 /// A bin whose misfit exceeds the noise.
@@ -269,7 +335,8 @@ pub struct Bin {
     pub emax_um: f64,
     /// Mean residual per component (µm).
     pub mean_um: [f64; 3],
-    /// What the tracker's noise leaves in this bin (µm), when its specification is given.
+    /// What the noise leaves in this bin (µm; each point by its station's noise), when its
+    /// specification is given.
     pub noise_um: Option<f64>,
 }
 
@@ -387,12 +454,14 @@ impl Candidate {
 }
 
 /// Fits `model` to `data` with the native engine (default strategy) and diagnoses the fit
-/// against the tracker noise the machine file states (if any); `Err` when the fit fails.
+/// against the noise the machine file states (if any: its `[tracker] noise`, each station's own
+/// where it states one); `Err` when the fit fails.
 pub fn diagnose(model: &Model, data: &MeasurementSet) -> Result<Diagnosis> {
-    diagnose_with(model, data, model.machine().tracker().noise.as_ref())
+    diagnose_with(model, data, model.machine().default_noise().as_ref())
 }
 
-/// [`diagnose()`] against the tracker noise `noise` (`None`: no specification; the noise is then
+/// [`diagnose()`] against the tracker's noise `noise`, the noise of every station that states
+/// none of its own (`None`, and a station without its own: no specification; the noise is then
 /// judged from repeated points alone, and candidates weigh every coordinate the same).
 pub fn diagnose_with(
     model: &Model,
@@ -424,26 +493,25 @@ pub fn diagnose_with(
     );
     let emm = id.reached.stats.emm_um;
     let breakdowns = diagnose::breakdowns(&problem, &r);
-    let levels = noise.map(|n| {
-        let moments = diagnose::noise_moments(&problem, n);
-        let rank = ident.as_ref().map_or(model.n_params(), |a| a.rank);
-        (n, moments, rank)
-    });
+    let rank = ident.as_ref().map_or(model.n_params(), |a| a.rank);
+    let levels = diagnose::noise_moments(&problem, noise);
     // Residual coordinates: three per point, one per range alone.
-    let coordinates: usize = (0..r.len())
-        .map(|i| if problem.scalar(i) { 1 } else { 3 })
-        .sum();
+    let coordinates = crate::shared::coordinates(&problem);
     let level_of = |points: &[usize]| {
         levels
             .as_ref()
-            .map(|(_, mom, rank)| diagnose::noise_level(mom, points, *rank, coordinates))
+            .map(|mom| diagnose::noise_level(mom, points, rank, coordinates))
     };
-    let verdict_noise = levels.as_ref().map(|(n, moments, _)| {
+    let verdict_noise = levels.as_ref().map(|moments| {
         let all: Vec<usize> = (0..r.len()).collect();
         let level = level_of(&all).expect("a noise model");
         let pairs = diagnose::repeat_pairs(&problem);
         let repeats = repeat.map(|(s, _)| (s.emm_um, pairs.as_slice()));
-        noise_verdict(n, &level, emm, &breakdowns, &level_of, repeats, moments)
+        let mut v = noise_verdict(noise, &level, emm, &breakdowns, &level_of, repeats, moments);
+        if model.machine().stations().len() > 1 {
+            v.stations = station_verdicts(&problem, &id.params, noise);
+        }
+        v
     });
     Ok(Diagnosis {
         points: data.points.len(),
@@ -471,10 +539,42 @@ pub fn diagnose_with(
     })
 }
 
+/// Each station's stated noise beside what its residuals show
+/// ([`volver_core::diagnose::station_noises`]): the stations' variance components
+/// ([`volver_solvers::identifiability::variance_components`]) on the residuals whitened by
+/// their stated noise, from the fit at `params`; empty when a station has no noise or the
+/// estimation fails.
+fn station_verdicts(
+    problem: &Problem,
+    params: &[f64],
+    noise: Option<&TrackerNoise>,
+) -> Vec<StationVerdict> {
+    let Ok(whitened) = problem.whitened(noise) else {
+        return Vec::new();
+    };
+    let task = volver_solvers::Task::new(whitened);
+    let tolerance = volver_solvers::identifiability::RANK_TOLERANCE;
+    let groups: Vec<usize> = problem
+        .data()
+        .points
+        .iter()
+        .map(|p| p.station_index)
+        .collect();
+    volver_solvers::identifiability::variance_components(&task, params, tolerance, &groups)
+        .and_then(|c| {
+            let c: Vec<(f64, f64)> = c.iter().map(|c| (c.scale, c.dof)).collect();
+            diagnose::station_noises(problem, noise, &c)
+        })
+        .iter()
+        .flatten()
+        .map(|s| StationVerdict::of(problem.model().machine(), s))
+        .collect()
+}
+
 /// The fit against the noise: overall, per bin, and the repeats (their estimate in µm and their
 /// pairs) against the specification.
 fn noise_verdict(
-    noise: &TrackerNoise,
+    noise: Option<&TrackerNoise>,
     level: &diagnose::NoiseLevel,
     emm: f64,
     breakdowns: &[diagnose::Breakdown],
@@ -513,7 +613,7 @@ fn noise_verdict(
         }
     });
     NoiseVerdict {
-        model: noise.to_string(),
+        model: noise.map_or_else(|| "each station's own".to_string(), |n| n.to_string()),
         noise_error_um: level.noise_emm_um,
         expected_fit_um: level.fit_emm_um,
         u95_um: 2.0 * level.sd_um,
@@ -522,6 +622,7 @@ fn noise_verdict(
         below: Standing::of(level, emm) == Standing::Below,
         above,
         repeats,
+        stations: Vec::new(),
     }
 }
 
@@ -533,11 +634,17 @@ fn overall_verdict(ranked: &[Score], emm: f64, noise: Option<&NoiseVerdict>) -> 
         return candidates;
     };
     let against = format!(
-        "{:.2} × what the tracker's noise leaves ({} ± {} µm)",
+        "{:.2} × what the {} noise leaves ({} ± {} µm)",
         n.ratio,
+        if n.stations.is_empty() {
+            "tracker's"
+        } else {
+            "stations'"
+        },
         um(n.expected_fit_um),
         um(n.u95_um)
     );
+    let stations = station_words(n);
     if n.at_noise {
         let aside = match ranked.first() {
             Some(s) if s.strong() => format!(
@@ -547,14 +654,43 @@ fn overall_verdict(ranked: &[Score], emm: f64, noise: Option<&NoiseVerdict>) -> 
             ),
             _ => String::new(),
         };
-        format!("the fit is at the noise, {against}: nothing is missing{aside}")
+        format!("the fit is at the noise, {against}: nothing is missing{aside}{stations}")
     } else if n.below {
         format!(
             "{candidates}. The fit is {against}: far below it, so the specification overstates \
-             the noise of these data (or they were averaged); judge by the candidates alone"
+             the noise of these data (or they were averaged); judge by the candidates \
+             alone{stations}"
         )
     } else {
-        format!("{candidates}. The fit is {against}: something is missing")
+        format!("{candidates}. The fit is {against}: something is missing{stations}")
+    }
+}
+
+/// The stations whose residuals show a noise off their stated one, in words (empty when none):
+/// `. By station, S2 shows 5.10 × its stated noise (σ 2.70 against 0.53 µm) …`.
+fn station_words(n: &NoiseVerdict) -> String {
+    let off: Vec<String> = n
+        .stations
+        .iter()
+        .filter(|s| s.standing != Standing::AtNoise)
+        .map(|s| {
+            format!(
+                "{} shows {:.2} × its stated noise (σ {} against {} µm)",
+                s.station,
+                s.scale,
+                um(s.shown_um),
+                um(s.stated_um)
+            )
+        })
+        .collect();
+    if off.is_empty() {
+        String::new()
+    } else {
+        format!(
+            ". By station, {}: its noise is not the one stated (or the model misses what it \
+             alone sees)",
+            off.join(", ")
+        )
     }
 }
 

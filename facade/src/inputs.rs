@@ -185,7 +185,9 @@ pub fn demo_test4(model: &Model) -> Result<Synthetic> {
 pub struct NoiseUsed {
     /// The noise model, in words.
     pub model: String,
-    /// Where it comes from: `--noise`, the machine file's `[tracker] noise`, or the residuals.
+    /// Where it comes from: `--noise`, the machine file's `[tracker] noise`, each station's own,
+    /// or the residuals; where stations state their own noise, each station's (`S2: its own
+    /// normal:0,0,0.5,1; S3: the tracker's …`).
     pub source: String,
     /// When a specified noise and the data disagree (the fit's EMM clearly above or below
     /// what the noise leaves at these points), what that means; `None` when they agree or the
@@ -194,14 +196,31 @@ pub struct NoiseUsed {
 }
 
 /// The one noise rule: `--noise` when given (it wins over the machine file's, and the source
-/// says both when they differ), else the machine file's `[tracker] noise`, else an isotropic
-/// normal with the residuals' variance.
+/// says both when they differ), else the machine file's `[tracker] noise`, else each station's
+/// own when every `[[station]]` table states one, else an isotropic normal with the residuals'
+/// variance. A station that states its own noise is weighed by it whatever the default (the
+/// source then says so per station: `S2: its own normal:0,0,0.5,1`), except by the residuals'
+/// isotropic noise.
+///
+/// ```
+/// use volver::core::machine::{Machine, Observes, StationSpec};
+/// let m = Machine::default_xcfz();
+/// let mut layout = StationSpec::default_layout(&m, 2, Observes::Range);
+/// layout[1].noise = Some("normal:0,0,0.5,1".into());
+/// let multi = m.with_stations(layout).unwrap();
+/// let (_, used) = volver::inputs::noise_rule(None, &multi).unwrap();
+/// assert!(used.source.contains("S1: the tracker's uniform:30,30,4,0.8; S2: its own normal:0,0,0.5,1"));
+/// ```
 pub fn noise_rule(
     given: Option<&str>,
     machine: &Machine,
 ) -> Result<(volver_solvers::uncertainty::NoiseModel, NoiseUsed)> {
     use volver_solvers::uncertainty::NoiseModel;
-    let file = machine.tracker().noise.filter(|n| !n.is_none());
+    let file = machine.default_noise().filter(|n| !n.is_none());
+    let own = |k| machine.station_own_noise(k).filter(|n| !n.is_none());
+    // Every station states its own: the default is never used (any stands for it).
+    let every_own =
+        machine.has_stations() && (0..machine.stations().len()).all(|k| own(k).is_some());
     let (model, source) = match (given, file) {
         (Some(text), file) => {
             let model = crate::shared::noise_of(Some(text))?;
@@ -218,13 +237,39 @@ pub fn noise_rule(
             NoiseModel::Tracker(f),
             "the machine file's [tracker] noise".to_string(),
         ),
-        (None, None) => (
-            NoiseModel::Residual,
-            "the residuals (no --noise, no [tracker] noise in the machine file)".to_string(),
+        (None, None) => match own(0).filter(|_| every_own) {
+            Some(first) => (
+                NoiseModel::Tracker(first),
+                "each station's own noise (no --noise, no [tracker] noise in the machine file)"
+                    .to_string(),
+            ),
+            None => (
+                NoiseModel::Residual,
+                "the residuals (no --noise, no [tracker] noise in the machine file)".to_string(),
+            ),
+        },
+    };
+    let default = match model {
+        NoiseModel::Tracker(n) => Some(n),
+        _ => None,
+    };
+    let words = crate::shared::station_noise_words(machine, default.as_ref());
+    let source = match (words, default) {
+        (Some(w), Some(_)) if every_own && given.is_some() => {
+            format!("{source}, which no station takes (each states its own): {w}")
+        }
+        (Some(w), Some(_)) => format!("{source}; by station, {w}"),
+        (Some(w), None) => format!(
+            "{source}; the stations' own noise ({w}) is not used: not every station states one"
         ),
+        (None, _) => source,
     };
     let used = NoiseUsed {
-        model: model.to_string(),
+        model: if every_own {
+            "each station's own".to_string()
+        } else {
+            model.to_string()
+        },
         source,
         disagreement: None,
     };

@@ -50,7 +50,17 @@ impl Standing {
     /// assert_eq!(Standing::of(&level, 67.0).conclusion(), "something is missing");
     /// ```
     pub fn of(level: &diagnose::NoiseLevel, emm_um: f64) -> Standing {
-        let z = level.z(emm_um);
+        Standing::of_z(level.z(emm_um))
+    }
+
+    /// The standing of a figure `z` standard deviations above what the noise leaves.
+    ///
+    /// ```
+    /// use volver::diagnosis::{ABOVE_NOISE_Z, Standing};
+    /// assert_eq!(Standing::of_z(ABOVE_NOISE_Z + 0.1), Standing::Above);
+    /// assert_eq!(Standing::of_z(-1.0), Standing::AtNoise);
+    /// ```
+    pub fn of_z(z: f64) -> Standing {
         if z > ABOVE_NOISE_Z {
             Standing::Above
         } else if z < -ABOVE_NOISE_Z {
@@ -73,25 +83,36 @@ impl Standing {
     }
 }
 
-/// What the tracker's `noise` leaves of a fit at `params` of `problem` (its identified
-/// directions absorb part of it) and where the fit's EMM `emm_um` stands against it; `None`
-/// when the fit's identifiability cannot be analysed.
+/// What the noise leaves of a fit at `params` of `problem` (its identified directions absorb
+/// part of it) and where the fit's EMM `emm_um` stands against it: each point by its station's
+/// noise, its own `[[station]]` table's, else the tracker's `noise`
+/// ([`volver_core::diagnose::noise_moments`]); `None` when the fit's identifiability cannot be
+/// analysed.
 pub fn standing(
     problem: &Problem,
     params: &[f64],
     emm_um: f64,
     noise: &TrackerNoise,
 ) -> Option<(diagnose::NoiseLevel, Standing)> {
+    standing_with(problem, params, emm_um, Some(noise))
+}
+
+/// [`standing`] with the tracker's default noise `default` optional: `None` also when a station
+/// that measured has no noise (neither its own nor the default).
+pub fn standing_with(
+    problem: &Problem,
+    params: &[f64],
+    emm_um: f64,
+    default: Option<&TrackerNoise>,
+) -> Option<(diagnose::NoiseLevel, Standing)> {
+    let moments = diagnose::noise_moments(problem, default)?;
     let ident = analyse(
         &volver_solvers::Task::new(problem.clone()),
         params,
         volver_solvers::identifiability::RANK_TOLERANCE,
         CORRELATION_LISTED,
     )?;
-    let moments = diagnose::noise_moments(problem, noise);
-    let coordinates: usize = (0..problem.n_points())
-        .map(|i| if problem.scalar(i) { 1 } else { 3 })
-        .sum();
+    let coordinates = coordinates(problem);
     let all: Vec<usize> = (0..problem.n_points()).collect();
     let level = diagnose::noise_level(&moments, &all, ident.rank, coordinates);
     Some((level, Standing::of(&level, emm_um)))
@@ -105,10 +126,51 @@ pub const MIN_REPEAT_PAIRS: usize = 5;
 /// the noise varies by some 10 % with tens of pairs.
 pub const REPEAT_MARGIN: f64 = 1.2;
 
-/// The fit `id` of `problem` against what the tracker's noise leaves a complete model
-/// ([`ModelCheck`]), with the noise the rule of one noise source gives: `noise` when it is the
-/// tracker's, else the machine file's `[tracker] noise` — judged as the diagnosis judges it
-/// ([`standing`]: more than [`ABOVE_NOISE_Z`] standard
+/// The residual coordinates of `problem`: three per point, one per range alone.
+pub fn coordinates(problem: &Problem) -> usize {
+    (0..problem.n_points())
+        .map(|i| if problem.scalar(i) { 1 } else { 3 })
+        .sum()
+}
+
+/// Each station's noise in words, where stations state their own: `S1: its own
+/// normal:0,0,0.1,0.15; S2: the tracker's paper` (`default`, the tracker's: `--noise` or the
+/// `[tracker]` table's; `none` for a station with neither); `None` when no station states its
+/// own (every station then has `default`).
+///
+/// ```
+/// use volver::core::machine::{Machine, Observes, StationSpec};
+/// let m = Machine::default_xcfz();
+/// assert_eq!(volver::shared::station_noise_words(&m, m.default_noise().as_ref()), None);
+/// let mut layout = StationSpec::default_layout(&m, 2, Observes::Range);
+/// layout[1].noise = Some("normal:0,0,0.5,1".into());
+/// let multi = m.with_stations(layout).unwrap();
+/// assert_eq!(
+///     volver::shared::station_noise_words(&multi, multi.default_noise().as_ref()).unwrap(),
+///     "S1: the tracker's uniform:30,30,4,0.8; S2: its own normal:0,0,0.5,1"
+/// );
+/// ```
+pub fn station_noise_words(machine: &Machine, default: Option<&TrackerNoise>) -> Option<String> {
+    let stations = machine.stations();
+    if !(0..stations.len()).any(|k| machine.station_own_noise(k).is_some()) {
+        return None;
+    }
+    let words: Vec<String> = stations
+        .iter()
+        .enumerate()
+        .map(|(k, st)| match (machine.station_own_noise(k), default) {
+            (Some(own), _) => format!("{}: its own {own}", st.id),
+            (None, Some(d)) => format!("{}: the tracker's {d}", st.id),
+            (None, None) => format!("{}: none stated", st.id),
+        })
+        .collect();
+    Some(words.join("; "))
+}
+
+/// The fit `id` of `problem` against what the noise leaves a complete model ([`ModelCheck`]),
+/// with the noise the rule of one noise source gives: `noise` when it is the tracker's, else the
+/// machine file's `[tracker] noise`, each station by its own noise where it states one — judged
+/// as the diagnosis judges it ([`standing_with`]: more than [`ABOVE_NOISE_Z`] standard
 /// deviations above) — else from the repeated points ([`REPEAT_MARGIN`] above the noise they
 /// show, at least [`MIN_REPEAT_PAIRS`] pairs), else unknown.
 ///
@@ -118,24 +180,31 @@ pub fn check_fit(
     id: &volver_solvers::strategy::Identification,
     noise: NoiseModel,
 ) -> volver_core::results::ModelCheck {
-    use volver_core::problem::Residuals;
     use volver_core::results::ModelCheck;
     let model = problem.model();
     let emm_um = id.reached.stats.emm_um;
+    let known = matches!(noise, NoiseModel::Tracker(_) | NoiseModel::Residual);
     let spec = match noise {
         NoiseModel::Tracker(n) => Some(n),
-        NoiseModel::Residual => model.machine().tracker().noise,
+        NoiseModel::Residual => model.machine().default_noise(),
         // A noise model this check does not know: judged by the repeated points below.
         _ => None,
     }
     .filter(|n| !n.is_none());
-    if let Some(n) = spec
-        && let Some((level, standing)) = standing(problem, &id.params, emm_um, &n)
+    if known
+        && let Some((level, standing)) = standing_with(problem, &id.params, emm_um, spec.as_ref())
     {
+        let basis = match station_noise_words(model.machine(), spec.as_ref()) {
+            Some(words) => format!("each station's noise ({words})"),
+            None => format!(
+                "the tracker's specification {}",
+                spec.map_or_else(String::new, |n| n.to_string())
+            ),
+        };
         return ModelCheck {
             emm_um,
             expected_um: Some(level.fit_emm_um),
-            basis: format!("the tracker's specification {n}"),
+            basis,
             above_noise: standing == Standing::Above,
         };
     }
@@ -143,10 +212,7 @@ pub fn check_fit(
     let free = model
         .n_params()
         .saturating_sub(model.constraints().rows.len() + held);
-    let coordinates: usize = (0..problem.n_points())
-        .map(|i| if problem.scalar(i) { 1 } else { 3 })
-        .sum();
-    let keep = (1.0 - free as f64 / coordinates.max(1) as f64)
+    let keep = (1.0 - free as f64 / coordinates(problem).max(1) as f64)
         .max(0.0)
         .sqrt();
     match volver_core::diagnose::repeat_noise(problem) {

@@ -18,6 +18,7 @@ pub struct DiagnoseArgs {
     /// The tracker's noise specification the fit is judged against: paper, none,
     /// normal:AZ_URAD,EL_URAD,RANGE_UM,RANGE_UM_PER_M (σ), uniform:… (bounds) or
     /// mpe:A_UM,B_UM_PER_M (±(a + b·L), k = 2). Default: the machine file's `[tracker] noise`.
+    /// A station whose `[[station]]` table states its own noise is judged by its own.
     #[arg(long)]
     noise: Option<String>,
     /// Run the loop to the end: add the best significant candidate, refit, diagnose again,
@@ -53,7 +54,7 @@ pub fn run(a: DiagnoseArgs) -> Result<()> {
     let (_, model, set) = a.inputs.load()?;
     let noise = match &a.noise {
         Some(text) => Some(volver::core::noise::TrackerNoise::from_text(text)?),
-        None => model.machine().tracker().noise,
+        None => model.machine().default_noise(),
     };
     if a.iterate {
         return iterate(&a, &model, &set, noise.as_ref());
@@ -291,10 +292,16 @@ fn print_noise(d: &Diagnosis) {
     let repeats = d.noise_estimate_um.zip(d.repeat_pairs);
     match (&d.noise, repeats) {
         (Some(n), _) => {
+            let label = if n.stations.is_empty() {
+                format!("tracker noise {}", n.model)
+            } else if n.stations.iter().all(|s| s.own) {
+                "the stations' noise (each its own)".to_string()
+            } else {
+                format!("the stations' noise (by default {})", n.model)
+            };
             println!(
-                "  tracker noise {}: its noise error here is {} µm, a complete model's fit \
-                 leaves {} ± {} µm (k = 2); this fit is {:.3} × that — {}",
-                n.model,
+                "  {label}: its noise error here is {} µm, a complete model's fit leaves {} ± {} \
+                 µm (k = 2); this fit is {:.3} × that — {}",
                 um(n.noise_error_um),
                 um(n.expected_fit_um),
                 um(n.u95_um),
@@ -307,6 +314,17 @@ fn print_noise(d: &Diagnosis) {
                     "above the noise"
                 }
             );
+            if !n.stations.is_empty() {
+                println!("  by station, the σ per coordinate its residuals show and its noise's:");
+            }
+            for st in &n.stations {
+                let standing = match st.standing {
+                    volver::diagnosis::Standing::AtNoise => "at its noise",
+                    volver::diagnosis::Standing::Above => "ABOVE its noise",
+                    volver::diagnosis::Standing::Below => "BELOW its noise",
+                };
+                println!("    {} — {standing}", st.text());
+            }
             if let Some(r) = &n.repeats {
                 println!(
                     "  {} repeated points give {} µm, the specification {} ± {} µm there: {}",

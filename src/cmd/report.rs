@@ -52,7 +52,7 @@ pub fn run(a: ReportArgs) -> Result<()> {
         &problem,
         &id1.params,
         volver::solvers::identifiability::RANK_TOLERANCE,
-        machine.tracker().noise.as_ref(),
+        machine.default_noise().as_ref(),
     );
     let extended = volver::inputs::with_candidates(&machine, model.clone(), &a.add)?;
     let id2 = if a.add.is_empty() {

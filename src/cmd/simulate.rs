@@ -145,9 +145,22 @@ pub fn run(a: SimulateArgs) -> Result<()> {
 }
 
 /// The noise to simulate with and where it comes from: `--noise` when given (naming the machine
-/// file's when it differs), else the machine file's `[tracker] noise`, else the paper's.
+/// file's when it differs), else the machine file's `[tracker] noise`, else the paper's; a
+/// station whose `[[station]]` table states its own noise is simulated with its own (named per
+/// station).
 fn noise_of(given: Option<&str>, machine: &Machine) -> Result<(TrackerNoise, String)> {
-    let file = machine.tracker().noise;
+    let (noise, source) = default_noise_of(given, machine)?;
+    Ok(
+        match volver::shared::station_noise_words(machine, Some(&noise)) {
+            Some(words) => (noise, format!("{source}; by station, {words}")),
+            None => (noise, source),
+        },
+    )
+}
+
+/// [`noise_of`]'s default, the tracker's, before the stations' own.
+fn default_noise_of(given: Option<&str>, machine: &Machine) -> Result<(TrackerNoise, String)> {
+    let file = machine.default_noise();
     Ok(match (given, file) {
         (Some(text), Some(f)) => {
             let n = TrackerNoise::from_text(text)?;

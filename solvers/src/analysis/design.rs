@@ -3,9 +3,10 @@
 //!
 //! The candidates are every reflector at every pose of a fine grid. Each candidate point `i`
 //! brings the information `F_i = A_iᵀ A_i`, with `A_i = W_i J_i N` its Jacobian at the nominal
-//! machine (zero errors, the machine file's tracker pose), whitened by the tracker's noise at
-//! that point ([`TrackerNoise::whitening`]: the range weighs far above the angles) and reduced
-//! to the free coordinates `N` of the model's constraints. A design puts weights `w_i` (summing
+//! machine (zero errors, the machine file's tracker pose), whitened by its station's noise at
+//! that point ([`TrackerNoise::whitening`]: the range weighs far above the angles; a station
+//! that states its own noise is weighed by it, so a noisier station brings less information)
+//! and reduced to the free coordinates `N` of the model's constraints. A design puts weights `w_i` (summing
 //! to one) on the candidates; `m` points give `F(w) = R + m Σ w_i F_i`, where `R` is a weak
 //! prior ([`crate::analysis::uncertainty::HELD_PRIOR_MM`] RMS in the function metric of
 //! [`crate::engines::gauge`]) that keeps a direction no candidate sees from being infinitely uncertain:
@@ -113,10 +114,12 @@ pub struct Design {
 }
 
 impl Space {
-    /// The information of every candidate point of `candidates` (every step of the plan) under
-    /// `noise`, and the I-criterion's `Q` for the tool offset `tool` (mm, from the last tool-side
-    /// axis) over the commands `grid`. `None` when the noise is zero (nothing to weigh by), a
-    /// Jacobian is not finite or the model's constraints are inconsistent.
+    /// The information of every candidate point of `candidates` (every step of the plan, from
+    /// every station) under each station's noise — its own `[[station]]` table's, else the
+    /// tracker's `noise` ([`Problem::whitened`]) — and the I-criterion's `Q` for the tool
+    /// offset `tool` (mm, from the last tool-side axis) over the commands `grid`. `None` when
+    /// a station's noise is zero (nothing to weigh by), a Jacobian is not finite or the
+    /// model's constraints are inconsistent.
     pub fn new(
         model: &Model,
         candidates: &Plan,
@@ -389,6 +392,72 @@ fn round(w: &[f64], points: usize) -> Vec<usize> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use volver_core::machine::{Machine, Observes, StationSpec};
+
+    /// The reflectors' centroid (mm).
+    fn centroid(model: &Model) -> [f64; 3] {
+        let r = model.machine().reflectors();
+        std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64)
+    }
+
+    /// The I (tool point at the reflectors' centroid) and D criteria of measuring a grid of 36
+    /// poses (X 0–1400 mm by 700, C 0–270° by 90, Z 0–600 mm by 300) once from four range-only
+    /// stations whose noises are `noises` (their own `[[station]]` noise).
+    fn criteria(noises: [&str; 4]) -> (f64, f64) {
+        let xcfz = Machine::default_xcfz();
+        let mut layout = StationSpec::default_layout(&xcfz, 4, Observes::Range);
+        for (st, n) in layout.iter_mut().zip(noises) {
+            st.noise = Some(n.to_string());
+        }
+        let machine = xcfz.with_stations(layout).unwrap();
+        let model = Model::new(machine, Model::default_xcfz().spec().clone()).unwrap();
+        let plan =
+            Plan::parse_grid(model.machine(), "X=0:1400:700,C=0:270:90,Z=0:600:300").unwrap();
+        // The tracker's default noise: no station takes it.
+        let space = Space::new(
+            &model,
+            &plan,
+            &TrackerNoise::PAPER,
+            centroid(&model),
+            &plan.positions,
+        )
+        .unwrap();
+        let once = vec![1.0; space.len()];
+        (
+            space.value(&once, Criterion::I).unwrap(),
+            space.value(&once, Criterion::D).unwrap(),
+        )
+    }
+
+    /// A station that states a noisier model brings less information: with one of four
+    /// stations' σ doubled, the tool point's mean variance (I) is larger and log det F (D)
+    /// smaller than with all four quiet, and both lie between that and all four doubled. The
+    /// data, not the weak prior, determine the tool point here: all four doubled is 4 × the
+    /// variance (to 5 %; measured 8.32e-7, 1.147e-6 with one doubled, 3.33e-6 mm²).
+    #[test]
+    fn a_noisier_station_weighs_less_in_the_design() {
+        let (quiet, loud) = ("normal:0,0,0.1,0.15", "normal:0,0,0.2,0.3");
+        let (i_quiet, d_quiet) = criteria([quiet; 4]);
+        let (i_one, d_one) = criteria([quiet, loud, quiet, quiet]);
+        let (i_loud, d_loud) = criteria([loud; 4]);
+        assert!(
+            i_quiet < i_one && i_one < i_loud,
+            "I: {i_quiet} {i_one} {i_loud}"
+        );
+        assert!(
+            d_quiet > d_one && d_one > d_loud,
+            "D: {d_quiet} {d_one} {d_loud}"
+        );
+        assert!(
+            (i_loud / i_quiet / 4.0 - 1.0).abs() < 0.05,
+            "{i_quiet} {i_loud}"
+        );
+        // One station of four doubled costs less than all four: at most half the way.
+        assert!(
+            i_one - i_quiet < 0.5 * (i_loud - i_quiet),
+            "I: {i_quiet} {i_one} {i_loud}"
+        );
+    }
 
     #[test]
     fn rounding_keeps_the_total_and_the_largest_remainders() {

@@ -154,6 +154,166 @@ pub fn analyse(
     })
 }
 
+/// The noise of one group of points as its residuals show it ([`variance_components`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Component {
+    /// The factor of the group's stated noise its residuals show (1 at the noise).
+    pub scale: f64,
+    /// The group's residual coordinates less what the fit absorbs of them (the sum of its
+    /// points' leverages): the degrees of freedom `scale` is estimated from.
+    pub dof: f64,
+    /// The group's residual coordinates (3 per point, 1 per range alone).
+    pub coordinates: usize,
+}
+
+/// Variance components (Helmert's estimation, as Förstner 1979 iterates it): the factor of its
+/// noise that each group of points shows, the points of group `groups[i]` weighed together by
+/// the factors found. `task`'s residuals are whitened by each point's stated noise
+/// ([`volver_core::problem::Problem::whitened`]), so a factor of 1 is the stated noise. From
+/// `params` (a fit of any objective), the weighted least-squares fit is one Gauss–Newton step
+/// over the identified directions (curvature above `tolerance` × the largest); each group's
+/// factor is `√(Σ‖r_i + J_i δ‖² / (m − Σ h_i))` over its `m` coordinates, `h_i` the points'
+/// leverages (the hat matrix's diagonal); the weights `1/factor²` and the step are renewed
+/// until the factors settle. A group's factor is thus its own noise's, not raised by what a
+/// noisier group pushes into the fit nor lowered by what the fit absorbs of it. One per group
+/// `0 … max(groups)`; `None` when the Jacobian is not finite or a decomposition fails.
+///
+/// ```
+/// use volver_solvers::identifiability::{RANK_TOLERANCE, variance_components};
+/// let model = volver_core::model::Model::default_xcfz();
+/// let plan = volver_core::plan::Plan::parse_grid(model.machine(), "X=0:1400:700,C=0:270:90,Z=0:600:300").unwrap();
+/// let mut data = volver_solvers::observability::nominal_data(&model, &plan);
+/// // Noise of 1 µm (σ per coordinate) on the first half of the points, 5 µm on the second.
+/// let mut rng = volver_core::random::Rng::new(3);
+/// let half = data.points.len() / 2;
+/// for (i, p) in data.points.iter_mut().enumerate() {
+///     let s = if i < half { 0.001 } else { 0.005 };
+///     p.measured = p.measured.map(|x| x + s * rng.normal());
+/// }
+/// let problem = volver_core::problem::Problem::new(&model, &data).unwrap();
+/// let task = volver_solvers::Task::new(problem);
+/// let groups: Vec<usize> = (0..data.points.len()).map(|i| usize::from(i >= half)).collect();
+/// let c = variance_components(&task, &model.initial_params(), RANK_TOLERANCE, &groups).unwrap();
+/// // Unwhitened residuals in mm: the factors are the σ (mm), to within their spread.
+/// assert!((c[0].scale / 0.001 - 1.0).abs() < 0.25 && (c[1].scale / 0.005 - 1.0).abs() < 0.25);
+/// assert_eq!(c[0].coordinates, 3 * half);
+/// ```
+pub fn variance_components(
+    task: &Task,
+    params: &[f64],
+    tolerance: f64,
+    groups: &[usize],
+) -> Option<Vec<Component>> {
+    let problem = &*task.problem;
+    let (n, np) = (params.len(), problem.n_points());
+    let Reduced { d, ns, .. } = reduced_normal(task, params)?;
+    let nf = ns.n_free();
+    let n_groups = groups.iter().max().map_or(0, |g| g + 1);
+    let mut coordinates = vec![0usize; n_groups];
+    for i in 0..np {
+        coordinates[groups[i]] += if problem.scalar(i) { 1 } else { 3 };
+    }
+    // Every residual and its Jacobian row in the scaled free coordinates: A = J D N.
+    use rayon::prelude::*;
+    let rows: Vec<([f64; 3], Vec<f64>)> = (0..np)
+        .into_par_iter()
+        .map(|i| {
+            let mut jac = vec![0.0; 3 * n];
+            let r = problem.residual_and_jacobian(i, params, &mut jac);
+            (r, jac)
+        })
+        .collect();
+    let j = faer::Mat::from_fn(3 * np, n, |row, c| {
+        rows[row / 3].1[(row % 3) * n + c] * d[c]
+    });
+    let r: Vec<f64> = (0..3 * np).map(|row| rows[row / 3].0[row % 3]).collect();
+    if r.iter().any(|v| !v.is_finite()) || (0..n).any(|c| !j.col(c).iter().all(|v| v.is_finite())) {
+        return None;
+    }
+    let a = crate::engines::kernels::product(j.as_ref(), ns.basis());
+    let mut weight = vec![1.0; n_groups];
+    let mut out = Vec::new();
+    for _ in 0..MAX_COMPONENT_ROUNDS {
+        let next = component_round(&a, &r, groups, &weight, &coordinates, nf, tolerance)?;
+        let settled = next
+            .iter()
+            .zip(&out)
+            .all(|(x, y): (&Component, &Component)| (x.scale - y.scale).abs() <= 1e-4 * y.scale);
+        weight = next
+            .iter()
+            .map(|c| 1.0 / c.scale.max(1e-12).powi(2))
+            .collect();
+        let done = settled && !out.is_empty();
+        out = next;
+        if done {
+            break;
+        }
+    }
+    Some(out)
+}
+
+/// The most rounds of reweighting [`variance_components`] takes (it settles in a handful).
+const MAX_COMPONENT_ROUNDS: usize = 30;
+
+/// One round of [`variance_components`]: the groups' factors under the weights `weight` (per
+/// group), from the rows `a` (`3 × points` by `nf`, reduced) and residuals `r`.
+fn component_round(
+    a: &faer::Mat<f64>,
+    r: &[f64],
+    groups: &[usize],
+    weight: &[f64],
+    coordinates: &[usize],
+    nf: usize,
+    tolerance: f64,
+) -> Option<Vec<Component>> {
+    let rows = a.nrows();
+    let w = |row: usize| weight[groups[row / 3]];
+    let aw = faer::Mat::from_fn(rows, nf, |row, c| w(row).sqrt() * a[(row, c)]);
+    let (mut sq, mut absorbed) = (vec![0.0; weight.len()], vec![0.0; weight.len()]);
+    if nf == 0 {
+        for (row, v) in r.iter().enumerate() {
+            sq[groups[row / 3]] += v * v;
+        }
+    } else {
+        let h = crate::engines::kernels::product(aw.transpose(), aw.as_ref());
+        let g: Vec<f64> = (0..nf)
+            .map(|c| (0..rows).map(|row| w(row) * a[(row, c)] * r[row]).sum())
+            .collect();
+        let evd = h.self_adjoint_eigen(Side::Lower).ok()?;
+        let (mu, v) = (evd.S().column_vector(), evd.U());
+        let mu_max = mu[nf - 1].max(f64::MIN_POSITIVE);
+        let kept: Vec<usize> = (0..nf).filter(|&i| mu[i] > tolerance * mu_max).collect();
+        let mut zeta = vec![0.0; nf];
+        for &i in &kept {
+            let c = -(0..nf).map(|k| v[(k, i)] * g[k]).sum::<f64>() / mu[i];
+            for (k, z) in zeta.iter_mut().enumerate() {
+                *z += v[(k, i)] * c;
+            }
+        }
+        // Leverages: w_row Σ_kept (a_row · v_i)² / μ_i.
+        let vk = faer::Mat::from_fn(nf, kept.len(), |k, c| v[(k, kept[c])] / mu[kept[c]].sqrt());
+        let p = crate::engines::kernels::product(aw.as_ref(), vk.as_ref());
+        for row in 0..rows {
+            let lin = r[row] + (0..nf).map(|k| a[(row, k)] * zeta[k]).sum::<f64>();
+            let group = groups[row / 3];
+            sq[group] += lin * lin;
+            absorbed[group] += (0..kept.len()).map(|c| p[(row, c)].powi(2)).sum::<f64>();
+        }
+    }
+    Some(
+        (0..weight.len())
+            .map(|k| {
+                let dof = (coordinates[k] as f64 - absorbed[k]).max(1.0);
+                Component {
+                    scale: (sq[k] / dof).sqrt(),
+                    dof,
+                    coordinates: coordinates[k],
+                }
+            })
+            .collect(),
+    )
+}
+
 /// The design's factor of the parameters' covariance, one column per identified direction `i`
 /// of `kept`: `w_i = D N v_i / √μ_i` (the covariance is `σ² Σ w_i w_iᵀ`), `d` the scales `D`,
 /// `basis` the null space `N`, `(mu, v)` the eigen-decomposition of `H_z`.

@@ -14,9 +14,11 @@ use volver_core::problem::{Problem, Residuals};
 use volver_core::units::UM_PER_MM;
 
 /// Scores every candidate of the library at the solution `params` of `problem`'s model and
-/// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's). With the tracker's
-/// `noise`, the residuals are whitened by it (each point and direction weighed by its own
-/// noise: angular noise grows with the distance); without, every coordinate weighs the same.
+/// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's). With the noise of
+/// every station — its own `[[station]]` table's, else the tracker's `noise` — the residuals
+/// are whitened by it (each point and direction weighed by its station's noise: angular noise
+/// grows with the distance, a range counts by its range σ); without, every coordinate weighs
+/// the same.
 ///
 /// Each candidate's new parameters are held to plausible sizes
 /// ([`volver_core::plausibility::limit`]) by a prior at that size, so a direction the data
@@ -86,7 +88,7 @@ struct Scoring<'a, 'p> {
     params: &'a [f64],
     /// The rank tolerance (relative curvature).
     tolerance: f64,
-    /// The tracker's noise the residuals are whitened by, when known.
+    /// The tracker's noise the residuals are whitened by (with each station's own), when known.
     noise: Option<&'a TrackerNoise>,
     /// The directions the data identify in the current model.
     rank0: usize,
@@ -285,9 +287,9 @@ struct Scored<'a> {
 
 impl<'a> Scored<'a> {
     fn new(problem: Problem<'a>, noise: Option<&TrackerNoise>) -> Scored<'a> {
-        let scored = noise
-            .and_then(|n| problem.whitened(Some(n)).ok())
-            .unwrap_or_else(|| problem.clone());
+        // Each station by its own noise, else the tracker's `noise`; unweighted when a station
+        // has neither.
+        let scored = problem.whitened(noise).unwrap_or_else(|_| problem.clone());
         Scored {
             plain: problem,
             scored,
@@ -341,7 +343,10 @@ impl<'a> Scored<'a> {
 /// EMM above the current one). A refit can reach at least as low; a candidate is never
 /// predicted to raise the EMM of the Φ fit it extends.
 fn predicted_emm(problem: &Problem, start: &[f64], tolerance: f64) -> Option<f64> {
-    let plain = Scored::new(problem.clone(), None);
+    let plain = Scored {
+        plain: problem.clone(),
+        scored: problem.plain(),
+    };
     let task = plain.task();
     let modules: Vec<f64> = problem
         .residuals(start)
