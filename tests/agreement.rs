@@ -447,6 +447,7 @@ fn tolerance(name: &str) -> Option<Tolerance> {
             residual_mm: 3.5e-2,
             // ml on ranges: 4.1e-9 measured (its ve bound is 1e-9).
             weighted: 1e-8,
+            weighted_scalar: 1e-8,
             ..exact
         }),
         // SQP on the smoothed Φ: 3.1e-9 on points, 6.2e-5 on ranges, residuals 24 nm. On the
