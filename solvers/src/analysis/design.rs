@@ -484,7 +484,10 @@ mod tests {
             let size = three.iter().map(|v| v * v).sum::<f64>();
             for (j, k) in [(0, 0), (3, 5), (10, 40), (n - 1, n - 2)] {
                 let full: f64 = (0..3).map(|r| three[r * n + j] * three[r * n + k]).sum();
-                assert!((one[j] * one[k] - full).abs() <= 1e-12 * size, "{i} {j} {k}");
+                assert!(
+                    (one[j] * one[k] - full).abs() <= 1e-12 * size,
+                    "{i} {j} {k}"
+                );
             }
         }
         let grid = [volver_core::machine::Commands::default()];
