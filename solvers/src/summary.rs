@@ -357,7 +357,8 @@ pub struct Summary {
     pub termination: Termination,
     /// Whether the engine ended with a Newton polish of the optimum under the task's
     /// constraints ([`crate::engines::polish::settle`]; the native LM on a converged Φ fit with nothing
-    /// held), so that the identification need not polish it again.
+    /// held, or at the vertex of a Φ fit of ranges alone), so that the identification need not
+    /// polish it again.
     #[serde(default)]
     pub polished: bool,
 }

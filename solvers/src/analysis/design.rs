@@ -6,7 +6,8 @@
 //! machine (zero errors, the machine file's tracker pose), whitened by its station's noise at
 //! that point ([`TrackerNoise::whitening`]: the range weighs far above the angles; a station
 //! that states its own noise is weighed by it, so a noisier station brings less information)
-//! and reduced to the free coordinates `N` of the model's constraints. A design puts weights `w_i` (summing
+//! and reduced to the free coordinates `N` of the model's constraints (a range alone, a scalar
+//! residual, has rank-one information: one row). A design puts weights `w_i` (summing
 //! to one) on the candidates; `m` points give `F(w) = R + m Σ w_i F_i`, where `R` is a weak
 //! prior ([`crate::analysis::uncertainty::HELD_PRIOR_MM`] RMS in the function metric of
 //! [`crate::engines::gauge`]) that keeps a direction no candidate sees from being infinitely uncertain:
@@ -83,9 +84,11 @@ impl std::str::FromStr for Criterion {
 /// The candidates' information, ready for designs.
 pub struct Space {
     /// The candidates' whitened rows in the free coordinates (`per` per candidate point, in
-    /// `candidates.steps()` order: 3 from each station).
+    /// `candidates.steps()` order: from each station 3, or 1 where it measures ranges alone).
     a: Mat<f64>,
-    /// Rows per candidate: 3 per station of the machine.
+    /// Rows per candidate: 3 per station of the machine, 1 per station of ranges alone (a
+    /// range's information has rank one: the two other rows would be zero, a third of the
+    /// work of every iteration on a layout of ranges).
     per: usize,
     /// `Q` of the I-criterion (nf × nf).
     q: Mat<f64>,
@@ -134,24 +137,38 @@ impl Space {
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
         let (n, nf, rows_total) = (p0.len(), ns.n_free(), problem.n_points());
         let stations = model.machine().stations().len();
-        let (m, per) = (rows_total / stations, 3 * stations);
+        let m = rows_total / stations;
         let basis = ns.basis();
-        // The whitened Jacobian rows (3 per measurement, n columns), then reduced to z.
+        // Each measurement's whitened Jacobian rows (n columns): three, or for a scalar
+        // residual (a range) the one row that carries its information.
         let rows: Vec<Vec<f64>> = (0..rows_total)
             .into_par_iter()
-            .map(|i| {
-                let mut row = vec![0.0; 3 * n];
-                whitened.residual_and_jacobian(i, &p0, &mut row);
-                row
-            })
+            .map(|i| information_rows(&whitened, i, &p0))
             .collect();
         if rows.iter().flatten().any(|v| !v.is_finite()) {
             return None;
         }
+        // A station whose every measurement is a scalar has one row per candidate, else three
+        // (a scalar measurement's row first, then zeros).
+        let widths: Vec<usize> = (0..stations)
+            .map(|s| {
+                if (0..m).all(|i| rows[s * m + i].len() == n) {
+                    1
+                } else {
+                    3
+                }
+            })
+            .collect();
+        let per: usize = widths.iter().sum();
+        let place: Vec<(usize, usize)> = widths
+            .iter()
+            .enumerate()
+            .flat_map(|(s, &w)| (0..w).map(move |k| (s, k)))
+            .collect();
         // Candidate-major: candidate i's rows from station s are measurement s·m + i's.
         let j = Mat::from_fn(per * m, n, |r, c| {
-            let (i, within) = (r / per, r % per);
-            rows[(within / 3) * m + i][(within % 3) * n + c]
+            let (i, (s, k)) = (r / per, place[r % per]);
+            rows[s * m + i].get(k * n + c).copied().unwrap_or(0.0)
         });
         let a = crate::engines::kernels::product(j.as_ref(), basis);
         let tool_grid = crate::analysis::uncertainty::ToolGrid {
@@ -194,12 +211,40 @@ impl Space {
     /// `F = R + Σ c_i F_i` for per-candidate multiplicities `c`.
     fn information(&self, c: &[f64]) -> Mat<f64> {
         let nf = self.r.nrows();
-        let per = self.per;
-        let scaled = Mat::from_fn(per * self.m, nf, |row, col| {
-            c[row / per].max(0.0).sqrt() * self.a[(row, col)]
-        });
+        let root: Vec<f64> = c
+            .iter()
+            .flat_map(|x| std::iter::repeat_n(x.max(0.0).sqrt(), self.per))
+            .collect();
+        let mut scaled = Mat::<f64>::zeros(self.a.nrows(), nf);
+        for col in 0..nf {
+            let rows = scaled.col_mut(col).iter_mut().zip(self.a.col(col).iter());
+            for ((out, a), s) in rows.zip(&root) {
+                *out = s * a;
+            }
+        }
         let ata = crate::engines::kernels::product(scaled.transpose(), scaled.as_ref());
         Mat::from_fn(nf, nf, |i, j| self.r[(i, j)] + ata[(i, j)])
+    }
+
+    /// `d_i = tr(S F_i)` of every candidate: the sum over its rows of `a S aᵀ`, each row's
+    /// accumulated column by column (the matrices are column-major) over the halves of `A S`.
+    fn leverages(&self, s: &Mat<f64>) -> Vec<f64> {
+        let (left, right) = crate::engines::kernels::product_parts(self.a.as_ref(), s.as_ref());
+        let mut by_row = vec![0.0; self.a.nrows()];
+        let mut col = 0;
+        for part in std::iter::once(&left).chain(right.as_ref()) {
+            for k in 0..part.ncols() {
+                let rows = by_row.iter_mut().zip(part.col(k).iter());
+                for ((acc, p), a) in rows.zip(self.a.col(col).iter()) {
+                    *acc += p * a;
+                }
+                col += 1;
+            }
+        }
+        by_row
+            .chunks(self.per)
+            .map(|rows| rows.iter().sum())
+            .collect()
     }
 
     /// `F⁻¹` and `log det F` (`None` when F is not positive definite).
@@ -324,7 +369,6 @@ impl Space {
         q: Option<&Mat<f64>>,
         iterations: usize,
     ) -> Option<(f64, usize)> {
-        let m = self.m;
         let mut equivalence = f64::INFINITY;
         let mut done = 0;
         for it in 0..iterations {
@@ -338,17 +382,7 @@ impl Space {
                 }
                 None => inv,
             };
-            // d_i = Σ over the candidate's rows of a S aᵀ.
-            let p = crate::engines::kernels::product(self.a.as_ref(), s.as_ref());
-            let nf = s.nrows();
-            let d: Vec<f64> = (0..m)
-                .into_par_iter()
-                .map(|i| {
-                    (self.per * i..self.per * (i + 1))
-                        .map(|row| (0..nf).map(|k| p[(row, k)] * self.a[(row, k)]).sum::<f64>())
-                        .sum()
-                })
-                .collect();
+            let d = self.leverages(&s);
             let mean: f64 = w.iter().zip(&d).map(|(a, b)| a * b).sum();
             if !(mean > 0.0 && mean.is_finite()) {
                 return None;
@@ -365,6 +399,37 @@ impl Space {
         }
         Some((equivalence, done))
     }
+}
+
+/// Measurement `i`'s whitened Jacobian rows at `p0` (row-major, `n` columns each): its three
+/// rows, or for a scalar residual (a range, whose Jacobian's second and third rows are zero,
+/// so that its whitened rows `W e₀ J₀` are all multiples of one) the single row `‖W e₀‖ J₀`
+/// with the same information.
+fn information_rows(whitened: &Problem<'_>, i: usize, p0: &[f64]) -> Vec<f64> {
+    let n = p0.len();
+    let mut row = vec![0.0; 3 * n];
+    whitened.residual_and_jacobian(i, p0, &mut row);
+    if !whitened.scalar(i) {
+        return row;
+    }
+    let norms: Vec<f64> = row
+        .chunks(n)
+        .map(|r| r.iter().map(|v| v * v).sum::<f64>().sqrt())
+        .collect();
+    let (top, _) = norms.iter().enumerate().fold(
+        (0, -1.0),
+        |best, (k, &v)| if v > best.1 { (k, v) } else { best },
+    );
+    let total = norms.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let gain = if norms[top] > 0.0 {
+        total / norms[top]
+    } else {
+        0.0
+    };
+    row[top * n..(top + 1) * n]
+        .iter()
+        .map(|v| v * gain)
+        .collect()
 }
 
 /// Weights rounded to `points` whole measurements by largest remainders (ties to the earlier
@@ -457,6 +522,46 @@ mod tests {
             i_one - i_quiet < 0.5 * (i_loud - i_quiet),
             "I: {i_quiet} {i_one} {i_loud}"
         );
+    }
+
+    /// A range's one row carries the information of its three whitened rows, and a layout of
+    /// ranges alone has one row per station and candidate.
+    #[test]
+    fn a_range_has_one_row_with_its_whole_information() {
+        use volver_core::machine::{Machine, Observes, StationSpec};
+        let xcfz = Machine::default_xcfz();
+        let multi = xcfz
+            .with_stations(StationSpec::default_layout(&xcfz, 2, Observes::Range))
+            .unwrap();
+        let text = volver_core::model::DEFAULT_MODEL_TOML.replace(
+            "identify = [\"x\", \"y\", \"z\"]",
+            "identify = [\"x\", \"y\", \"z\"]\nrange_offset = true",
+        );
+        let model = Model::from_toml_str(multi.clone(), &text, "ranges").unwrap();
+        let plan = Plan::parse_grid(&multi, "X=0:1400:700,C=0:270:90,Z=0:600:300").unwrap();
+        let data = crate::analysis::observability::nominal_data(&model, &plan);
+        let problem = Problem::new(&model, &data).unwrap();
+        let whitened = problem.whitened(Some(&TrackerNoise::PAPER)).unwrap();
+        let p0 = model.initial_params();
+        let n = p0.len();
+        for i in [0, 7, data.points.len() - 1] {
+            assert!(problem.scalar(i));
+            let one = information_rows(&whitened, i, &p0);
+            assert_eq!(one.len(), n);
+            let mut three = vec![0.0; 3 * n];
+            whitened.residual_and_jacobian(i, &p0, &mut three);
+            let size = three.iter().map(|v| v * v).sum::<f64>();
+            for (j, k) in [(0, 0), (3, 5), (10, 40), (n - 1, n - 2)] {
+                let full: f64 = (0..3).map(|r| three[r * n + j] * three[r * n + k]).sum();
+                assert!(
+                    (one[j] * one[k] - full).abs() <= 1e-12 * size,
+                    "{i} {j} {k}"
+                );
+            }
+        }
+        let grid = [volver_core::machine::Commands::default()];
+        let space = Space::new(&model, &plan, &TrackerNoise::PAPER, [0.0; 3], &grid).unwrap();
+        assert_eq!((space.per, space.a.nrows()), (2, 2 * plan.n_points()));
     }
 
     #[test]

@@ -468,18 +468,34 @@ fn weigh_rows(
 /// so neither do the bits.
 pub(crate) fn product(a: faer::MatRef<'_, f64>, b: faer::MatRef<'_, f64>) -> Mat<f64> {
     let (m, n) = (a.nrows(), b.ncols());
+    match product_parts(a, b) {
+        (whole, None) => whole,
+        (left, Some(right)) => {
+            let half = left.ncols();
+            Mat::from_fn(m, n, |i, j| {
+                if j < half {
+                    left[(i, j)]
+                } else {
+                    right[(i, j - half)]
+                }
+            })
+        }
+    }
+}
+
+/// [`product`] before its halves are joined: `a · b` whole (`None` beside it), or its left
+/// and right column halves.
+pub(crate) fn product_parts(
+    a: faer::MatRef<'_, f64>,
+    b: faer::MatRef<'_, f64>,
+) -> (Mat<f64>, Option<Mat<f64>>) {
+    let (m, n) = (a.nrows(), b.ncols());
     if m < SPLIT || n < SPLIT {
-        return a * b;
+        return (a * b, None);
     }
     let half = n / 2;
     let (left, right) = rayon::join(|| a * b.subcols(0, half), || a * b.subcols(half, n - half));
-    Mat::from_fn(m, n, |i, j| {
-        if j < half {
-            left[(i, j)]
-        } else {
-            right[(i, j - half)]
-        }
-    })
+    (left, Some(right))
 }
 
 /// `bᵀ m b` (the reduction of a symmetric matrix to the columns of `b`), by two [`product`]s.

@@ -12,6 +12,8 @@ use crate::options::Objective;
 use faer::{Mat, Side};
 use volver_core::problem::Residuals;
 
+mod l1;
+
 /// What [`settle`] did.
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
@@ -22,6 +24,8 @@ pub struct Settled {
     pub jacobian_evaluations: usize,
     /// Objective passes (line search included).
     pub evaluations: usize,
+    /// Simplex pivots of the linear programmes (Φ on scalar residuals; zero otherwise).
+    pub pivots: usize,
     /// The objective's predicted decrease left at the end (the Newton decrement `½ gᵀH⁻¹g`),
     /// relative to the objective.
     pub decrement: f64,
@@ -47,6 +51,11 @@ pub enum SettleStop {
     NoDecrease,
     /// The Newton steps allowed (40) are spent.
     StepLimit,
+    /// Φ on scalar residuals (an L1 fit): the linear programme at the point is optimal and its
+    /// step negligible, with a predicted decrease within the cost's rounding — the basic
+    /// residuals vanish to rounding and every multiplier is within ±1, the first-order
+    /// conditions of the L1 optimum (see [`settle`]).
+    Vertex,
 }
 
 /// Why [`settle`] could not run.
@@ -102,6 +111,14 @@ const HALVINGS: usize = 30;
 /// smaller predicted decrease (the result is then the point of smallest predicted decrease):
 /// [`Settled::stop`] says which.
 ///
+/// Φ of scalar residuals alone (ranges: an L1 fit, whose optimum is a vertex where as many
+/// residuals vanish as there are free coordinates, and where the smoothed Newton steps crawl)
+/// goes to that vertex exactly instead: sequential linear programmes, each the L1 regression
+/// of the residuals linearised at the point, solved by the simplex method of L1 regression
+/// (Barrodale and Roberts) from the previous basis, its step taken where Φ falls; once the basis
+/// is the optimum's these are Newton's steps on the interpolated residuals, and the run stops
+/// at [`SettleStop::Vertex`] (the Newton steps above when the programmes fail).
+///
 /// This is what makes the gauge a rule rather than a neighbourhood: engines stop at different
 /// places in the nearly flat directions that remain identified (curvature 1e-9 … 1e-4 of the
 /// largest), and polishing them to the same optimum makes the result independent of the engine
@@ -127,6 +144,12 @@ pub(crate) fn settle_scaled(
     irls_final_epsilon: f64,
 ) -> Result<(Vec<f64>, Settled), Unsettled> {
     let free = free_coordinates(task, p, scale)?;
+    if objective.loss() == Objective::Phi && free.n_free() > 0 && l1::all_scalar(&*task.problem) {
+        let x = free.params(&vec![0.0; free.n_free()]);
+        if let Ok(done) = vertex(&*task.problem, &free, x) {
+            return Ok(done);
+        }
+    }
     let mut settle = Settle::start(&*task.problem, free, objective.loss(), irls_final_epsilon)?;
     if settle.free.n_free() == 0 {
         settle.report.decrement = 0.0;
@@ -150,6 +173,29 @@ pub(crate) fn settle_scaled(
         (x, report.decrement) = (x0, d0);
     }
     Ok((x, report))
+}
+
+/// The L1 optimum of Φ on scalar residuals alone (the vertex of [`settle`]) from `x` in the
+/// free coordinates `free`.
+pub(crate) fn vertex(
+    problem: &dyn Residuals,
+    free: &Free,
+    x: Vec<f64>,
+) -> Result<(Vec<f64>, Settled), Unsettled> {
+    l1::settle(problem, free, x, phi_rounding(problem))
+}
+
+pub(crate) use l1::all_scalar;
+
+/// The rounding of Φ (mm): each residual is rounded relative to what its point measured (mm from
+/// the tracker), not to itself, and the mean of n of them by 1/√n of that: 16 ε of the largest
+/// over √n, a margin of ~15 over what is seen (3e-13 of Φ on test 4).
+fn phi_rounding(problem: &dyn Residuals) -> f64 {
+    let np = problem.n_points();
+    let scale = (0..np)
+        .map(|i| problem.observation_scale(i))
+        .fold(0.0_f64, f64::max);
+    16.0 * f64::EPSILON * scale / (np as f64).sqrt()
 }
 
 /// The Jacobi-scaled free coordinates of `task` at `p`, in `scale` when given. Parameters a
@@ -216,13 +262,7 @@ impl<'t> Settle<'t> {
         let norms0 = norms(problem, &x).ok_or(Unsettled::NotFinite)?;
         let eps = irls_final_epsilon * norms0.iter().sum::<f64>() / np as f64;
         let cost = cost_of(objective, &norms0, eps);
-        // The cost's rounding: each residual is rounded relative to what its point measured (mm
-        // from the tracker), not to itself, and the mean of n of them by 1/√n of that: 16 ε of
-        // the largest over √n, a margin of ~15 over what is seen (3e-13 of Φ on test 4).
-        let scale = (0..np)
-            .map(|i| problem.observation_scale(i))
-            .fold(0.0_f64, f64::max);
-        let floor = 16.0 * f64::EPSILON * scale / (np as f64).sqrt()
+        let floor = phi_rounding(problem)
             * if objective.loss() == Objective::Ve {
                 2.0 * cost.sqrt()
             } else {
@@ -247,6 +287,7 @@ impl<'t> Settle<'t> {
                 steps: 0,
                 jacobian_evaluations: 0,
                 evaluations: 1,
+                pivots: 0,
                 decrement: f64::INFINITY,
                 stop: SettleStop::StepLimit,
             },

@@ -84,3 +84,31 @@ impl Lm<'_, '_, '_> {
         }
     }
 }
+
+impl Lm<'_, '_, '_> {
+    /// A Φ fit of scalar residuals alone (an L1 fit): the exact vertex of its optimum from the
+    /// current point ([`crate::engines::polish::vertex`]); `true` when it was reached (the point
+    /// moved there, the fit polished), `false` (nothing changed) when the fit is not one, holds
+    /// unidentifiable directions, or the finish did not reach a vertex.
+    pub(super) fn vertex_finish(&mut self) -> bool {
+        if !self.l1 || self.run.summary.unidentifiable != 0 {
+            return false;
+        }
+        let outcome = crate::engines::polish::vertex(self.problem, &self.free, self.p.clone());
+        let Ok((q, report)) = outcome else {
+            return false;
+        };
+        self.run.summary.jacobian_evaluations += report.jacobian_evaluations;
+        self.run.summary.evaluations += report.evaluations + report.jacobian_evaluations;
+        if report.stop != crate::engines::polish::SettleStop::Vertex {
+            return false;
+        }
+        self.run.summary.iterations += report.steps;
+        self.run.summary.polished = true;
+        self.norms = norms_of(self.problem, &q);
+        self.run.summary.evaluations += 1;
+        self.p = q;
+        self.recost();
+        true
+    }
+}

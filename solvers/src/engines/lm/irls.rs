@@ -6,7 +6,8 @@
 //!   Φ once its steps gain little ([`FIRST_GAIN`], then down to [`MAJORISING_GAIN`]), handed
 //!   back when the Newton model fails there ([`NEWTON_REFUSALS`]); a fit with scalar residuals
 //!   continues in ε from [`CONTINUATION`] × the initial fraction down to
-//!   [`SCALAR_FINAL_EPSILON`] (see [`crate::engines::lm`]).
+//!   [`SCALAR_FINAL_EPSILON`] (see [`crate::engines::lm`]: a fit of scalar residuals alone
+//!   ends at its L1 vertex instead, and continues in ε only where that finish fails).
 //! * [`Continuation`], the Ceres and NLopt wrappers': a solve per ε, ε shrinking tenfold from
 //!   `irls_initial_epsilon × Φ₀` to `irls_final_epsilon × Φ`, the last solve with the run's
 //!   objective-change tolerance, the earlier ones with [`STAGE_TOLERANCE`].

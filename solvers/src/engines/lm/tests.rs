@@ -65,8 +65,8 @@ fn least_squares_iterates_are_known_by_hand() {
 
 #[test]
 fn phi_reaches_the_median() {
-    // Φ's optimum is the median whatever the outlier; the ranges-alone continuation in ε and
-    // the polish take the LM there from the mean's side.
+    // Φ's optimum is the median whatever the outlier; the polish (points) or the vertex
+    // (ranges alone) take the LM there from the mean's side.
     let y = [1.0, 2.0, 4.0, 5.0, 100.0];
     for scalar in [false, true] {
         let sol = LevenbergMarquardt::default().solve(
@@ -82,6 +82,24 @@ fn phi_reaches_the_median() {
             sol.params[0]
         );
         assert!(close(sol.summary.reached.phi_mm, 102.0 / 5.0, 1e-5));
+    }
+}
+
+#[test]
+fn ranges_alone_end_at_the_vertex_exactly() {
+    // Scalar residuals alone: Φ is an L1 fit, and the LM ends at its vertex (the median itself,
+    // not within ε of it) on the parameter-change test, polished or not.
+    let y = [1.0, 2.0, 4.0, 5.0, 100.0];
+    for polish in [true, false] {
+        let lm = LevenbergMarquardt {
+            polish,
+            ..LevenbergMarquardt::default()
+        };
+        let sol = lm.solve(&task(&y, true), &[30.0], &Options::default(), &mut Silent);
+        assert_eq!(sol.summary.termination, Termination::ParameterChange);
+        assert_eq!(sol.params, vec![4.0], "{:?}", sol.summary);
+        assert!(sol.summary.polished);
+        assert!(sol.summary.iterations <= 20, "{:?}", sol.summary);
     }
 }
 
