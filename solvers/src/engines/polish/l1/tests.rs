@@ -36,10 +36,11 @@ fn basic_step(a: &[f64], r: &[f64], rows: &[usize]) -> Option<Vec<f64>> {
             return None;
         }
         e.swap(c, pivot);
-        for k in c + 1..m {
-            let f = e[k][c] / e[c][c];
-            for j in c..=m {
-                e[k][j] -= f * e[c][j];
+        let top = e[c].clone();
+        for row in e.iter_mut().skip(c + 1) {
+            let f = row[c] / top[c];
+            for (x, y) in row[c..].iter_mut().zip(&top[c..]) {
+                *x -= f * y;
             }
         }
     }
