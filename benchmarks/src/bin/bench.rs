@@ -3,7 +3,7 @@
 //!
 //! Run: `cargo run --release -p volver-benchmarks --all-features --bin bench`
 //! (`-- --quick` for the two smaller sizes only, `-- --reference-only` for the comparison with the
-//! expert Ceres program only).
+//! expert Ceres program only, `-- --ranges-only` for ranges alone and the plan only).
 //!
 //! First, test 4 against Ceres at its best: the native engine and the expert Ceres program
 //! (`benchmarks/ceres/expert.cpp`, feature `ceres`) on the same data, 1 and 2 threads each, best
@@ -27,8 +27,15 @@
 //!   ratios are per step;
 //!
 //! Then both cores: the native LM on the 10 000-point problem on one and two threads, best of 7
-//! runs each, and the ratio; last, the scaling of the native LM's identification time with
+//! runs each, and the ratio; then the scaling of the native LM's identification time with
 //! points and with parameters.
+//!
+//! Last, ranges alone (`-- --ranges-only` for this part only): test 4's poses measured
+//! range-only from four stations (the default layout, 4 160 ranges, the paper's noise on the
+//! ranges, the stations' positions and offsets identified), identified by the native LM with Φ
+//! (an L1 fit) and with ve, best of 5 runs each: steps, Φ, time and Φ's time as a multiple of
+//! ve's; and `volver plan`'s design (I-optimal, 1 040 points, the CLI's defaults) on that
+//! four-station layout and on the one tracker, best of 3 runs each, and their ratio.
 //!
 //! No figure here is a test threshold.
 
@@ -624,6 +631,149 @@ fn scaling() {
     }
 }
 
+/// The XCFZ machine measured range-only from the default layout of four stations, and the
+/// paper's model with each station's range offset.
+fn ranges_model() -> Model {
+    use volver_core::machine::{Observes, StationSpec};
+    let xcfz = Machine::default_xcfz();
+    let multi = xcfz
+        .with_stations(StationSpec::default_layout(&xcfz, 4, Observes::Range))
+        .expect("the default layout");
+    let text = volver_core::model::DEFAULT_MODEL_TOML.replace(
+        "identify = [\"x\", \"y\", \"z\"]",
+        "identify = [\"x\", \"y\", \"z\"]\nrange_offset = true",
+    );
+    Model::from_toml_str(multi, &text, "paper model with range offsets").expect("valid model")
+}
+
+/// Test 4's ranges from four stations (seed 7, the paper's noise on the ranges) identified by
+/// the native LM with `objective` (`phi` or `ve`), as JSON.
+fn run_ranges(objective: &str) -> serde_json::Value {
+    use volver_core::measure::Observation;
+    let model = ranges_model();
+    let machine = model.machine();
+    let truth = Truth::random(
+        machine,
+        Model::default_xcfz().spec(),
+        &Magnitudes::default(),
+        7,
+    )
+    .expect("truth");
+    let mut sim = Simulation::new(Plan::preset(machine, "test4").expect("preset"), truth, 7);
+    sim.observe = Observation::Range;
+    let data = sim.run().expect("simulation").measurements;
+    let t = Instant::now();
+    let problem = Problem::new(&model, &data).expect("problem");
+    let options = Options {
+        objective: if objective == "ve" {
+            Objective::Ve
+        } else {
+            Objective::Phi
+        },
+        ..Options::default()
+    };
+    let id = identify(
+        &volver_solvers::lm::LevenbergMarquardt::default(),
+        problem.clone(),
+        &model.initial_params(),
+        &Strategy::default(),
+        &options,
+        &mut volver_solvers::Silent,
+    );
+    serde_json::json!({
+        "objective": objective,
+        "time_s": t.elapsed().as_secs_f64(),
+        "steps": id.iterations(),
+        "evaluations": id.evaluations(),
+        "phi_mm": problem.phi(&id.params),
+        "points": problem.n_points(),
+        "termination": id.termination.to_string(),
+    })
+}
+
+/// `volver plan`'s design with the CLI's defaults (I-optimal, 1 040 points, the paper's noise,
+/// the tool at the reflectors' centroid) on the four-station layout of ranges (`ranges4`) or
+/// the one tracker, as JSON.
+fn run_plan(layout: &str) -> serde_json::Value {
+    let model = if layout == "ranges4" {
+        ranges_model()
+    } else {
+        Model::default_xcfz()
+    };
+    let machine = model.machine();
+    let request = volver::planning::Request {
+        tool: volver::compensation::reflector_centroid(&model),
+        per_axis: volver::planning::default_per_axis(machine, machine.reflectors().len())
+            .expect("a candidate grid"),
+        ..volver::planning::Request::default()
+    };
+    let t = Instant::now();
+    match volver::planning::plan(&model, &request) {
+        Ok(planned) => serde_json::json!({
+            "layout": layout,
+            "time_s": t.elapsed().as_secs_f64(),
+            "candidates": planned.report.candidates,
+            "equivalence": planned.report.equivalence,
+            "u95_mean_um": planned.report.u95_mean_um,
+        }),
+        Err(e) => serde_json::json!({ "layout": layout, "error": e.to_string() }),
+    }
+}
+
+/// Φ against ve on the four stations' ranges, and the plan's time on that layout against one
+/// tracker's: best of `reps` runs each, each in its own process.
+fn ranges(reps: usize) {
+    println!(
+        "\n## Ranges alone: test 4 from four stations (4 160 ranges, paper noise), and its plan\n"
+    );
+    let best_of = |what: &str, arg: &str, n: usize| -> serde_json::Value {
+        (0..n)
+            .map(|_| child(what, arg))
+            .min_by(|a, b| f(a, "time_s").total_cmp(&f(b, "time_s")))
+            .unwrap_or_default()
+    };
+    let (phi, ve) = (
+        best_of("ranges", "phi", reps),
+        best_of("ranges", "ve", reps),
+    );
+    println!("| objective | steps | evals | Φ mm | time s | × ve | termination |");
+    println!("|---|---|---|---|---|---|---|");
+    for r in [&phi, &ve] {
+        println!(
+            "| {} | {} | {} | {:.12e} | {:.3} | {:.2} | {} |",
+            r["objective"].as_str().unwrap_or("?"),
+            r["steps"],
+            r["evaluations"],
+            f(r, "phi_mm"),
+            f(r, "time_s"),
+            f(r, "time_s") / f(&ve, "time_s"),
+            r["termination"].as_str().unwrap_or("?"),
+        );
+    }
+    let reps_plan = reps.div_ceil(2);
+    let (four, one) = (
+        best_of("plan", "ranges4", reps_plan),
+        best_of("plan", "tracker", reps_plan),
+    );
+    if let Some(e) = [&four, &one].iter().find_map(|r| r["error"].as_str()) {
+        println!("\n`volver plan` not measured: {e}.");
+        return;
+    }
+    println!(
+        "\n`volver plan` (I-optimal, 1 040 points, CLI defaults), best of {reps_plan}: {:.2} s on \
+         the four stations' ranges ({} candidates, equivalence {:.4}, U mean {:.3} µm), {:.2} s \
+         with one tracker ({} candidates, U mean {:.3} µm): {:.2}×.",
+        f(&four, "time_s"),
+        four["candidates"],
+        f(&four, "equivalence"),
+        f(&four, "u95_mean_um"),
+        f(&one, "time_s"),
+        one["candidates"],
+        f(&one, "u95_mean_um"),
+        f(&four, "time_s") / f(&one, "time_s"),
+    );
+}
+
 /// The size a child is asked for: a named one or `scale:degree:order:poses`.
 fn size_of(key: &str) -> Size {
     if let Some(rest) = key.strip_prefix("scale:") {
@@ -648,6 +798,14 @@ fn main() {
     if args.len() == 4 && args[1] == "child" {
         // As the CLI does: the passes start on this thread.
         volver_solvers::share_calling_thread();
+        if args[2] == "ranges" {
+            println!("{}", run_ranges(&args[3]));
+            return;
+        }
+        if args[2] == "plan" {
+            println!("{}", run_plan(&args[3]));
+            return;
+        }
         let size = size_of(&args[3]);
         let v = if args[2] == "kernels" {
             kernels(&size)
@@ -665,6 +823,11 @@ fn main() {
         "volver bench — engines: {}; one process per measurement; Φ from the model's start",
         volver_solvers::engine_names().join(", ")
     );
+    if args.iter().any(|a| a == "--ranges-only") {
+        ranges(if quick { 3 } else { 5 });
+        println!("\nTotal {:.0} s.", t.elapsed().as_secs_f64());
+        return;
+    }
     reference(if quick { 3 } else { 7 });
     if args.iter().any(|a| a == "--reference-only") {
         return;
@@ -677,5 +840,6 @@ fn main() {
     }
     threads(if quick { 3 } else { 7 });
     scaling();
+    ranges(if quick { 3 } else { 5 });
     println!("\nTotal {:.0} s.", t.elapsed().as_secs_f64());
 }

@@ -57,20 +57,20 @@
 //!   the polish, which stops once a Newton step moves the error functions by less than 1e-10
 //!   of their size).
 //! * **Ranges alone** ([`Residuals::scalar`] for every point: a range's module is its absolute
-//!   value, so Φ is an L1 fit, whose optimum is a vertex where as many ranges are interpolated
-//!   as there are free coordinates). Smoothing sees only the residuals within ε of zero, so the
-//!   Newton stages crawl towards a vertex (a continuation in ε from 1e-2 Φ down to 1e-6 Φ took
-//!   80–150 steps on test 4's ranges from four stations, then the Newton polish forty more of
-//!   0.5 s each, and ended 4e-7 … 1.5e-6 above the optimum). Instead, once the majorising stage has
-//!   slowed down, the vertex is found exactly by sequential linear programmes
-//!   ([`crate::engines::polish::settle`] on scalar residuals: the simplex method of L1
-//!   regression, then Newton's steps on the interpolated ranges; [`Lm::vertex_finish`]), and
-//!   the run ends there on the parameter-change test (its last step negligible): 10 LM steps
-//!   and 3 linear programmes (~150–250 pivots in the first, none after) on those ranges, in
-//!   less time than ve's fit of the same data, whether or not [`LevenbergMarquardt::polish`]
-//!   is set. Should the linear programmes fail (the rows not spanning the free coordinates, a
-//!   singular basis, a limit), the Newton stages go on, with ε lowered tenfold each time one
-//!   converges, down to 1e-6 Φ, and try again where each converges.
+//!   value, so Φ is an L1 fit, whose optimum is a vertex where as many ranges are interpolated as
+//!   there are free coordinates). Smoothing sees only the residuals within ε of zero, so the Newton
+//!   stages crawl towards a vertex (a continuation in ε from 1e-2 Φ down to 1e-6 Φ took 80–150
+//!   steps on test 4's ranges from four stations, then the Newton polish forty more of 0.5 s each,
+//!   and ended 4e-7 … 1.5e-6 above the optimum). Instead, once the majorising stage has slowed
+//!   down, the vertex is found exactly by sequential linear programmes
+//!   ([`crate::engines::polish::settle`] on scalar residuals: the simplex method of L1 regression,
+//!   then Newton's steps on the interpolated ranges), and the run ends there on the
+//!   parameter-change test (its last step negligible): 10 LM steps and 3 linear programmes
+//!   (140–260 pivots in the first, a few after) on those ranges, in less time than ve's fit of the
+//!   same data, whether or not [`LevenbergMarquardt::polish`] is set. Should the linear programmes
+//!   fail (the rows not spanning the free coordinates, a singular basis, a limit), the Newton
+//!   stages go on, with ε lowered tenfold each time one converges, down to 1e-6 Φ, and try again
+//!   where each converges.
 //!
 //! ```
 //! use volver_core::machine::Machine;

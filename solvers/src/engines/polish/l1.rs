@@ -29,6 +29,7 @@
 
 use super::{Negligible, SettleStop, Settled, Unsettled};
 use crate::engines::coordinates::Free;
+use crate::engines::kernels::dot;
 use faer::Mat;
 use faer::linalg::solvers::{PartialPivLu, Solve};
 use rayon::prelude::*;
@@ -121,10 +122,6 @@ fn first_basis(a: &[f64], r: &[f64], m: usize) -> Option<Vec<usize>> {
         }
     }
     (basis.len() == m).then_some(basis)
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// The optimum of a linearised L1 fit: the step, the linearised residuals there and the
@@ -350,7 +347,7 @@ fn line_search(
     report.jacobian_evaluations += 1;
     if let Some((r, a)) = rows(problem, free, &xt) {
         let phit = phi_of(&r);
-        if phit < phi || phit <= phi + tolerance {
+        if phit < phi || (tolerance > 0.0 && phit <= phi + tolerance) {
             return Some((xt, r, a, phit));
         }
     }
