@@ -216,8 +216,9 @@ impl<'a> Problem<'a> {
     ///
     /// A station's noise is the one its own `[[station]]` table states
     /// ([`crate::machine::Machine::station_own_noise`]), else `default` (the tracker's: the
-    /// `[tracker]` table's or `--noise`). `Err` names the station without any, or a noise-free
-    /// one (which weighs nothing).
+    /// `[tracker]` table's or `--noise`). `Err` names the station without any, a noise-free
+    /// one (which weighs nothing), or one whose σ is zero for a quantity it measures (its angles
+    /// or range for a point, its range for a range: that point would weigh infinitely).
     ///
     /// ```
     /// use volver_core::model::Model;
@@ -240,6 +241,10 @@ impl<'a> Problem<'a> {
     /// }
     /// assert!(w.is_whitened() && !w.plain().is_whitened());
     /// assert!(problem.whitened(None).is_err()); // no noise stated anywhere
+    /// // A point measured by a tracker whose angles have no noise: refused, naming the line.
+    /// let exact_angles = TrackerNoise::from_text("normal:0,0,2,0").unwrap();
+    /// let err = problem.whitened(Some(&exact_angles)).unwrap_err().to_string();
+    /// assert!(err.contains("σ = 0") && err.contains("line 2"), "{err}");
     /// ```
     pub fn whitened(&self, default: Option<&TrackerNoise>) -> Result<Problem<'a>> {
         let machine = self.model.machine();
@@ -273,6 +278,36 @@ impl<'a> Problem<'a> {
                     });
                 }
             }
+        }
+        if let Some(p) = self.data.points.iter().find(|p| {
+            let n = &noises[p.station_index];
+            let (s_az, s_el) = n.angle_sigmas_rad();
+            let s_r = n.range_sigma_mm(norm(p.measured));
+            let observed = match p.observation {
+                crate::measure::Observation::Range => s_r > 0.0,
+                crate::measure::Observation::Point => s_az > 0.0 && s_el > 0.0 && s_r > 0.0,
+            };
+            !observed
+        }) {
+            let st = &machine.stations()[p.station_index];
+            let whose = match st.id.as_str() {
+                "" => "the tracker's noise".to_string(),
+                id => format!("station '{id}''s noise"),
+            };
+            let what = match p.observation {
+                crate::measure::Observation::Range => "its ranges",
+                crate::measure::Observation::Point => "its angles and range",
+            };
+            return Err(Error::InvalidOption {
+                name: "noise",
+                message: format!(
+                    "{whose} {} has σ = 0 for what it observes (line {} measures {what}): a \
+                     noise-weighted fit would give that point infinite weight; state σ > 0 for \
+                     every quantity the station measures (--noise, [tracker] noise or the \
+                     station's noise)",
+                    noises[p.station_index], p.line
+                ),
+            });
         }
         let rows = self
             .data

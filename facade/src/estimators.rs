@@ -47,8 +47,24 @@ pub struct Row {
 pub struct SideBySide {
     /// One row per estimator of [`COMPARED`].
     pub rows: Vec<Row>,
-    /// The Cramér–Rao limit (µm, the same measure as `expected_um`), at the ml fit.
+    /// The Cramér–Rao limit (µm, the same measure as `expected_um`), at the ml fit; for a
+    /// bounded noise (`normal` false) the Gauss–Markov limit of the estimators linear in the
+    /// data.
     pub cramer_rao_um: f64,
+    /// Whether the noise is normal (see `cramer_rao_um`).
+    pub normal: bool,
+}
+
+impl SideBySide {
+    /// The limit's name: "Cramér–Rao limit" for normal noise, "Gauss–Markov limit" for a
+    /// bounded one.
+    pub fn limit_name(&self) -> &'static str {
+        if self.normal {
+            "Cramér–Rao limit"
+        } else {
+            "Gauss–Markov limit"
+        }
+    }
 }
 
 /// Fits `data` with `model` by each estimator of [`COMPARED`] under the tracker noise `noise`
@@ -136,6 +152,10 @@ pub fn side_by_side(
     Ok(SideBySide {
         rows,
         cramer_rao_um: limit.unwrap_or(f64::NAN),
+        normal: match noise {
+            NoiseModel::Tracker(t) => t.distribution == volver_core::noise::Distribution::Normal,
+            _ => false,
+        },
     })
 }
 
@@ -167,6 +187,7 @@ pub fn over_truths(
         sum = Some(match sum {
             None => SideBySide {
                 cramer_rao_um: sq(s.cramer_rao_um),
+                normal: s.normal,
                 rows: s
                     .rows
                     .into_iter()

@@ -479,7 +479,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let (given, full) = (model, with_reflectors(model, &request.extra_reflectors)?);
     let model = &full;
     let machine = model.machine();
-    let candidates = checked_candidates(machine, request.per_axis)?;
+    let candidates = checked_candidates(machine, request)?;
     let grid = crate::shared::default_grid(machine, 5)?;
     let space = Space::new(
         model,
@@ -584,9 +584,11 @@ fn reference_and_design(
     Ok((reference, design))
 }
 
-/// The candidate grid of `per_axis` positions per axis, refused beyond [`MAX_CANDIDATES`]
-/// points.
-fn checked_candidates(machine: &Machine, per_axis: usize) -> Result<Plan> {
+/// The candidate grid of the request's `per_axis` positions per axis, refused beyond
+/// [`MAX_CANDIDATES`] points, or when a station's noise has σ = 0 for what it measures.
+fn checked_candidates(machine: &Machine, request: &Request) -> Result<Plan> {
+    crate::shared::check_station_noises(machine, &request.noise)?;
+    let per_axis = request.per_axis;
     let candidates = candidate_grid(machine, per_axis)?;
     if candidates.n_points() > MAX_CANDIDATES {
         return Err(Error::Request(format!(

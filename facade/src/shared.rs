@@ -295,6 +295,45 @@ pub fn noise_of(text: Option<&str>) -> Result<NoiseModel> {
     })
 }
 
+/// Refuses a station whose noise (its own, else `default`) has σ = 0 for what it observes — its
+/// angles or range for a tracker, its range for an interferometer — naming it: an uncertainty or
+/// a design from it would give that station's measurements infinite weight (a NaN, or a
+/// decomposition that fails, without this check).
+///
+/// ```
+/// use volver::core::{machine::Machine, noise::TrackerNoise};
+/// let m = Machine::default_xcfz();
+/// assert!(volver::shared::check_station_noises(&m, &TrackerNoise::PAPER).is_ok());
+/// let none = TrackerNoise::from_text("none").unwrap();
+/// let err = volver::shared::check_station_noises(&m, &none).unwrap_err().to_string();
+/// assert!(err.contains("the tracker") && err.contains("σ = 0"), "{err}");
+/// ```
+pub fn check_station_noises(machine: &Machine, default: &TrackerNoise) -> Result<()> {
+    use volver_core::machine::Observes;
+    for (k, st) in machine.stations().iter().enumerate() {
+        let n = machine.station_noise_or(k, *default);
+        let (s_az, s_el) = n.angle_sigmas_rad();
+        // A range of a metre: the range's σ is a + b·L, zero only when both are.
+        let s_r = n.range_sigma_mm(1000.0);
+        let observed = match st.observes {
+            Observes::Range => s_r > 0.0,
+            _ => s_az > 0.0 && s_el > 0.0 && s_r > 0.0,
+        };
+        if !observed {
+            let who = match st.id.as_str() {
+                "" => "the tracker".to_string(),
+                id => format!("station '{id}'"),
+            };
+            return Err(Error::Request(format!(
+                "{who}'s noise {n} has σ = 0 for what it measures: its measurements would weigh \
+                 infinitely; state its noise (--noise, the machine file's [tracker] noise or \
+                 the station's own noise)"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// A parameter's share of a combination.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Share {

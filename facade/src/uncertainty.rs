@@ -110,7 +110,7 @@ pub fn assess(
         objective: request.objective,
         ..Default::default()
     };
-    check_request(request)?;
+    check_request(request, model)?;
     let fitted = crate::identification::fitted_problem(&problem, options.objective, request.noise)?;
     let mut id = volver_solvers::strategy::identify(
         solver.as_ref(),
@@ -222,6 +222,9 @@ pub struct EfficiencyU {
     pub cramer_rao_um: f64,
     /// Each estimator's name and expected error (µm).
     pub estimators: Vec<(String, f64)>,
+    /// Whether every station's noise is normal: the limit is the Cramér–Rao limit; else (a
+    /// bounded noise) the Gauss–Markov limit of the estimators linear in the data.
+    pub normal: bool,
 }
 
 impl From<&volver_solvers::efficiency::Efficiency> for EfficiencyU {
@@ -233,6 +236,7 @@ impl From<&volver_solvers::efficiency::Efficiency> for EfficiencyU {
                 .iter()
                 .map(|(o, v)| (o.to_string(), v * UM_PER_MM))
                 .collect(),
+            normal: e.normal,
         }
     }
 }
@@ -460,7 +464,10 @@ pub fn monte_carlo_ratio(us: &[volver_solvers::uncertainty::PointUncertainty], m
 /// (a count from the command line is bounded before anything is allocated for it).
 ///
 /// [`MAX_REPLICAS`]: volver_solvers::uncertainty::MAX_REPLICAS
-fn check_request(request: &Request) -> Result<()> {
+fn check_request(request: &Request, model: &Model) -> Result<()> {
+    if let NoiseModel::Tracker(t) = request.noise {
+        crate::shared::check_station_noises(model.machine(), &t)?;
+    }
     use volver_solvers::uncertainty::MAX_REPLICAS;
     if request.priors.is_some() && request.monte_carlo.is_some() {
         return Err(Error::Request(

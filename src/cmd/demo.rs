@@ -395,8 +395,14 @@ fn print_estimators(model2: &Model, out: &Synthetic) -> Result<()> {
             r.emm_um
         );
     }
+    let why = if s.normal {
+        "no unbiased estimator's expected error is lower"
+    } else {
+        "the noise is bounded: no unbiased estimator linear in the data does better"
+    };
     println!(
-        "     Cramér–Rao limit of this plan and noise: {:.2} µm (no unbiased estimator's expected error is lower); `--objective ml` reaches it",
+        "     {} of this plan and noise: {:.2} µm ({why}); `--objective ml` reaches it",
+        s.limit_name(),
         s.cramer_rao_um
     );
     Ok(())

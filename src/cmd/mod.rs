@@ -102,17 +102,25 @@ pub fn print_efficiency(
 ) {
     println!(
         "\n  estimators on this plan and noise: expected RMS tool-point error over the grid (3-D, \
-         after the set-up's transform, k = 1, from the data)"
+         after the set-up's transform, k = 1)"
     );
-    println!(
-        "    {:<43} {:>9.3} µm",
-        "Cramér–Rao limit (of unbiased estimators)", e.cramer_rao_um
-    );
+    let (limit, ml) = if e.normal {
+        (
+            "Cramér–Rao limit (of unbiased estimators)",
+            "ml (maximum likelihood)",
+        )
+    } else {
+        (
+            "Gauss–Markov limit (bounded noise: of linear ones)",
+            "ml (noise-weighted least squares)",
+        )
+    };
+    println!("    {limit:<50} {:>9.3} µm", e.cramer_rao_um);
     for (name, v) in &e.estimators {
         let what = match name.as_str() {
             "phi" => "phi (the paper's Φ)",
             "ve" => "ve (least squares)",
-            "ml" => "ml (maximum likelihood)",
+            "ml" => ml,
             "phi-w" => "phi-w (Φ of whitened residuals)",
             other => other,
         };
@@ -121,7 +129,7 @@ pub fn print_efficiency(
             _ => "",
         };
         println!(
-            "    {what:<43} {v:>9.3} µm  {:>5.2} × the limit{mark}",
+            "    {what:<50} {v:>9.3} µm  {:>5.2} × the limit{mark}",
             v / e.cramer_rao_um
         );
     }

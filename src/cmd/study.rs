@@ -125,8 +125,11 @@ fn print_estimators(seed: u64) -> Result<()> {
             );
         }
         println!(
-            "  {noise:<20} {:<7} {:>16} {:>13.2}   (Cramér–Rao limit)",
-            "limit", "", s.cramer_rao_um
+            "  {noise:<20} {:<7} {:>16} {:>13.2}   ({})",
+            "limit",
+            "",
+            s.cramer_rao_um,
+            s.limit_name()
         );
     }
     Ok(())

@@ -61,6 +61,10 @@ pub struct Efficiency {
     /// Each estimator (Φ, ve, ml, whitened Φ) and its expected RMS tool-point error (mm, the
     /// same measure); an estimator whose covariance cannot be formed is left out.
     pub estimators: Vec<(Objective, f64)>,
+    /// Whether every station's noise is normal: the limit is then the Cramér–Rao limit and ml
+    /// the maximum-likelihood estimate; else (a bounded noise) the Gauss–Markov limit of the
+    /// estimators linear in the data, and ml is noise-weighted least squares.
+    pub normal: bool,
 }
 
 impl Efficiency {
@@ -140,8 +144,16 @@ pub fn compare(
             Some((o, expected_rms_mm(grid, model, params, &cov)))
         })
         .collect();
+    let machine = model.machine();
+    let normal = match noise {
+        NoiseModel::Tracker(t) => (0..machine.stations().len()).all(|k| {
+            machine.station_noise_or(k, t).distribution == volver_core::noise::Distribution::Normal
+        }),
+        _ => false,
+    };
     Some(Efficiency {
         limit_mm,
         estimators,
+        normal,
     })
 }
