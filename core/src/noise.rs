@@ -392,6 +392,21 @@ impl TrackerNoise {
         self.distribution.sigma(self.range_value_mm(r_mm))
     }
 
+    /// Whether every quantity a reading at `r_mm` takes has σ > 0: the range alone when
+    /// `range_only` (an interferometer's reading, a range), else the angles too. A weighted fit
+    /// would give a reading of a quantity with σ = 0 infinite weight.
+    ///
+    /// ```
+    /// use volver_core::noise::TrackerNoise;
+    /// let interferometer = TrackerNoise::from_text("normal:0,0,0.1,0.15").unwrap();
+    /// assert!(interferometer.measures(true, 2000.0) && !interferometer.measures(false, 2000.0));
+    /// assert!(!TrackerNoise::NONE.measures(true, 2000.0));
+    /// ```
+    pub fn measures(&self, range_only: bool, r_mm: f64) -> bool {
+        let (s_az, s_el) = self.angle_sigmas_rad();
+        self.range_sigma_mm(r_mm) > 0.0 && (range_only || (s_az > 0.0 && s_el > 0.0))
+    }
+
     /// `true` when every value is zero.
     pub fn is_none(&self) -> bool {
         self.azimuth_urad == 0.0

@@ -280,14 +280,8 @@ impl<'a> Problem<'a> {
             }
         }
         if let Some(p) = self.data.points.iter().find(|p| {
-            let n = &noises[p.station_index];
-            let (s_az, s_el) = n.angle_sigmas_rad();
-            let s_r = n.range_sigma_mm(norm(p.measured));
-            let observed = match p.observation {
-                crate::measure::Observation::Range => s_r > 0.0,
-                crate::measure::Observation::Point => s_az > 0.0 && s_el > 0.0 && s_r > 0.0,
-            };
-            !observed
+            let range = p.observation == crate::measure::Observation::Range;
+            !noises[p.station_index].measures(range, norm(p.measured))
         }) {
             let st = &machine.stations()[p.station_index];
             let whose = match st.id.as_str() {

@@ -403,15 +403,7 @@ pub fn fitted_problem<'a>(
     objective: Objective,
     noise: NoiseModel,
 ) -> Result<Problem<'a>> {
-    if !objective.whitened() {
-        return Ok(problem.plain());
-    }
-    let default = match noise {
-        NoiseModel::Tracker(t) => Some(t),
-        _ => None,
-    };
-    problem
-        .whitened(default.as_ref())
+    volver_solvers::uncertainty::weighed(&problem.plain(), objective, noise)
         .map_err(|e| Error::Request(format!("--objective {objective}: {e}")))
 }
 

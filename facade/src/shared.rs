@@ -312,14 +312,8 @@ pub fn check_station_noises(machine: &Machine, default: &TrackerNoise) -> Result
     use volver_core::machine::Observes;
     for (k, st) in machine.stations().iter().enumerate() {
         let n = machine.station_noise_or(k, *default);
-        let (s_az, s_el) = n.angle_sigmas_rad();
-        // A range of a metre: the range's σ is a + b·L, zero only when both are.
-        let s_r = n.range_sigma_mm(1000.0);
-        let observed = match st.observes {
-            Observes::Range => s_r > 0.0,
-            _ => s_az > 0.0 && s_el > 0.0 && s_r > 0.0,
-        };
-        if !observed {
+        // At a metre: the range's σ is a + b·L, zero only when both are.
+        if !n.measures(st.observes == Observes::Range, 1000.0) {
             let who = match st.id.as_str() {
                 "" => "the tracker".to_string(),
                 id => format!("station '{id}'"),

@@ -85,9 +85,13 @@ pub fn expected_rms_mm(
     params: &[f64],
     cov: &Covariance,
 ) -> f64 {
-    let g = grid.jacobian(model, params, true);
-    let y = &g * &cov.data;
-    let k = grid.commands.len().max(1) as f64;
+    rms_through(&grid.jacobian(model, params, true), cov)
+}
+
+/// [`expected_rms_mm`] through the grid's Jacobian after the transform `g` (3K × n).
+fn rms_through(g: &faer::Mat<f64>, cov: &Covariance) -> f64 {
+    let y = g * &cov.data;
+    let k = (g.nrows() / 3).max(1) as f64;
     let mut sum = 0.0;
     for r in 0..y.nrows() {
         for c in 0..y.ncols() {
@@ -132,7 +136,9 @@ pub fn compare(
 ) -> Option<Efficiency> {
     let model = problem.model();
     let limit = cramer_rao(problem, gauge, params, noise)?;
-    let limit_mm = expected_rms_mm(grid, model, params, &limit);
+    // The tool points' Jacobian after the transform, once for every covariance.
+    let g = grid.jacobian(model, params, true);
+    let limit_mm = rms_through(&g, &limit);
     let estimators = Objective::ALL
         .iter()
         .filter_map(|&o| {
@@ -141,7 +147,7 @@ pub fn compare(
             } else {
                 linear(problem, gauge, params, o, noise)?
             };
-            Some((o, expected_rms_mm(grid, model, params, &cov)))
+            Some((o, rms_through(&g, &cov)))
         })
         .collect();
     let machine = model.machine();

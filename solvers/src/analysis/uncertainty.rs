@@ -341,15 +341,27 @@ fn fitted_residuals<'a>(
     noise: NoiseModel,
 ) -> Option<(Problem<'a>, Problem<'a>)> {
     let plain = problem.plain();
-    if !objective.whitened() {
-        return Some((plain.clone(), plain));
-    }
-    let fitted = match noise {
-        _ if problem.is_whitened() => problem.clone(),
-        NoiseModel::Tracker(t) => problem.whitened(Some(&t)).ok()?,
-        NoiseModel::Residual => return None,
-    };
+    let fitted = weighed(&plain, objective, noise).ok()?;
     Some((plain, fitted))
+}
+
+/// The residuals the estimator of `objective` weighs: `problem` itself for Φ and ve, whitened
+/// for ml and phi-w by each station's noise — its own where the machine file states one, else
+/// the tracker model of `noise` (with [`NoiseModel::Residual`], only the stations' own).
+/// `Err` names a station without a usable noise.
+pub fn weighed<'a>(
+    problem: &Problem<'a>,
+    objective: Objective,
+    noise: NoiseModel,
+) -> Result<Problem<'a>, volver_core::Error> {
+    if !objective.whitened() {
+        return Ok(problem.clone());
+    }
+    let default = match noise {
+        NoiseModel::Tracker(t) => Some(t),
+        NoiseModel::Residual => None,
+    };
+    problem.whitened(default.as_ref())
 }
 
 /// A factor `F` of the sandwich `A⁺ B A⁺ = F Fᵀ` (both `nf × nf`, symmetric, `B` positive
@@ -579,7 +591,7 @@ pub fn monte_carlo(
                 p.measured = noise.read(model.machine(), p, *x, sigma_mm, &mut rng);
             }
             let out = Problem::new(model, &set).ok().and_then(|problem| {
-                let task = weighed(problem, noise, options.objective)?;
+                let task = Task::new(weighed(&problem, options.objective, noise).ok()?);
                 let task = match gauge {
                     Some(g) => g.apply(&task),
                     None => task,
@@ -597,18 +609,6 @@ pub fn monte_carlo(
         failed,
         time_s: t0.elapsed().as_secs_f64(),
     })
-}
-
-/// The task of a replica's `problem`: its residuals whitened by `noise` when `objective`
-/// weighs them by it (`None` when they cannot be).
-fn weighed<'a>(problem: Problem<'a>, noise: NoiseModel, objective: Objective) -> Option<Task<'a>> {
-    if !objective.whitened() {
-        return Some(Task::new(problem));
-    }
-    match noise {
-        NoiseModel::Tracker(t) => problem.whitened(Some(&t)).ok().map(Task::new),
-        NoiseModel::Residual => None,
-    }
 }
 
 /// Replicas of a fit.
