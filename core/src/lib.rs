@@ -6,6 +6,7 @@
 //! - [`chain`]: chain notation (`XCFZ`, `FXYZ` …);
 //! - [`machine`]: the machine description (TOML) and the embedded XCFZ grinder;
 //! - [`iso`]: the ISO 230 error catalogue (EXX … ECC, X0C, B0Z);
+//! - [`approach`]: the direction of approach of each axis at a point (reversal errors);
 //! - [`basis`]: monomial, Legendre, Chebyshev-by-nodes, Fourier and sine-phase bases;
 //! - [`model`]: error models, parameter layout, linear constraints, evaluation and the exact
 //!   structured Jacobian;
@@ -44,6 +45,7 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod approach;
 pub mod basis;
 pub mod chain;
 pub mod compensate;

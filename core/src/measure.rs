@@ -28,6 +28,8 @@
 //! assert_eq!(set.points[0].measured, [950.0, 75.0, 1450.0]);
 //! ```
 
+use crate::approach::{self, Approach};
+use crate::chain::MAX_AXES;
 use crate::csvio::{self, Format};
 use crate::error::{Error, Place, Result};
 use crate::machine::{Commands, Machine};
@@ -69,6 +71,9 @@ pub struct Measurement {
     pub station_index: usize,
     /// Line of the source file (1-based), for messages.
     pub line: usize,
+    /// The direction of approach of each axis ([`crate::approach`]): stated by the file's
+    /// `approach_<AXIS>` columns, else derived from the measuring order when the set is read.
+    pub approach: Approach,
 }
 
 /// A key equal for two measurements of one pose from one station: the commands rounded to 1e-6
@@ -223,6 +228,7 @@ pub(crate) fn located(
         station,
         station_index,
         line,
+        approach: Approach::UNKNOWN,
     })
 }
 
@@ -232,6 +238,19 @@ pub(crate) fn read_rows(
     machine: &Machine,
     table: &mut csvio::Table,
     no_rows: &str,
+    read: impl Fn(&csvio::Row) -> Result<Measurement>,
+) -> Result<MeasurementSet> {
+    read_rows_stated(machine, table, no_rows, [false; MAX_AXES], read)
+}
+
+/// [`read_rows`] for a file whose `approach_<AXIS>` columns state the direction of approach of
+/// the axes marked in `stated` (their values already in each point's `approach`); the others'
+/// directions are derived from the measuring order ([`fill_approach`]).
+pub(crate) fn read_rows_stated(
+    machine: &Machine,
+    table: &mut csvio::Table,
+    no_rows: &str,
+    stated: [bool; MAX_AXES],
     read: impl Fn(&csvio::Row) -> Result<Measurement>,
 ) -> Result<MeasurementSet> {
     let mut points = Vec::new();
@@ -244,7 +263,34 @@ pub(crate) fn read_rows(
     }
     refuse_copies(&points, &file)?;
     refuse_unknown_stations(machine, &points, &file)?;
+    fill_approach(&mut points, stated);
     Ok(MeasurementSet::from_file_times(points))
+}
+
+/// The measuring order of `points`: their time stamps' order when every point has one (ties in
+/// file order), else the file's order.
+pub fn measuring_order(points: &[Measurement]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    if points.iter().all(|p| p.t_s.is_some()) {
+        order.sort_by(|&a, &b| {
+            let (ta, tb) = (points[a].t_s.unwrap_or(0.0), points[b].t_s.unwrap_or(0.0));
+            ta.total_cmp(&tb)
+        });
+    }
+    order
+}
+
+/// Every point's direction of approach on the axes not `stated` by the file, from the measuring
+/// order ([`measuring_order`], [`approach::from_order`]).
+pub fn fill_approach(points: &mut [Measurement], stated: [bool; MAX_AXES]) {
+    let order = measuring_order(points);
+    let commands: Vec<Commands> = order.iter().map(|&i| points[i].commands).collect();
+    let derived = approach::from_order(&commands, MAX_AXES);
+    for (&i, a) in order.iter().zip(derived) {
+        for k in (0..MAX_AXES).filter(|&k| !stated[k]) {
+            points[i].approach.0[k] = a.0[k];
+        }
+    }
 }
 
 /// Whether station `station` of `machine` can give `observation`: a range-only station gives
@@ -303,7 +349,10 @@ impl MeasurementSet {
             columns: read::Columns::of(machine, table.header())?,
         };
         let no_rows = "the file has a header but no measurement rows";
-        read_rows(machine, &mut table, no_rows, |row| reader.measurement(row))
+        let stated = reader.columns.stated();
+        read_rows_stated(machine, &mut table, no_rows, stated, |row| {
+            reader.measurement(row)
+        })
     }
 
     /// A set of points whose `t_s` are the file's stamps: counted from the earliest from now on,
@@ -396,6 +445,8 @@ struct Layout {
     with_range: bool,
     with_t: bool,
     with_station: bool,
+    /// `approach_<AXIS>` columns: the axes whose directions the measuring order does not give.
+    approach: [bool; MAX_AXES],
 }
 
 impl Layout {
@@ -409,6 +460,7 @@ impl Layout {
             with_range,
             with_t: any(|p| p.t_s.is_some()),
             with_station: any(|p| p.station.is_some()),
+            approach: stated_axes(&set.points),
         }
     }
 
@@ -435,6 +487,11 @@ impl Layout {
         }
         if self.with_station {
             out.push_str(",station");
+        }
+        for (k, ax) in machine.axes().iter().enumerate() {
+            if self.approach[k] {
+                let _ = write!(out, ",{}", approach::column_name(ax.axis.letter()));
+            }
         }
         out.push('\n');
         out
@@ -477,8 +534,26 @@ impl Layout {
         if self.with_station {
             let _ = write!(out, ",{}", csvio::cell(p.station.as_deref().unwrap_or("")));
         }
+        for k in (0..machine.axes().len()).filter(|&k| self.approach[k]) {
+            let _ = write!(out, ",{:+}", p.approach.0[k]);
+        }
         out.push('\n');
     }
+}
+
+/// The axes whose directions of approach differ somewhere from those the measuring order gives
+/// ([`fill_approach`]): a file must state them (`approach_<AXIS>` columns) to be read back the
+/// same.
+fn stated_axes(points: &[Measurement]) -> [bool; MAX_AXES] {
+    let mut derived = points.to_vec();
+    fill_approach(&mut derived, [false; MAX_AXES]);
+    let mut out = [false; MAX_AXES];
+    for (p, d) in points.iter().zip(&derived) {
+        for (k, o) in out.iter_mut().enumerate() {
+            *o |= p.approach.0[k] != d.approach.0[k];
+        }
+    }
+    out
 }
 
 /// Positions converted from radians back to degrees carry rounding noise (89.99999999999999);

@@ -53,8 +53,8 @@ mod spec;
 use regressors::PointRegressors;
 pub use regressors::Regressors;
 pub use spec::{
-    BallScrewSpec, EffectsSpec, ErrorModelSpec, ErrorTermSpec, MAX_FIXED, OneOrMany,
-    PERIOD_RANGE_MM, SquarenessRule, TrackerModelSpec,
+    BallScrewSpec, EffectsSpec, ErrorModelSpec, ErrorTermSpec, MAX_FIXED, MAX_REVERSAL_DEGREE,
+    OneOrMany, PERIOD_RANGE_MM, ReversalFunction, ReversalSpec, SquarenessRule, TrackerModelSpec,
 };
 use spec::{EffectSlot, FieldVar};
 
@@ -66,6 +66,50 @@ pub const DEFAULT_MODEL_LABEL: &str = "<embedded paper error model>";
 
 /// Most error values (modelled errors plus the tracker pose) one point may depend on.
 pub const MAX_SLOTS: usize = 72;
+
+/// What a point's effects read beside its commands: the time it was measured at (s since the
+/// test's start) and the direction each axis arrived from ([`crate::approach`]; the reversal
+/// effect's sign).
+///
+/// ```
+/// use volver_core::approach::Approach;
+/// use volver_core::model::{ErrorModelSpec, Model, PointState};
+/// use volver_core::machine::Machine;
+/// let m = Machine::default_xcfz();
+/// let spec = ErrorModelSpec::from_toml_str("[effects]\nreversal = [\"X\"]", "m.toml").unwrap();
+/// let model = Model::new(m, spec).unwrap();
+/// let mut p = model.initial_params();
+/// p[model.param_index("reversal.X.b").unwrap()] = 0.010; // B = 10 µm
+/// let cmd = model.machine().commands_from_file_units(&[700.0, 0.0, 300.0]);
+/// let at = |s: i8| PointState { t_s: 0.0, approach: Approach::all(3, s) };
+/// let (up, down) = (model.predict_in(&cmd, 0, at(1), &p), model.predict_in(&cmd, 0, at(-1), &p));
+/// assert!(((up[0] - down[0]).abs() - 0.010).abs() < 1e-12);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PointState {
+    /// Seconds since the test's start.
+    pub t_s: f64,
+    /// Each axis' direction of approach.
+    pub approach: crate::approach::Approach,
+}
+
+impl PointState {
+    /// At time `t_s` (s), no axis' direction known.
+    pub fn at(t_s: f64) -> PointState {
+        PointState {
+            t_s,
+            approach: crate::approach::Approach::UNKNOWN,
+        }
+    }
+
+    /// The state of a measured point: its time stamp (0 without one) and its directions.
+    pub fn of(m: &crate::measure::Measurement) -> PointState {
+        PointState {
+            t_s: m.t_s.unwrap_or(0.0),
+            approach: m.approach,
+        }
+    }
+}
 
 /// What the reverse pass of [`Model`]'s exact Jacobian differentiates.
 #[derive(Clone, Copy)]

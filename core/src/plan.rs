@@ -136,6 +136,58 @@ impl Plan {
         }
     }
 
+    /// The plan measured in a random order (a Fisher–Yates shuffle of its measurements, seeded):
+    /// the order an optimised route or a shop's own program may take, which approaches each
+    /// axis' positions from either side at random.
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::plan::Plan;
+    /// let m = Machine::default_xcfz();
+    /// let plan = Plan::preset(&m, "test4").unwrap();
+    /// let s = plan.shuffled(3);
+    /// let (mut a, mut b) = (plan.steps(), s.steps());
+    /// assert_ne!(a, b);
+    /// a.sort();
+    /// b.sort();
+    /// assert_eq!(a, b);
+    /// ```
+    pub fn shuffled(&self, seed: u64) -> Plan {
+        let mut steps = self.steps();
+        let mut rng = crate::random::Rng::new(seed ^ 0x5EED_0F0D_E125_u64);
+        for i in (1..steps.len()).rev() {
+            let j = (rng.next_u64() % (i as u64 + 1)) as usize;
+            steps.swap(i, j);
+        }
+        Plan {
+            name: format!("{} (shuffled, seed {seed})", self.name),
+            sequence: Some(steps),
+            ..self.clone()
+        }
+    }
+
+    /// The direction of approach of every measurement when the plan is run `passes` times in
+    /// a row (once from each station), in that order: each axis' last move before the point
+    /// ([`crate::approach::from_order`]; a pass continues from where the previous one ended).
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::plan::Plan;
+    /// let m = Machine::default_xcfz();
+    /// let plan = Plan::parse_grid(&m, "X=0:1400:700,C=0,Z=0").unwrap();
+    /// let a = plan.approaches(2);
+    /// assert_eq!(a.len(), 2 * plan.n_points());
+    /// // X at 1400 arrived moving +; the second pass starts with a move back to 0 (−).
+    /// assert_eq!((a[4].0[0], a[6].0[0]), (1, -1));
+    /// ```
+    pub fn approaches(&self, passes: usize) -> Vec<crate::approach::Approach> {
+        let steps = self.steps();
+        let order: Vec<Commands> = (0..passes)
+            .flat_map(|_| steps.iter().map(|s| self.positions[s.position]))
+            .collect();
+        crate::approach::from_order(&order, crate::chain::MAX_AXES)
+    }
+
     /// A named preset of the paper (see the module documentation). The presets are defined for
     /// machines with the axes X, C and Z; each axis must reach the preset's range.
     pub fn preset(machine: &Machine, name: &str) -> Result<Plan> {

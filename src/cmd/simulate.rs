@@ -39,6 +39,9 @@ Effects (--effect, repeatable):
   station-drift=ID,VX,VY,VZ           a station's position drifting with time, µm/h
   coupling=AXIS,COMPONENT,BY,AMP_UM   E{COMPONENT}{AXIS} += A·sin(πξ)·η: a straightness bow
                                       growing with the position of BY (ξ, η over 0 … 1)
+  reversal=AXIS,B_UM                  reversal value B of an axis (backlash; µrad for a rotary
+                                      axis): its positioning error is ±B/2 by the direction of
+                                      its last move (the measuring order, --order shuffled)
 
 Example:
   volver simulate --plan test4 --seed 7 --out sim --effect thermal-drift=0,0,15";
@@ -105,6 +108,11 @@ pub struct SimulateArgs {
     /// range part applies, e.g. --noise normal:0,0,0.1,0.15 for U(k = 2) = 0.2 µm + 0.3 µm/m).
     #[arg(long, default_value = "point", value_parser = ["point", "spherical", "range"])]
     observe: String,
+    /// Measuring order: plan (the plan's or plan file's order) or shuffled (its measurements in
+    /// a random order drawn from --seed, as an optimised route takes them: each axis reaches
+    /// its positions from either side, which a reversal effect makes visible).
+    #[arg(long, default_value = "plan", value_parser = ["plan", "shuffled"])]
+    order: String,
 }
 
 /// Runs `volver simulate`.
@@ -302,6 +310,19 @@ fn with_stations(a: &SimulateArgs, m: Machine) -> Result<Machine> {
 /// The plan of `--plan` on `machine` (an embedded machine: `preset`), measuring the reflectors
 /// of `--reflectors`.
 fn plan_of(
+    a: &SimulateArgs,
+    machine: &Machine,
+    preset: Option<&volver::core::presets::Preset>,
+) -> Result<Plan> {
+    let plan = plan_in_order(a, machine, preset)?;
+    Ok(match a.order.as_str() {
+        "shuffled" => plan.shuffled(a.seed),
+        _ => plan,
+    })
+}
+
+/// The plan of `--plan`, `--plan-file` or the preset, in its own order.
+fn plan_in_order(
     a: &SimulateArgs,
     machine: &Machine,
     preset: Option<&volver::core::presets::Preset>,

@@ -58,6 +58,8 @@ pub(super) struct Columns {
     range: Option<usize>,
     t_s: Option<usize>,
     station: Option<usize>,
+    /// `approach_<AXIS>` columns: (chain axis, column).
+    approach: Vec<(usize, usize)>,
 }
 
 impl Columns {
@@ -78,6 +80,7 @@ impl Columns {
             range,
             t_s: header.find("t_s")?,
             station: header.find("station")?,
+            approach: approach_columns(machine, header)?,
         };
         if columns.xyz.is_none() && range.is_none() {
             return Err(Error::input(
@@ -87,6 +90,15 @@ impl Columns {
         }
         columns.check_units(header)?;
         Ok(columns)
+    }
+
+    /// The axes whose direction of approach the file states.
+    pub(super) fn stated(&self) -> [bool; crate::chain::MAX_AXES] {
+        let mut out = [false; crate::chain::MAX_AXES];
+        for &(k, _) in &self.approach {
+            out[k] = true;
+        }
+        out
     }
 
     /// The units on the observations' and time's headers: mm, degrees and seconds.
@@ -127,6 +139,35 @@ fn refuse_foreign_axes(machine: &Machine, header: &Header) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `approach_<AXIS>` columns of `header`: (chain axis, column); a column for an axis the
+/// machine lacks is refused.
+fn approach_columns(machine: &Machine, header: &Header) -> Result<Vec<(usize, usize)>> {
+    let mut out = Vec::new();
+    for h in header.names() {
+        let Some(letter) = h.strip_prefix("approach_") else {
+            continue;
+        };
+        let mut chars = letter.chars();
+        let axis = match (chars.next().and_then(Axis::from_letter), chars.next()) {
+            (Some(a), None) => machine.axis(a),
+            _ => None,
+        };
+        let Some((k, _)) = axis else {
+            return Err(Error::input(
+                header.place(h),
+                format!(
+                    "column '{h}' names no axis of the machine ({}): a direction of approach \
+                     column is approach_ and an axis letter",
+                    machine.chain()
+                ),
+            ));
+        };
+        let col = header.require(h, || format!("missing column '{h}'"))?;
+        out.push((k, col));
+    }
+    Ok(out)
 }
 
 /// `meas_x`, `meas_y`, `meas_z`: all three or none.
@@ -201,7 +242,20 @@ impl RowReader<'_> {
         let observed = self.observation(row, station.is_some())?;
         let place = || self.station_place(row);
         let (line, read) = (row.line(), (commands, reflector));
-        super::located(machine, read, observed, (t_s, station), line, place)
+        let mut m = super::located(machine, read, observed, (t_s, station), line, place)?;
+        for &(k, col) in &cols.approach {
+            m.approach.0[k] = crate::approach::parse_sign(row.text(col)).ok_or_else(|| {
+                row.error(
+                    col,
+                    format!(
+                        "'{}' is no direction of approach: +1 (the axis arrived moving in its \
+                         positive direction), -1 (negative) or 0 (unknown), on every row",
+                        row.text(col)
+                    ),
+                )
+            })?;
+        }
+        Ok(m)
     }
 
     /// Where a row's station is: its cell, or the missing column.

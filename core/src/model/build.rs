@@ -223,6 +223,7 @@ impl<'a> Builder<'a> {
         self.axis_effects()?;
         self.tracker_and_station_drift()?;
         self.field_effects()?;
+        self.reversal_effects()?;
         if self.terms.len() + TRACKER_DOF + self.effects.len() > MAX_SLOTS {
             return Err(Error::TooManyParameters {
                 message: format!(
@@ -411,6 +412,54 @@ impl<'a> Builder<'a> {
                 };
                 self.push_effect(slot, &names);
             }
+        }
+        Ok(())
+    }
+
+    /// Reversals of the axes: per axis `reversal.X.b` (and `reversal.X.b1` … for a function),
+    /// in mm for a linear axis, rad for a rotary one.
+    fn reversal_effects(&mut self) -> Result<()> {
+        let spec = self.spec;
+        let fx = &spec.effects;
+        for (i, r) in fx.reversal.iter().enumerate() {
+            let name = r.axis();
+            let field = "effects.reversal";
+            let Some((k, ax)) = self.machine.axis_named(name) else {
+                return Err(Error::input(
+                    self.place(name, field),
+                    format!("'{name}' is not an axis of {}", self.machine.chain()),
+                ));
+            };
+            if fx.reversal[..i].iter().any(|o| o.axis() == name) {
+                return Err(Error::input(
+                    self.place(name, field),
+                    format!("the reversal of {name} is listed twice"),
+                ));
+            }
+            let degree = r.degree();
+            if degree > MAX_REVERSAL_DEGREE {
+                return Err(Error::input(
+                    self.place(name, field),
+                    format!(
+                        "degree {degree} of the reversal of {name} is above \
+                         {MAX_REVERSAL_DEGREE} (ISO 230-2 reports B at a few targets)"
+                    ),
+                ));
+            }
+            let rotary = ax.axis.is_rotary();
+            let dir = ax.axis.direction() + if rotary { 3 } else { 0 };
+            let unit = if rotary { Unit::Rad } else { Unit::Mm };
+            let names: Vec<(String, Unit)> = (0..=degree)
+                .map(|q| {
+                    let code = if q == 0 {
+                        "b".to_string()
+                    } else {
+                        format!("b{q}")
+                    };
+                    (format!("reversal.{name}.{code}"), unit)
+                })
+                .collect();
+            self.push_effect(EffectSlot::Reversal { k, dir, degree }, &names);
         }
         Ok(())
     }

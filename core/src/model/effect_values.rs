@@ -22,6 +22,8 @@ struct EffectPoint<'a, S> {
     station: usize,
     /// The time stamp (s).
     t_s: f64,
+    /// Each axis' direction of approach.
+    approach: crate::approach::Approach,
     /// The last field's functions (shared by its three components).
     field: Option<FieldValues<S>>,
     /// ∂value/∂p by parameter, when asked.
@@ -52,9 +54,9 @@ impl Model {
                 EffectSlot::Drift(c) | EffectSlot::Field { c, .. } => e.tool_shift[c] += v,
                 EffectSlot::Reflector { c, .. } => e.reflector_delta[c] += v,
                 EffectSlot::RangeScale => e.range_scale = v,
-                EffectSlot::Screw { k, dir, .. } | EffectSlot::ThermalScale { k, dir } => {
-                    e.component[k][dir] += v
-                }
+                EffectSlot::Screw { k, dir, .. }
+                | EffectSlot::ThermalScale { k, dir }
+                | EffectSlot::Reversal { k, dir, .. } => e.component[k][dir] += v,
                 EffectSlot::LocationDrift { k, c } => e.location[k][c] += v,
                 EffectSlot::TrackerDrift(k) => e.tracker[k] += v,
                 EffectSlot::StationDrift { c, .. } => e.tracker[c] += v,
@@ -117,7 +119,7 @@ impl Model {
         commands: &[S; MAX_AXES],
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         vals: &mut [S],
         jac: Option<&mut [f64]>,
@@ -127,7 +129,8 @@ impl Model {
             commands,
             reflector,
             station,
-            t_s,
+            t_s: state.t_s,
+            approach: state.approach,
             field: None,
             jac,
         };
@@ -190,7 +193,46 @@ impl Model {
                 S::from(params[j] * t_h)
             }
             EffectSlot::Field { vars, pair, .. } => self.field_value(vars, pair, j, params, at),
+            EffectSlot::Reversal { k, degree, .. } => self.reversal_value(k, degree, j, params, at),
         }
+    }
+
+    /// The value of the reversal of chain axis `k` at a point: `s/2 · B(u)`, `s` the axis'
+    /// direction of approach (+1, −1, 0), `B(u) = Σ_q b_q P_q(û)` with `b_q = params[j + q]`
+    /// and `P_q` the Legendre polynomials of the position normalised over the travel (P₀ = 1).
+    #[inline]
+    fn reversal_value<S: Real>(
+        &self,
+        k: usize,
+        degree: usize,
+        j: usize,
+        params: &[f64],
+        at: &mut EffectPoint<S>,
+    ) -> S {
+        let half = 0.5 * at.approach.sign(k);
+        let x = if degree > 0 {
+            self.machine.axes()[k].normalise_at(at.commands[k])
+        } else {
+            S::zero()
+        };
+        let (mut p0, mut p1) = (S::one(), x);
+        let mut v = S::zero();
+        for q in 0..=degree {
+            let phi = match q {
+                0 => S::one(),
+                1 => x,
+                _ => {
+                    // (q)P_q = (2q − 1) x P_{q−1} − (q − 1) P_{q−2}
+                    let p = (x * p1 * (2 * q - 1) as f64 - p0 * (q - 1) as f64) * (1.0 / q as f64);
+                    p0 = p1;
+                    p1 = p;
+                    p
+                }
+            } * half;
+            at.set(j + q, phi.re());
+            v += phi * params[j + q];
+        }
+        v
     }
 
     /// The value of one component of an error field over `vars` (`pair`: two distinct

@@ -143,7 +143,22 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [f64; 3] {
-        self.predict_with(commands, reflector, 0, t_s, params, None)
+        self.predict_in(commands, reflector, PointState::at(t_s), params)
+    }
+
+    /// [`Model::predict`] in `state`: at its time, each axis arriving from its direction of
+    /// approach (the reversal effect's sign, [`crate::approach`]).
+    ///
+    /// # Panics
+    /// As [`Model::predict`].
+    pub fn predict_in(
+        &self,
+        commands: &Commands,
+        reflector: usize,
+        state: PointState,
+        params: &[f64],
+    ) -> [f64; 3] {
+        self.predict_with(commands, reflector, 0, state, params, None)
     }
 
     /// [`Model::predict_at`] with the point's [`Regressors`] when the caller has them.
@@ -152,11 +167,11 @@ impl Model {
         commands: &Commands,
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
     ) -> [f64; 3] {
-        let e = self.errors_with(&commands.0, reflector, station, t_s, params, cached);
+        let e = self.errors_with(&commands.0, reflector, station, state, params, cached);
         predict(
             &self.machine,
             commands,
@@ -203,7 +218,21 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> PointErrors<S> {
-        self.errors_with(commands, reflector, 0, t_s, params, None)
+        self.errors_in(commands, reflector, PointState::at(t_s), params)
+    }
+
+    /// [`Model::errors_with_commands`] in `state` (its time and directions of approach).
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn errors_in<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        reflector: usize,
+        state: PointState,
+        params: &[f64],
+    ) -> PointErrors<S> {
+        self.errors_with(commands, reflector, 0, state, params, None)
     }
 
     /// [`Model::errors_with_commands`], with the point's [`Regressors`] when the caller has
@@ -213,7 +242,7 @@ impl Model {
         commands: &[S; MAX_AXES],
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
     ) -> PointErrors<S> {
@@ -245,7 +274,7 @@ impl Model {
         e.station = station;
         if !self.effects.is_empty() {
             let mut vals = [S::zero(); MAX_SLOTS];
-            self.effect_values(commands, reflector, station, t_s, params, &mut vals, None);
+            self.effect_values(commands, reflector, station, state, params, &mut vals, None);
             let base = self.terms.len() + TRACKER_DOF;
             self.place_effects(&mut e, |i| vals[base + i]);
         }
@@ -284,7 +313,22 @@ impl Model {
         t_s: f64,
         params: &[f64],
     ) -> [S; 3] {
-        let mut e = self.errors_with_commands(commands, usize::MAX, t_s, params);
+        self.tool_point_in(commands, tool, PointState::at(t_s), params)
+    }
+
+    /// [`Model::tool_point_at`] in `state`: at its time, and with each axis' reversal on the
+    /// side its direction of approach puts it (the mean of both sides where it is unknown).
+    ///
+    /// # Panics
+    /// When `params.len() != n_params()`.
+    pub fn tool_point_in<S: Real>(
+        &self,
+        commands: &[S; MAX_AXES],
+        tool: &[f64; 3],
+        state: PointState,
+        params: &[f64],
+    ) -> [S; 3] {
+        let mut e = self.errors_in(commands, usize::MAX, state, params);
         e.reflector_delta = [S::zero(); 3];
         e.range_scale = S::zero();
         crate::kinematics::tool_in_workpiece(&self.machine, commands, tool, &e)
@@ -309,7 +353,7 @@ impl Model {
             JacobianTarget::Tool(tool),
             usize::MAX,
             0,
-            0.0,
+            PointState::default(),
             params,
             None,
             jac,
@@ -350,7 +394,15 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
-        self.reflector_with_jacobian(commands, reflector, 0, t_s, params, None, jac)
+        self.reflector_with_jacobian(
+            commands,
+            reflector,
+            0,
+            PointState::at(t_s),
+            params,
+            None,
+            jac,
+        )
     }
 
     /// [`Model::predict_with_jacobian_at`] with the point's [`Regressors`] when the caller has
@@ -361,7 +413,7 @@ impl Model {
         commands: &Commands,
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
         jac: &mut [f64],
@@ -372,7 +424,7 @@ impl Model {
             JacobianTarget::Reflector(refl),
             reflector,
             station,
-            t_s,
+            state,
             params,
             cached,
             jac,
@@ -389,7 +441,7 @@ impl Model {
         target: JacobianTarget,
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         cached: Option<PointRegressors<'_>>,
         jac: &mut [f64],
@@ -410,7 +462,7 @@ impl Model {
             &commands.0,
             reflector,
             station,
-            t_s,
+            state,
             params,
             &mut vals,
             Some(jac),
@@ -507,7 +559,7 @@ impl Model {
         params: &[f64],
         dir: &[f64],
     ) -> [f64; 3] {
-        let x = self.predict_dual2(commands, reflector, 0, t_s, params, dir);
+        let x = self.predict_dual2(commands, reflector, 0, PointState::at(t_s), params, dir);
         [x[0].v2, x[1].v2, x[2].v2]
     }
 
@@ -518,7 +570,7 @@ impl Model {
         commands: &Commands,
         reflector: usize,
         station: usize,
-        t_s: f64,
+        state: PointState,
         params: &[f64],
         dir: &[f64],
     ) -> [num_dual::Dual2_64; 3] {
@@ -546,12 +598,12 @@ impl Model {
             &commands.0,
             reflector,
             station,
-            t_s,
+            state,
             params,
             &mut vals,
             None,
         );
-        self.effect_values(&commands.0, reflector, station, t_s, dir, &mut d1, None);
+        self.effect_values(&commands.0, reflector, station, state, dir, &mut d1, None);
         let mut e = self.point_errors(|i| num_dual::Dual2_64::new(vals[i], d1[i], d2[i]));
         e.station = station;
         let refl = &self.machine.reflectors()[reflector].offset;
@@ -591,9 +643,9 @@ impl Model {
                     EffectSlot::Drift(c) | EffectSlot::Field { c, .. } => de.tool_shift[c],
                     EffectSlot::Reflector { c, .. } => de.reflector_delta[c],
                     EffectSlot::RangeScale => de.range_scale,
-                    EffectSlot::Screw { k, dir, .. } | EffectSlot::ThermalScale { k, dir } => {
-                        de.component[k][dir]
-                    }
+                    EffectSlot::Screw { k, dir, .. }
+                    | EffectSlot::ThermalScale { k, dir }
+                    | EffectSlot::Reversal { k, dir, .. } => de.component[k][dir],
                     EffectSlot::LocationDrift { k, c } => de.location[k][c],
                     EffectSlot::TrackerDrift(k) => de.tracker[k],
                     EffectSlot::StationDrift { c, .. } => de.tracker[c],

@@ -60,7 +60,7 @@ impl Model {
             &m.commands,
             m.reflector,
             m.station_index,
-            m.t_s.unwrap_or(0.0),
+            PointState::of(m),
             params,
             cached,
         );
@@ -100,7 +100,7 @@ impl Model {
             &m.commands,
             m.reflector,
             m.station_index,
-            m.t_s.unwrap_or(0.0),
+            PointState::of(m),
             params,
             Some(regressors.point(i)),
             jac,
@@ -160,7 +160,7 @@ impl Model {
             &m.commands,
             m.reflector,
             m.station_index,
-            m.t_s.unwrap_or(0.0),
+            PointState::of(m),
             params,
             dir,
         );

@@ -5,6 +5,7 @@
 //! of at every pass: the fixed regressors of the paper's eq. 13, as a least-squares code keeps
 //! its design matrix. The cached path gives the same bits as the direct one (tested).
 
+use super::PointState;
 use super::{Model, Term, TermGroup};
 use crate::basis::MAX_COEFFS;
 use crate::chain::{MAX_AXES, Side};
@@ -141,7 +142,7 @@ impl Model {
             commands,
             reflector,
             0,
-            t_s,
+            PointState::at(t_s),
             params,
             Some(regressors.point(i)),
         )
@@ -167,7 +168,7 @@ impl Model {
             commands,
             reflector,
             0,
-            t_s,
+            PointState::at(t_s),
             params,
             Some(regressors.point(i)),
             jac,

@@ -151,6 +151,8 @@ pub struct BallScrewSpec {
 /// tracker_drift = true          # trackerdrift.rx, .ry, .rz (rad/h): the tracker's small rotations += ω·t
 /// station_drift = true          # stationdrift.S1.x … (mm/h): each station's position += v·t
 /// field = ["X*Z", "X*t"]        # field.X*Z.x_1_1 … (mm): a smooth displacement of the tool point
+/// reversal = ["X", "C"]         # reversal.X.b (mm; rad for a rotary axis): ±B/2 by the direction of approach
+/// # reversal = [{ axis = "X", degree = 1 }]   # B(x) = b + b1·P₁(x̂): a reversal varying along the axis
 /// [[effects.ball_screw]]
 /// axis = "X"
 /// period_mm = 700.0             # screw.X.a, screw.X.b (mm): a·sin φ + b·cos φ, φ = 2π(u − u_ref)/P
@@ -196,6 +198,55 @@ pub struct EffectsSpec {
     /// Generic displacement fields, by their variables (`X`, `X*Z`, `C*t`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub field: Vec<String>,
+    /// Axes with a reversal value (ISO 230-2's B: backlash, lost motion), entering their
+    /// positioning error as `s · B / 2` by the point's direction of approach `s`
+    /// ([`crate::approach`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub reversal: Vec<ReversalSpec>,
+}
+
+/// The highest degree of a reversal function ([`ReversalSpec`]).
+pub const MAX_REVERSAL_DEGREE: usize = 3;
+
+/// The reversal of one axis: its letter alone (a constant reversal value B, parameter
+/// `reversal.X.b`), or a table `{ axis = "X", degree = d }` for a reversal varying along the
+/// axis as ISO 230-2 reports B(x): `B = b + b1·P₁(x̂) + … + bd·P_d(x̂)` (Legendre polynomials of
+/// the position normalised over the travel; parameters `reversal.X.b`, `reversal.X.b1` …).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ReversalSpec {
+    /// A constant reversal value of the axis of this letter.
+    Axis(String),
+    /// A reversal function of the axis.
+    Function(ReversalFunction),
+}
+
+/// A reversal function's table ([`ReversalSpec::Function`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ReversalFunction {
+    /// The axis' letter.
+    pub axis: String,
+    /// The degree of B's polynomial (0 … [`MAX_REVERSAL_DEGREE`]).
+    pub degree: usize,
+}
+
+impl ReversalSpec {
+    /// The axis' letter.
+    pub fn axis(&self) -> &str {
+        match self {
+            ReversalSpec::Axis(a) => a,
+            ReversalSpec::Function(f) => &f.axis,
+        }
+    }
+
+    /// The degree of B's polynomial (0: constant).
+    pub fn degree(&self) -> usize {
+        match self {
+            ReversalSpec::Axis(_) => 0,
+            ReversalSpec::Function(f) => f.degree,
+        }
+    }
 }
 
 /// A variable of a field ([`EffectsSpec::field`]).
@@ -271,6 +322,9 @@ pub(super) enum EffectSlot {
         vars: [FieldVar; 2],
         pair: bool,
     },
+    /// Reversal of chain axis k, added to its positioning error (component `dir`: EXX 0 … ECC
+    /// 5): value = s/2 · Σ_{q ≤ degree} b_q P_q(û), s its direction of approach.
+    Reversal { k: usize, dir: usize, degree: usize },
 }
 
 impl EffectSlot {
@@ -279,7 +333,7 @@ impl EffectSlot {
     pub(super) fn role(self) -> super::Role {
         use super::Role;
         match self {
-            EffectSlot::Screw { .. } => Role::Geometry,
+            EffectSlot::Screw { .. } | EffectSlot::Reversal { .. } => Role::Geometry,
             EffectSlot::ThermalScale { .. } | EffectSlot::LocationDrift { .. } => Role::Thermal,
             EffectSlot::Field { vars, pair, .. } => {
                 let time = vars[0] == FieldVar::Time || (pair && vars[1] == FieldVar::Time);
@@ -308,6 +362,7 @@ impl EffectSlot {
             }
             EffectSlot::RangeScale => "range scale".to_string(),
             EffectSlot::Screw { k, .. } => format!("ball screw of {}", axis(k)),
+            EffectSlot::Reversal { k, .. } => format!("reversal of {}", axis(k)),
             EffectSlot::ThermalScale { k, .. } => format!("thermal scale of {}", axis(k)),
             EffectSlot::LocationDrift { k, .. } => format!("location drift of {}", axis(k)),
             EffectSlot::TrackerDrift(_) => "tracker drift".to_string(),

@@ -93,10 +93,19 @@ pub enum Effect {
         /// Amplitude (µm).
         amplitude_um: f64,
     },
+    /// The reversal value B of an axis (ISO 230-2; backlash, lost motion): its positioning
+    /// error is `+B/2` where it arrived moving in its positive direction and `−B/2` moving in
+    /// its negative ([`crate::approach`]).
+    Reversal {
+        /// The axis (linear or rotary).
+        axis: Axis,
+        /// B in µm for a linear axis, µrad for a rotary one.
+        value: f64,
+    },
 }
 
 /// The effects: id, CLI syntax and meaning, in the order `volver simulate --help` lists them.
-pub const EFFECTS: [(&str, &str, &str); 11] = [
+pub const EFFECTS: [(&str, &str, &str); 12] = [
     (
         "thermal-drift",
         "thermal-drift=VX,VY,VZ",
@@ -152,6 +161,12 @@ pub const EFFECTS: [(&str, &str, &str); 11] = [
         "coupling=AXIS,COMPONENT,BY,AMP_UM",
         "error E{COMPONENT}{AXIS} changing with the position of BY: A·sin(πξ)·η",
     ),
+    (
+        "reversal",
+        "reversal=AXIS,B_UM",
+        "reversal value B of an axis (µm; µrad for a rotary axis): ±B/2 by its direction of \
+         approach",
+    ),
 ];
 
 impl Effect {
@@ -169,6 +184,7 @@ impl Effect {
             Effect::Coupling { .. } => "coupling",
             Effect::TrackerDrift { .. } => "tracker-drift",
             Effect::StationDrift { .. } => "station-drift",
+            Effect::Reversal { .. } => "reversal",
         }
     }
 
@@ -332,6 +348,18 @@ impl Effect {
                     Ok(())
                 } else {
                     check.fail("the drift rates must be finite")
+                }
+            }
+            Effect::Reversal { axis, value } => {
+                if check.machine.axis(*axis).is_none() {
+                    check.fail(format!(
+                        "{axis} is not an axis of {}",
+                        check.machine.chain()
+                    ))
+                } else if !value.is_finite() {
+                    check.fail("the reversal value must be finite")
+                } else {
+                    Ok(())
                 }
             }
             Effect::Coupling {
@@ -523,6 +551,13 @@ impl Args<'_> {
                     ppm_per_h: self.num(args[1])?,
                 }
             }
+            "reversal" => {
+                self.count(2)?;
+                Effect::Reversal {
+                    axis: self.letter(0)?,
+                    value: self.num(self.values[1])?,
+                }
+            }
             "location-drift" => {
                 self.count(3)?;
                 let v = self.nums(1)?;
@@ -613,6 +648,7 @@ impl fmt::Display for Effect {
                 station,
                 rate_um_per_h: v,
             } => write!(f, "{station},{},{},{}", v[0], v[1], v[2]),
+            Effect::Reversal { axis, value } => write!(f, "{axis},{value}"),
         }
     }
 }

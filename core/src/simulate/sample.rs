@@ -20,6 +20,7 @@ impl Simulation {
         sampler.nominal.reserve(n);
         // The errors of a position, computed once however many reflectors are measured there.
         let mut cached: Option<(usize, PointErrors<f64>)> = None;
+        let approaches = self.plan.approaches(stations);
         let visits = (0..stations).flat_map(|s| steps.iter().map(move |step| (s, step)));
         for (i, (station, step)) in visits.enumerate() {
             let j = step.position;
@@ -36,7 +37,13 @@ impl Simulation {
             } else {
                 0.0
             };
-            sampler.measure(Visit { i, station, step }, errors, t_s)?;
+            let visit = Visit {
+                i,
+                station,
+                step,
+                approach: approaches[i],
+            };
+            sampler.measure(visit, errors, t_s)?;
         }
         Ok(sampler.finish(duration, n))
     }
@@ -84,6 +91,7 @@ impl Simulation {
         }
         let machine = truth.model.machine().clone();
         let offsets_mm = self.reflector_offsets(&machine)?;
+        let reversals = self.reversals(&machine);
         let mut nominal_errors = PointErrors::<f64>::zero();
         nominal_errors.tracker = truth.tracker_pose();
         Ok(Sampler {
@@ -93,6 +101,7 @@ impl Simulation {
             drift_mm_per_s,
             scale,
             screws,
+            reversals,
             offsets_mm,
             nominal_errors,
             noise_rng: stream(self.seed, Stream::Noise),
@@ -100,6 +109,27 @@ impl Simulation {
             noise_free: Vec::new(),
             nominal: Vec::new(),
         })
+    }
+
+    /// The `reversal` effects: chain axis, component of its positioning error (EXX: 0, ECC: 5),
+    /// B in mm or rad.
+    fn reversals(&self, machine: &Machine) -> Vec<(usize, usize, f64)> {
+        self.effects
+            .iter()
+            .filter_map(|e| match e {
+                Effect::Reversal { axis, value } => {
+                    let (k, _) = machine.axis(*axis)?;
+                    let comp = axis.direction() + if axis.is_rotary() { 3 } else { 0 };
+                    let unit = if axis.is_rotary() {
+                        RAD_PER_URAD
+                    } else {
+                        MM_PER_UM
+                    };
+                    Some((k, comp, value * unit))
+                }
+                _ => None,
+            })
+            .collect()
     }
 
     /// Every reflector's offset (mm) with the `reflector-offset` effects added.
@@ -165,6 +195,8 @@ struct Visit<'a> {
     station: usize,
     /// The position and reflector.
     step: &'a Step,
+    /// Each axis' direction of approach.
+    approach: crate::approach::Approach,
 }
 
 /// The state of a simulation run: the prepared truth and effects, the noise stream and the
@@ -182,6 +214,8 @@ struct Sampler<'a> {
     scale: f64,
     /// Ball-screw errors.
     screws: Vec<Screw>,
+    /// Reversals: chain axis, component of its positioning error, B (mm or rad).
+    reversals: Vec<(usize, usize, f64)>,
     /// Reflector offsets with their errors (mm).
     offsets_mm: Vec<[f64; 3]>,
     /// The errors of the nominal machine: only the tracker pose.
@@ -220,11 +254,19 @@ impl Sampler<'_> {
 
     /// Simulates one measurement at time `t_s` (s) with the position's `errors`.
     fn measure(&mut self, visit: Visit, errors: PointErrors<f64>, t_s: f64) -> Result<()> {
-        let Visit { i, station, step } = visit;
+        let Visit {
+            i,
+            station,
+            step,
+            approach,
+        } = visit;
         let (j, r) = (step.position, step.reflector);
         let cmd = &self.sim.plan.positions[j];
         let shift = (self.drift_mm_per_s != [0.0; 3]).then(|| self.drift_mm_per_s.map(|v| v * t_s));
-        let errors = self.at_station(errors, station);
+        let mut errors = self.at_station(errors, station);
+        for &(k, comp, b) in &self.reversals {
+            errors.component[k][comp] += 0.5 * b * approach.sign(k);
+        }
         let errors = self.sim.age(&self.machine, cmd, t_s, &errors);
         let point =
             predict_with_tool_shift(&self.machine, cmd, &self.offsets_mm[r], &errors, shift)
@@ -266,6 +308,7 @@ impl Sampler<'_> {
                 .then(|| self.machine.stations()[station].id.clone()),
             station_index: station,
             line: i + 2,
+            approach,
         });
         Ok(())
     }

@@ -70,6 +70,7 @@ pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
     let machine = model.machine();
     let steps = plan.steps();
     let mut points = Vec::with_capacity(steps.len() * machine.stations().len());
+    let approaches = plan.approaches(machine.stations().len());
     for (k, st) in machine.stations().iter().enumerate() {
         for (i, s) in steps.iter().enumerate() {
             let at = k * steps.len() + i;
@@ -89,6 +90,7 @@ pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
                 station: machine.has_stations().then(|| st.id.clone()),
                 station_index: k,
                 line: at + 2,
+                approach: approaches[at],
             };
             m.measured = model.observe(&m, &p);
             points.push(m);
