@@ -21,8 +21,9 @@
 //! without `..`, so a new effect does not compile here until it is added to the matrix, and the
 //! matrix fails until every output handles it.
 
+use volver::core::approach::Approach;
 use volver::core::machine::{Commands, Machine, Observes, StationSpec};
-use volver::core::model::{DEFAULT_MODEL_TOML, EffectsSpec, Model, Role};
+use volver::core::model::{DEFAULT_MODEL_TOML, EffectsSpec, Model, PointState, Role};
 use volver::core::tables::{ErrorTables, uncarried};
 
 mod common;
@@ -142,6 +143,12 @@ const EFFECT_ROWS: &[EffectRow] = &[
         &["field X*t"],
     ),
     (
+        "reversal of a linear axis and a rotary one (a function of its position)",
+        false,
+        "reversal = [\"X\", { axis = \"C\", degree = 1 }]",
+        &[],
+    ),
+    (
         "every effect at once",
         true,
         "thermal_drift = true\nreflector_offset = [\"R2\"]\nrange_scale = true\n\
@@ -161,7 +168,7 @@ const EFFECT_ROWS: &[EffectRow] = &[
 /// does not compile here until the matrix covers it.
 #[test]
 fn the_matrix_covers_every_effect() {
-    let mut seen = [false; 9];
+    let mut seen = [false; 10];
     for c in cases() {
         let EffectsSpec {
             thermal_drift,
@@ -173,6 +180,7 @@ fn the_matrix_covers_every_effect() {
             tracker_drift,
             station_drift,
             field,
+            reversal,
         } = &c.model.spec().effects;
         let set = [
             *thermal_drift,
@@ -184,6 +192,7 @@ fn the_matrix_covers_every_effect() {
             *tracker_drift,
             *station_drift,
             !field.is_empty(),
+            !reversal.is_empty(),
         ];
         for (s, v) in seen.iter_mut().zip(set) {
             *s |= v;
@@ -224,6 +233,18 @@ fn commands_of(model: &Model, rng: &mut Rng, n: usize) -> Vec<Commands> {
         .collect()
 }
 
+/// A state at the test's start with each axis arriving from a random side (`known`), or from
+/// none.
+fn state_of(model: &Model, rng: &mut Rng, known: bool) -> PointState {
+    let mut approach = Approach::UNKNOWN;
+    if known {
+        for k in 0..model.machine().axes().len() {
+            approach.0[k] = if rng.next() < 0.0 { -1 } else { 1 };
+        }
+    }
+    PointState { t_s: 0.0, approach }
+}
+
 fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
     (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt()
 }
@@ -239,10 +260,20 @@ fn the_tool_points_jacobian_is_exact_for_every_kind() {
         let mut jac = vec![0.0; 3 * n];
         let mut moved = vec![false; n];
         let mut worst: f64 = 0.0;
-        for c in commands_of(model, &mut rng, 4) {
+        for (q, c) in commands_of(model, &mut rng, 4).into_iter().enumerate() {
+            // Each axis arriving from a side (a reversal's sign), the first command from none.
+            let state = state_of(model, &mut rng, q > 0);
             for tool in [[0.0, 0.0, -120.0], [35.0, -20.0, 60.0]] {
-                let t = model.tool_point_with_jacobian(&c, &tool, &p, &mut jac);
-                assert_eq!(t, model.tool_point(&c.0, &tool, &p), "{}: value", case.name);
+                let t = model.tool_point_with_jacobian_in(&c, &tool, state, &p, &mut jac);
+                assert_eq!(
+                    t,
+                    model.tool_point_in(&c.0, &tool, state, &p),
+                    "{}: value",
+                    case.name
+                );
+                if q == 0 {
+                    assert_eq!(t, model.tool_point(&c.0, &tool, &p), "{}: value", case.name);
+                }
                 for j in 0..n {
                     let info = &model.params()[j];
                     let h = if info.name.contains(".phi") {
@@ -255,8 +286,8 @@ fn the_tool_points_jacobian_is_exact_for_every_kind() {
                     let (mut pp, mut pm) = (p.clone(), p.clone());
                     pp[j] += h;
                     pm[j] -= h;
-                    let a = model.tool_point(&c.0, &tool, &pp);
-                    let b = model.tool_point(&c.0, &tool, &pm);
+                    let a = model.tool_point_in(&c.0, &tool, state, &pp);
+                    let b = model.tool_point_in(&c.0, &tool, state, &pm);
                     for r in 0..3 {
                         let fd = (a[r] - b[r]) / (2.0 * h);
                         let ad = jac[r * n + j];

@@ -348,12 +348,28 @@ impl Model {
         params: &[f64],
         jac: &mut [f64],
     ) -> [f64; 3] {
+        self.tool_point_with_jacobian_in(commands, tool, PointState::default(), params, jac)
+    }
+
+    /// [`Model::tool_point_with_jacobian`] in `state` (its time and each axis' direction of
+    /// approach, as [`Model::tool_point_in`]).
+    ///
+    /// # Panics
+    /// As [`Model::tool_point_with_jacobian`].
+    pub fn tool_point_with_jacobian_in(
+        &self,
+        commands: &Commands,
+        tool: &[f64; 3],
+        state: PointState,
+        params: &[f64],
+        jac: &mut [f64],
+    ) -> [f64; 3] {
         self.point_with_jacobian(
             commands,
             JacobianTarget::Tool(tool),
             usize::MAX,
             0,
-            PointState::default(),
+            state,
             params,
             None,
             jac,
