@@ -3,6 +3,7 @@
 
 mod figures;
 mod findings;
+mod reversal;
 mod truth;
 
 use crate::error::{Error, Result};
@@ -209,6 +210,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     maps(&page, &mut s)?;
     error_functions(&page, &mut s)?;
     squareness(&page, &mut s)?;
+    reversal::section(&page, &mut s)?;
     findings::diagnosis(&page, &mut s)?;
     findings::candidates(&page, &mut s)?;
     findings::identifiability(&page, &mut s)?;

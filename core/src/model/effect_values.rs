@@ -197,6 +197,65 @@ impl Model {
         }
     }
 
+    /// The reversal value B (mm, or rad for a rotary axis) of chain axis `k` at `position`
+    /// (internal units): the forward approach's positioning error minus the reverse one's
+    /// (ISO 230-2), `None` when the model has no reversal of that axis. When `grad` is given
+    /// (one value per parameter), ∂B/∂p is written there (zero for every other parameter).
+    ///
+    /// # Panics
+    /// When `params` or `grad` is not one value per parameter.
+    pub fn reversal_at(
+        &self,
+        k: usize,
+        position: f64,
+        params: &[f64],
+        grad: Option<&mut [f64]>,
+    ) -> Option<f64> {
+        self.check_len(params);
+        let &(slot, j) = self
+            .effects
+            .iter()
+            .find(|(s, _)| matches!(s, EffectSlot::Reversal { k: a, .. } if *a == k))?;
+        let EffectSlot::Reversal { degree, .. } = slot else {
+            return None;
+        };
+        let mut commands = [0.0; MAX_AXES];
+        commands[k] = position;
+        let mut approach = crate::approach::Approach::UNKNOWN;
+        approach.0[k] = 1;
+        let mut jac = grad;
+        if let Some(g) = jac.as_deref_mut() {
+            assert_eq!(g.len(), params.len(), "one gradient value per parameter");
+            g.fill(0.0);
+        }
+        let mut at = EffectPoint {
+            commands: &commands,
+            reflector: usize::MAX,
+            station: 0,
+            t_s: 0.0,
+            approach,
+            field: None,
+            jac: jac.as_deref_mut(),
+        };
+        // The forward approach's value is +B/2.
+        let half = self.reversal_value(k, degree, j, params, &mut at);
+        if let Some(g) = jac {
+            g[j..=j + degree].iter_mut().for_each(|v| *v *= 2.0);
+        }
+        Some(2.0 * half)
+    }
+
+    /// The axes with a reversal in the model: (chain axis, its parameters).
+    pub fn reversal_axes(&self) -> Vec<(usize, Range<usize>)> {
+        self.effects
+            .iter()
+            .filter_map(|&(slot, j)| match slot {
+                EffectSlot::Reversal { k, degree, .. } => Some((k, j..j + degree + 1)),
+                _ => None,
+            })
+            .collect()
+    }
+
     /// The value of the reversal of chain axis `k` at a point: `s/2 · B(u)`, `s` the axis'
     /// direction of approach (+1, −1, 0), `B(u) = Σ_q b_q P_q(û)` with `b_q = params[j + q]`
     /// and `P_q` the Legendre polynomials of the position normalised over the travel (P₀ = 1).
