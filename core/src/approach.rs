@@ -7,8 +7,8 @@
 //! positive direction minus the one approaching in the negative. volver's reversal effect
 //! (`[effects] reversal = ["X"]`, parameter `reversal.X.b`) adds `s · B / 2` to the axis'
 //! positioning error, where `s` is the point's [`Approach`] on that axis: +1 when the axis
-//! arrived moving in its positive direction, −1 moving in its negative, 0 when unknown (the
-//! axis never moved before the point: the mean of both directions is predicted).
+//! arrived moving in its positive direction, −1 moving in its negative, 0 when unknown (an
+//! axis that never moves in the test: the mean of both directions is predicted).
 //!
 //! **Where the direction comes from** (the same rule for every reader):
 //! 1. an `approach_<AXIS>` column of the measurement file (`+1`, `-1`, `0`, or `+`, `-`), when the
@@ -18,7 +18,13 @@
 //!    (a file sorted by something else is put back in time order), else the rows' order. The
 //!    direction of an axis at a point is the sign of its last move before the point, a move
 //!    being a change of its command larger than [`MOVE_TOLERANCE`] (commands as written: a
-//!    rotary axis from 350° to 10° moves −340°); before its first move it is 0.
+//!    rotary axis from 350° to 10° moves −340°). Before an axis' first move, the direction of
+//!    that first move: the test is taken to have reached its first position moving the way it
+//!    then goes on (as a measuring program that starts with an approach move does). This is an
+//!    assumption, stated so: were those points predicted at the mean of both sides, their
+//!    contrast with the rest would seem to measure a reversal that a test approaching the axis
+//!    from one side cannot measure. An axis that never moves keeps 0 (unknown) throughout.
+//!    State the direction in `approach_<AXIS>` columns where the assumption is wrong.
 //!
 //! An `approach_<AXIS>` column must give every row a value (a partial column is refused: the
 //! rows without one would silently take the order's direction).
@@ -99,6 +105,9 @@ impl Approach {
 
 /// The directions of approach of points visited in `order` (their commands, in measuring order)
 /// on a machine of `n_axes` axes: each the sign of every axis' last move before it.
+///
+/// Before an axis' first move its direction is that of the first move (see the module
+/// documentation); an axis that never moves has 0.
 pub fn from_order(order: &[Commands], n_axes: usize) -> Vec<Approach> {
     let mut out = Vec::with_capacity(order.len());
     let mut state = Approach::UNKNOWN;
@@ -107,6 +116,13 @@ pub fn from_order(order: &[Commands], n_axes: usize) -> Vec<Approach> {
             state = state.after_move(&order[i - 1], c, n_axes);
         }
         out.push(state);
+    }
+    // The points before each axis' first move: that move's direction.
+    for k in 0..n_axes.min(MAX_AXES) {
+        if let Some(first) = out.iter().position(|a| a.0[k] != 0) {
+            let s = out[first].0[k];
+            out[..first].iter_mut().for_each(|a| a.0[k] = s);
+        }
     }
     out
 }
@@ -155,14 +171,14 @@ mod tests {
         let a = from_order(&order, 2);
         let x: Vec<i8> = a.iter().map(|a| a.0[0]).collect();
         let y: Vec<i8> = a.iter().map(|a| a.0[1]).collect();
-        assert_eq!(x, [0, 1, 1, 1, -1]);
-        assert_eq!(y, [0, 0, -1, -1, 1]);
+        assert_eq!(x, [1, 1, 1, 1, -1]);
+        assert_eq!(y, [-1, -1, -1, -1, 1]);
     }
 
     #[test]
     fn moves_below_the_tolerance_are_no_moves() {
         let a = from_order(&[c(1.0, 0.0), c(1.0 + 1e-12, 0.0)], 2);
-        assert_eq!(a[1], Approach::UNKNOWN);
+        assert_eq!(a, [Approach::UNKNOWN; 2]);
         assert_eq!(Approach::all(2, -3).0, [-1, -1, 0, 0, 0, 0]);
         assert_eq!(Approach::all(2, 1).describe(&['X', 'Z']), "X+ Z+");
     }

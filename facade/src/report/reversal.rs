@@ -76,7 +76,11 @@ pub(super) fn section(p: &Page, s: &mut String) -> Result<()> {
             "truth (in this model)",
         ]
     } else {
-        &["axis", "B ± U (k = 2)", "points forward / reverse / unknown"]
+        &[
+            "axis",
+            "B ± U (k = 2)",
+            "points forward / reverse / unknown",
+        ]
     };
     s.push_str(&table(head, &rows));
     Ok(())
