@@ -34,7 +34,8 @@
 //! use volver_core::machine::Commands;
 //! let c = |x: f64| Commands([x, 0.0, 0.0, 0.0, 0.0, 0.0]);
 //! let a = from_order(&[c(0.0), c(100.0), c(100.0), c(50.0)], 3);
-//! assert_eq!(a.iter().map(|a| a.0[0]).collect::<Vec<_>>(), [0, 1, 1, -1]);
+//! // The first point: X's first move is +, so it is taken to have arrived moving +.
+//! assert_eq!(a.iter().map(|a| a.0[0]).collect::<Vec<_>>(), [1, 1, 1, -1]);
 //! assert_eq!(a[3].sign(1), 0.0);
 //! ```
 
