@@ -113,6 +113,7 @@ pub fn uncertainty_command(a: UncertaintyArgs) -> Result<()> {
     println!("{}", noise_used.text());
     print_parameters(&assessment, &model);
     print_tool_point(&assessment, &model, &request);
+    print_reversals(&assessment, &model);
     print_efficiency(&assessment, &request);
     let check = &assessment.model_check;
     let label = if check.above_noise {
@@ -210,6 +211,43 @@ fn print_parameters(a: &Assessment, model: &Model) {
             K * uh * s
         );
     }
+}
+
+/// Each axis' reversal B ± U (k = 2) at the middle of its travel: the tool point above is the
+/// mean of both directions of approach; approached from one side it moves by ±B/2 along the
+/// axis, with U(B)/2 beside its U.
+fn print_reversals(a: &Assessment, model: &Model) {
+    let axes = model.reversal_axes();
+    if axes.is_empty() {
+        return;
+    }
+    let parts: Vec<String> = axes
+        .iter()
+        .map(|(k, _)| {
+            let ax = &model.machine().axes()[*k];
+            let mid = 0.5 * (ax.min + ax.max);
+            let mut g = vec![0.0; a.id.params.len()];
+            let b = model.reversal_at(*k, mid, &a.id.params, Some(&mut g));
+            let u = K * a.covariance.u(&g);
+            let (s, unit) = if ax.axis.is_rotary() {
+                (volver::core::units::URAD_PER_RAD, "µrad")
+            } else {
+                (UM_PER_MM, "µm")
+            };
+            format!(
+                "{} {:.3} ± {:.3} {unit}",
+                ax.axis,
+                b.unwrap_or(0.0) * s,
+                u * s
+            )
+        })
+        .collect();
+    println!(
+        "\n  reversal B ± U (k = 2) at mid-travel: {}. The tool point above is the mean of both \
+         directions of approach; reached moving one way it moves by ±B/2 along the axis (the \
+         compensation applies it by each move's direction), U(B)/2 beside the U above",
+        parts.join("; ")
+    );
 }
 
 /// The tool point's largest U over the grid, after the transform and raw, with Monte Carlo's.
