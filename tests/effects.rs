@@ -246,6 +246,20 @@ fn bad_effects_in_a_model_file_are_named() {
         let e = err(&format!("[effects]\nfield = [\"{bad}\"]\n"));
         assert!(e.contains("e.toml") && e.contains(why), "{bad}: {e}");
     }
+    let e = err("[effects]\nreversal = [\"Y\"]\n");
+    assert!(
+        e.contains("e.toml") && e.contains("'Y' is not an axis of XCFZ"),
+        "{e}"
+    );
+    let e = err("[effects]\nreversal = [\"X\", { axis = \"X\", degree = 1 }]\n");
+    assert!(e.contains("the reversal of X is listed twice"), "{e}");
+    let e = err("[effects]\nreversal = [{ axis = \"C\", degree = 7 }]\n");
+    assert!(
+        e.contains("degree 7 of the reversal of C is above 3"),
+        "{e}"
+    );
+    let e = err("[effects]\nreversal = [{ axis = \"C\", order = 1 }]\n");
+    assert!(e.contains("e.toml") && e.contains("reversal"), "{e}");
     let e = err("[effects]\ndrift = true\n");
     assert!(e.contains("e.toml") && e.contains("drift"), "{e}");
     // The effects survive a results file round trip.

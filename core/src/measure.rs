@@ -571,6 +571,72 @@ mod tests {
     }
 
     #[test]
+    fn directions_of_approach_come_from_the_order_or_the_columns() {
+        // Rows out of time order: the time stamps give the measuring order.
+        let csv = "X,C,Z,reflector,meas_x,meas_y,meas_z,t_s\n\
+                   500,0,0,R1,1,2,3,20\n\
+                   100,0,0,R1,1,2,4,0\n\
+                   300,0,0,R1,1,2,5,10\n";
+        let s = MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap();
+        let x: Vec<i8> = s.points.iter().map(|p| p.approach.0[0]).collect();
+        assert_eq!(x, [1, 1, 1]);
+        assert_eq!(s.points[0].approach.0[1], 0, "C never moves: unknown");
+        // A column wins for its axis; the others still come from the order.
+        let csv = "X,C,Z,reflector,meas_x,meas_y,meas_z,approach_X\n\
+                   100,0,0,R1,1,2,3,-1\n\
+                   100,0,0,R1,1,2,4,+1\n\
+                   100,0,50,R1,1,2,5,-\n";
+        let s = MeasurementSet::from_csv_str(&m(), csv, "d.csv").unwrap();
+        let x: Vec<i8> = s.points.iter().map(|p| p.approach.0[0]).collect();
+        assert_eq!(x, [-1, 1, -1]);
+        assert_eq!(s.points[0].approach.0[2], 1);
+        // Written back with the column (the order does not give it) and read the same.
+        let text = s.to_csv_string(&m());
+        assert!(
+            text.lines().next().unwrap().ends_with(",approach_X"),
+            "{text}"
+        );
+        let back = MeasurementSet::from_csv_str(&m(), &text, "again.csv").unwrap();
+        assert_eq!(
+            back.points,
+            s.points
+                .iter()
+                .map(|p| Measurement {
+                    line: p.line,
+                    ..p.clone()
+                })
+                .collect::<Vec<_>>()
+        );
+        // A file the order describes is written without it.
+        let plain = "X,C,Z,reflector,meas_x,meas_y,meas_z\n100,0,0,R1,1,2,3\n200,0,0,R1,1,2,4\n";
+        let s = MeasurementSet::from_csv_str(&m(), plain, "d.csv").unwrap();
+        assert!(!s.to_csv_string(&m()).contains("approach"));
+    }
+
+    #[test]
+    fn bad_directions_of_approach_are_refused_where_they_are() {
+        let read = |csv: &str| {
+            MeasurementSet::from_csv_str(&m(), csv, "d.csv")
+                .unwrap_err()
+                .to_string()
+        };
+        let e = read("X,C,Z,reflector,meas_x,meas_y,meas_z,approach_Y\n1,0,0,R1,1,2,3,1\n");
+        assert!(
+            e.contains("d.csv") && e.contains("'approach_Y' names no axis"),
+            "{e}"
+        );
+        let e = read("X,C,Z,reflector,meas_x,meas_y,meas_z,approach_X\n1,0,0,R1,1,2,3,up\n");
+        assert!(
+            e.contains("d.csv:2") && e.contains("'up' is no direction of approach"),
+            "{e}"
+        );
+        let e = read(
+            "X,C,Z,reflector,meas_x,meas_y,meas_z,approach_C\n1,0,0,R1,1,2,3,1\n2,0,0,R1,1,2,4,\n",
+        );
+        assert!(e.contains("d.csv:3") && e.contains("on every row"), "{e}");
+    }
+
+    #[test]
     fn reads_any_column_order_and_ignores_extras() {
         let csv = "note,meas_z,Z,reflector,C,X,meas_y,meas_x,t_s,station\n\
                    a,1450,0,R1,90,700,75,950,12.5,S1\n\

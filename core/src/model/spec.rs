@@ -212,7 +212,7 @@ pub const MAX_REVERSAL_DEGREE: usize = 3;
 /// `reversal.X.b`), or a table `{ axis = "X", degree = d }` for a reversal varying along the
 /// axis as ISO 230-2 reports B(x): `B = b + b1·P₁(x̂) + … + bd·P_d(x̂)` (Legendre polynomials of
 /// the position normalised over the travel; parameters `reversal.X.b`, `reversal.X.b1` …).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum ReversalSpec {
     /// A constant reversal value of the axis of this letter.
@@ -229,6 +229,41 @@ pub struct ReversalFunction {
     pub axis: String,
     /// The degree of B's polynomial (0 … [`MAX_REVERSAL_DEGREE`]).
     pub degree: usize,
+}
+
+impl<'de> Deserialize<'de> for ReversalSpec {
+    /// An axis letter, or a table with `axis` and `degree`; anything else is refused naming
+    /// what a reversal takes (an untagged enum would only say that no variant matched).
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = ReversalSpec;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str(
+                    "a reversal: an axis letter (\"X\") or a table { axis = \"X\", degree = 1 }",
+                )
+            }
+            fn visit_str<E: serde::de::Error>(
+                self,
+                v: &str,
+            ) -> std::result::Result<Self::Value, E> {
+                Ok(ReversalSpec::Axis(v.to_string()))
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> std::result::Result<Self::Value, A::Error> {
+                let f = ReversalFunction::deserialize(
+                    serde::de::value::MapAccessDeserializer::new(map),
+                )
+                .map_err(|e| {
+                    serde::de::Error::custom(format!("a reversal table takes axis and degree: {e}"))
+                })?;
+                Ok(ReversalSpec::Function(f))
+            }
+        }
+        d.deserialize_any(Visitor)
+    }
 }
 
 impl ReversalSpec {
