@@ -234,6 +234,15 @@ impl Effect {
             | Effect::TrackerTilt { .. }
             | Effect::ReflectorOffset { .. }
             | Effect::RangeScale { .. } => self.validate_tracker_side(&check),
+            Effect::Reversal { axis, value } => {
+                if machine.axis(*axis).is_none() {
+                    check.fail(format!("{axis} is not an axis of {}", machine.chain()))
+                } else if !value.is_finite() {
+                    check.fail("the reversal value must be finite")
+                } else {
+                    Ok(())
+                }
+            }
             _ => self.validate_machine_side(&check),
         }
     }
@@ -348,18 +357,6 @@ impl Effect {
                     Ok(())
                 } else {
                     check.fail("the drift rates must be finite")
-                }
-            }
-            Effect::Reversal { axis, value } => {
-                if check.machine.axis(*axis).is_none() {
-                    check.fail(format!(
-                        "{axis} is not an axis of {}",
-                        check.machine.chain()
-                    ))
-                } else if !value.is_finite() {
-                    check.fail("the reversal value must be finite")
-                } else {
-                    Ok(())
                 }
             }
             Effect::Coupling {
@@ -697,6 +694,11 @@ mod tests {
         };
         let e = drift.validate(&m).unwrap_err().to_string();
         assert!(e.contains("has no [[station]] tables"), "{e}");
+        let r = Effect::parse("reversal=C,-20").unwrap();
+        assert_eq!(r.to_string(), "reversal=C,-20");
+        assert!(r.validate(&m).is_ok());
+        let e = Effect::parse("reversal=Y,5").unwrap().validate(&m).unwrap_err();
+        assert!(e.to_string().contains("Y is not an axis of XCFZ"), "{e}");
         assert!(Effect::RangeScale { ppm: -2e6 }.validate(&m).is_err());
         assert!(Effect::RangeScale { ppm: 3.0 }.validate(&m).is_ok());
     }
