@@ -2,7 +2,7 @@
 //! reflectors, the tracker on the table), issue 44: cross-validation refits the measurement
 //! alone and starts from `identify`'s baseline; the truth is drawn in the model's squareness
 //! rule and gauge; the maps cover every plane of the linear axes. Release only (`scripts/test`):
-//! each test fits a 96-parameter model to 1485 points.
+//! each test fits a 96-parameter model to 1485 points. Also the reversal panel (issue 49).
 
 use volver::core::iso::ErrorId;
 use volver::core::machine::Machine;
@@ -295,7 +295,8 @@ fn the_maps_cover_every_plane_of_the_linear_axes() {
 /// parameter leaves [`Model::tool_point`] unchanged to the bit, and a step of any other moves
 /// it somewhere, with every kind of effect the model files offer (on the gantry: drift,
 /// reflector offset, range scale, scale growth, the tracker's drift, ball screw, fields over
-/// axes and over time; on the XCFZ grinder: the location drift of C and a field over C and t).
+/// axes and over time; on the XCFZ grinder: the location drift of C, a field over C and t, and
+/// the reversal of X and C, the tool point taken with every axis arriving moving forward).
 #[test]
 fn the_measurement_is_what_the_tool_point_leaves_out() {
     let gantry = Model::from_toml_str(
@@ -311,7 +312,7 @@ fn the_measurement_is_what_the_tool_point_leaves_out() {
     let xcfz = Model::from_toml_str(
         Machine::default_xcfz(),
         &format!(
-            "{}\n[effects]\nlocation_drift = [\"C\"]\nfield = [\"C*t\"]\n",
+            "{}\n[effects]\nlocation_drift = [\"C\"]\nfield = [\"C*t\"]\nreversal = [\"X\", \"C\"]\n",
             volver::core::model::DEFAULT_MODEL_TOML
         ),
         "xcfz-model.toml",
@@ -325,11 +326,17 @@ fn the_measurement_is_what_the_tool_point_leaves_out() {
             .collect();
         let grid = volver::uncertainty::default_grid(model.machine(), 3).unwrap();
         let tool = volver::compensation::reflector_centroid(model);
+        // Every axis arriving moving forward: a reversal moves the tool point then.
+        let state = volver::core::model::PointState {
+            t_s: 0.0,
+            approach: volver::core::approach::Approach::all(model.machine().axes().len(), 1),
+        };
         for (j, info) in model.params().iter().enumerate() {
             let mut q = params.clone();
             q[j] += 1e-3;
             let moves = grid.positions.iter().any(|c| {
-                model.tool_point(&c.0, &tool, &q) != model.tool_point(&c.0, &tool, &params)
+                model.tool_point_in(&c.0, &tool, state, &q)
+                    != model.tool_point_in(&c.0, &tool, state, &params)
             });
             assert_eq!(
                 moves,
@@ -339,5 +346,58 @@ fn the_measurement_is_what_the_tool_point_leaves_out() {
                 model.is_measurement_param(j)
             );
         }
+    }
+}
+
+/// The reversal panel: XCFZ test 4 in a shuffled order with a hidden reversal of X (30 µm) and
+/// C (−60 µrad), the paper's noise (the embedded machine's, which the report's U uses); the
+/// paper's model with `reversal = ["X", "C"]` fitted; the
+/// report's panel gives each B with its U (k = 2), and the truth lies within it (coverage at
+/// k = 2; fixed seed), with the counts of points approached forward and in reverse.
+#[test]
+#[cfg_attr(debug_assertions, ignore = "release only (scripts/test)")]
+fn the_reversal_panel_gives_each_b_with_its_u() {
+    let m = Machine::default_xcfz();
+    let truth = Truth::random(&m, Model::default_xcfz().spec(), &Magnitudes::default(), 5).unwrap();
+    let plan = Plan::preset(&m, "test4").unwrap().shuffled(5);
+    let mut sim = Simulation::new(plan, truth, 5);
+    sim.noise = TrackerNoise::PAPER;
+    sim.effects = ["reversal=X,30", "reversal=C,-60"]
+        .iter()
+        .map(|e| Effect::parse(e).unwrap())
+        .collect();
+    let data = sim.run().unwrap().measurements;
+    let text = format!(
+        "{}\n[effects]\nreversal = [\"X\", \"C\"]\n",
+        volver::core::model::DEFAULT_MODEL_TOML
+    );
+    let model = Model::from_toml_str(m, &text, "model.toml").unwrap();
+    let id = fitted(&model, &data);
+    let fit = Fit {
+        label: "with reversal".into(),
+        model: &model,
+        id: &id,
+    };
+    let page = html(&ReportInput::new("reversal", "data.csv", &data, vec![fit])).unwrap();
+    let at = page
+        .find("Reversal (direction of approach)")
+        .expect("the panel");
+    let panel = &page[at..at + page[at..].find("</table>").unwrap()];
+    for (axis, unit, truth) in [("X", "µm", 30.0), ("C", "µrad", -60.0)] {
+        let row = panel
+            .split("<tr>")
+            .find(|r| r.contains(&format!("<td>{axis}</td>")))
+            .unwrap_or_else(|| panic!("no row for {axis}: {panel}"));
+        let cell = row.split("<td>").nth(2).unwrap();
+        let (b, rest) = cell.split_once(" ± ").unwrap();
+        let u = rest.split_once(&format!(" {unit}")).unwrap().0;
+        let (b, u): (f64, f64) = (b.parse().unwrap(), u.parse().unwrap());
+        println!("{axis}: B {b} ± {u} {unit} (truth {truth})");
+        assert!((b - truth).abs() <= u, "{axis}: {b} ± {u} against {truth}");
+        assert!(
+            u < 0.2 * truth.abs(),
+            "{axis}: U {u} is no measurement of {truth}"
+        );
+        assert!(row.contains(" / "), "{row}");
     }
 }

@@ -697,7 +697,10 @@ mod tests {
         let r = Effect::parse("reversal=C,-20").unwrap();
         assert_eq!(r.to_string(), "reversal=C,-20");
         assert!(r.validate(&m).is_ok());
-        let e = Effect::parse("reversal=Y,5").unwrap().validate(&m).unwrap_err();
+        let e = Effect::parse("reversal=Y,5")
+            .unwrap()
+            .validate(&m)
+            .unwrap_err();
         assert!(e.to_string().contains("Y is not an axis of XCFZ"), "{e}");
         assert!(Effect::RangeScale { ppm: -2e6 }.validate(&m).is_err());
         assert!(Effect::RangeScale { ppm: 3.0 }.validate(&m).is_ok());
