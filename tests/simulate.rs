@@ -447,6 +447,62 @@ fn a_ball_screw_error_acts_as_a_commanded_position_shifted_by_it() {
 }
 
 #[test]
+fn a_reversal_acts_as_a_command_shifted_by_half_of_it_the_way_the_axis_came() {
+    // Hand-set: X and C go out, back, out and back; each point's direction written out here
+    // (the first point takes its axis' first move's, +), not derived by volver. On the nominal
+    // machine a reversal B of an axis on side s shifts its command by s·(±B/2).
+    let m = xcfz();
+    let positions = [
+        (0.0, 0.0),
+        (400.0, 90.0),
+        (800.0, 180.0),
+        (400.0, 90.0),
+        (1200.0, 270.0),
+        (200.0, 0.0),
+    ];
+    let signs = [1.0, 1.0, 1.0, -1.0, 1.0, -1.0];
+    let plan = Plan {
+        name: "out and back".into(),
+        positions: positions
+            .iter()
+            .map(|&(x, c)| m.commands_from_file_units(&[x, c, 300.0]))
+            .collect(),
+        reflectors: vec![0],
+        sequence: None,
+    };
+    let mut sim = Simulation::new(plan, zero_truth(), 3);
+    sim.noise = TrackerNoise::NONE;
+    sim.effects = vec![
+        Effect::parse("reversal=X,10").unwrap(),
+        Effect::parse("reversal=C,-40").unwrap(),
+    ];
+    let out = sim.run().unwrap();
+    let (kx, x) = m.axis(Axis::X).unwrap();
+    let (kc, c) = m.axis(Axis::C).unwrap();
+    for (pt, s) in out.measurements.points.iter().zip(signs) {
+        let mut cmd = pt.commands;
+        cmd.0[kx] += x.side.sign() * s * 0.5 * 10e-3;
+        cmd.0[kc] += c.side.sign() * s * 0.5 * -40e-6;
+        let want = predict(
+            &m,
+            &cmd,
+            &m.reflectors()[0].offset,
+            &PointErrors::<f64>::zero(),
+        );
+        // The model turns C's error by a small-angle rotation, the command by an exact one:
+        // they differ at second order, (20 µrad)² × 1.5 m ≈ 6e-7 mm; a wrong sign is 0.03 mm.
+        assert!(
+            dist(pt.measured, want) < 1e-6,
+            "line {}: {:?}: {} mm",
+            pt.line,
+            pt.approach,
+            dist(pt.measured, want)
+        );
+        assert_eq!(f64::from(pt.approach.0[kx]), s, "line {}", pt.line);
+    }
+}
+
+#[test]
 fn a_reflector_offset_error_moves_that_reflector_only() {
     let delta = [30.0, -20.0, 15.0]; // µm
     let base = run("test4", random_truth(5), TrackerNoise::NONE, vec![]);
