@@ -15,17 +15,18 @@
 //!    it reached since its direction was set, or that far from where it stood while its
 //!    direction is unknown — reverses, and the point is compensated again with its new
 //!    direction;
-//! 3. the reversal holds when the new command moves the axis the new way from its previous
-//!    command (the drive does reverse). Otherwise the point is **unsettled**: an axis that
-//!    overshoots (lands beyond its target in the direction it moves: ISO 230-2's B > 0, the
-//!    tool relative to the workpiece along the axis) cannot reach a point less than |B| behind
-//!    the one it turned at, in either state (reversed, its command would go forward; not
-//!    reversed, it would go back, and so reverse). Such an axis holds its command there —
-//!    it does not move, so it keeps its direction — and the tool is off its target by as much
-//!    as the program has gone back (less than |B|; [`Compensated::deviation_mm`] says how far);
-//!    it reverses at the first point the program has gone back more than |B| from the turn;
+//! 3. the reversal holds when the command written in the new direction reverses the axis by
+//!    step 2's measure (the drive does reverse: the direction is that of the command written).
+//!    Otherwise the point is **unsettled**: an axis that overshoots (lands beyond its target in
+//!    the direction it moves: ISO 230-2's B > 0, the tool relative to the workpiece along the
+//!    axis) cannot reach a point less than |B| behind the one it turned at, in either state
+//!    (reversed, its command would not go back; not reversed, it would go back, and so
+//!    reverse). Such an axis holds its command there — it does not move, so it keeps its
+//!    direction — and the tool is off its target by as much as the program has gone back (less
+//!    than |B| and the tolerance; [`Compensated::deviation_mm`] says how far); it reverses at
+//!    the first point the program has gone back more than that from the turn;
 //! 4. steps 2–3 repeat while an axis' direction changes (the axes' compensations interact a
-//!    little), at most once per axis.
+//!    little); each axis reverses or holds at most once per point.
 //!
 //! A move back by less than the tolerance leaves the axis' direction (and its lost motion)
 //! alone: a compensation that moves a near-stationary axis back and forth by fractions of a
@@ -188,12 +189,15 @@ impl Travel {
                 if !self.reversal[k] || held[k] {
                     continue;
                 }
-                if s.0[k] != before.0[k] && !self.moves_toward(k, s.0[k], w.0[k]) {
-                    // Step 3: the reversed command does not move the axis the new way.
-                    s.0[k] = before.0[k];
-                    held[k] = true;
-                    unsettled.push(k);
-                    again = true;
+                if s.0[k] != before.0[k] {
+                    // Step 3: a reversal holds when the command written in the new direction
+                    // reverses the axis by step 2's measure, else the axis holds its command.
+                    if self.judge(k, w.0[k]) != Judged::Reverse(s.0[k]) {
+                        s.0[k] = before.0[k];
+                        held[k] = true;
+                        unsettled.push(k);
+                        again = true;
+                    }
                 } else if judged.0[k] != s.0[k] {
                     s.0[k] = judged.0[k];
                     again = true;
@@ -268,11 +272,6 @@ impl Travel {
             _ if (w - e).abs() > tol => Judged::Reverse(if w > e { 1 } else { -1 }),
             _ => Judged::Keep(e),
         }
-    }
-
-    /// Whether axis `k`'s written command `w` moves it in direction `d` from its last command.
-    fn moves_toward(&self, k: usize, d: i8, w: f64) -> bool {
-        self.last[k].is_some_and(|l| f64::from(d) * (w - l) > MOVE_TOLERANCE)
     }
 
     /// Moves the state to written command `w` with directions `next` on the axes `moved`: a
@@ -358,8 +357,8 @@ mod tests {
         // 10 µm back from the turn: still held.
         let pt = t.next(&comp, &at(199.99), &exact).unwrap();
         assert_eq!((pt.approach.0[0], pt.written.0[0]), (1, held));
-        // 16 µm back: the reverse command goes back from the held one.
-        let pt = t.next(&comp, &at(199.984), &exact).unwrap();
+        // 17 µm back: the reverse command goes back from the held one by more than 1 µm.
+        let pt = t.next(&comp, &at(199.983), &exact).unwrap();
         assert_eq!((pt.approach.0[0], pt.reversed.clone()), (-1, vec![0]));
         assert!(pt.unsettled.is_empty() && pt.compensated.deviation_mm < 1e-9);
     }
