@@ -224,13 +224,7 @@ fn judged_by_rs274(b_um: f64) -> String {
         "{tables_out}"
     );
     let csv = read_plain(&std::fs::read_to_string(tables.join("errors.csv")).unwrap());
-    let prog = Program::read(
-        PART,
-        "part.ngc",
-        model.machine(),
-        &Setup::default(),
-    )
-    .unwrap();
+    let prog = Program::read(PART, "part.ngc", model.machine(), &Setup::default()).unwrap();
     let programmed: Vec<[f64; 6]> = prog.points().iter().map(|p| p.0).collect();
     let run = rs274::run(&out, None, None).unwrap();
     let canon = run.end_points();
@@ -264,7 +258,11 @@ fn judged_by_rs274(b_um: f64) -> String {
         // Where the program moves X by more than 0.1 mm, the drive moves it that way.
         let px = if i > 0 { programmed[i - 1][1] } else { x };
         if (x - px).abs() > 0.1 {
-            assert_eq!(dir, if x > px { 1 } else { -1 }, "B {b_um} µm, point {i}: {c:?}");
+            assert_eq!(
+                dir,
+                if x > px { 1 } else { -1 },
+                "B {b_um} µm, point {i}: {c:?}"
+            );
         }
         let want_x = x + 1e-3 * (table_um(&csv, "EXX", x, dir) + table_um(&csv, "EXY", y, 0));
         let want_y = y + 1e-3 * (table_um(&csv, "EYX", x, 0) + table_um(&csv, "EYY", y, 0));
@@ -307,9 +305,15 @@ fn judged_by_rs274(b_um: f64) -> String {
         worst
     );
     assert!(count[0] > 20 && count[2] > 20 && count[1] == 1, "{count:?}");
-    assert!(stdout.contains(&format!("  {flips} reversal(s)")), "{stdout}");
+    assert!(
+        stdout.contains(&format!("  {flips} reversal(s)")),
+        "{stdout}"
+    );
     if overshoot {
-        assert!(unsettled > 0 && stdout.contains("holds its command there"), "{stdout}");
+        assert!(
+            unsettled > 0 && stdout.contains("holds its command there"),
+            "{stdout}"
+        );
     } else {
         assert_eq!(unsettled, 0);
         assert!(!stdout.contains("holds its command there"), "{stdout}");
@@ -326,11 +330,17 @@ fn rs274_puts_each_point_where_the_forward_or_reverse_table_says() {
     }
     for b in [15.0, -15.0] {
         let out = judged_by_rs274(b);
-        assert!(out.contains("reversal of X: each point compensated"), "{out}");
+        assert!(
+            out.contains("reversal of X: each point compensated"),
+            "{out}"
+        );
         // X's direction is set by its first move (X400), changes at X700 (back), X250
         // (forward), X500 (back), X300 (forward), at the arc's turn, and wherever the
         // compensation alone moves it back by more than the tolerance (checked above).
-        assert!(out.contains("reversal(s) of an axis with a reversal value"), "{out}");
+        assert!(
+            out.contains("reversal(s) of an axis with a reversal value"),
+            "{out}"
+        );
     }
 }
 
@@ -391,14 +401,20 @@ fn compensating_in_a_direction_then_predicting_in_it_gives_the_program() {
             };
             let c = comp.in_state(state).compensate(&programmed).unwrap();
             let x = model.tool_point_in(&c.commands.0, &tool, state, &p);
-            let d = (0..3).map(|i| (x[i] - target[i]).powi(2)).sum::<f64>().sqrt();
+            let d = (0..3)
+                .map(|i| (x[i] - target[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
             worst = worst.max(d);
             assert!(d < 1e-9, "{cmd:?} in {a:?}: {d:.3e} mm off");
             // Predicted in the other direction it misses: the state matters.
             let mut other = state;
             other.approach.0[0] = -a.0[0];
             let y = model.tool_point_in(&c.commands.0, &tool, other, &p);
-            let miss = (0..3).map(|i| (y[i] - target[i]).powi(2)).sum::<f64>().sqrt();
+            let miss = (0..3)
+                .map(|i| (y[i] - target[i]).powi(2))
+                .sum::<f64>()
+                .sqrt();
             assert!(miss > 0.014, "{miss}");
             solved.push((a, c.commands));
         }
@@ -435,12 +451,18 @@ fn the_plain_csv_carries_forward_minus_reverse_equal_to_b() {
     let m = model.machine();
     let tables = ErrorTables::from_model(&model, &p, 25.0, 15.0).unwrap();
     let csv = tables.to_plain_csv();
-    assert!(csv.starts_with("error,axis,position,position_unit,value,value_unit,forward,reverse\n"));
+    assert!(
+        csv.starts_with("error,axis,position,position_unit,value,value_unit,forward,reverse\n")
+    );
     let back = ErrorTables::from_plain_csv(&csv, "errors.csv").unwrap();
     assert!(tables.max_difference(&back).unwrap() < 1e-11);
     let mut n = 0;
     for (axis, b) in [
-        (Axis::X, Box::new(move |u: f64| b0 + b1 * u + b2 * 0.5 * (3.0 * u * u - 1.0)) as Box<dyn Fn(f64) -> f64>),
+        (
+            Axis::X,
+            Box::new(move |u: f64| b0 + b1 * u + b2 * 0.5 * (3.0 * u * u - 1.0))
+                as Box<dyn Fn(f64) -> f64>,
+        ),
         (Axis::C, Box::new(move |u: f64| c0 + c1 * u)),
     ] {
         let (k, a) = m.axis(axis).unwrap();
@@ -481,9 +503,20 @@ fn the_plain_csv_carries_forward_minus_reverse_equal_to_b() {
     }
     let isg = ErrorTables::from_isg_csv(&tables.to_isg_csv(), "i.csv").unwrap();
     assert!(isg.axes.iter().all(|t| t.reversal.is_none()));
-    let exx = |t: &ErrorTables| t.axes[0].errors.iter().find(|e| e.0 == "EXX").unwrap().1.clone();
+    let exx = |t: &ErrorTables| {
+        t.axes[0]
+            .errors
+            .iter()
+            .find(|e| e.0 == "EXX")
+            .unwrap()
+            .1
+            .clone()
+    };
     for (a, b) in exx(&isg).iter().zip(exx(&tables)) {
-        assert!((a - b).abs() < 1e-12, "the ISG file holds the mean: {a} against {b}");
+        assert!(
+            (a - b).abs() < 1e-12,
+            "the ISG file holds the mean: {a} against {b}"
+        );
     }
     // What the mean leaves, for those formats alone.
     let grid = [m.commands_from_file_units(&[0.0, 0.0, 0.0])];
@@ -521,7 +554,10 @@ fn the_tables_tool_point_in_a_direction_is_the_models() {
         let want = model.tool_point_in(&c.0, &tool, state, &p);
         for t in [&tables, &back] {
             let got = t.tool_point_in(&model, &c, &tool, a).unwrap();
-            let d = (0..3).map(|q| (got[q] - want[q]).powi(2)).sum::<f64>().sqrt();
+            let d = (0..3)
+                .map(|q| (got[q] - want[q]).powi(2))
+                .sum::<f64>()
+                .sqrt();
             assert!(d < 1e-8, "{a:?}: {d:.3e} mm");
         }
     }
@@ -547,15 +583,30 @@ fn block_delete_that_changes_a_direction_is_refused() {
     };
     let e = write("G0 X100 Y100 Z-50\nG1 X300 F500\n/G1 X400\nG1 X350 Y100 Z-50\n").unwrap_err();
     assert!(
-        e.starts_with("bd.ngc:4:") && e.contains("skips optional line 3") && e.contains("X arrives in reverse if the control runs line 3, forward if it skips it"),
+        e.starts_with("bd.ngc:4:")
+            && e.contains("skips optional line 3")
+            && e.contains(
+                "X arrives in reverse if the control runs line 3, forward if it skips it"
+            ),
         "{e}"
     );
     write("G0 X100 Y100 Z-50\nG1 X300 F500\n/G1 X400\nG1 X450 Y100 Z-50\n").unwrap();
     // Without a reversal the same program is written.
-    let plain = Model::from_toml_str(m.clone(), "[[error]]\nname = \"EXX\"\nbasis = \"legendre\"\ndegree = 1\n", "p.toml").unwrap();
+    let plain = Model::from_toml_str(
+        m.clone(),
+        "[[error]]\nname = \"EXX\"\nbasis = \"legendre\"\ndegree = 1\n",
+        "p.toml",
+    )
+    .unwrap();
     let pp = plain.initial_params();
     let c2 = Compensator::new(&plain, &pp, [0.0; 3]).unwrap();
-    let prog = Program::read("G0 X100 Y100 Z-50\nG1 X300 F500\n/G1 X400\nG1 X350 Y100 Z-50\n", "bd.ngc", m, &Setup::default()).unwrap();
+    let prog = Program::read(
+        "G0 X100 Y100 Z-50\nG1 X300 F500\n/G1 X400\nG1 X350 Y100 Z-50\n",
+        "bd.ngc",
+        m,
+        &Setup::default(),
+    )
+    .unwrap();
     prog.compensate(&c2, m, 4, "t").unwrap();
 }
 
@@ -568,8 +619,11 @@ fn machine_coordinate_moves_set_directions() {
     let x_of = |text: &str| -> f64 {
         let prog = Program::read(text, "g53.ngc", m, &Setup::default()).unwrap();
         let (out, _) = prog.compensate(&comp, m, 4, "t").unwrap();
-        let last = out.lines().filter(|l| l.starts_with("G1")).last().unwrap();
-        let w = last.split_whitespace().find(|w| w.starts_with('X')).unwrap();
+        let last = out.lines().rfind(|l| l.starts_with("G1")).unwrap();
+        let w = last
+            .split_whitespace()
+            .find(|w| w.starts_with('X'))
+            .unwrap();
         w[1..].parse().unwrap()
     };
     // X300 reached from X500 (G53 took X there): reverse; from X100: forward.
@@ -577,5 +631,8 @@ fn machine_coordinate_moves_set_directions() {
     let up = x_of("G0 X100 Y100 Z-50\nG53 G0 X50\nG1 X300 F500\n");
     // Lost motion of 15 µm (the slide's B +15 µm on X, which carries the workpiece): forward
     // the tool lands 7.5 µm short, so the command is 7.5 µm long; in reverse 7.5 µm short.
-    assert!(((up - down) - 0.015).abs() < 2e-4, "forward {up}, reverse {down}");
+    assert!(
+        ((up - down) - 0.015).abs() < 2e-4,
+        "forward {up}, reverse {down}"
+    );
 }

@@ -376,7 +376,6 @@ pub fn compensate_points(
         )));
     }
     let pts = read_points(text, label, m)?;
-    let axes = m.axes();
     let oriented = comp.tool_axis().is_some();
     let mut travel = Travel::new(comp.model(), reversal_tolerance_um);
     let directed = travel.directed();
@@ -387,51 +386,7 @@ pub fn compensate_points(
         let pt = travel
             .next(comp, &p.commands, &write)
             .with_context(|| format!("{label}:{}", p.line))?;
-        let c = &pt.compensated;
-        let state = volver_core::model::PointState {
-            t_s: 0.0,
-            approach: pt.approach,
-        };
-        let comp = &comp.in_state(state);
-        let (cells, written) = written(m, &c.commands, decimals);
-        let prog: Vec<String> = axes
-            .iter()
-            .enumerate()
-            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
-            .collect();
-        let wd = comp.deviation_mm(&written, c.target);
-        if pt.unsettled.is_empty() {
-            t.ws = t.ws.max(c.deviation_mm);
-            t.ww = t.ww.max(wd);
-        } else {
-            t.unsettled += 1;
-            t.worst_unsettled = t.worst_unsettled.max(wd);
-        }
-        t.largest = t.largest.max(c.error_mm);
-        let off: String = c
-            .outside_travel
-            .iter()
-            .map(|&k| axes[k].axis.letter())
-            .collect();
-        t.outside += usize::from(!off.is_empty());
-        let mut extra = match &c.orientation {
-            Some(o) => t.orientation(comp, &written, o),
-            None => String::new(),
-        };
-        if directed {
-            for k in 0..axes.len() {
-                extra.push_str(&format!(",{}", pt.approach.0[k]));
-            }
-        }
-        out.push_str(&format!(
-            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
-            p.line,
-            p.id.clone().unwrap_or_default(),
-            cells.join(","),
-            prog.join(","),
-            c.error_mm * UM_PER_MM,
-            wd * UM_PER_MM
-        ));
+        out.push_str(&t.row(comp, m, p, &pt, decimals, directed));
     }
     Ok(Compensated {
         text: out,
@@ -509,6 +464,65 @@ struct Tally {
 }
 
 impl Tally {
+    /// The output row of point `p` compensated as `pt` (its command written with `decimals`),
+    /// tallied; with the axes' directions of approach when `directed`.
+    fn row(
+        &mut self,
+        comp: &volver_core::compensate::Compensator,
+        m: &volver_core::machine::Machine,
+        p: &volver_core::compensate::ListedPoint,
+        pt: &volver_core::compensate::PathPoint,
+        decimals: usize,
+        directed: bool,
+    ) -> String {
+        let axes = m.axes();
+        let c = &pt.compensated;
+        let state = volver_core::model::PointState {
+            t_s: 0.0,
+            approach: pt.approach,
+        };
+        let comp = &comp.in_state(state);
+        let (cells, written) = volver_core::compensate::written(m, &c.commands, decimals);
+        let prog: Vec<String> = axes
+            .iter()
+            .enumerate()
+            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
+            .collect();
+        let wd = comp.deviation_mm(&written, c.target);
+        if pt.unsettled.is_empty() {
+            self.ws = self.ws.max(c.deviation_mm);
+            self.ww = self.ww.max(wd);
+        } else {
+            self.unsettled += 1;
+            self.worst_unsettled = self.worst_unsettled.max(wd);
+        }
+        self.largest = self.largest.max(c.error_mm);
+        let off: String = c
+            .outside_travel
+            .iter()
+            .map(|&k| axes[k].axis.letter())
+            .collect();
+        self.outside += usize::from(!off.is_empty());
+        let mut extra = match &c.orientation {
+            Some(o) => self.orientation(comp, &written, o),
+            None => String::new(),
+        };
+        if directed {
+            for k in 0..axes.len() {
+                extra.push_str(&format!(",{}", pt.approach.0[k]));
+            }
+        }
+        format!(
+            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
+            p.line,
+            p.id.clone().unwrap_or_default(),
+            cells.join(","),
+            prog.join(","),
+            c.error_mm * UM_PER_MM,
+            wd * UM_PER_MM
+        )
+    }
+
     /// Tallies a compensated direction `o` (the command as `written`) and gives its cells.
     fn orientation(
         &mut self,

@@ -270,20 +270,7 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
             usize::from(a.decimals),
             a.reversal_tolerance_um,
         )?;
-        println!(
-            "  {} points from {label}: uncompensated error up to {:.4} µm",
-            done.points,
-            done.max_error_mm * UM_PER_MM
-        );
-        if done.unsettled > 0 {
-            println!(
-                "  warning: {} point(s) an axis that overshoots (ISO 230-2 B > 0) reaches going \
-                 back by less than |B| from where it turned: it holds its command there, up to \
-                 {:.3} µm off (not in the deviations below; see the approach columns)",
-                done.unsettled,
-                done.worst_unsettled_mm * UM_PER_MM
-            );
-        }
+        points_summary(&done, &label);
         done
     } else {
         compensate_gcode(&a, &comp, &model, &params, record.as_ref(), tool, axis)?
@@ -316,6 +303,24 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     write_atomic(&a.out, done.text).with_context(|| format!("writing {}", a.out.display()))?;
     println!("  written to {}", a.out.display());
     Ok(())
+}
+
+/// What the compensation of a point list did, printed.
+fn points_summary(done: &Compensated, label: &str) {
+    println!(
+        "  {} points from {label}: uncompensated error up to {:.4} µm",
+        done.points,
+        done.max_error_mm * UM_PER_MM
+    );
+    if done.unsettled > 0 {
+        println!(
+            "  warning: {} point(s) an axis that overshoots (ISO 230-2 B > 0) reaches going back \
+             by less than |B| from where it turned: it holds its command there, up to {:.3} µm \
+             off (not in the deviations below; see the approach columns)",
+            done.unsettled,
+            done.worst_unsettled_mm * UM_PER_MM
+        );
+    }
 }
 
 /// Prints what is compensated: a warning when the tool point is off the line through the
@@ -666,7 +671,9 @@ fn direction_note(
             let (lo, hi) = b
                 .iter()
                 .map(|v| sign * v)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| (l.min(v), h.max(v)));
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                    (l.min(v), h.max(v))
+                });
             let (scale, unit) = if t.axis.is_rotary() {
                 (URAD_PER_RAD, "µrad")
             } else {

@@ -153,8 +153,8 @@ impl Travel {
     /// coordinates (`G53`). Each axis that moves takes the direction of its move by the rule.
     pub fn moved_to(&mut self, to: &[Option<f64>; MAX_AXES]) {
         let mut w = Commands::default();
-        for k in 0..self.n_axes {
-            w.0[k] = to[k].or(self.last[k]).unwrap_or(0.0);
+        for (k, t) in to.iter().enumerate().take(self.n_axes) {
+            w.0[k] = t.or(self.last[k]).unwrap_or(0.0);
         }
         let moved: Vec<bool> = (0..self.n_axes).map(|k| to[k].is_some()).collect();
         let mut next = self.approach;
@@ -183,26 +183,7 @@ impl Travel {
         let (mut c, mut w) = loop {
             let c = comp.in_state(self.state(s)).compensate(programmed)?;
             let w = write(&c.commands);
-            let judged = self.judged(&w);
-            let mut again = false;
-            for k in 0..self.n_axes {
-                if !self.reversal[k] || held[k] {
-                    continue;
-                }
-                if s.0[k] != before.0[k] {
-                    // Step 3: a reversal holds when the command written in the new direction
-                    // reverses the axis by step 2's measure, else the axis holds its command.
-                    if self.judge(k, w.0[k]) != Judged::Reverse(s.0[k]) {
-                        s.0[k] = before.0[k];
-                        held[k] = true;
-                        unsettled.push(k);
-                        again = true;
-                    }
-                } else if judged.0[k] != s.0[k] {
-                    s.0[k] = judged.0[k];
-                    again = true;
-                }
-            }
+            let again = self.round(&mut s, before, &w, &mut held, &mut unsettled);
             round += 1;
             if !again || round > self.n_axes + 1 {
                 break (c, w);
@@ -238,6 +219,41 @@ impl Travel {
                 .collect(),
             unsettled,
         })
+    }
+
+    /// One round of steps 2–3 at written command `w`, solved with directions `s` (changed in
+    /// place) from the directions `before` the point: a reversed axis whose command does not
+    /// reverse it holds (`held`, `unsettled`), an axis the command reverses takes the new
+    /// direction. Whether a direction changed (the point is solved again).
+    fn round(
+        &self,
+        s: &mut Approach,
+        before: Approach,
+        w: &Commands,
+        held: &mut [bool; MAX_AXES],
+        unsettled: &mut Vec<usize>,
+    ) -> bool {
+        let judged = self.judged(w);
+        let mut again = false;
+        for (k, h) in held.iter_mut().enumerate().take(self.n_axes) {
+            if !self.reversal[k] || *h {
+                continue;
+            }
+            if s.0[k] != before.0[k] {
+                // Step 3: a reversal holds when the command written in the new direction
+                // reverses the axis by step 2's measure, else the axis holds its command.
+                if self.judge(k, w.0[k]) != Judged::Reverse(s.0[k]) {
+                    s.0[k] = before.0[k];
+                    *h = true;
+                    unsettled.push(k);
+                    again = true;
+                }
+            } else if judged.0[k] != s.0[k] {
+                s.0[k] = judged.0[k];
+                again = true;
+            }
+        }
+        again
     }
 
     /// The state of a point reached with directions `approach` (at the test's start).
@@ -353,7 +369,10 @@ mod tests {
         let pt = t.next(&comp, &at(199.995), &exact).unwrap();
         assert_eq!((pt.approach.0[0], pt.unsettled.clone()), (1, vec![0]));
         assert_eq!(pt.written.0[0], held);
-        assert!((pt.compensated.deviation_mm - 0.0045).abs() < 1e-9, "{pt:?}");
+        assert!(
+            (pt.compensated.deviation_mm - 0.0045).abs() < 1e-9,
+            "{pt:?}"
+        );
         // 10 µm back from the turn: still held.
         let pt = t.next(&comp, &at(199.99), &exact).unwrap();
         assert_eq!((pt.approach.0[0], pt.written.0[0]), (1, held));

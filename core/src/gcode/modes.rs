@@ -2,10 +2,10 @@
 //! path: feed mode, plane, units, offsets, tools, dwells, reference moves.
 
 use super::Block;
-use crate::chain::MAX_AXES;
 use super::codes;
 use super::interp::{FeedMode, Owner, Parsed, Reader, refuse};
 use super::offsets::LETTERS;
+use crate::chain::MAX_AXES;
 use crate::error::{Place, Result};
 
 impl Reader<'_> {

@@ -193,7 +193,7 @@ fn arc_fractions(a0: f64, turn: f64, step: f64, place: &Place) -> Result<Vec<f64
     let mut m = first;
     loop {
         let t = (m * quarter - a0) / turn;
-        if !(t < 1.0 - 1e-9) {
+        if t >= 1.0 - 1e-9 {
             break;
         }
         if t > 1e-9 {
@@ -236,9 +236,15 @@ mod tests {
         // Clockwise from 100° by 200°: turning points at 90°, 0°, −90°.
         let ts = arc_fractions(q * 10.0 / 9.0, -q * 20.0 / 9.0, 0.1, &place).unwrap();
         for want in [0.05, 0.5, 0.95] {
-            assert!(ts.iter().any(|t| (t - want).abs() < 1e-12), "{want}: {ts:?}");
+            assert!(
+                ts.iter().any(|t| (t - want).abs() < 1e-12),
+                "{want}: {ts:?}"
+            );
         }
-        assert!(ts.windows(2).all(|w| w[1] > w[0] && (w[1] - w[0]) * 3.49 <= 0.1 + 1e-12));
+        assert!(
+            ts.windows(2)
+                .all(|w| w[1] > w[0] && (w[1] - w[0]) * 3.49 <= 0.1 + 1e-12)
+        );
         // A turning point at the arc's start is no cut.
         let ts = arc_fractions(0.0, q, 10.0, &place).unwrap();
         assert_eq!(ts, [1.0]);

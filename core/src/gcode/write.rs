@@ -334,7 +334,12 @@ impl Writer<'_, '_> {
         pt: &PathPoint,
         place: &Place,
     ) -> Result<()> {
-        let letters: Vec<char> = self.machine.axes().iter().map(|a| a.axis.letter()).collect();
+        let letters: Vec<char> = self
+            .machine
+            .axes()
+            .iter()
+            .map(|a| a.axis.letter())
+            .collect();
         let reversal = reversal_axes(comp.model());
         for (t, line) in &mut self.alternatives {
             let other = t

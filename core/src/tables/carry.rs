@@ -3,11 +3,11 @@
 //! tables cannot carry with the error it leaves ([`uncarried`]).
 
 use super::ErrorTables;
+use crate::approach::Approach;
 use crate::error::{Error, Result};
 use crate::iso::ErrorId;
 use crate::kinematics::{PointErrors, tool_in_workpiece};
 use crate::machine::Commands;
-use crate::approach::Approach;
 use crate::model::{Model, Role};
 use serde::Serialize;
 

@@ -200,7 +200,9 @@ pub(super) fn reversal_at(model: &Model, params: &[f64], commands: &Commands, k:
             t_s: 0.0,
             approach: a,
         };
-        model.errors_in(&commands.0, usize::MAX, state, params).component[k][c]
+        model
+            .errors_in(&commands.0, usize::MAX, state, params)
+            .component[k][c]
     };
     side(1) - side(-1)
 }
