@@ -636,3 +636,49 @@ fn machine_coordinate_moves_set_directions() {
         "forward {up}, reverse {down}"
     );
 }
+
+/// A point list is visited in its rows' order: each point compensated in the direction X
+/// arrives with, given in the output's `approach_X` column.
+#[test]
+fn a_point_list_is_compensated_in_its_order() {
+    let dir = scratch("points");
+    let (model, p) = mill_truth(15.0);
+    let results = dir.join("truth.json");
+    ResultsFile::from_model(&model, &p)
+        .unwrap()
+        .save(&results)
+        .unwrap();
+    let list = dir.join("points.csv");
+    std::fs::write(
+        &list,
+        "id,X,Y,Z\na,100,100,-50\nb,400,100,-50\nf,300,100,-50\ng,200,100,-50\nh,300,100,-50\n",
+    )
+    .unwrap();
+    let out = dir.join("out.csv");
+    let s = |p: &Path| p.display().to_string();
+    let o = volver(&[
+        "compensate",
+        "--results",
+        &s(&results),
+        "--points",
+        &s(&list),
+        "--out",
+        &s(&out),
+        "--tool",
+        "0,0,0",
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&out).unwrap();
+    let mut rows = text.lines();
+    let header: Vec<&str> = rows.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (x, ax) = (col("X"), col("approach_X"));
+    let rows: Vec<Vec<&str>> = rows.map(|r| r.split(',').collect()).collect();
+    let approach: Vec<&str> = rows.iter().map(|r| r[ax]).collect();
+    assert_eq!(approach, ["0", "1", "-1", "-1", "1"], "{text}");
+    // X300 reached in reverse (f) and forward (h): the slide's B apart (lost motion of 15 µm on
+    // X, which carries the workpiece: the command is 7.5 µm long forward, 7.5 µm short back).
+    let at = |i: usize| rows[i][x].parse::<f64>().unwrap();
+    assert!(((at(4) - at(2)) - 0.015).abs() < 2e-4, "{text}");
+}

@@ -492,6 +492,43 @@ mod tests {
     }
 
     #[test]
+    fn plain_csv_forward_and_reverse_columns() {
+        let h = "error,axis,position,position_unit,value,value_unit,forward,reverse\n";
+        let ok = format!(
+            "{h}B0Z,Z,,,2.5,urad,,\nEXX,X,0,mm,1,um,8.5,-6.5\nEXX,X,700,mm,2,um,9,-5\n\
+             EYX,X,0,mm,1,um,,\nEYX,X,700,mm,2,um,,\n"
+        );
+        let t = ErrorTables::from_plain_csv(&ok, "p.csv").unwrap();
+        let b = t.axes[0].reversal.as_ref().unwrap();
+        assert!((b[0] - 0.015).abs() < 1e-15 && (b[1] - 0.014).abs() < 1e-15);
+        assert!((t.directional(Axis::X, 350.0).unwrap().forward - 0.00875).abs() < 1e-15);
+        let e = |body: &str| {
+            ErrorTables::from_plain_csv(&format!("{h}{body}"), "p.csv")
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            e("EXX,X,0,mm,1,um,8.5,\n"),
+            "p.csv:2: field 'reverse': forward and reverse go together: give both or neither"
+        );
+        assert!(
+            e("EYX,X,0,mm,1,um,2,0\n")
+                .starts_with("p.csv:2: field 'forward': EYX does not depend on the direction")
+        );
+        assert!(
+            e("EXX,X,0,mm,1,um,3,0\n")
+                .starts_with("p.csv:2: field 'value': the value 1 is not the mean of forward 3")
+        );
+        assert!(e("EXX,X,0,mm,1,um,2,0\nEXX,X,5,mm,1,um,,\n").starts_with(
+            "p.csv:3: field 'forward': EXX: forward and reverse are given on its other rows"
+        ));
+        assert!(e("EXX,X,0,mm,1,um,,\nEXX,X,5,mm,1,um,2,0\n").starts_with(
+            "p.csv:3: field 'forward': EXX: forward and reverse are missing on its other rows"
+        ));
+        assert!(e("B0Z,Z,,,1,urad,1,1\n").contains("B0Z does not depend on the direction"));
+    }
+
+    #[test]
     fn isg_and_etalon_errors_name_the_line() {
         let e = ErrorTables::from_isg_csv("X EXX\n0 1\n10 x\n", "i.csv").unwrap_err();
         assert_eq!(
