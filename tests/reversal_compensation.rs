@@ -10,25 +10,33 @@
 //!    directions and of the tool-side Z in z: each is then an offset of its command — the
 //!    errors are deviations of the slides in the machine frame (ISO 230-1), a workpiece-side
 //!    slide's moves the workpiece and so the tool the other way, and the command takes `+E`;
-//!    a tool-side slide's command takes `−E` — to first order in the errors' slopes. The
-//!    canonical positions rs274 prints at every point equal the programmed positions plus (X,
-//!    Y) or minus (Z) the values of `volver tables`' plain CSV (read by hand here), forward on X
-//!    when X's programmed move into the point is positive, reverse when it is negative, the
-//!    mean before X's first move — within 0.1 µm: the output's and rs274's 4 decimals (5e-5 mm)
-//!    and the errors evaluated at the compensated instead of the programmed command (below
+//!    a tool-side slide's command takes `−E` — to first order in the errors' slopes. X's
+//!    direction at each point is read from rs274's own X positions by the documented rule (a
+//!    move back of more than 1 µm from the furthest point reached reverses it): it is the
+//!    programmed direction wherever the program moves X by more than 0.1 mm (checked), and the
+//!    compensation alone may reverse it (the Y move, where Y's straightness moves X's command
+//!    by 3.4 µm). The canonical positions rs274 prints at every point equal the programmed
+//!    positions plus (X, Y) or minus (Z) the values of `volver tables`' plain CSV (read by hand
+//!    here), forward on X when X arrives forward, reverse when it arrives in reverse, the mean
+//!    before X's first move — within 0.1 µm: the output's and rs274's 4 decimals (5e-5 mm) and
+//!    the errors evaluated at the compensated instead of the programmed command (below
 //!    1e-6 mm). With lost motion (a slide B of +15 µm on X, which carries the workpiece: ISO
-//!    230-2's B = −15 µm) every point, the arc's turning point included, is compensated in its
-//!    programmed direction; with an overshooting X (slide B −15 µm, ISO 230-2 +15 µm) the points
-//!    less than 15 µm behind the point X turned at are reported unsettled and X holds its
-//!    command there (the rule of `volver_core::compensate::Travel`: no command reaches them in
-//!    one move), all others are compensated in their programmed direction.
+//!    230-2's B = −15 µm) every point is so, the arc's turning point included; with an
+//!    overshooting X (slide B −15 µm, ISO 230-2 +15 µm) the points X would reach going back by
+//!    less than 15 µm (and the tolerance) from where it turned are reported unsettled and X
+//!    holds its command there, less than 16 µm off (the rule of
+//!    `volver_core::compensate::Travel`: no command reaches them in one move); the number of
+//!    X's reversals the command prints is the one counted on rs274's positions.
 //! 2. **Compensate then predict in the same direction gives the program**: for random commands
 //!    and random directions of each axis (a linear and a rotary axis with a reversal, the
 //!    paper's errors at random), the compensated command's tool point in that state is the
 //!    nominal machine's at the programmed command (1e-9 mm).
 //! 3. **Tables**: hand-set reversal functions (not fitted) written to the plain CSV and read
-//!    back give forward − reverse = B(x) at every position (1e-9 mm, 1e-9 rad: the CSV's
-//!    decimals); the ISG and Etalon files say the reversal is not carried and hold the mean.
+//!    back give forward − reverse = B(x) at every position, and the model's forward and reverse
+//!    errors (1e-11 mm or rad: the CSV's 9 decimals of µm, 6 of µrad); the ISG and Etalon files
+//!    say the reversal is not carried and hold the mean. Also: the tables' tool point in a
+//!    state is the model's; a point list is compensated in its rows' order; block delete that
+//!    changes a direction is refused; `G53` moves set directions.
 
 mod common;
 
@@ -47,8 +55,9 @@ use volver::core::tables::{ErrorTables, TableFormat, uncarried_in};
 const MILL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/gcode/mill.toml");
 
 /// The part: the first move states every axis (directions unknown), X forward twice, back, a
-/// Y move (X keeps its reverse direction), forward, back, then an arc (centre X400 Y250, radius
-/// 100 mm, from −60° to +60° counter-clockwise) that turns X at X500, and a move back.
+/// Y move, forward, back, then an arc (centre X400 Y250, radius 100 mm, from −60° to +45°
+/// counter-clockwise: no chord of equal steps would end at 0°) that turns X at X500, and a move
+/// back.
 const PART: &str = "%
 (a part that reverses X)
 G21 G90 G17
@@ -61,7 +70,7 @@ G1 X500
 G1 X400
 G0 X300 Y163.3975
 G1 X450
-G3 X450 Y336.6025 I-50 J86.6025
+G3 X470.7107 Y320.7107 I-50 J86.6025
 G1 X120
 M30
 %
@@ -226,6 +235,14 @@ fn judged_by_rs274(b_um: f64) -> String {
     let csv = read_plain(&std::fs::read_to_string(tables.join("errors.csv")).unwrap());
     let prog = Program::read(PART, "part.ngc", model.machine(), &Setup::default()).unwrap();
     let programmed: Vec<[f64; 6]> = prog.points().iter().map(|p| p.0).collect();
+    // The arc's turning point (X500 Y250, to the radius' rounding in the program) is a point
+    // of the path.
+    assert!(
+        programmed
+            .iter()
+            .any(|q| (q[1] - 500.0).abs() < 1e-4 && (q[0] - 250.0).abs() < 1e-9),
+        "{programmed:?}"
+    );
     let run = rs274::run(&out, None, None).unwrap();
     let canon = run.end_points();
     assert_eq!(canon.len(), programmed.len(), "{}", run.canon);
@@ -251,7 +268,7 @@ fn judged_by_rs274(b_um: f64) -> String {
                 _ if (cx - ext).abs() > tau => (dir, ext) = (if cx > ext { 1 } else { -1 }, cx),
                 _ => {}
             }
-            flips += usize::from(dir != before);
+            flips += usize::from(before != 0 && dir != before);
         } else {
             ext = cx;
         }
@@ -336,7 +353,7 @@ fn rs274_puts_each_point_where_the_forward_or_reverse_table_says() {
         );
         // X's direction is set by its first move (X400), changes at X700 (back), X250
         // (forward), X500 (back), X300 (forward), at the arc's turn, and wherever the
-        // compensation alone moves it back by more than the tolerance (checked above).
+        // compensation alone moves it back by more than the tolerance (counted above).
         assert!(
             out.contains("reversal(s) of an axis with a reversal value"),
             "{out}"

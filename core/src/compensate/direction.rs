@@ -93,7 +93,8 @@ pub struct PathPoint {
     pub written: Commands,
     /// Each axis' direction of approach to the point: the state it was compensated in.
     pub approach: Approach,
-    /// The axes (chain positions) with a reversal whose direction changed at this point.
+    /// The axes (chain positions) with a reversal whose direction changed at this point from
+    /// one side to the other (not the first move of an axis whose direction was unknown).
     pub reversed: Vec<usize>,
     /// The axes (chain positions) with a reversal that could not reverse here although the
     /// program goes back (step 3 of the rule): each holds its last command, and the point is
@@ -215,7 +216,7 @@ impl Travel {
             written: w,
             approach: s,
             reversed: (0..self.n_axes)
-                .filter(|&k| self.reversal[k] && s.0[k] != before.0[k])
+                .filter(|&k| self.reversal[k] && before.0[k] != 0 && s.0[k] != before.0[k])
                 .collect(),
             unsettled,
         })

@@ -229,8 +229,8 @@ pub struct Report {
     pub uncompensated: Vec<usize>,
     /// The tools whose tool points compensated the moves (`None`: the one tool point).
     pub tools: Vec<Option<i64>>,
-    /// How many times an axis with a reversal changed direction: each change compensated at
-    /// its turning point ([`crate::compensate::Travel`]).
+    /// How many times an axis with a reversal changed direction (from one side to the other):
+    /// each change compensated at its turning point ([`crate::compensate::Travel`]).
     pub reversals: usize,
     /// Lines (1-based) of points where an axis with a reversal went back but could not be
     /// compensated as reversed (an overshooting axis, ISO 230-2's B > 0, less than |B| behind
