@@ -27,6 +27,14 @@
 //! for microradians; the point is still met, and what is left of the direction is reported
 //! ([`OrientationResult`]).
 //!
+//! **Directions of approach.** An axis with a reversal (ISO 230-2's B, `[effects] reversal`)
+//! puts the tool on one side or the other by the direction it arrives from: a compensator
+//! [`in_state`](Compensator::in_state) solves `T(q*, p, s) = T(q_programmed, 0)` with each
+//! axis' direction `s` ([`crate::model::PointState`]); by default every direction is unknown
+//! and the reversal is at its mean. Along a path (a program, a point list in its order),
+//! [`Travel`] settles each axis' direction from the commands the control executes, point by
+//! point, and compensates each point in it (its module states the rule).
+//!
 //! Every compensated command is verified: the tool point it gives through the forward model
 //! (an independent `f64` evaluation) is compared with the target, and the deviation is
 //! reported (and the direction's angle from its target). Units: mm and rad.
@@ -49,11 +57,13 @@ use crate::error::{Error, Result};
 use crate::iso::Axis;
 use crate::kinematics::{PointErrors, tool_in_workpiece};
 use crate::machine::Commands;
-use crate::model::Model;
+use crate::model::{Model, PointState};
 use num_dual::{DualNum, DualSVec64};
 
+mod direction;
 mod points;
 mod step;
+pub use direction::{PathPoint, REVERSAL_TOLERANCE_UM, Travel, reversal_axes};
 pub use points::{ListedPoint, MAX_AXIS_VALUE, read_points, written};
 pub use step::solve_dense;
 use step::{ConstrainedStep, solve_step};
@@ -75,6 +85,9 @@ pub struct Compensator<'a> {
     /// The tool's axis (unit, frame of the last tool-side axis) when its direction is
     /// compensated too ([`Compensator::with_orientation`]).
     axis: Option<[f64; 3]>,
+    /// The state the machine is in ([`Compensator::in_state`]): each axis' direction of
+    /// approach (the reversal's side) and the time (the test's start by default).
+    state: PointState,
 }
 
 /// One compensated command.
@@ -202,6 +215,7 @@ impl<'a> Compensator<'a> {
             tool,
             free,
             axis: None,
+            state: PointState::default(),
         })
     }
 
@@ -262,7 +276,43 @@ impl<'a> Compensator<'a> {
             tool,
             free: (0..5).collect(),
             axis: Some(axis.map(|v| v / len)),
+            state: PointState::default(),
         })
+    }
+
+    /// The same inverse model with the machine in `state`: each axis arriving from the side
+    /// `state.approach` gives, so that its reversal is on that side (the mean of both sides
+    /// for an axis whose direction is unknown, as [`Model::tool_point_in`]). Every command it
+    /// solves and every point it gives ([`Compensator::actual_point`], the deviations) is in
+    /// that state; the nominal machine's point is the same in every state.
+    ///
+    /// ```
+    /// use volver_core::approach::Approach;
+    /// use volver_core::compensate::Compensator;
+    /// use volver_core::model::{Model, PointState};
+    /// let text = "[effects]\nreversal = [\"X\"]";
+    /// let model = Model::from_toml_str(volver_core::machine::Machine::default_xcfz(), text, "m.toml").unwrap();
+    /// let mut p = model.initial_params();
+    /// p[model.param_index("reversal.X.b").unwrap()] = 0.015; // B = 15 µm
+    /// let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
+    /// let q = model.machine().commands_from_file_units(&[700.0, 0.0, 300.0]);
+    /// let at = |s: i8| PointState { t_s: 0.0, approach: Approach::all(3, s) };
+    /// let up = comp.in_state(at(1)).compensate(&q).unwrap().commands.0[0];
+    /// let down = comp.in_state(at(-1)).compensate(&q).unwrap().commands.0[0];
+    /// // X carries the workpiece: arriving forward its slide is B/2 further along +x, so the
+    /// // tool B/2 short of its target: the command is B/2 long (and B/2 short in reverse).
+    /// assert!((up - (700.0 + 0.0075)).abs() < 1e-12 && (down - (700.0 - 0.0075)).abs() < 1e-12);
+    /// ```
+    pub fn in_state(&self, state: PointState) -> Compensator<'a> {
+        Compensator {
+            state,
+            ..self.clone()
+        }
+    }
+
+    /// The state it compensates in ([`Compensator::in_state`]).
+    pub fn state(&self) -> PointState {
+        self.state
     }
 
     /// The axes Newton moves (chain positions).
@@ -280,9 +330,11 @@ impl<'a> Compensator<'a> {
         )
     }
 
-    /// The real machine's tool point at `commands`, with the identified errors (mm).
+    /// The real machine's tool point at `commands`, with the identified errors, in its state
+    /// ([`Compensator::in_state`]) (mm).
     pub fn actual_point(&self, commands: &Commands) -> [f64; 3] {
-        self.model.tool_point(&commands.0, &self.tool, self.params)
+        self.model
+            .tool_point_in(&commands.0, &self.tool, self.state, self.params)
     }
 
     /// The model whose errors it compensates.
@@ -318,9 +370,9 @@ impl<'a> Compensator<'a> {
     pub fn actual_direction(&self, commands: &Commands) -> Option<[f64; 3]> {
         self.axis.map(|a| {
             let tip = self.actual_point(commands);
-            let back = self
-                .model
-                .tool_point(&commands.0, &self.behind(a), self.params);
+            let back =
+                self.model
+                    .tool_point_in(&commands.0, &self.behind(a), self.state, self.params);
             unit([tip[0] - back[0], tip[1] - back[1], tip[2] - back[2]])
         })
     }
@@ -581,10 +633,14 @@ impl<'a> Compensator<'a> {
         for (i, &k) in self.free.iter().enumerate() {
             u[k] = D::from_re(q.0[k]).derivative(i);
         }
-        let tip = self.model.tool_point(&u, &self.tool, self.params);
+        let tip = self
+            .model
+            .tool_point_in(&u, &self.tool, self.state, self.params);
         let mut rows: Vec<D> = (0..3).map(|c| tip[c] - target[c]).collect();
         if let (Some(a), Some(t)) = (self.axis, target_dir) {
-            let back = self.model.tool_point(&u, &self.behind(a), self.params);
+            let back = self
+                .model
+                .tool_point_in(&u, &self.behind(a), self.state, self.params);
             let d = [tip[0] - back[0], tip[1] - back[1], tip[2] - back[2]];
             let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             rows.extend((0..3).map(|c| (d[c] / len - t[c]) * DIRECTION_LEVER_MM));

@@ -18,6 +18,24 @@
 //! as a control applies them, and [`uncarried`] lists every machine part the tables cannot
 //! express (a field over the axes, a part that grows with time) with the error it leaves.
 //!
+//! **Directions of approach.** An axis with a reversal (`[effects] reversal`, parameter
+//! `reversal.X.b` = B) has two positioning errors at each position: arriving **forward** (its
+//! command increasing) `E↑ = E + B/2`, arriving in **reverse** `E↓ = E − B/2`, so that
+//! `B = E↑ − E↓` and `E`, the value the tables hold for every error, is the mean of both
+//! directions. The tables keep B per position ([`AxisTable::reversal`]) for the axis'
+//! positioning error (EXX for X, ECC for C); the other errors do not depend on the direction.
+//! In ISO 230-2's terms — mean positional deviations `x̄↑`, `x̄↓` of the tool relative to the
+//! workpiece along the axis' command, reversal value `B = x̄↑ − x̄↓` — these are the same
+//! numbers on an axis that moves the tool, and their negatives on one that moves the workpiece
+//! (its slide's error moves the workpiece, so the tool the other way: [`Directional::deviations`]
+//! turns them). [`ErrorTables::directional`] gives the forward and reverse values at any
+//! position and [`Directional::corrections`] what a control adds to the axis' command in each
+//! direction (LinuxCNC's `nominal forward reverse` compensation files, Siemens'
+//! direction-dependent tables); [`ErrorTables::tool_point_in`] is the tool point as a control
+//! applying them moves it. The plain CSV carries both directions; the ISG and Etalon formats
+//! have no direction: they hold the mean and say in their comments that the reversal is not
+//! carried ([`uncarried_in`] sizes what that leaves).
+//!
 //! Formats:
 //! - **ISG CSV** ([`ErrorTables::to_isg_csv`]), the tabular format of ISG-kernel volumetric
 //!   compensation: `//` comments; blocks separated by `#`; each block a header of argument and
@@ -29,6 +47,10 @@
 //! - **Plain CSV** ([`ErrorTables::to_plain_csv`]): one row per value,
 //!   `error,axis,position,position_unit,value,value_unit` (an empty position for constants);
 //!   lengths in µm (`um`, the mm value × 1 000), angles in µrad (`urad`, the rad value × 10⁶).
+//!   With a reversal, two more columns `forward,reverse`: the value on forward and on reverse
+//!   approach, filled on the rows of an error that depends on the direction (the positioning
+//!   error of an axis with a reversal; `value` their mean) and empty on the others (the value
+//!   holds both ways). Files without them are read as before.
 //!
 //! ```
 //! use volver_core::model::Model;
@@ -48,8 +70,10 @@ use crate::model::Model;
 use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
 mod carry;
+mod direction;
 mod read;
 pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
+pub use direction::{Directional, TableFormat, uncarried_in};
 
 /// The most rows of one axis' table (compensation tables have tens to thousands).
 pub const MAX_TABLE_ROWS: usize = 100_000;
@@ -61,8 +85,26 @@ pub struct AxisTable {
     pub axis: Axis,
     /// Positions (file units: mm, or degrees for a rotary axis), increasing.
     pub positions: Vec<f64>,
-    /// Each component error's name and values (mm or rad), one per position.
+    /// Each component error's name and values (mm or rad), one per position: for an error that
+    /// depends on the direction of approach, the mean of both directions.
     pub errors: Vec<(String, Vec<f64>)>,
+    /// With a reversal of the axis, ISO 230-2's reversal value B at each position (mm, or rad
+    /// for a rotary axis) of its positioning error (EXX for X, ECC for C): forward approach
+    /// `value + B/2`, reverse `value − B/2` ([`ErrorTables::directional`]). `None`: no error of
+    /// the axis depends on the direction.
+    pub reversal: Option<Vec<f64>>,
+}
+
+impl AxisTable {
+    /// The name of the axis' positioning error (EXX for X, ECC for C): the one a reversal
+    /// enters.
+    pub fn positioning(&self) -> String {
+        ErrorId::Component {
+            component: self.axis,
+            axis: self.axis,
+        }
+        .to_string()
+    }
 }
 
 /// Every exported error of a machine.
@@ -183,8 +225,13 @@ impl ErrorTables {
             })
             .collect();
         let mut axes = Vec::new();
+        let reversal = crate::compensate::reversal_axes(model);
         for (k, a) in m.axes().iter().enumerate() {
-            let comps = model.modelled_components(k);
+            let mut comps = model.modelled_components(k);
+            let reverses = reversal.contains(&k);
+            if reverses {
+                comps[a.axis.index()] = true;
+            }
             if !comps.iter().any(|&c| c) {
                 continue;
             }
@@ -199,6 +246,7 @@ impl ErrorTables {
                 .filter(|&c| comps[c])
                 .map(|c| (ids[c].to_string(), Vec::with_capacity(positions.len())))
                 .collect();
+            let mut b = Vec::new();
             for &pos in &positions {
                 let mut cmd = reference;
                 cmd.0[k] = a.from_file_units(pos);
@@ -206,11 +254,15 @@ impl ErrorTables {
                 for (slot, c) in (0..6).filter(|&c| comps[c]).enumerate() {
                     errors[slot].1.push(e.component[k][c]);
                 }
+                if reverses {
+                    b.push(direction::reversal_at(model, params, &cmd, k));
+                }
             }
             axes.push(AxisTable {
                 axis: a.axis,
                 positions,
                 errors,
+                reversal: reverses.then_some(b),
             });
         }
         Ok(ErrorTables { constants, axes })
@@ -241,6 +293,15 @@ impl ErrorTables {
                     return None;
                 }
             }
+            match (&a.reversal, &b.reversal) {
+                (None, None) => {}
+                (Some(ra), Some(rb)) if ra.len() == rb.len() => {
+                    for (x, y) in ra.iter().zip(rb) {
+                        d = d.max((x - y).abs());
+                    }
+                }
+                _ => return None,
+            }
             for (ea, eb) in a.errors.iter().zip(&b.errors) {
                 if ea.0 != eb.0 || ea.1.len() != eb.1.len() {
                     return None;
@@ -260,6 +321,7 @@ impl ErrorTables {
              // sign convention: ERRORS (ISO 230-1 deviations), not corrections\n\
              // units: positions mm (linear axes) or degrees (rotary axes); errors mm or rad\n",
         );
+        s.push_str(&self.no_direction_note());
         if !self.constants.is_empty() {
             s.push_str("// location and squareness errors (constant)\n");
             let names: Vec<&str> = self.constants.iter().map(|c| c.0.as_str()).collect();
@@ -300,6 +362,7 @@ impl ErrorTables {
              // units: positions mm (linear axes) or degrees (rotary axes); errors mm or rad\n\
              // Gridpoints rows: position value\n",
         );
+        s.push_str(&self.no_direction_note());
         for (name, v) in &self.constants {
             s.push_str(&format!("[{name}]\nVALUE = {}\n", fmt_value(*v)));
         }
@@ -315,24 +378,38 @@ impl ErrorTables {
         s
     }
 
-    /// The plain CSV text (see the module documentation): µm and µrad.
+    /// The plain CSV text (see the module documentation): µm and µrad; with a reversal, the
+    /// `forward` and `reverse` columns.
     pub fn to_plain_csv(&self) -> String {
-        let mut s = String::from("error,axis,position,position_unit,value,value_unit\n");
+        let directed = self.axes.iter().any(|t| t.reversal.is_some());
+        let mut s = String::from("error,axis,position,position_unit,value,value_unit");
+        s.push_str(if directed { ",forward,reverse\n" } else { "\n" });
+        let empty = if directed { ",," } else { "" };
         for (n, v) in &self.constants {
             // The axis of the error (empty for a name that is not one, which no reader gives).
             let axis = n
                 .parse::<ErrorId>()
                 .map_or(String::new(), |id| id.axis().to_string());
             let (scale, unit, dec) = plain_unit(n);
-            s.push_str(&format!("{n},{axis},,,{:.dec$},{unit}\n", v * scale));
+            s.push_str(&format!("{n},{axis},,,{:.dec$},{unit}{empty}\n", v * scale));
         }
         for t in &self.axes {
             let pu = if t.axis.is_rotary() { "deg" } else { "mm" };
+            let positioning = t.positioning();
             for (n, vals) in &t.errors {
                 let (scale, unit, dec) = plain_unit(n);
-                for (p, v) in t.positions.iter().zip(vals) {
+                let b = t.reversal.as_ref().filter(|_| *n == positioning);
+                for (i, (p, v)) in t.positions.iter().zip(vals).enumerate() {
+                    let both = match b {
+                        Some(b) => format!(
+                            ",{:.dec$},{:.dec$}",
+                            (v + 0.5 * b[i]) * scale,
+                            (v - 0.5 * b[i]) * scale
+                        ),
+                        None => empty.to_string(),
+                    };
                     s.push_str(&format!(
-                        "{n},{},{p:.6},{pu},{:.dec$},{unit}\n",
+                        "{n},{},{p:.6},{pu},{:.dec$},{unit}{both}\n",
                         t.axis,
                         v * scale
                     ));

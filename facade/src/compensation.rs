@@ -61,7 +61,8 @@ pub fn load_results(
 }
 
 /// The tables' expanded uncertainty (k = 2), in the tables' own layout: every value is the
-/// U of the error there. The tables are linear in the parameters (the sine series' phases
+/// U of the error there (of the mean of both directions for an axis' positioning error with a
+/// reversal: the layout has no place for the U of the reversal). The tables are linear in the parameters (the sine series' phases
 /// excepted, linearised over one standard deviation), so each factor column's change of the
 /// tables is its exact contribution.
 pub fn table_uncertainty(
@@ -80,6 +81,9 @@ pub fn table_uncertainty(
         for (_, vals) in &mut t.errors {
             vals.iter_mut().for_each(|v| *v = 0.0);
         }
+        // The U of each error's value (the mean of both directions for one that depends on the
+        // direction of approach); the reversal's own U is not in this layout.
+        t.reversal = None;
     }
     for col in record.data_factor.iter().chain(&record.held_factor) {
         let p: Vec<f64> = params.iter().zip(col).map(|(a, b)| a + b).collect();
@@ -132,6 +136,10 @@ pub struct Carry {
     pub departure_at: usize,
     /// The machine's parts the tables cannot carry, each with the error it leaves.
     pub uncarried: Vec<volver_core::tables::Uncarried>,
+    /// The axes' reversals, which the plain CSV carries (forward and reverse values) and the
+    /// formats without a direction (ISG, Etalon) do not: each with the error their mean
+    /// leaves ([`volver_core::tables::uncarried_in`]).
+    pub without_direction: Vec<volver_core::tables::Uncarried>,
 }
 
 impl Carry {
@@ -155,7 +163,18 @@ impl Carry {
 
     /// One line per significant part: its name, size and where.
     pub fn lines(&self) -> Vec<String> {
-        self.significant()
+        self.describe(self.significant())
+    }
+
+    /// One line per reversal the formats without a direction do not carry (see
+    /// [`Carry::without_direction`]): its name, size and where.
+    pub fn direction_lines(&self) -> Vec<String> {
+        self.describe(self.without_direction.iter().collect())
+    }
+
+    /// One line per part: its name, size and where.
+    fn describe(&self, parts: Vec<&volver_core::tables::Uncarried>) -> Vec<String> {
+        parts
             .into_iter()
             .map(|u| {
                 let when = match u.role {
@@ -189,6 +208,18 @@ pub fn carry(model: &Model, params: &[f64], tables: &ErrorTables, tool: [f64; 3]
     let commands = (0..plan.positions.len())
         .map(|k| crate::uncertainty::Assessment::commands(model, &plan, k))
         .collect();
+    let uncarried = volver_core::tables::uncarried(model, params, &tool, &plan.positions);
+    let isg = volver_core::tables::uncarried_in(
+        volver_core::tables::TableFormat::Isg,
+        model,
+        params,
+        &tool,
+        &plan.positions,
+    );
+    let without_direction = isg
+        .into_iter()
+        .filter(|u| !uncarried.iter().any(|v| v.name == u.name))
+        .collect();
     Ok(Carry {
         axes: model
             .machine()
@@ -199,7 +230,8 @@ pub fn carry(model: &Model, params: &[f64], tables: &ErrorTables, tool: [f64; 3]
         commands,
         departure_mm: departure.0,
         departure_at: departure.1,
-        uncarried: volver_core::tables::uncarried(model, params, &tool, &plan.positions),
+        uncarried,
+        without_direction,
     })
 }
 
@@ -314,56 +346,47 @@ pub struct Compensated {
     pub outside: usize,
     /// With the tool's orientation compensated, what became of its direction.
     pub orientation: Option<OrientationSummary>,
+    /// Points where an axis with a reversal could not reverse although the program goes back
+    /// ([`volver_core::compensate::PathPoint::unsettled`]: it holds its command), not in the
+    /// deviations above.
+    pub unsettled: usize,
+    /// The largest deviation of those points from their targets (mm).
+    pub worst_unsettled_mm: f64,
 }
 
 /// Compensates the point list `text` (read from `label`) with `comp`; each corrected command is
-/// written with `decimals` and checked through the forward model as written.
+/// written with `decimals` and checked through the forward model as written. The points are
+/// visited in the list's order, each a straight move from the one before: with a reversal in
+/// the model, each is compensated in the direction its axes arrive with
+/// ([`volver_core::compensate::Travel`], reversal tolerance `reversal_tolerance_um`; the first
+/// point's directions unknown), and the output gives them (`approach_X` columns: +1, −1, 0).
 pub fn compensate_points(
     comp: &volver_core::compensate::Compensator,
     m: &volver_core::machine::Machine,
     text: &str,
     label: &str,
     decimals: usize,
+    reversal_tolerance_um: f64,
 ) -> Result<Compensated> {
-    use volver_core::compensate::{read_points, written};
+    use volver_core::compensate::{Travel, read_points, written};
+    if !(reversal_tolerance_um.is_finite() && reversal_tolerance_um >= 0.0) {
+        return Err(Error::Request(format!(
+            "--reversal-tolerance-um {reversal_tolerance_um}: a length of zero or more (µm; µrad \
+             on a rotary axis)"
+        )));
+    }
     let pts = read_points(text, label, m)?;
-    let axes = m.axes();
     let oriented = comp.tool_axis().is_some();
-    let mut out = points_header(m, oriented);
+    let mut travel = Travel::new(comp.model(), reversal_tolerance_um);
+    let directed = travel.directed();
+    let mut out = points_header(m, oriented, directed);
     let mut t = Tally::default();
+    let write = |q: &volver_core::machine::Commands| written(m, q, decimals).1;
     for p in &pts {
-        let c = comp
-            .compensate(&p.commands)
+        let pt = travel
+            .next(comp, &p.commands, &write)
             .with_context(|| format!("{label}:{}", p.line))?;
-        let (cells, written) = written(m, &c.commands, decimals);
-        let prog: Vec<String> = axes
-            .iter()
-            .enumerate()
-            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
-            .collect();
-        let wd = comp.deviation_mm(&written, c.target);
-        t.ws = t.ws.max(c.deviation_mm);
-        t.ww = t.ww.max(wd);
-        t.largest = t.largest.max(c.error_mm);
-        let off: String = c
-            .outside_travel
-            .iter()
-            .map(|&k| axes[k].axis.letter())
-            .collect();
-        t.outside += usize::from(!off.is_empty());
-        let extra = match &c.orientation {
-            Some(o) => t.orientation(comp, &written, o),
-            None => String::new(),
-        };
-        out.push_str(&format!(
-            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
-            p.line,
-            p.id.clone().unwrap_or_default(),
-            cells.join(","),
-            prog.join(","),
-            c.error_mm * UM_PER_MM,
-            wd * UM_PER_MM
-        ));
+        out.push_str(&t.row(comp, m, p, &pt, decimals, directed));
     }
     Ok(Compensated {
         text: out,
@@ -379,19 +402,30 @@ pub fn compensate_points(
             near_singularity: t.singular,
             worst_singular_rad: t.dir_singular,
         }),
+        unsettled: t.unsettled,
+        worst_unsettled_mm: t.worst_unsettled,
     })
 }
 
 /// The header of a compensated point list: the corrected commands, the programmed ones, the
-/// error and deviation, and the direction's columns when the orientation is compensated.
-fn points_header(m: &volver_core::machine::Machine, oriented: bool) -> String {
+/// error and deviation, the direction's columns when the orientation is compensated, and each
+/// axis' direction of approach when the model has a reversal (`directed`).
+fn points_header(m: &volver_core::machine::Machine, oriented: bool, directed: bool) -> String {
     let letters: Vec<String> = m
         .axes()
         .iter()
         .map(|x| x.axis.letter().to_string())
         .collect();
+    let approach: String = if directed {
+        m.axes()
+            .iter()
+            .map(|a| format!(",{}", volver_core::approach::column_name(a.axis.letter())))
+            .collect()
+    } else {
+        String::new()
+    };
     format!(
-        "line,id,{},{},error_um,deviation_um,outside_travel{}\n",
+        "line,id,{},{},error_um,deviation_um,outside_travel{}{approach}\n",
         letters.join(","),
         letters
             .iter()
@@ -424,9 +458,71 @@ struct Tally {
     /// Commands near the singularity and the largest deviation left there (rad).
     singular: usize,
     dir_singular: f64,
+    /// Points held by an axis that could not reverse, and their largest deviation (mm).
+    unsettled: usize,
+    worst_unsettled: f64,
 }
 
 impl Tally {
+    /// The output row of point `p` compensated as `pt` (its command written with `decimals`),
+    /// tallied; with the axes' directions of approach when `directed`.
+    fn row(
+        &mut self,
+        comp: &volver_core::compensate::Compensator,
+        m: &volver_core::machine::Machine,
+        p: &volver_core::compensate::ListedPoint,
+        pt: &volver_core::compensate::PathPoint,
+        decimals: usize,
+        directed: bool,
+    ) -> String {
+        let axes = m.axes();
+        let c = &pt.compensated;
+        let state = volver_core::model::PointState {
+            t_s: 0.0,
+            approach: pt.approach,
+        };
+        let comp = &comp.in_state(state);
+        let (cells, written) = volver_core::compensate::written(m, &c.commands, decimals);
+        let prog: Vec<String> = axes
+            .iter()
+            .enumerate()
+            .map(|(k, x)| format!("{}", x.to_file_units(p.commands.0[k])))
+            .collect();
+        let wd = comp.deviation_mm(&written, c.target);
+        if pt.unsettled.is_empty() {
+            self.ws = self.ws.max(c.deviation_mm);
+            self.ww = self.ww.max(wd);
+        } else {
+            self.unsettled += 1;
+            self.worst_unsettled = self.worst_unsettled.max(wd);
+        }
+        self.largest = self.largest.max(c.error_mm);
+        let off: String = c
+            .outside_travel
+            .iter()
+            .map(|&k| axes[k].axis.letter())
+            .collect();
+        self.outside += usize::from(!off.is_empty());
+        let mut extra = match &c.orientation {
+            Some(o) => self.orientation(comp, &written, o),
+            None => String::new(),
+        };
+        if directed {
+            for k in 0..axes.len() {
+                extra.push_str(&format!(",{}", pt.approach.0[k]));
+            }
+        }
+        format!(
+            "{},{},{},{},{:.4},{:.6},{off}{extra}\n",
+            p.line,
+            p.id.clone().unwrap_or_default(),
+            cells.join(","),
+            prog.join(","),
+            c.error_mm * UM_PER_MM,
+            wd * UM_PER_MM
+        )
+    }
+
     /// Tallies a compensated direction `o` (the command as `written`) and gives its cells.
     fn orientation(
         &mut self,

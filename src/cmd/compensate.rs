@@ -119,6 +119,11 @@ pub struct CompensateArgs {
     /// on every axis value, cycles refused).
     #[arg(long, default_value = "linuxcnc")]
     dialect: String,
+    /// With a reversal in the model (each point compensated in the direction its axes arrive
+    /// with): a written command going back by less than this (µm; µrad on a rotary axis) from
+    /// the furthest point its axis reached does not reverse the axis.
+    #[arg(long, default_value_t = volver::core::compensate::REVERSAL_TOLERANCE_UM)]
+    reversal_tolerance_um: f64,
 }
 
 /// The U gate ([`volver::compensation::vouch`]) as the command line applies it: each note
@@ -257,12 +262,15 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
         )?;
         let label = path.display().to_string();
         let text = std::fs::read_to_string(path).with_context(|| format!("reading {label}"))?;
-        let done = compensate_points(&comp, m, &text, &label, usize::from(a.decimals))?;
-        println!(
-            "  {} points from {label}: uncompensated error up to {:.4} µm",
-            done.points,
-            done.max_error_mm * UM_PER_MM
-        );
+        let done = compensate_points(
+            &comp,
+            m,
+            &text,
+            &label,
+            usize::from(a.decimals),
+            a.reversal_tolerance_um,
+        )?;
+        points_summary(&done, &label);
         done
     } else {
         compensate_gcode(&a, &comp, &model, &params, record.as_ref(), tool, axis)?
@@ -297,6 +305,24 @@ pub fn compensate_command(a: CompensateArgs) -> Result<()> {
     Ok(())
 }
 
+/// What the compensation of a point list did, printed.
+fn points_summary(done: &Compensated, label: &str) {
+    println!(
+        "  {} points from {label}: uncompensated error up to {:.4} µm",
+        done.points,
+        done.max_error_mm * UM_PER_MM
+    );
+    if done.unsettled > 0 {
+        println!(
+            "  warning: {} point(s) an axis that overshoots (ISO 230-2 B > 0) reaches going back \
+             by less than |B| from where it turned: it holds its command there, up to {:.3} µm \
+             off (not in the deviations below; see the approach columns)",
+            done.unsettled,
+            done.worst_unsettled_mm * UM_PER_MM
+        );
+    }
+}
+
 /// Prints what is compensated: a warning when the tool point is off the line through the
 /// reflectors, then the machine, the results, the tool and the axes solved for.
 fn announce(a: &CompensateArgs, model: &Model, comp: &Compensator, tool: [f64; 3]) {
@@ -329,6 +355,18 @@ fn announce(a: &CompensateArgs, model: &Model, comp: &Compensator, tool: [f64; 3
         a.results.display(),
         model.spec().name,
     );
+    let reversal: String = volver::core::compensate::reversal_axes(model)
+        .iter()
+        .map(|&k| m.axes()[k].axis.letter())
+        .collect();
+    if !reversal.is_empty() {
+        println!(
+            "  reversal of {reversal}: each point compensated in the direction its axes arrive \
+             with (from the written commands, in the order they run; an axis going back by less \
+             than {} µm (µrad) keeps its direction)",
+            a.reversal_tolerance_um
+        );
+    }
 }
 
 /// Prints what compensation did to the tool's direction and refuses a direction verified
@@ -406,6 +444,7 @@ fn compensate_gcode(
         decimals: usize::from(a.decimals),
         allow_outside_travel: a.allow_outside_travel,
         dialect: setup.dialect,
+        reversal_tolerance_um: a.reversal_tolerance_um,
     };
     let (out, rep) = prog.compensate_with(&tooling, m, &options, &header)?;
     gcode_summary(a, &label, &rep);
@@ -425,6 +464,8 @@ fn compensate_gcode(
                 near_singularity: rep.near_singularity.len(),
                 worst_singular_rad: rep.max_singular_direction_deviation_rad,
             }),
+        unsettled: rep.unsettled_points,
+        worst_unsettled_mm: rep.max_unsettled_deviation_mm,
     })
 }
 
@@ -502,6 +543,24 @@ fn gcode_summary(a: &CompensateArgs, label: &str, rep: &volver::core::gcode::Rep
         rep.points,
         rep.max_error_mm * UM_PER_MM
     );
+    if rep.reversals > 0 || !rep.unsettled_reversals.is_empty() {
+        println!(
+            "  {} reversal(s) of an axis with a reversal value, each compensated from its turning \
+             point on",
+            rep.reversals
+        );
+    }
+    if !rep.unsettled_reversals.is_empty() {
+        println!(
+            "  warning: on lines {} an axis that overshoots (lands beyond its target in the \
+             direction it moves: ISO 230-2 B > 0) goes back by less than |B| from where it \
+             turned: no command reaches those points in one move, so it holds its command there, \
+             up to {:.3} µm off (not in the deviations below), and reverses once the program has \
+             gone back more than |B|",
+            lines_list(&rep.unsettled_reversals),
+            rep.max_unsettled_deviation_mm * UM_PER_MM
+        );
+    }
     if !rep.uncompensated.is_empty() {
         println!(
             "  {} reference or machine-coordinate move(s) kept as written, not compensated (lines {})",
@@ -560,14 +619,14 @@ pub struct TablesArgs {
 
 /// Prints how closely the tables give the model's tool point and every part of the model they
 /// cannot carry with the error it leaves; refuses when one leaves more than
-/// [`volver::compensation::CARRY_TOLERANCE_MM`] unless `force`.
+/// [`volver::compensation::CARRY_TOLERANCE_MM`] unless `force`. Returns what the tables carry.
 fn judge_carry(
     model: &Model,
     params: &[f64],
     tables: &ErrorTables,
     tool: [f64; 3],
     force: bool,
-) -> Result<()> {
+) -> Result<volver::compensation::Carry> {
     let c = volver::compensation::carry(model, params, tables, tool)?;
     println!(
         "  the tables against the model's tool point {} mm over {} commands of the travel: up to \
@@ -579,7 +638,7 @@ fn judge_carry(
     );
     let lines = c.lines();
     if lines.is_empty() {
-        return Ok(());
+        return Ok(c);
     }
     let msg = format!(
         "per-axis tables cannot carry {} part(s) of the model: {}; a control given these tables \
@@ -591,7 +650,63 @@ fn judge_carry(
         bail!("{msg}; --force writes the tables anyway");
     }
     println!("  warning: {msg} (written anyway: --force)");
-    Ok(())
+    Ok(c)
+}
+
+/// Prints which reversals the tables carry: errors.csv has each axis' forward and reverse
+/// values, the ISG and Etalon files (no direction) only their mean, which leaves the error
+/// printed.
+fn direction_note(
+    machine: &volver::core::machine::Machine,
+    tables: &ErrorTables,
+    carry: &volver::compensation::Carry,
+) {
+    let reversals: Vec<String> = tables
+        .axes
+        .iter()
+        .filter_map(|t| {
+            let b = t.reversal.as_ref()?;
+            // ISO 230-2's B: the tool relative to the workpiece along the axis' command.
+            let sign = machine.axis(t.axis).map_or(1.0, |(_, a)| a.side.sign());
+            let (lo, hi) = b
+                .iter()
+                .map(|v| sign * v)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), v| {
+                    (l.min(v), h.max(v))
+                });
+            let (scale, unit) = if t.axis.is_rotary() {
+                (URAD_PER_RAD, "µrad")
+            } else {
+                (UM_PER_MM, "µm")
+            };
+            Some(if (hi - lo) * scale < 5e-4 {
+                format!("{} (ISO 230-2 B = {:.3} {unit})", t.axis, hi * scale)
+            } else {
+                format!(
+                    "{} (ISO 230-2 B from {:.3} to {:.3} {unit})",
+                    t.axis,
+                    lo * scale,
+                    hi * scale
+                )
+            })
+        })
+        .collect();
+    if reversals.is_empty() {
+        return;
+    }
+    println!(
+        "  reversal of {}: errors.csv carries each axis' positioning error on forward and \
+         reverse approach (its forward and reverse columns: errors of the slide, whose \
+         difference is ISO 230-2's B on an axis that moves the tool and its negative on one \
+         that moves the workpiece)",
+        reversals.join(", ")
+    );
+    println!(
+        "  warning: errors-isg.csv and errors-etalon.txt do NOT carry the reversal (the formats \
+         have no direction of approach): their values are the mean of both directions, which \
+         leaves {}",
+        carry.direction_lines().join("; ")
+    );
 }
 
 /// Runs `volver tables`.
@@ -617,7 +732,8 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         vouch(&model, &params, record.as_ref(), tool, a.max_u_um)?,
         a.force,
     )?;
-    judge_carry(&model, &params, &tables, tool, a.force)?;
+    let carry = judge_carry(&model, &params, &tables, tool, a.force)?;
+    direction_note(model.machine(), &tables, &carry);
     let mut paths = write_tables(&tables, &a.out)?;
     if let Some(r) = &record {
         // The formats have no place for U: a companion in errors.csv's layout whose values are

@@ -299,6 +299,7 @@ impl<'a> Reader<'a> {
             comments: Vec::new(),
             steps: Vec::new(),
             note: None,
+            held_moves: Vec::new(),
         };
         if trimmed.starts_with('%') {
             return Ok(block);

@@ -50,6 +50,14 @@
 //! program's own coordinate system, offsets and units (only the positions change, so the
 //! control applies the same offsets), and verifies every written command through the forward
 //! model.
+//!
+//! **Directions.** Each point is compensated in the direction each axis arrives there with,
+//! taken from the written commands the control executes, reference and machine-coordinate
+//! moves included ([`crate::compensate::Travel`] states the rule): an axis with a reversal has
+//! its reversal on the side it comes from. Arcs are cut at the points where an axis of their
+//! plane turns, so that a reversal inside an arc happens at a point of the path. With a
+//! reversal in the model, a point whose compensation depends on whether the control skips an
+//! optional move before it (block delete) is refused.
 
 pub mod codes;
 mod interp;
@@ -158,6 +166,10 @@ pub struct Block {
     pub steps: Vec<Step>,
     /// Why a move of this block is kept uncompensated (`G28`, `G53`).
     pub note: Option<String>,
+    /// The machine positions such an uncompensated move passes through, in order (mm,
+    /// degrees; chain order; `None` for an axis it does not move): `G28`'s intermediate point
+    /// and reference position, `G53`'s end. The directions of approach follow them.
+    pub held_moves: Vec<[Option<f64>; MAX_AXES]>,
 }
 
 impl Block {
@@ -177,6 +189,9 @@ pub struct Program {
     pub file: String,
     /// Its lines.
     pub blocks: Vec<Block>,
+    /// The machine position at the start, where known (mm, degrees; chain order):
+    /// [`Setup::start`].
+    pub start: [Option<f64>; MAX_AXES],
 }
 
 /// What [`Program::compensate_with`] measured.
@@ -214,6 +229,18 @@ pub struct Report {
     pub uncompensated: Vec<usize>,
     /// The tools whose tool points compensated the moves (`None`: the one tool point).
     pub tools: Vec<Option<i64>>,
+    /// How many times an axis with a reversal changed direction (from one side to the other):
+    /// each change compensated at its turning point ([`crate::compensate::Travel`]).
+    pub reversals: usize,
+    /// Lines (1-based) of points where an axis with a reversal went back but could not be
+    /// compensated as reversed (an overshooting axis, ISO 230-2's B > 0, less than |B| behind
+    /// the point it turned at: it holds its command; [`crate::compensate::PathPoint::unsettled`]).
+    /// Their deviations are not in the largest deviations above.
+    pub unsettled_reversals: Vec<usize>,
+    /// How many points those lines hold.
+    pub unsettled_points: usize,
+    /// The largest deviation of those points from their targets (mm): less than the axis' |B|.
+    pub max_unsettled_deviation_mm: f64,
 }
 
 /// The modal state the writer states at the top of its output: absolute, mm, XY plane (the
@@ -260,6 +287,7 @@ impl Program {
         Ok(Program {
             file: file.to_string(),
             blocks,
+            start: setup.start,
         })
     }
 

@@ -5,6 +5,7 @@ use super::Block;
 use super::codes;
 use super::interp::{FeedMode, Owner, Parsed, Reader, refuse};
 use super::offsets::LETTERS;
+use crate::chain::MAX_AXES;
 use crate::error::{Place, Result};
 
 impl Reader<'_> {
@@ -423,6 +424,8 @@ impl Reader<'_> {
         place: &Place,
     ) -> Result<()> {
         let mut words = Vec::new();
+        let mut via = [None; MAX_AXES];
+        let mut home = [None; MAX_AXES];
         for (k, l) in LETTERS.iter().enumerate() {
             let (Some(v), Some(c)) = (p.axes[k], self.chain[k]) else {
                 continue;
@@ -436,13 +439,22 @@ impl Reader<'_> {
                 "{l}{}",
                 self.setup.dialect.decimal_point(number(prog))
             ));
-            self.pos[c] = Some(self.offsets.home[h][k]);
+            via[c] = Some(self.to_machine(k, prog));
+            home[c] = Some(self.offsets.home[h][k]);
         }
         if words.is_empty() {
             for k in 0..6 {
                 if let Some(c) = self.chain[k] {
-                    self.pos[c] = Some(self.offsets.home[h][k]);
+                    home[c] = Some(self.offsets.home[h][k]);
                 }
+            }
+        } else {
+            block.held_moves.push(via);
+        }
+        block.held_moves.push(home);
+        for (c, v) in home.iter().enumerate() {
+            if v.is_some() {
+                self.pos[c] = *v;
             }
         }
         self.compensated = false;
@@ -477,11 +489,14 @@ impl Reader<'_> {
             ));
         }
         self.motion = Some(motion.0);
+        let mut to = [None; MAX_AXES];
         for k in 0..6 {
             if let (Some(v), Some(c)) = (p.axes[k], self.chain[k]) {
                 self.pos[c] = Some(v * if k < 3 { self.scale() } else { 1.0 });
+                to[c] = self.pos[c];
             }
         }
+        block.held_moves.push(to);
         self.compensated = false;
         block
             .kept

@@ -157,13 +157,15 @@ pub(crate) fn arc_points(
         sweep = tau; // a full circle
     }
     let step = 2.0 * (1.0 - (tol / r0).min(1.0)).acos();
-    let n = move_points((sweep / step.max(1e-9)).ceil(), place)?;
     let dir = if clockwise { -1.0 } else { 1.0 };
-    Ok((1..=n)
-        .map(|i| {
-            let t = i as f64 / n as f64;
+    let ts = arc_fractions(a0, dir * sweep, step.max(1e-9), place)?;
+    let n = ts.len();
+    Ok(ts
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| {
             let mut p = lerp(from, to, t);
-            if i < n {
+            if i + 1 < n {
                 let a = a0 + dir * sweep * t;
                 let r = r0 + (r1 - r0) * t;
                 p[k1] = c1 + r * a.cos();
@@ -172,4 +174,79 @@ pub(crate) fn arc_points(
             p
         })
         .collect())
+}
+
+/// The fractions (0, 1] of an arc from angle `a0` turning by `turn` (rad; negative:
+/// clockwise) at which its chords end: every turning point of an axis of its plane (the angles
+/// that are multiples of π/2, where one of the plane's axes reverses) is a chord's end, so that
+/// each chord moves each axis one way only; between them, equal chords of at most `step` (rad).
+fn arc_fractions(a0: f64, turn: f64, step: f64, place: &Place) -> Result<Vec<f64>> {
+    let quarter = std::f64::consts::FRAC_PI_2;
+    let sweep = turn.abs();
+    // The turning points strictly inside the arc (not within 1e-9 of its ends).
+    let mut cuts: Vec<f64> = Vec::new();
+    let first = if turn > 0.0 {
+        (a0 / quarter).floor() + 1.0
+    } else {
+        (a0 / quarter).ceil() - 1.0
+    };
+    let mut m = first;
+    loop {
+        let t = (m * quarter - a0) / turn;
+        if t >= 1.0 - 1e-9 {
+            break;
+        }
+        if t > 1e-9 {
+            cuts.push(t);
+        }
+        m += turn.signum();
+    }
+    cuts.push(1.0);
+    let total: f64 = cuts
+        .iter()
+        .scan(0.0, |prev, &t| {
+            let n = ((t - *prev) * sweep / step).ceil().max(1.0);
+            *prev = t;
+            Some(n)
+        })
+        .sum();
+    move_points(total, place)?;
+    let mut out = Vec::new();
+    let mut prev = 0.0;
+    for t in cuts {
+        let n = ((t - prev) * sweep / step).ceil().max(1.0) as usize;
+        out.extend((1..=n).map(|i| prev + (t - prev) * i as f64 / n as f64));
+        prev = t;
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn arcs_are_cut_at_their_axes_turning_points() {
+        let place = Place::file("t.nc");
+        let q = std::f64::consts::FRAC_PI_2;
+        // From −60° counter-clockwise by 120°: X turns at 0°, half-way.
+        let ts = arc_fractions(-q * 2.0 / 3.0, q * 4.0 / 3.0, 0.3, &place).unwrap();
+        assert!(ts.iter().any(|t| (t - 0.5).abs() < 1e-15), "{ts:?}");
+        assert_eq!(*ts.last().unwrap(), 1.0);
+        // Clockwise from 100° by 200°: turning points at 90°, 0°, −90°.
+        let ts = arc_fractions(q * 10.0 / 9.0, -q * 20.0 / 9.0, 0.1, &place).unwrap();
+        for want in [0.05, 0.5, 0.95] {
+            assert!(
+                ts.iter().any(|t| (t - want).abs() < 1e-12),
+                "{want}: {ts:?}"
+            );
+        }
+        assert!(
+            ts.windows(2)
+                .all(|w| w[1] > w[0] && (w[1] - w[0]) * 3.49 <= 0.1 + 1e-12)
+        );
+        // A turning point at the arc's start is no cut.
+        let ts = arc_fractions(0.0, q, 10.0, &place).unwrap();
+        assert_eq!(ts, [1.0]);
+    }
 }

@@ -3,10 +3,14 @@
 //! forward model as written.
 
 use super::{Block, MAX_DECIMALS, Motion, Program, Report, START_STATE, Step};
-use crate::compensate::{Compensated, Compensator};
+use crate::chain::MAX_AXES;
+use crate::compensate::{
+    Compensated, Compensator, PathPoint, REVERSAL_TOLERANCE_UM, Travel, reversal_axes,
+};
 use crate::error::{Error, Place, Result};
 use crate::iso::Axis;
 use crate::machine::{Commands, Machine};
+use crate::model::PointState;
 use std::collections::BTreeMap;
 
 /// The compensators of a program's tools: each tool's own tool point (its length along the
@@ -45,6 +49,9 @@ pub struct WriteOptions {
     pub allow_outside_travel: bool,
     /// The dialect written: Fanuc-style gets a decimal point on every axis value.
     pub dialect: crate::dialect::Dialect,
+    /// The reversal tolerance (µm on a linear axis, µrad on a rotary one, ≥ 0): a written
+    /// command going back by less does not reverse its axis ([`Travel`] states the rule).
+    pub reversal_tolerance_um: f64,
 }
 
 impl Default for WriteOptions {
@@ -53,6 +60,7 @@ impl Default for WriteOptions {
             decimals: 4,
             allow_outside_travel: false,
             dialect: crate::dialect::Dialect::LinuxCnc,
+            reversal_tolerance_um: REVERSAL_TOLERANCE_UM,
         }
     }
 }
@@ -74,6 +82,12 @@ struct Writer<'p, 'c> {
     order: Vec<usize>,
     out: String,
     report: Report,
+    /// Each axis' direction along the path the control executes.
+    travel: Travel,
+    /// With a reversal in the model, the paths on which the control skipped an optional move
+    /// (block delete) and the line of that move: the next move must be written the same on
+    /// each ([`Writer::merge`]).
+    alternatives: Vec<(Travel, usize)>,
 }
 
 impl Program {
@@ -119,6 +133,18 @@ impl Program {
                 ),
             });
         }
+        let tol = options.reversal_tolerance_um;
+        if !(tol.is_finite() && tol >= 0.0) {
+            return Err(Error::InvalidOption {
+                name: "reversal_tolerance_um",
+                message: format!(
+                    "{tol}: the reversal tolerance must be a length of zero or more (µm; µrad on \
+                     a rotary axis)"
+                ),
+            });
+        }
+        let mut travel = Travel::new(tooling.default.model(), tol);
+        travel.moved_to(&internal(machine, &self.start));
         let mut w = Writer {
             program: self,
             machine,
@@ -127,6 +153,8 @@ impl Program {
             order: conventional_order(machine),
             out: String::new(),
             report: Report::default(),
+            travel,
+            alternatives: Vec::new(),
         };
         let lead = self.lead();
         for b in &self.blocks[..lead] {
@@ -168,6 +196,31 @@ impl Writer<'_, '_> {
     /// One block: its moves' points, the words between them, its kept words on the first line
     /// and its stops on the last.
     fn block(&mut self, b: &Block) -> Result<()> {
+        let moves = !b.held_moves.is_empty() || b.motions().next().is_some();
+        // The paths that skip an optional move: from here as it stands.
+        let skipped = (moves && b.optional && self.travel.directed()).then(|| {
+            let mut v = vec![(self.travel.clone(), b.line)];
+            v.extend(self.alternatives.iter().cloned());
+            v
+        });
+        self.block_lines(b)?;
+        if moves {
+            let mut alternatives = skipped.unwrap_or_default();
+            alternatives.dedup_by(|a, b| a.0 == b.0);
+            self.alternatives = alternatives;
+        }
+        Ok(())
+    }
+
+    /// [`Writer::block`]'s lines.
+    fn block_lines(&mut self, b: &Block) -> Result<()> {
+        for h in &b.held_moves {
+            let to = internal(self.machine, h);
+            self.travel.moved_to(&to);
+            for (t, _) in &mut self.alternatives {
+                t.moved_to(&to);
+            }
+        }
         if b.steps.is_empty() {
             let mut line = b.rewritten("");
             let mut tail = b.after.clone();
@@ -210,22 +263,28 @@ impl Writer<'_, '_> {
         Ok(())
     }
 
-    /// The compensated points of one move, as lines.
+    /// The compensated points of one move, as lines: each point compensated in the directions
+    /// its axes arrive with ([`Travel`]).
     fn motion(&mut self, b: &Block, m: &Motion, lines: &mut Vec<String>) -> Result<()> {
         self.report.moves += 1;
         self.report.arcs += usize::from(m.arc);
         let comp = self.tooling.of(m.tool);
         let place = Place::file(&self.program.file).at_line(b.line);
         let n = m.points.len();
+        let (machine, options) = (self.machine, self.options);
+        let write = |q: &Commands| written(machine, &options, m, q).1;
         for p in &m.points {
             let mut programmed = Commands::default();
             for (k, a) in self.machine.axes().iter().enumerate() {
                 programmed.0[k] = a.from_file_units(p[k]);
             }
-            let c = comp
-                .compensate(&programmed)
+            let pt = self
+                .travel
+                .next(comp, &programmed, &write)
                 .map_err(|e| Error::input(place.clone(), e.to_string()))?;
-            let (texts, written) = self.written(m, &c.commands);
+            self.merge(comp, &programmed, &write, &pt, &place)?;
+            let c = &pt.compensated;
+            let (texts, written) = written(machine, &options, m, &c.commands);
             let mut text = String::from(if m.rapid { "G0" } else { "G1" });
             for &k in &self.order {
                 text.push_str(&format!(
@@ -238,44 +297,95 @@ impl Writer<'_, '_> {
                 // Equal chords: each takes 1/n of the move's time.
                 text.push_str(&format!(" F{}", super::modes::number(f * n as f64)));
             }
-            if let Some(beyond) = self.travel(&c, &place)? {
+            if let Some(beyond) = self.travel_limits(c, &place)? {
                 text.push_str(&format!(" (volver: {beyond})"));
             }
-            self.verify(comp, &c, &written, b.line);
+            let state = PointState {
+                t_s: 0.0,
+                approach: pt.approach,
+            };
+            self.report.reversals += pt.reversed.len();
+            if pt.unsettled.is_empty() {
+                self.verify(&comp.in_state(state), c, &written, b.line);
+            } else {
+                // Held short of its target by the rule (Travel): reported on its own.
+                let rep = &mut self.report;
+                rep.points += 1;
+                rep.unsettled_points += 1;
+                rep.max_error_mm = rep.max_error_mm.max(c.error_mm);
+                rep.max_unsettled_deviation_mm = rep.max_unsettled_deviation_mm.max(c.deviation_mm);
+                if rep.unsettled_reversals.last() != Some(&b.line) {
+                    rep.unsettled_reversals.push(b.line);
+                }
+            }
             lines.push(text);
         }
         Ok(())
     }
 
-    /// The compensated command as written in the move's program coordinates and units, and the
-    /// machine command those texts stand for (internal units).
-    fn written(&self, m: &Motion, commands: &Commands) -> (Vec<String>, Commands) {
-        let mut out = *commands;
-        let texts = self
+    /// Refuses a point whose compensated command depends on whether the control skipped an
+    /// optional move before it: on each path that skipped one, the point is compensated in that
+    /// path's directions and must be written as `pt` is.
+    fn merge(
+        &mut self,
+        comp: &Compensator,
+        programmed: &Commands,
+        write: &dyn Fn(&Commands) -> Commands,
+        pt: &PathPoint,
+        place: &Place,
+    ) -> Result<()> {
+        let letters: Vec<char> = self
             .machine
             .axes()
             .iter()
-            .enumerate()
-            .map(|(k, a)| {
-                let unit = if m.inch && !a.axis.is_rotary() {
-                    25.4
-                } else {
-                    1.0
-                };
-                let decimals = self.options.decimals + usize::from(unit != 1.0);
-                let prog = (a.to_file_units(commands.0[k]) - m.offset[k]) / unit;
-                let t = (self.options.dialect).decimal_point(format!("{:.decimals$}", prog + 0.0));
-                let back: f64 = t.parse().expect("a formatted number parses");
-                out.0[k] = a.from_file_units(back * unit + m.offset[k]);
-                t
-            })
+            .map(|a| a.axis.letter())
             .collect();
-        (texts, out)
+        let reversal = reversal_axes(comp.model());
+        for (t, line) in &mut self.alternatives {
+            let other = t
+                .next(comp, programmed, write)
+                .map_err(|e| Error::input(place.clone(), e.to_string()))?;
+            if other.written == pt.written {
+                continue;
+            }
+            let side = |s: i8| match s {
+                1 => "forward",
+                -1 => "in reverse",
+                _ => "from an unknown side",
+            };
+            let sides: Vec<String> = reversal
+                .iter()
+                .filter(|&&k| other.approach.0[k] != pt.approach.0[k])
+                .map(|&k| {
+                    format!(
+                        "{} arrives {} if the control runs line {line}, {} if it skips it",
+                        letters[k],
+                        side(pt.approach.0[k]),
+                        side(other.approach.0[k])
+                    )
+                })
+                .collect();
+            return Err(Error::input(
+                place.clone(),
+                format!(
+                    "the compensated command here depends on whether the control skips optional \
+                     line {line} (block delete '/'): {}, and its reversal puts the tool elsewhere; \
+                     approach this point from the same side either way (a move before it that \
+                     does not depend on line {line}), or remove the '/'",
+                    if sides.is_empty() {
+                        "the axes arrive from different sides".to_string()
+                    } else {
+                        sides.join("; ")
+                    }
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// Refuses a compensated command beyond an axis' travel, or (when allowed) says by how
     /// much, for a comment on its line.
-    fn travel(&mut self, c: &Compensated, place: &Place) -> Result<Option<String>> {
+    fn travel_limits(&mut self, c: &Compensated, place: &Place) -> Result<Option<String>> {
         if c.outside_travel.is_empty() {
             return Ok(None);
         }
@@ -339,6 +449,46 @@ impl Writer<'_, '_> {
             }
         }
     }
+}
+
+/// The compensated command `commands` as written in move `m`'s program coordinates and units
+/// with `options`' decimals and dialect, and the machine command those texts stand for
+/// (internal units).
+fn written(
+    machine: &Machine,
+    options: &WriteOptions,
+    m: &Motion,
+    commands: &Commands,
+) -> (Vec<String>, Commands) {
+    let mut out = *commands;
+    let texts = machine
+        .axes()
+        .iter()
+        .enumerate()
+        .map(|(k, a)| {
+            let unit = if m.inch && !a.axis.is_rotary() {
+                25.4
+            } else {
+                1.0
+            };
+            let decimals = options.decimals + usize::from(unit != 1.0);
+            let prog = (a.to_file_units(commands.0[k]) - m.offset[k]) / unit;
+            let t = (options.dialect).decimal_point(format!("{:.decimals$}", prog + 0.0));
+            let back: f64 = t.parse().expect("a formatted number parses");
+            out.0[k] = a.from_file_units(back * unit + m.offset[k]);
+            t
+        })
+        .collect();
+    (texts, out)
+}
+
+/// Machine positions in file units (mm, degrees; `None` where unknown) in internal units.
+fn internal(machine: &Machine, p: &[Option<f64>; MAX_AXES]) -> [Option<f64>; MAX_AXES] {
+    let mut out = [None; MAX_AXES];
+    for (k, a) in machine.axes().iter().enumerate() {
+        out[k] = p[k].map(|v| a.from_file_units(v));
+    }
+    out
 }
 
 impl Block {

@@ -3,6 +3,7 @@
 //! tables cannot carry with the error it leaves ([`uncarried`]).
 
 use super::ErrorTables;
+use crate::approach::Approach;
 use crate::error::{Error, Result};
 use crate::iso::ErrorId;
 use crate::kinematics::{PointErrors, tool_in_workpiece};
@@ -45,6 +46,23 @@ impl ErrorTables {
         commands: &Commands,
         tool: &[f64; 3],
     ) -> Result<[f64; 3]> {
+        self.tool_point_in(model, commands, tool, Approach::UNKNOWN)
+    }
+
+    /// [`ErrorTables::tool_point`] with each axis arriving from the side `approach` gives: a
+    /// control applying the forward values to an axis arriving in its positive direction and
+    /// the reverse ones to an axis arriving in its negative direction (the mean where the
+    /// direction is unknown), as [`Model::tool_point_in`] does.
+    ///
+    /// # Errors
+    /// As [`ErrorTables::tool_point`].
+    pub fn tool_point_in(
+        &self,
+        model: &Model,
+        commands: &Commands,
+        tool: &[f64; 3],
+        approach: Approach,
+    ) -> Result<[f64; 3]> {
         let m = model.machine();
         let mut e = PointErrors::<f64>::zero();
         let chain_index = |axis| {
@@ -72,13 +90,17 @@ impl ErrorTables {
                     .map_err(|_| Error::UnknownErrorName { name: name.clone() })?;
                 e.component[k][id.component().index()] = interpolate(&t.positions, values, at);
             }
+            if let Some(b) = &t.reversal {
+                let half = 0.5 * approach.sign(k) * interpolate(&t.positions, b, at);
+                e.component[k][t.axis.index()] += half;
+            }
         }
         Ok(tool_in_workpiece(m, &commands.0, tool, &e))
     }
 }
 
 /// Linear interpolation of `values` over increasing `positions` at `at`, the end values beyond.
-fn interpolate(positions: &[f64], values: &[f64], at: f64) -> f64 {
+pub(super) fn interpolate(positions: &[f64], values: &[f64], at: f64) -> f64 {
     let n = positions.len().min(values.len());
     if n == 0 {
         return 0.0;
@@ -101,7 +123,8 @@ fn interpolate(positions: &[f64], values: &[f64], at: f64) -> f64 {
 pub struct Uncarried {
     /// The part, as [`Model::part_name`] names it (`field X*Z`, `thermal scale of X` …).
     pub name: String,
-    /// What it is ([`Role::Field`] or [`Role::Thermal`]).
+    /// What it is ([`Role::Field`] or [`Role::Thermal`]; [`Role::Geometry`] for a reversal in
+    /// a format without a direction, [`super::uncarried_in`]).
     pub role: Role,
     /// Its parameters' names.
     pub parameters: Vec<String>,
@@ -113,7 +136,9 @@ pub struct Uncarried {
 }
 
 /// Every machine part of `model` at `params` that per-axis tables cannot carry ([`Role::Field`],
-/// [`Role::Thermal`]), each with the largest displacement of the tool point `tool` it makes
+/// [`Role::Thermal`]; a reversal is carried, by the forward and reverse values of
+/// [`ErrorTables`] and the plain CSV: [`super::uncarried_in`] lists it for the formats without
+/// a direction), each with the largest displacement of the tool point `tool` it makes
 /// over `commands`: the tool point with the part against the tool point with its parameters at
 /// zero, every other parameter as it is (computed through [`Model::tool_point`]'s chain, not
 /// estimated from the coefficients). Parts of the measurement ([`Role::Measurement`]) are not

@@ -7,7 +7,7 @@ use crate::error::{Error, Place, Result};
 use crate::iso::{Axis, ErrorId};
 use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
-/// The plain CSV's header.
+/// The plain CSV's header; with a reversal, [`DIRECTION_COLUMNS`] follow.
 const PLAIN_COLUMNS: [&str; 6] = [
     "error",
     "axis",
@@ -16,6 +16,13 @@ const PLAIN_COLUMNS: [&str; 6] = [
     "value",
     "value_unit",
 ];
+
+/// The plain CSV's columns of the values on forward and reverse approach.
+const DIRECTION_COLUMNS: [&str; 2] = ["forward", "reverse"];
+
+/// How far (µm or µrad) a plain CSV's value may be from the mean of its forward and reverse
+/// values: the rounding of their decimals, far below any error.
+const MEAN_TOLERANCE: f64 = 1e-6;
 
 impl ErrorTables {
     /// Reads [`ErrorTables::to_isg_csv`]'s format back; `file` names it in messages.
@@ -39,20 +46,26 @@ impl ErrorTables {
         Ok(reader.out)
     }
 
-    /// Reads [`ErrorTables::to_plain_csv`]'s format back; `file` names it in messages.
+    /// Reads [`ErrorTables::to_plain_csv`]'s format back, with or without its `forward` and
+    /// `reverse` columns; `file` names it in messages.
     pub fn from_plain_csv(text: &str, file: &str) -> Result<ErrorTables> {
         let format = Format {
             units_in_header: false,
             ..Format::default()
         };
         let table = csvio::read(text, file, format)?;
-        let mut table = match table {
-            Some(t) if t.header().names() == PLAIN_COLUMNS => t,
+        let directed = |names: &[String]| {
+            names.len() == 8 && names[..6] == PLAIN_COLUMNS && names[6..] == DIRECTION_COLUMNS
+        };
+        let (mut table, directed) = match table {
+            Some(t) if t.header().names() == PLAIN_COLUMNS => (t, false),
+            Some(t) if directed(t.header().names()) => (t, true),
             other => {
                 let line = other.map_or(1, |t| t.header().line());
                 return Err(Error::input(
                     Place::file(file).at_line(line),
-                    "expected the header error,axis,position,position_unit,value,value_unit",
+                    "expected the header error,axis,position,position_unit,value,value_unit \
+                     (and forward,reverse with a reversal)",
                 ));
             }
         };
@@ -61,7 +74,11 @@ impl ErrorTables {
             axes: Vec::new(),
         };
         for row in table.rows() {
-            plain_row(&mut out, &row?)?;
+            let row = row?;
+            plain_row(&mut out, &row)?;
+            if directed {
+                direction_cells(&mut out, &row)?;
+            }
         }
         Ok(out)
     }
@@ -166,6 +183,7 @@ fn isg_header(cells: &[&str], place: &Place) -> Result<Block> {
             axis,
             positions: Vec::new(),
             errors: names[1..].iter().map(|n| (n.clone(), Vec::new())).collect(),
+            reversal: None,
         }),
         None => {
             first.parse::<ErrorId>().map_err(|e| {
@@ -266,6 +284,7 @@ impl EtalonReader {
                 axis,
                 positions: pos,
                 errors: vec![(id.to_string(), vals)],
+                reversal: None,
             }),
         }
         Ok(())
@@ -292,6 +311,7 @@ fn plain_row(out: &mut ErrorTables, row: &Row) -> Result<()> {
             axis,
             positions: Vec::new(),
             errors: Vec::new(),
+            reversal: None,
         });
     }
     let Some(t) = out.axes.last_mut() else {
@@ -314,6 +334,71 @@ fn plain_row(out: &mut ErrorTables, row: &Row) -> Result<()> {
         ));
     }
     t.errors[n - 1].1.push(v);
+    Ok(())
+}
+
+/// A plain CSV row's `forward` and `reverse` cells (after [`plain_row`] read it into `out`):
+/// empty on an error that does not depend on the direction, filled — on every row of it, with
+/// `value` their mean — on the positioning error (EXX for X, ECC for C) of an axis with a
+/// reversal, whose B (`forward − reverse`) joins the axis' table.
+fn direction_cells(out: &mut ErrorTables, row: &Row) -> Result<()> {
+    let id: ErrorId = row.text(0).parse().map_err(|e| row.error(0, e))?;
+    let filled = (row.filled(6), row.filled(7));
+    let constant = !row.filled(2);
+    let positioning = matches!(id, ErrorId::Component { component, axis } if component == axis);
+    match filled {
+        (false, false) => {
+            let open = out.axes.last().is_some_and(|t| t.reversal.is_some());
+            if positioning && !constant && open {
+                return Err(row.error(
+                    6,
+                    format!("{id}: forward and reverse are given on its other rows: give them on every row"),
+                ));
+            }
+            return Ok(());
+        }
+        (true, true) => {}
+        (f, _) => {
+            return Err(row.error(
+                if f { 7 } else { 6 },
+                "forward and reverse go together: give both or neither",
+            ));
+        }
+    }
+    if constant || !positioning {
+        return Err(row.error(
+            6,
+            format!(
+                "{id} does not depend on the direction of approach: only an axis' positioning \
+                 error (EXX for X, ECC for C) has forward and reverse values; leave them empty"
+            ),
+        ));
+    }
+    let scale = plain_scale(row, id)?;
+    let (fw, rv, v) = (row.number(6, "")?, row.number(7, "")?, row.number(4, "")?);
+    if (v - 0.5 * (fw + rv)).abs() > MEAN_TOLERANCE {
+        return Err(row.error(
+            4,
+            format!(
+                "the value {v} is not the mean of forward {fw} and reverse {rv} ({})",
+                0.5 * (fw + rv)
+            ),
+        ));
+    }
+    let Some(t) = out.axes.last_mut() else {
+        return Ok(()); // plain_row opened the axis' table
+    };
+    let first = t.errors.last().is_some_and(|e| e.1.len() == 1);
+    match (&mut t.reversal, first) {
+        (None, true) => t.reversal = Some(vec![(fw - rv) * scale]),
+        (Some(b), false) => b.push((fw - rv) * scale),
+        _ => {
+            return Err(row.error(
+                6,
+                format!("{id}: forward and reverse are missing on its other rows: give them on every row"),
+            ));
+        }
+    }
     Ok(())
 }
 
@@ -404,6 +489,43 @@ mod tests {
                 .to_string()
                 .starts_with("p.csv:1: expected the header error,axis,")
         );
+    }
+
+    #[test]
+    fn plain_csv_forward_and_reverse_columns() {
+        let h = "error,axis,position,position_unit,value,value_unit,forward,reverse\n";
+        let ok = format!(
+            "{h}B0Z,Z,,,2.5,urad,,\nEXX,X,0,mm,1,um,8.5,-6.5\nEXX,X,700,mm,2,um,9,-5\n\
+             EYX,X,0,mm,1,um,,\nEYX,X,700,mm,2,um,,\n"
+        );
+        let t = ErrorTables::from_plain_csv(&ok, "p.csv").unwrap();
+        let b = t.axes[0].reversal.as_ref().unwrap();
+        assert!((b[0] - 0.015).abs() < 1e-15 && (b[1] - 0.014).abs() < 1e-15);
+        assert!((t.directional(Axis::X, 350.0).unwrap().forward - 0.00875).abs() < 1e-15);
+        let e = |body: &str| {
+            ErrorTables::from_plain_csv(&format!("{h}{body}"), "p.csv")
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            e("EXX,X,0,mm,1,um,8.5,\n"),
+            "p.csv:2: field 'reverse': forward and reverse go together: give both or neither"
+        );
+        assert!(
+            e("EYX,X,0,mm,1,um,2,0\n")
+                .starts_with("p.csv:2: field 'forward': EYX does not depend on the direction")
+        );
+        assert!(
+            e("EXX,X,0,mm,1,um,3,0\n")
+                .starts_with("p.csv:2: field 'value': the value 1 is not the mean of forward 3")
+        );
+        assert!(e("EXX,X,0,mm,1,um,2,0\nEXX,X,5,mm,1,um,,\n").starts_with(
+            "p.csv:3: field 'forward': EXX: forward and reverse are given on its other rows"
+        ));
+        assert!(e("EXX,X,0,mm,1,um,,\nEXX,X,5,mm,1,um,2,0\n").starts_with(
+            "p.csv:3: field 'forward': EXX: forward and reverse are missing on its other rows"
+        ));
+        assert!(e("B0Z,Z,,,1,urad,1,1\n").contains("B0Z does not depend on the direction"));
     }
 
     #[test]
