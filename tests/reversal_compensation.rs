@@ -90,8 +90,9 @@ degree = 1
 reversal = [\"X\"]
 ";
 
-/// The mill model with hand-set errors: the slide B of X `b_um` (µm; X carries the workpiece, so
-/// ISO 230-2's B is −`b_um`), the others some µm.
+/// The mill model with hand-set errors: the slide B of X `b_um` (µm: the reversal of X's own
+/// positioning error EXX; X carries the workpiece, so ISO 230-2's B, the model's
+/// `reversal.X.b`, is −`b_um`), the others some µm.
 fn mill_truth(b_um: f64) -> (Model, Vec<f64>) {
     let machine = Machine::load(Path::new(MILL)).unwrap();
     let model = Model::from_toml_str(machine, MILL_MODEL, "mill-model.toml").unwrap();
@@ -105,7 +106,7 @@ fn mill_truth(b_um: f64) -> (Model, Vec<f64>) {
         ("EXY.c2", -0.007),
         ("EYY.c1", -0.009),
         ("EZZ.c1", 0.005),
-        ("reversal.X.b", b_um * 1e-3),
+        ("reversal.X.b", -b_um * 1e-3),
     ] {
         p[model.param_index(name).unwrap_or_else(|| panic!("{name}"))] = v;
     }
@@ -488,11 +489,14 @@ fn the_plain_csv_carries_forward_minus_reverse_equal_to_b() {
         for (pos, d) in rows {
             // Legendre polynomials of the position normalised over the travel, by hand.
             let u = 2.0 * (a.from_file_units(pos) - a.min) / (a.max - a.min) - 1.0;
+            // The tables hold the axis' own errors: on an axis that carries the workpiece
+            // (X and C here) forward − reverse is −B (ISO 230-2's B, the tool's deviation).
+            let sigma = a.side.sign();
             assert!(
-                (d.reversal() - b(u)).abs() < 1e-11,
-                "{axis} at {pos}: forward − reverse {} against B {}",
+                (d.reversal() - sigma * b(u)).abs() < 1e-11,
+                "{axis} at {pos}: forward − reverse {} against σ·B {}",
                 d.reversal(),
-                b(u)
+                sigma * b(u)
             );
             // The model's own forward and reverse errors there.
             let mut cmd = Commands::default();

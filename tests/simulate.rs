@@ -450,7 +450,8 @@ fn a_ball_screw_error_acts_as_a_commanded_position_shifted_by_it() {
 fn a_reversal_acts_as_a_command_shifted_by_half_of_it_the_way_the_axis_came() {
     // Hand-set: X and C go out, back, out and back; each point's direction written out here
     // (the first point takes its axis' first move's, +), not derived by volver. On the nominal
-    // machine a reversal B of an axis on side s shifts its command by s·(±B/2).
+    // machine ISO 230-2's reversal B (the tool's deviation relative to the workpiece along the
+    // command, forward minus reverse) acts as the command shifted by ±B/2, on either side.
     let m = xcfz();
     let positions = [
         (0.0, 0.0),
@@ -477,12 +478,12 @@ fn a_reversal_acts_as_a_command_shifted_by_half_of_it_the_way_the_axis_came() {
         Effect::parse("reversal=C,-40").unwrap(),
     ];
     let out = sim.run().unwrap();
-    let (kx, x) = m.axis(Axis::X).unwrap();
-    let (kc, c) = m.axis(Axis::C).unwrap();
+    let (kx, _) = m.axis(Axis::X).unwrap();
+    let (kc, _) = m.axis(Axis::C).unwrap();
     for (pt, s) in out.measurements.points.iter().zip(signs) {
         let mut cmd = pt.commands;
-        cmd.0[kx] += x.side.sign() * s * 0.5 * 10e-3;
-        cmd.0[kc] += c.side.sign() * s * 0.5 * -40e-6;
+        cmd.0[kx] += s * 0.5 * 10e-3;
+        cmd.0[kc] += s * 0.5 * -40e-6;
         let want = predict(
             &m,
             &cmd,

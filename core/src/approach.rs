@@ -3,10 +3,12 @@
 //!
 //! An axis that stops short of its command on the side it came from (backlash, a drive's lost
 //! motion) puts the tool where it does not only by its position but by the direction of its
-//! last move: the **reversal value** B of ISO 230-2, the mean deviation approaching in the
-//! positive direction minus the one approaching in the negative. volver's reversal effect
-//! (`[effects] reversal = ["X"]`, parameter `reversal.X.b`) adds `s · B / 2` to the axis'
-//! positioning error, where `s` is the point's [`Approach`] on that axis: +1 when the axis
+//! last move: the **reversal value** B of ISO 230-2, the mean deviation (of the tool relative
+//! to the workpiece, along the command) approaching in the positive direction minus the one
+//! approaching in the negative. volver's reversal effect (`[effects] reversal = ["X"]`,
+//! parameter `reversal.X.b`) moves the tool relative to the workpiece by `s · B / 2` along the
+//! axis (the axis' positioning error by `σ · s · B / 2`, σ = −1 on the workpiece side), where
+//! `s` is the point's [`Approach`] on that axis: +1 when the axis
 //! arrived moving in its positive direction, −1 moving in its negative, 0 when unknown (an
 //! axis that never moves in the test: the mean of both directions is predicted).
 //!

@@ -293,14 +293,14 @@ impl<'a> Compensator<'a> {
     /// let text = "[effects]\nreversal = [\"X\"]";
     /// let model = Model::from_toml_str(volver_core::machine::Machine::default_xcfz(), text, "m.toml").unwrap();
     /// let mut p = model.initial_params();
-    /// p[model.param_index("reversal.X.b").unwrap()] = 0.015; // B = 15 µm
+    /// p[model.param_index("reversal.X.b").unwrap()] = -0.015; // B = −15 µm: lost motion
     /// let comp = Compensator::new(&model, &p, [0.0; 3]).unwrap();
     /// let q = model.machine().commands_from_file_units(&[700.0, 0.0, 300.0]);
     /// let at = |s: i8| PointState { t_s: 0.0, approach: Approach::all(3, s) };
     /// let up = comp.in_state(at(1)).compensate(&q).unwrap().commands.0[0];
     /// let down = comp.in_state(at(-1)).compensate(&q).unwrap().commands.0[0];
-    /// // X carries the workpiece: arriving forward its slide is B/2 further along +x, so the
-    /// // tool B/2 short of its target: the command is B/2 long (and B/2 short in reverse).
+    /// // Arriving forward the tool stops |B|/2 short of its target (relative to the workpiece
+    /// // X carries): the command is |B|/2 long (and |B|/2 short in reverse).
     /// assert!((up - (700.0 + 0.0075)).abs() < 1e-12 && (down - (700.0 - 0.0075)).abs() < 1e-12);
     /// ```
     pub fn in_state(&self, state: PointState) -> Compensator<'a> {

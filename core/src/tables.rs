@@ -19,10 +19,11 @@
 //! express (a field over the axes, a part that grows with time) with the error it leaves.
 //!
 //! **Directions of approach.** An axis with a reversal (`[effects] reversal`, parameter
-//! `reversal.X.b` = B) has two positioning errors at each position: arriving **forward** (its
-//! command increasing) `E↑ = E + B/2`, arriving in **reverse** `E↓ = E − B/2`, so that
-//! `B = E↑ − E↓` and `E`, the value the tables hold for every error, is the mean of both
-//! directions. The tables keep B per position ([`AxisTable::reversal`]) for the axis'
+//! `reversal.X.b` = ISO 230-2's B) has two positioning errors at each position: arriving
+//! **forward** (its command increasing) `E↑ = E + σB/2`, arriving in **reverse**
+//! `E↓ = E − σB/2` (σ = +1 on an axis that moves the tool, −1 on one that moves the
+//! workpiece), so that `σB = E↑ − E↓` and `E`, the value the tables hold for every error, is
+//! the mean of both directions. The tables keep B per position ([`AxisTable::reversal`]) for the axis'
 //! positioning error (EXX for X, ECC for C); the other errors do not depend on the direction.
 //! In ISO 230-2's terms — mean positional deviations `x̄↑`, `x̄↓` of the tool relative to the
 //! workpiece along the axis' command, reversal value `B = x̄↑ − x̄↓` — these are the same

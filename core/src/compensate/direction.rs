@@ -33,8 +33,9 @@
 //! micrometre does not take up its backlash each time; on an axis with lost motion (ISO 230-2's
 //! B < 0: it stops short of its target on the side it comes from) the slide stays in the play,
 //! within the tolerance of its target. With a tolerance of zero every move back of the written
-//! command reverses. (The model's `reversal.X.b` is the slide's B in the machine frame, as its
-//! other errors: ISO 230-2's B on an axis that moves the tool, its negative on one that moves
+//! command reverses. (The model's `reversal.X.b` is ISO 230-2's B, the tool's deviation
+//! relative to the workpiece; the reversal of the axis' own error — the slide's, in the machine
+//! frame, as the tables hold it — is B on an axis that moves the tool and −B on one that moves
 //! the workpiece; see [`crate::tables::Directional`].)
 //!
 //! The written program is a line between consecutive points, so each of its moves has one
@@ -315,6 +316,8 @@ mod tests {
     use super::*;
     use crate::machine::Machine;
 
+    /// The XCFZ machine with a reversal of X whose slide B (the reversal of EXX itself) is
+    /// `b_mm`: X carries the workpiece, so ISO 230-2's B (`reversal.X.b`) is −`b_mm`.
     fn model_with(b_mm: f64) -> (Model, Vec<f64>) {
         let model = Model::from_toml_str(
             Machine::default_xcfz(),
@@ -323,7 +326,7 @@ mod tests {
         )
         .unwrap();
         let mut p = model.initial_params();
-        p[model.param_index("reversal.X.b").unwrap()] = b_mm;
+        p[model.param_index("reversal.X.b").unwrap()] = -b_mm;
         (model, p)
     }
 

@@ -198,8 +198,10 @@ impl Model {
     }
 
     /// The reversal value B (mm, or rad for a rotary axis) of chain axis `k` at `position`
-    /// (internal units): the forward approach's positioning error minus the reverse one's
-    /// (ISO 230-2), `None` when the model has no reversal of that axis. When `grad` is given
+    /// (internal units): ISO 230-2's, the deviation of the tool relative to the workpiece along
+    /// the command on forward approach minus the one on reverse approach (on a workpiece-side
+    /// axis the axis' own positioning error reverses by −B), `None` when the model has no
+    /// reversal of that axis. When `grad` is given
     /// (one value per parameter), ∂B/∂p is written there (zero for every other parameter).
     ///
     /// # Panics
@@ -238,9 +240,11 @@ impl Model {
             jac: jac.as_deref_mut(),
         };
         // The forward approach's value is +B/2.
-        let half = self.reversal_value(k, degree, j, params, &mut at);
+        // The forward approach adds σ·B/2 to the positioning error (σ the axis' side).
+        let sigma = self.machine.axes()[k].side.sign();
+        let half = self.reversal_value(k, degree, j, params, &mut at) * sigma;
         if let Some(g) = jac {
-            g[j..=j + degree].iter_mut().for_each(|v| *v *= 2.0);
+            g[j..=j + degree].iter_mut().for_each(|v| *v *= 2.0 * sigma);
         }
         Some(2.0 * half)
     }
@@ -256,9 +260,12 @@ impl Model {
             .collect()
     }
 
-    /// The value of the reversal of chain axis `k` at a point: `s/2 · B(u)`, `s` the axis'
-    /// direction of approach (+1, −1, 0), `B(u) = Σ_q b_q P_q(û)` with `b_q = params[j + q]`
-    /// and `P_q` the Legendre polynomials of the position normalised over the travel (P₀ = 1).
+    /// The value the reversal of chain axis `k` adds to its positioning error at a point:
+    /// `σ·s/2 · B(u)`, `s` the axis' direction of approach (+1, −1, 0), `B(u) = Σ_q b_q P_q(û)`
+    /// with `b_q = params[j + q]` and `P_q` the Legendre polynomials of the position normalised
+    /// over the travel (P₀ = 1), and `σ` the axis' side ([`crate::chain::Side::sign`]): B is
+    /// ISO 230-2's, a deviation of the tool relative to the workpiece along the command, which
+    /// a workpiece-side axis' error moves the other way (eq. 6: `−x + EXX`).
     #[inline]
     fn reversal_value<S: Real>(
         &self,
@@ -268,7 +275,7 @@ impl Model {
         params: &[f64],
         at: &mut EffectPoint<S>,
     ) -> S {
-        let half = 0.5 * at.approach.sign(k);
+        let half = 0.5 * at.approach.sign(k) * self.machine.axes()[k].side.sign();
         let x = if degree > 0 {
             self.machine.axes()[k].normalise_at(at.commands[k])
         } else {

@@ -198,9 +198,11 @@ pub struct EffectsSpec {
     /// Generic displacement fields, by their variables (`X`, `X*Z`, `C*t`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub field: Vec<String>,
-    /// Axes with a reversal value (ISO 230-2's B: backlash, lost motion), entering their
-    /// positioning error as `s · B / 2` by the point's direction of approach `s`
-    /// ([`crate::approach`]).
+    /// Axes with a reversal value (ISO 230-2's B: backlash, lost motion; the tool's deviation
+    /// relative to the workpiece along the command, forward approach minus reverse), entering
+    /// their positioning error as `σ · s · B / 2` by the point's direction of approach `s`
+    /// ([`crate::approach`]) and the axis' side `σ` (−1 for a workpiece-side axis, whose error
+    /// moves the workpiece).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub reversal: Vec<ReversalSpec>,
 }

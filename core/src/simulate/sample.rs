@@ -112,20 +112,22 @@ impl Simulation {
     }
 
     /// The `reversal` effects: chain axis, component of its positioning error (EXX: 0, ECC: 5),
-    /// B in mm or rad.
+    /// B in mm or rad times the axis' side sign (what the error of the axis itself reverses by).
     fn reversals(&self, machine: &Machine) -> Vec<(usize, usize, f64)> {
         self.effects
             .iter()
             .filter_map(|e| match e {
                 Effect::Reversal { axis, value } => {
-                    let (k, _) = machine.axis(*axis)?;
+                    let (k, ax) = machine.axis(*axis)?;
                     let comp = axis.direction() + if axis.is_rotary() { 3 } else { 0 };
                     let unit = if axis.is_rotary() {
                         RAD_PER_URAD
                     } else {
                         MM_PER_UM
                     };
-                    Some((k, comp, value * unit))
+                    // B is the tool's deviation relative to the workpiece: a workpiece-side
+                    // axis' error moves it the other way.
+                    Some((k, comp, value * unit * ax.side.sign()))
                 }
                 _ => None,
             })

@@ -27,7 +27,7 @@ use crate::units::{UM_PER_MM, URAD_PER_RAD};
 /// use volver_core::chain::Side;
 /// use volver_core::tables::Directional;
 /// let d = Directional { forward: 0.004, reverse: -0.011 };
-/// assert!((d.reversal() - 0.015).abs() < 1e-15); // E↑ − E↓: the model's reversal.X.b
+/// assert!((d.reversal() - 0.015).abs() < 1e-15); // E↑ − E↓: the slide's reversal
 /// assert!((d.mean() + 0.0035).abs() < 1e-15);
 /// // An axis that moves the workpiece: the tool lands 4 µm short arriving forward, 11 µm
 /// // beyond in reverse (ISO 230-2 B = −15 µm); its command takes +4 µm and −11 µm.
@@ -44,8 +44,9 @@ pub struct Directional {
 }
 
 impl Directional {
-    /// The reversal `E↑ − E↓`: the model's `reversal.X.b` (ISO 230-2's B on an axis that moves
-    /// the tool, its negative on one that moves the workpiece).
+    /// The reversal of the axis' own error `E↑ − E↓`: ISO 230-2's B (the model's
+    /// `reversal.X.b`) on an axis that moves the tool, its negative on one that moves the
+    /// workpiece.
     pub fn reversal(&self) -> f64 {
         self.forward - self.reverse
     }
@@ -117,9 +118,9 @@ impl ErrorTables {
     /// let model = Model::from_toml_str(Machine::default_xcfz(), text, "m.toml").unwrap();
     /// let mut p = model.initial_params();
     /// p[model.param_index("EXX.c1").unwrap()] = 0.010;
-    /// // X carries the workpiece: a slide B of +15 µm is a lost motion of 15 µm (ISO 230-2
-    /// // B = −15 µm).
-    /// p[model.param_index("reversal.X.b").unwrap()] = 0.015;
+    /// // X carries the workpiece: a lost motion of 15 µm (ISO 230-2 B = −15 µm, the model's
+    /// // reversal.X.b) is a slide B of +15 µm.
+    /// p[model.param_index("reversal.X.b").unwrap()] = -0.015;
     /// let t = ErrorTables::from_model(&model, &p, 100.0, 10.0).unwrap();
     /// let d = t.directional(Axis::X, 700.0).unwrap();
     /// assert!((d.reversal() - 0.015).abs() < 1e-15);
