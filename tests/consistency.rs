@@ -15,7 +15,13 @@
 //!   the tables' positions, less exactly the parts tables cannot carry (1e-9 mm); the plain CSV
 //!   written and read back gives the same; [`uncarried`] names exactly those parts.
 //! - **uncertainty** (release only): the linearised U of the tool point against Monte Carlo's
-//!   on test 4 of the XCFZ machine, within 15 % on average over the grid.
+//!   on test 4 of the XCFZ machine, within 15 % on average over the grid; a reversal's B at
+//!   mid-travel, linearised against Monte Carlo, within 25 %.
+//! - **directions of approach** (a reversal): the Jacobian, the compensation and the tables'
+//!   cells are taken with each axis arriving from a random side ([`PointState`]); the tables'
+//!   tool point uses the forward or reverse value, and the formats without a direction (ISG,
+//!   Etalon) name exactly the reversals beside the parts no table carries. The report's panel
+//!   and the diagnosis have their own tests (tests/report.rs, tests/reversal_diagnosis.rs).
 //!
 //! Every field of [`EffectsSpec`] must appear in a case: the coverage check destructures it
 //! without `..`, so a new effect does not compile here until it is added to the matrix, and the
@@ -24,7 +30,7 @@
 use volver::core::approach::Approach;
 use volver::core::machine::{Commands, Machine, Observes, StationSpec};
 use volver::core::model::{DEFAULT_MODEL_TOML, EffectsSpec, Model, PointState, Role};
-use volver::core::tables::{ErrorTables, uncarried};
+use volver::core::tables::{ErrorTables, TableFormat, uncarried, uncarried_in};
 
 mod common;
 use common::Rng;
@@ -350,15 +356,18 @@ fn predict_is_the_compensations_forward_model_for_every_kind() {
         let tool = volver::compensation::reflector_centroid(model);
         let comp = volver::compensation::compensator(model, &p, tool, None, None).unwrap();
         let mut worst: f64 = 0.0;
-        for c in commands_of(model, &mut rng, 3) {
+        for (q, c) in commands_of(model, &mut rng, 3).into_iter().enumerate() {
             let mut inner = c;
             for (k, ax) in model.machine().axes().iter().enumerate() {
                 // Away from the ends, so the compensated command stays on the travel.
                 inner.0[k] = ax.min + 0.1 * (ax.max - ax.min) + 0.8 * (c.0[k] - ax.min);
             }
-            let out = comp.compensate(&inner).unwrap();
+            // Each axis arriving from a random side (the first command from none): the
+            // compensation in a state, and predict in the same state.
+            let state = state_of(model, &mut rng, q > 0);
+            let out = comp.in_state(state).compensate(&inner).unwrap();
             let nominal = comp.nominal_point(&inner);
-            let predicted = model.tool_point(&out.commands.0, &tool, &p);
+            let predicted = model.tool_point_in(&out.commands.0, &tool, state, &p);
             worst = worst.max(distance(predicted, nominal));
             assert!(
                 distance(predicted, nominal) < 1e-9,
@@ -411,8 +420,13 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
                 let row = ((rng.next() + 1.0) * 0.5 * (t.positions.len() - 1) as f64).round();
                 c.0[k] = model.machine().axes()[k].from_file_units(t.positions[row as usize]);
             }
-            let from_tables = tables.tool_point(model, &c, &tool).unwrap();
-            let expected = model.tool_point(&c.0, &tool, &carried);
+            // Each axis arriving from a random side: the forward or reverse value of an axis
+            // with a reversal (the plain CSV carries both).
+            let state = state_of(model, &mut rng, true);
+            let from_tables = tables
+                .tool_point_in(model, &c, &tool, state.approach)
+                .unwrap();
+            let expected = model.tool_point_in(&c.0, &tool, state, &carried);
             worst = worst.max(distance(from_tables, expected));
             assert!(
                 distance(from_tables, expected) < 1e-9,
@@ -421,7 +435,9 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
                 distance(from_tables, expected)
             );
             // The plain CSV's resolution: 1e-12 rad (µrad to 6 decimals) on levers of ~2 m.
-            let reread = back.tool_point(model, &c, &tool).unwrap();
+            let reread = back
+                .tool_point_in(model, &c, &tool, state.approach)
+                .unwrap();
             assert!(
                 distance(reread, from_tables) < 1e-8,
                 "{}: the plain CSV read back moves the tool point by {:.3e} mm",
@@ -441,6 +457,18 @@ fn tables_carry_the_tool_point_and_name_what_they_cannot() {
             "{}: the parts tables cannot carry",
             case.name
         );
+        // The formats without a direction (ISG, Etalon) cannot carry a reversal either.
+        let isg: Vec<String> = uncarried_in(TableFormat::Isg, model, &p, &tool, &grid)
+            .into_iter()
+            .map(|u| u.name)
+            .filter(|n| !names.contains(&n.as_str()))
+            .collect();
+        let reversals: Vec<String> = model
+            .reversal_axes()
+            .iter()
+            .map(|(k, _)| format!("reversal of {}", model.machine().axes()[*k].axis))
+            .collect();
+        assert_eq!(isg, reversals, "{}: what ISG cannot carry", case.name);
         for u in &parts {
             assert!(
                 u.largest_mm > 1e-6,
