@@ -59,10 +59,7 @@ pub const REVERSAL_TOLERANCE_UM: f64 = 1.0;
 /// The chain positions of the axes `model` gives a reversal (`[effects] reversal`): those whose
 /// direction of approach moves the tool point.
 pub fn reversal_axes(model: &Model) -> Vec<usize> {
-    let m = model.machine();
-    let mut out: Vec<usize> = (model.spec().effects.reversal.iter())
-        .filter_map(|r| m.axis_named(r.axis()).map(|(k, _)| k))
-        .collect();
+    let mut out: Vec<usize> = model.reversal_axes().into_iter().map(|(k, _)| k).collect();
     out.sort_unstable();
     out
 }

@@ -190,22 +190,12 @@ impl ErrorTables {
     }
 }
 
-/// The reversal value B (mm or rad) of chain axis `k`'s positioning error at `commands`:
-/// its error on forward approach less the one on reverse approach.
+/// The reversal of chain axis `k`'s own positioning error at `commands` (mm or rad): its error
+/// on forward approach less the one on reverse approach, `σ·B` ([`Model::reversal_at`]'s ISO
+/// 230-2 B times the axis' side sign).
 pub(super) fn reversal_at(model: &Model, params: &[f64], commands: &Commands, k: usize) -> f64 {
-    let c = model.machine().axes()[k].axis.index();
-    let side = |s: i8| {
-        let mut a = Approach::UNKNOWN;
-        a.0[k] = s;
-        let state = PointState {
-            t_s: 0.0,
-            approach: a,
-        };
-        model
-            .errors_in(&commands.0, usize::MAX, state, params)
-            .component[k][c]
-    };
-    side(1) - side(-1)
+    let sigma = model.machine().axes()[k].side.sign();
+    sigma * model.reversal_at(k, commands.0[k], params, None).unwrap_or(0.0)
 }
 
 /// [`uncarried`] for tables written in `format`: the parts no per-axis table carries, and for a
