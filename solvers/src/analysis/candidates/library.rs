@@ -561,6 +561,36 @@ mod tests {
         assert!(positions.windows(2).all(|w| w[0] < w[1]), "{positions:?}");
     }
 
+    /// A reversal is offered for the axes some points reached from each side: in test 4's own
+    /// order X only moves forward (no `reversal:X`), C and Z turn back; shuffled, all three.
+    /// The library itself (what `identify --add` takes) has all three either way.
+    #[test]
+    fn a_reversal_is_offered_only_for_an_axis_reached_from_both_sides() {
+        use crate::analysis::observability::nominal_data;
+        let model = Model::default_xcfz();
+        let plan = volver_core::plan::Plan::preset(model.machine(), "test4").expect("a preset");
+        let reversals = |data: &MeasurementSet| -> Vec<String> {
+            offered(&model, data)
+                .into_iter()
+                .filter(|c| c.id.starts_with("reversal:"))
+                .map(|c| c.id)
+                .collect()
+        };
+        let own = nominal_data(&model, &plan);
+        assert_eq!(reversals(&own), ["reversal:C", "reversal:Z"]);
+        let shuffled = nominal_data(&model, &plan.shuffled(7));
+        assert_eq!(
+            reversals(&shuffled),
+            ["reversal:X", "reversal:C", "reversal:Z"]
+        );
+        let all = ids(&model);
+        assert!(
+            ["reversal:X", "reversal:C", "reversal:Z"]
+                .iter()
+                .all(|id| all.contains(&id.to_string()))
+        );
+    }
+
     /// Four variables (X, C, Z and t): four fields alone and six pairs, in chain order.
     #[test]
     fn the_fields_are_every_variable_and_every_pair() {
