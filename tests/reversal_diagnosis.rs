@@ -177,25 +177,27 @@ fn without_a_reversal_none_is_found() {
     assert!(d.finding().is_none() && d.done(), "{}", d.verdict);
 }
 
+/// The paper's model with reversals of X and C, as TOML.
+fn toml_with_reversals() -> String {
+    format!(
+        "{}\n[effects]\nreversal = [\"X\", \"C\"]\n",
+        include_str!("../core/data/xcfz-paper-model.toml")
+    )
+}
+
 /// Test 4 without its repeated turn (C 0–330°) in its own order: X only moves forward, C
 /// reaches 0° only after turning back and every other angle moving forward, Z likewise. With
 /// reversals hidden on X and C, a model with reversals is told that the data cannot separate
 /// them from the positioning errors; the diagnosis offers no `reversal:X` (X never arrives in
 /// reverse) and shows no split of X, and C's split is not called significant (no position is
-/// reached from both sides).
+/// reached from both sides); with X stated forward at every point, `identify` says why the
+/// gauge holds X's reversal.
 #[test]
 fn a_one_sided_plan_is_reported_unable_to_separate_the_reversals() {
     let m = Machine::default_xcfz();
     let plan = Plan::parse_grid(&m, "X=0:1400:200,C=0:330:30,Z=0:600:150").unwrap();
     let data = simulate(plan, 6, &[("X", 16.0), ("C", 20.0)]);
-    let spec = ErrorModelSpec::from_toml_str(
-        &format!(
-            "{}\n[effects]\nreversal = [\"X\", \"C\"]\n",
-            include_str!("../core/data/xcfz-paper-model.toml")
-        ),
-        "m.toml",
-    )
-    .unwrap();
+    let spec = ErrorModelSpec::from_toml_str(&toml_with_reversals(), "m.toml").unwrap();
     let with_reversals = Model::new(m.clone(), spec).unwrap();
     let findings = observe(&with_reversals, &data, &with_reversals.initial_params());
     let one_sided: Vec<&str> = findings
@@ -213,6 +215,37 @@ fn a_one_sided_plan_is_reported_unable_to_separate_the_reversals() {
     assert!(d.directions.iter().all(|x| x.axis != "X"));
     let c = d.directions.iter().find(|x| x.axis == "C").unwrap();
     assert!(c.positions_both == 0 && !c.significant, "{}", c.text());
+    // The same data stating that X arrived forward everywhere (an approach_X column of +1, no
+    // point left unknown): X's reversal is then exactly a constant offset, and `identify` names
+    // it among the combinations the gauge holds, with the reason.
+    let dir = std::env::temp_dir().join(format!("volver-one-sided-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut forward = data.clone();
+    for p in &mut forward.points {
+        p.approach.0[0] = 1;
+    }
+    let (csv, model_file) = (dir.join("forward.csv"), dir.join("model.toml"));
+    std::fs::write(&csv, forward.to_csv_string(&m)).unwrap();
+    std::fs::write(&model_file, toml_with_reversals()).unwrap();
+    let out = volver(&[
+        "identify",
+        "--data",
+        csv.to_str().unwrap(),
+        "--model",
+        model_file.to_str().unwrap(),
+        "--no-history",
+    ]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("held: reversal.X — the data approach X from one side only"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
     // `layout --plan` says the same of the plan itself, whatever the model.
     let out = volver(&["layout", "--plan", "X=0:1400:200,C=0:330:30,Z=0:600:150"]);
     let text = String::from_utf8(out.stdout).unwrap();
