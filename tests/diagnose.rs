@@ -109,8 +109,19 @@ fn repeated_points_estimate_the_noise_error() {
     let out = run(plan, t, TrackerNoise::PAPER, vec![]);
     let problem = Problem::new(&out.truth.model, &out.measurements).unwrap();
     let (est, pairs) = repeat_noise(&problem).unwrap();
-    // 216 positions × 2 reflectors, plus the C = 0/360 repeats within each pass.
-    assert!(pairs >= 432, "{pairs} pairs");
+    // Each point and its reading in the second pass are repeats when every axis arrived from the
+    // same side both times: all but the first pass' points at X's first position (X, the
+    // slowest axis, had not moved yet: direction unknown; in the second pass it arrives there
+    // moving back). C = 0° and 360° are reached from opposite sides of C (0° after the turn
+    // back): not repeats.
+    let pts = &out.measurements.points;
+    let n = pts.len() / 2;
+    let same_sides = (0..n)
+        .filter(|&i| pts[i].approach == pts[i + n].approach)
+        .count();
+    assert_eq!(pairs, same_sides);
+    // Six positions of X (0, 300 … 1200, 1400).
+    assert_eq!(pairs, n - n / 6, "{pairs} pairs of {n} points");
     let ratio = est.emm_um / out.record.noise_error.emm_um;
     println!(
         "repeat estimate {} µm vs noise error {} µm",
@@ -125,7 +136,7 @@ fn repeated_points_estimate_the_noise_error() {
 #[test]
 fn candidates_that_cannot_be_scored_are_reported() {
     use volver::core::model::Model;
-    use volver::solvers::candidates::{library, rank, verdict};
+    use volver::solvers::candidates::{offered, rank, verdict};
     let model = Model::default_xcfz();
     let m = model.machine();
     let plan = Plan::parse_grid(m, "X=0:1400:350,C=0:330:30,Z=0:600:150").unwrap();
@@ -134,9 +145,10 @@ fn candidates_that_cannot_be_scored_are_reported() {
     let nan = vec![f64::NAN; model.n_params()];
     let tolerance = volver::solvers::identifiability::RANK_TOLERANCE;
     let ranked = rank(&problem, &nan, tolerance, None);
+    // Every candidate the data can identify at all (not X's reversal: X only moves forward).
     assert_eq!(
         ranked.len(),
-        library(&model).len(),
+        offered(&model, &data).len(),
         "every candidate listed"
     );
     assert!(ranked.iter().all(|s| s.failed.is_some()));

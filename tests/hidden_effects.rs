@@ -259,8 +259,17 @@ fn volver_diagnose_ranks_the_hidden_effect_first_in_json() {
     assert!(c[0]["delta_bic"].as_f64().unwrap() < -10.0);
     assert_eq!(v["outliers"].as_array().unwrap().len(), 5);
     assert!(v["outliers"][0]["line"].as_u64().unwrap() >= 2);
-    // The repeated C = 0/360 points estimate the noise.
-    assert!(v["noise_estimate_um"].as_f64().unwrap() > 0.0);
+    // Test 4's C = 0° and 360° points are reached from opposite sides of C (0° after the turn
+    // back): not repeats, but the two sides of C, which show no reversal (none is hidden).
+    assert!(v["noise_estimate_um"].is_null() && v["repeat_pairs"].is_null());
+    let c_split = v["directions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|d| d["axis"] == "C")
+        .unwrap();
+    assert_eq!(c_split["positions_both"], 1, "{c_split}");
+    assert_eq!(c_split["significant"], false, "{c_split}");
     // The harmonic shows in C's periodogram at order 2 (machine frame).
     let c_lines = v["periodograms"]
         .as_array()

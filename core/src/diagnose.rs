@@ -1,5 +1,6 @@
 //! Where a model fails: its residuals broken down by axis position, reflector, station, time
-//! and tracker distance, periodograms against an axis, the largest outliers, the noise estimated
+//! and tracker distance, split by each axis' direction of approach ([`by_direction`]: a
+//! reversal the model lacks), periodograms against an axis, the largest outliers, the noise estimated
 //! from repeated points, what the noise specification leaves at a set of points
 //! ([`noise_level`], each point by its station's noise) and the noise each station's residuals
 //! show against its own ([`station_noises`]). The first part of the diagnosis loop; candidates
@@ -35,6 +36,9 @@ use crate::noise::TrackerNoise;
 use crate::problem::{Problem, norm};
 use crate::units::UM_PER_MM;
 use std::f64::consts::PI;
+
+mod direction;
+pub use direction::{Coverage, DirectionSplit, MIN_SIDE_POINTS, SideMean, by_direction, coverage};
 
 /// Residuals of the points that fall in one bin.
 #[derive(Clone, Debug, PartialEq)]
@@ -407,8 +411,8 @@ pub fn largest(residuals: &[[f64; 3]], k: usize) -> Vec<(usize, f64)> {
 }
 
 /// The noise estimated from repeated points (same commands and reflector measured twice or
-/// more, e.g. C = 0° and C = 360° in the paper's meshes): EMM and EMax of `(m₁ − m₂)/√2` over
-/// consecutive repeats, and the number of pairs. `None` without repeats.
+/// more with every axis arriving from the same side, [`repeat_pairs`]): EMM and EMax of
+/// `(m₁ − m₂)/√2` over consecutive repeats, and the number of pairs. `None` without repeats.
 ///
 /// For normal noise the difference of two readings divided by √2 has the noise's own
 /// distribution, so this estimates the noise error without knowing the truth. Drift between the
@@ -425,12 +429,17 @@ pub fn repeat_noise(problem: &Problem) -> Option<(ErrorStats, usize)> {
     (!diffs.is_empty()).then(|| (ErrorStats::of_modules(diffs.iter().copied()), diffs.len()))
 }
 
-/// The pairs of points measured at the same pose with the same reflector (rotary positions a
-/// full turn apart are the same pose), each point with the next repeat of it.
+/// The pairs of repeated points, each point with the next repeat of it: measured at the same
+/// pose with the same reflector and station (rotary positions a full turn apart are the same
+/// pose) **and with every axis arriving from the same side** ([`crate::measure::repeat_key`]).
+/// Two readings of one pose reached from opposite sides of an axis differ by its reversal
+/// besides the noise (the C = 0° and C = 360° points of test 4, the first reached after the
+/// table turned back, the second moving forward): they are not repeats, and the residuals'
+/// split by direction of approach ([`by_direction`]) is where such a difference shows.
 pub fn repeat_pairs(problem: &Problem) -> Vec<(usize, usize)> {
     let machine = problem.model().machine();
     let pts = &problem.data().points;
-    let key = |i: usize| crate::measure::pose_key(machine, &pts[i]);
+    let key = |i: usize| crate::measure::repeat_key(machine, &pts[i]);
     let mut order: Vec<usize> = (0..pts.len()).collect();
     order.sort_by_key(|&i| (key(i), i));
     order

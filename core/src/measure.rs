@@ -78,25 +78,44 @@ pub struct Measurement {
 
 /// A key equal for two measurements of one pose from one station: the commands rounded to 1e-6
 /// (mm, rad) with rotary positions a full turn apart taken as one (C = 0° and 360°), the
-/// reflector and the station (the same pose seen from two stations is not a repeat).
+/// reflector and the station (the same pose seen from two stations is not a repeat). It says
+/// nothing of the direction each axis arrived from: [`repeat_key`] does.
 pub fn pose_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
     let mut k: Vec<i64> = machine
         .axes()
         .iter()
         .enumerate()
-        .map(|(j, ax)| {
-            let mut u = p.commands.0[j];
-            if ax.axis.is_rotary() {
-                u = u.rem_euclid(std::f64::consts::TAU);
-                if (u - std::f64::consts::TAU).abs() < 1e-9 {
-                    u = 0.0;
-                }
-            }
-            (u * 1e6).round() as i64
-        })
+        .map(|(j, ax)| position_key(ax, p.commands.0[j]))
         .collect();
     k.push(p.reflector as i64);
     k.push(p.station_index as i64);
+    k
+}
+
+/// A key equal for two positions `u` of axis `ax` (internal units: mm, rad) that are one
+/// position: rounded to 1e-6, a rotary axis' taken modulo a turn (C = 0° and 360° are one).
+pub fn position_key(ax: &crate::machine::MachineAxis, u: f64) -> i64 {
+    let mut u = u;
+    if ax.axis.is_rotary() {
+        u = u.rem_euclid(std::f64::consts::TAU);
+        if (u - std::f64::consts::TAU).abs() < 1e-9 {
+            u = 0.0;
+        }
+    }
+    (u * 1e6).round() as i64
+}
+
+/// A key equal for two measurements that are **repeats**: one pose ([`pose_key`]) reached with
+/// every axis arriving from the same side ([`Measurement::approach`]: +1, −1, or 0 for an axis
+/// that had not moved yet). Two readings of one pose reached from opposite sides of an axis
+/// differ by that axis' reversal (ISO 230-2's B, [`crate::approach`]) besides the noise, so
+/// they are not repeats: in test 4's own order C = 360° arrives moving + and C = 0° (after the
+/// turn back) moving −, and on a machine whose table has backlash their difference is its
+/// reversal, not the tracker's noise.
+pub fn repeat_key(machine: &Machine, p: &Measurement) -> Vec<i64> {
+    let mut k = pose_key(machine, p);
+    let n = machine.axes().len().min(MAX_AXES);
+    k.extend(p.approach.0[..n].iter().map(|&s| i64::from(s)));
     k
 }
 

@@ -7,6 +7,7 @@
 //! |---|---|
 //! | a translation error over its axis' travel (EXX, EYC …), a location error (X0C …), a reflector offset, a periodic positioning error's amplitude | [`MAX_TRANSLATION_MM`] = 1 mm |
 //! | a rotation error over its axis' travel (EAX, ECC …), a squareness or location tilt (B0Z, A0C …) | [`MAX_ANGLE_RAD`] = 1 mrad (1 mm per metre) |
+//! | a reversal value B (`reversal.X.b`, ISO 230-2: a few µm to tens of µm on a linear axis, a few to tens of µrad on a rotary table; the norm of a reversal function's coefficients) | [`MAX_TRANSLATION_MM`] = 1 mm on a linear axis, [`MAX_ANGLE_RAD`] = 1 mrad on a rotary one |
 //! | a thermal drift | 1 mm/h |
 //! | a range scale | 1 000 ppm |
 //! | a scale growing with time | [`MAX_SCALE_GROWTH_PPM_PER_H`] = 100 ppm/h (steel at 9 K/h) |
@@ -309,4 +310,37 @@ fn implausible_tracker_moves(model: &Model, params: &[f64], start: &[f64]) -> Ve
         });
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ErrorModelSpec;
+
+    /// A reversal is judged as a translation on a linear axis and as an angle on a rotary one:
+    /// 40 µm of backlash on X and 60 µrad on C pass; 1.5 mm on X (a value in the wrong unit)
+    /// and 2 mrad on C do not.
+    #[test]
+    fn a_reversal_is_judged_by_its_axis_kind() {
+        let spec = ErrorModelSpec::from_toml_str("[effects]\nreversal = [\"X\", \"C\"]", "m.toml")
+            .expect("a spec");
+        let model = Model::new(crate::machine::Machine::default_xcfz(), spec).expect("a model");
+        let (x, c) = (
+            model.param_index("reversal.X.b").expect("X's"),
+            model.param_index("reversal.C.b").expect("C's"),
+        );
+        let mut p = model.initial_params();
+        (p[x], p[c]) = (0.040, 60e-6);
+        assert!(check(&model, &p, &Context::default()).is_empty());
+        (p[x], p[c]) = (1.5, 2e-3);
+        let found = check(&model, &p, &Context::default());
+        let names: Vec<String> = found.iter().map(|f| f.to_string()).collect();
+        assert_eq!(
+            names,
+            [
+                "reversal.C reaches 2000 µrad (plausible: up to 1000 µrad)",
+                "reversal.X reaches 1500 µm (plausible: up to 1000 µm)"
+            ]
+        );
+    }
 }

@@ -269,6 +269,7 @@ fn print_diagnosis(d: &Diagnosis) {
     if d.noise.as_ref().is_some_and(|n| !n.above.is_empty()) {
         println!("  (* the misfit there exceeds the tracker's noise)");
     }
+    print_directions(d);
     let worst: Vec<String> = d
         .outliers
         .iter()
@@ -285,6 +286,27 @@ fn print_diagnosis(d: &Diagnosis) {
         println!("  {}: {}", p.axis, cells.join("  "));
     }
     print_candidates(d);
+}
+
+/// The residuals split by each axis' direction of approach (axes reached from both sides).
+fn print_directions(d: &Diagnosis) {
+    if d.directions.is_empty() {
+        return;
+    }
+    println!(
+        "  by direction of approach (the positioning error each side's points show beyond the \
+         model; forward − reverse at the same position is the reversal they show):"
+    );
+    for x in &d.directions {
+        println!("    {}{}", x.text(), if x.significant { " *" } else { "" });
+    }
+    if d.directions.iter().any(|x| x.significant) {
+        println!(
+            "    (* more than {} standard errors: the residuals depend on the direction of \
+             approach — a reversal the model lacks)",
+            volver::diagnosis::DIRECTION_Z
+        );
+    }
 }
 
 /// The fit against the noise: the tracker's specification, repeated points, or neither.

@@ -280,6 +280,27 @@ fn print_outcome(outcome: &Outcome, out: Option<&std::path::Path>) {
 }
 
 /// The run's counts, what the data do not determine, implausible sizes and what was written.
+/// Each reversal among the combinations the data leave open whose axis no position reached
+/// from both sides separates from its positioning error, with why: `held: reversal.X.b — the
+/// data approach X from one side only`.
+fn print_held_reversals(outcome: &Outcome) {
+    use volver::solvers::observability::Kind;
+    for f in &outcome.observability {
+        let Some(axis) = f.axis.filter(|_| f.kind == Kind::OneSided) else {
+            continue;
+        };
+        let prefix = format!("reversal.{axis}.");
+        let open = outcome
+            .unidentified
+            .iter()
+            .any(|u| u.parameters.iter().any(|s| s.name.starts_with(&prefix)));
+        if open {
+            let why = f.what.split(" (").next().unwrap_or(&f.what);
+            println!("    held: reversal.{axis} — {why}");
+        }
+    }
+}
+
 fn print_verdict(outcome: &Outcome, out: Option<&std::path::Path>) {
     let id = &outcome.id;
     let weak = &outcome.unidentified;
@@ -324,6 +345,7 @@ fn print_verdict(outcome: &Outcome, out: Option<&std::path::Path>) {
                 u.relative_curvature
             );
         }
+        print_held_reversals(outcome);
     }
     if held > 0 || outcome.with_priors {
         println!("  gauge: {}", outcome.rule);

@@ -62,11 +62,27 @@ pub fn run(a: LayoutArgs) -> Result<()> {
             &data,
             &model.initial_params(),
         ));
+        print_reversals(&model, &data);
         if a.redundant {
             print_redundant(&model, &data)?;
         }
     }
     Ok(())
+}
+
+/// What the plan's measuring order lets a fit say of each axis' reversal, whatever the model.
+fn print_reversals(model: &Model, data: &volver::core::measure::MeasurementSet) {
+    let lines = volver::solvers::observability::reversal_lines(model.machine(), data);
+    if lines.is_empty() {
+        return;
+    }
+    println!(
+        "\nReversals (ISO 230-2's B, backlash) this plan's order can measure: only positions \
+         reached from both sides separate an axis' reversal from its positioning error"
+    );
+    for (words, _) in &lines {
+        println!("  - {words}");
+    }
 }
 
 /// The parameters to hold for an identifiable model, and the `[fixed]` table.

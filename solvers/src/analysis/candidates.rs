@@ -39,6 +39,7 @@
 //! | `range-offset` | each station's range offset, the dead path (`[tracker] range_offset`) |
 //! | `station-drift` | each station's position drifting with time (`[effects] station_drift`; machines with `[[station]]` tables) |
 //! | `ball-screw:X:700` | a periodic positioning error of X with period 700 mm (travel/2 … travel/8 are tried) |
+//! | `reversal:X` | a reversal value of X, ISO 230-2's B (backlash: ±B/2 on its positioning error by the direction of approach; `[effects] reversal`); offered only when some points arrived at X from each side ([`offered`]) |
 //! | `thermal-scale:X` | the scale of linear axis X growing with time: EXX += α·x·t (`[effects] thermal_scale`; needs `t_s`) |
 //! | `tracker-drift` | the tracker's small rotations drifting with time (`[effects] tracker_drift`) |
 //! | `location-drift:C` | the line of rotary axis C drifting with time: X0C, Y0C += v·t (`[effects] location_drift`) |
@@ -52,7 +53,7 @@ mod scoring;
 mod sizes;
 mod verdict;
 
-pub use library::{SCREW_PERIODS, library};
+pub use library::{SCREW_PERIODS, library, offered};
 pub use scoring::{carry_over, rank};
 pub use verdict::{EMM_GAIN, axis_of, lowers, recommended, sharing, um, variables, verdict};
 

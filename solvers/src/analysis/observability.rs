@@ -1,7 +1,9 @@
 //! What a layout (machine, tracker mount, reflectors, error model and plan) can and cannot
 //! measure, in words a metrologist acts on: axes whose motion the tracker cannot see, errors
-//! that need more positions than the plan has, pairs of parameters that are the same motion on
-//! this layout, and combinations the data cannot identify — each with what would fix it.
+//! that need more positions than the plan has, reversals (ISO 230-2's B) the measuring order
+//! cannot separate from the positioning error (no position reached from both sides), pairs of
+//! parameters that are the same motion on this layout, and combinations the data cannot
+//! identify — each with what would fix it.
 //!
 //! It needs no measurement: [`nominal_data`] turns a plan into the points a perfect machine
 //! would give, and the design (the Jacobian at the model's start) decides the rest. `volver
@@ -30,6 +32,9 @@ use volver_core::model::Model;
 use volver_core::plan::Plan;
 use volver_core::problem::{Problem, Residuals};
 
+mod reversal;
+pub use reversal::reversal_lines;
+
 /// Correlation above which two parameters are called interchangeable.
 pub const INTERCHANGEABLE: f64 = 0.99;
 
@@ -45,6 +50,9 @@ pub enum Kind {
     Interchangeable,
     /// A combination of parameters the data cannot identify.
     Unidentified,
+    /// An axis whose reversal the data cannot separate from its positioning error: no position
+    /// of it is reached from both sides ([`reversal_lines`]).
+    OneSided,
 }
 
 /// One statement about the layout.
@@ -131,8 +139,8 @@ fn basis_words(kind: BasisKind, degree: usize) -> String {
 }
 
 /// The findings for `model` on `data` at `params` (the start of a fit, or the model's start
-/// for a plan): unseen axes, too few positions, interchangeable pairs, unidentified
-/// combinations, in that order.
+/// for a plan): unseen axes, too few positions, reversals the measuring order cannot separate
+/// from the positioning error, interchangeable pairs, unidentified combinations, in that order.
 pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Finding> {
     let Ok(problem) = Problem::new(model, data) else {
         return Vec::new();
@@ -140,6 +148,7 @@ pub fn observe(model: &Model, data: &MeasurementSet, params: &[f64]) -> Vec<Find
     let col = column_norms(&problem, params);
     let (unseen, mut out) = unseen_axes(model, &col);
     out.extend(too_few_positions(model, data, &unseen));
+    out.extend(reversal::findings(model, data));
     // The design: interchangeable pairs and unidentified combinations.
     let task = Task::new(problem);
     let Some(a) = analyse(&task, params, 1e-10, INTERCHANGEABLE) else {

@@ -9,7 +9,10 @@ use super::Candidate;
 use volver_core::basis::BasisKind;
 use volver_core::iso::ErrorId;
 use volver_core::machine::{Machine, MachineAxis};
-use volver_core::model::{BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, OneOrMany};
+use volver_core::measure::MeasurementSet;
+use volver_core::model::{
+    BallScrewSpec, ErrorModelSpec, ErrorTermSpec, Model, OneOrMany, ReversalSpec,
+};
 use volver_core::units::UM_PER_MM;
 
 /// Periodic positioning errors are tried with periods travel/2 … travel/SCREW_PERIODS.
@@ -79,13 +82,14 @@ enum Family {
 }
 
 /// The families, in the order the library lists them (the ranking breaks ties by it).
-const FAMILIES: [Family; 12] = [
+const FAMILIES: [Family; 13] = [
     Family::Each(missing_errors),
     Family::Each(raised_errors),
     Family::Switch("thermal-drift"),
     Family::Each(reflector_offsets),
     Family::Switch("range-scale"),
     Family::Each(ball_screws),
+    Family::Each(reversals),
     Family::Each(axis_drifts),
     Family::Switch("range-offset"),
     Family::Switch("station-drift"),
@@ -113,6 +117,27 @@ pub fn library(model: &Model) -> Vec<Candidate> {
         }
     }
     out
+}
+
+/// The candidates of the library that `data` can identify at all: the library less the
+/// reversal of an axis no point arrived at from each side (`reversal:X` when every point of X
+/// arrived forward, or in reverse, or before X moved: a reversal is then a constant offset of
+/// X's positioning error, which the model's constants and the tracker's pose absorb; see
+/// [`volver_core::diagnose::coverage`]). `volver identify --add` takes any candidate of
+/// [`library`].
+pub fn offered(model: &Model, data: &MeasurementSet) -> Vec<Candidate> {
+    let machine = model.machine();
+    library(model)
+        .into_iter()
+        .filter(|c| {
+            let Some(letter) = c.id.strip_prefix("reversal:") else {
+                return true;
+            };
+            machine.axis_named(letter).is_some_and(|(k, _)| {
+                volver_core::diagnose::coverage(machine, &data.points, k).both_sides()
+            })
+        })
+        .collect()
 }
 
 /// A candidate `id` whose spec is the model's with `edit` applied.
@@ -268,6 +293,27 @@ fn ball_screws(model: &Model, out: &mut Vec<Candidate>) {
                 |s| s.effects.ball_screw.push(screw),
             ));
         }
+    }
+}
+
+/// `reversal:X`: a reversal value of each axis the model gives none (ISO 230-2's B: backlash,
+/// lost motion; `[effects] reversal`), linear and rotary alike.
+fn reversals(model: &Model, out: &mut Vec<Candidate>) {
+    let have = &model.spec().effects.reversal;
+    for ax in model.machine().axes() {
+        let letter = ax.axis.to_string();
+        if have.iter().any(|r| r.axis() == letter) {
+            continue;
+        }
+        out.push(extension(
+            model,
+            format!("reversal:{letter}"),
+            format!(
+                "a reversal of {letter} (backlash, lost motion: ISO 230-2's B, ±B/2 on its \
+                 positioning error by the direction of approach)"
+            ),
+            |s| s.effects.reversal.push(ReversalSpec::Axis(letter.clone())),
+        ));
     }
 }
 
@@ -503,6 +549,7 @@ mod tests {
             "reflector-offset:",
             "range-scale",
             "ball-screw:",
+            "reversal:",
             "thermal-scale:",
             "range-offset",
             "tracker-drift",
@@ -512,6 +559,36 @@ mod tests {
         let positions: Vec<Option<usize>> = order.iter().map(|p| first(p)).collect();
         assert!(positions.iter().all(Option::is_some), "{positions:?}");
         assert!(positions.windows(2).all(|w| w[0] < w[1]), "{positions:?}");
+    }
+
+    /// A reversal is offered for the axes some points reached from each side: in test 4's own
+    /// order X only moves forward (no `reversal:X`), C and Z turn back; shuffled, all three.
+    /// The library itself (what `identify --add` takes) has all three either way.
+    #[test]
+    fn a_reversal_is_offered_only_for_an_axis_reached_from_both_sides() {
+        use crate::analysis::observability::nominal_data;
+        let model = Model::default_xcfz();
+        let plan = volver_core::plan::Plan::preset(model.machine(), "test4").expect("a preset");
+        let reversals = |data: &MeasurementSet| -> Vec<String> {
+            offered(&model, data)
+                .into_iter()
+                .filter(|c| c.id.starts_with("reversal:"))
+                .map(|c| c.id)
+                .collect()
+        };
+        let own = nominal_data(&model, &plan);
+        assert_eq!(reversals(&own), ["reversal:C", "reversal:Z"]);
+        let shuffled = nominal_data(&model, &plan.shuffled(7));
+        assert_eq!(
+            reversals(&shuffled),
+            ["reversal:X", "reversal:C", "reversal:Z"]
+        );
+        let all = ids(&model);
+        assert!(
+            ["reversal:X", "reversal:C", "reversal:Z"]
+                .iter()
+                .all(|id| all.contains(&id.to_string()))
+        );
     }
 
     /// Four variables (X, C, Z and t): four fields alone and six pairs, in chain order.

@@ -3,7 +3,7 @@
 
 use super::novelty::{self, Expressible};
 use super::sizes::{Sizing, plausible};
-use super::{Candidate, Score, library};
+use super::{Candidate, Score, offered};
 use crate::Task;
 use crate::engines::coordinates::{Reduced, reduced_normal_under};
 use faer::Side;
@@ -13,7 +13,7 @@ use volver_core::noise::TrackerNoise;
 use volver_core::problem::{Problem, Residuals};
 use volver_core::units::UM_PER_MM;
 
-/// Scores every candidate of the library at the solution `params` of `problem`'s model and
+/// Scores every candidate of the library the data can identify ([`offered`]) at the solution `params` of `problem`'s model and
 /// ranks them by ΔBIC. `tolerance` is the rank tolerance (as the engine's). With the noise of
 /// every station — its own `[[station]]` table's, else the tracker's `noise` — the residuals
 /// are whitened by it (each point and direction weighed by its station's noise: angular noise
@@ -38,7 +38,7 @@ pub fn rank(
     let Some((p0, rank0)) = gauss_newton_steps(&base.task(), params, tolerance, &[None]) else {
         // Nothing can be compared with a current model whose own step fails: every candidate
         // is listed with the reason, none dropped.
-        return library(model)
+        return offered(model, problem.data())
             .into_iter()
             .map(|c| {
                 let why = "the current model's Gauss-Newton step is singular or not finite, so \
@@ -52,7 +52,7 @@ pub fn rank(
     // The residuals' variance per coordinate in the scoring's units: the prior's scale.
     let variance = rss0 / (m - rank0 as f64).max(1.0);
     let expressible = Expressible::new(problem, params, tolerance);
-    let scores: Vec<Score> = library(model)
+    let scores: Vec<Score> = offered(model, problem.data())
         .into_iter()
         .map(|c| {
             let (id, description) = (c.id.clone(), c.description.clone());
@@ -395,6 +395,7 @@ fn sort_and_merge(mut scores: Vec<Score>) -> Vec<Score> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::candidates::library;
     use crate::analysis::observability::nominal_data;
     use volver_core::iso::ErrorId;
     use volver_core::plan::Plan;

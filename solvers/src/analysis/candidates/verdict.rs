@@ -182,8 +182,10 @@ fn verdict_scored(ranked: &[Score], emm_um: f64) -> String {
                 um(emm_um)
             );
         }
+        // The best is named with the EMM it would bring only when it lowers it: a verdict never
+        // promises to raise the EMM.
         None => match ranked.first() {
-            Some(s) if s.seen() && s.delta_bic < 0.0 => format!(
+            Some(s) if s.seen() && s.delta_bic < 0.0 && lowers(s, emm_um) => format!(
                 "no candidate has strong evidence; the best, {} (ΔBIC {:.1}), would bring the \
                  EMM from {} to about {} µm",
                 s.id,
@@ -354,6 +356,13 @@ mod tests {
             Some("ball-screw:X:700")
         );
         assert!(recommended(&cases[2], emm).is_none());
+        // Weak evidence for an addition that would not lower the EMM: no promise of an EMM.
+        let weak_raising = scored("raise:EZC", -4.0, emm + 0.03);
+        let v = verdict(&[weak_raising], emm);
+        assert!(
+            !v.contains("would bring") && v.starts_with("no candidate of the library lowers"),
+            "{v}"
+        );
     }
 
     /// A field is shown with the physical candidates over its variables, and only those.
