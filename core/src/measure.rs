@@ -38,7 +38,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 mod read;
-pub(crate) use read::{axis_columns, read_commands};
+pub(crate) use read::{approach_columns, axis_columns, read_commands};
 
 /// What one measurement observed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]

@@ -83,12 +83,13 @@ impl std::str::FromStr for Criterion {
 
 /// The candidates' information, ready for designs.
 pub struct Space {
-    /// The candidates' whitened rows in the free coordinates (`per` per candidate point, in
-    /// `candidates.steps()` order: from each station 3, or 1 where it measures ranges alone).
+    /// The candidates' whitened rows in the free coordinates (`per` per candidate, in
+    /// `candidates.steps()` order: from each station and each measurement of the candidate's
+    /// group 3, or 1 where the station measures ranges alone).
     a: Mat<f64>,
-    /// Rows per candidate: 3 per station of the machine, 1 per station of ranges alone (a
-    /// range's information has rank one: the two other rows would be zero, a third of the
-    /// work of every iteration on a layout of ranges).
+    /// Rows per candidate: 3 per station of the machine and measurement of the group, 1 per
+    /// station of ranges alone (a range's information has rank one: the two other rows would
+    /// be zero, a third of the work of every iteration on a layout of ranges).
     per: usize,
     /// `Q` of the I-criterion (nf × nf).
     q: Mat<f64>,
@@ -130,6 +131,25 @@ impl Space {
         tool: [f64; 3],
         grid: &[Commands],
     ) -> Option<Space> {
+        Space::grouped(model, (candidates, 1), noise, tool, grid)
+    }
+
+    /// [`Space::new`] for candidates of `group` consecutive steps of `candidates` each, measured
+    /// together: a bidirectional plan's pair (the same reflector at the same pose approached
+    /// from below, then from above, [`volver_core::plan::sides`]), whose information is the sum
+    /// of both, the reversal's columns included. `None` as [`Space::new`], or when the steps
+    /// do not divide into groups.
+    pub fn grouped(
+        model: &Model,
+        (candidates, group): (&Plan, usize),
+        noise: &TrackerNoise,
+        tool: [f64; 3],
+        grid: &[Commands],
+    ) -> Option<Space> {
+        let steps = candidates.n_points();
+        if group == 0 || steps % group != 0 {
+            return None;
+        }
         let p0 = model.initial_params();
         let data = crate::analysis::observability::nominal_data(model, candidates);
         let problem = Problem::new(model, &data).ok()?;
@@ -137,7 +157,7 @@ impl Space {
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
         let (n, nf, rows_total) = (p0.len(), ns.n_free(), problem.n_points());
         let stations = model.machine().stations().len();
-        let m = rows_total / stations;
+        let m = steps / group;
         let basis = ns.basis();
         // Each measurement's whitened Jacobian rows (n columns): three, or for a scalar
         // residual (a range) the one row that carries its information.
@@ -152,23 +172,28 @@ impl Space {
         // (a scalar measurement's row first, then zeros).
         let widths: Vec<usize> = (0..stations)
             .map(|s| {
-                if (0..m).all(|i| rows[s * m + i].len() == n) {
+                if (0..steps).all(|i| rows[s * steps + i].len() == n) {
                     1
                 } else {
                     3
                 }
             })
             .collect();
-        let per: usize = widths.iter().sum();
-        let place: Vec<(usize, usize)> = widths
+        // A candidate's rows: from each station, each measurement of its group, each row.
+        let place: Vec<(usize, usize, usize)> = widths
             .iter()
             .enumerate()
-            .flat_map(|(s, &w)| (0..w).map(move |k| (s, k)))
+            .flat_map(|(s, &w)| (0..group).flat_map(move |g| (0..w).map(move |k| (s, g, k))))
             .collect();
-        // Candidate-major: candidate i's rows from station s are measurement s·m + i's.
+        let per = place.len();
+        // Candidate-major: candidate i's rows from station s are measurements s·steps +
+        // i·group + g's.
         let j = Mat::from_fn(per * m, n, |r, c| {
-            let (i, (s, k)) = (r / per, place[r % per]);
-            rows[s * m + i].get(k * n + c).copied().unwrap_or(0.0)
+            let (i, (s, g, k)) = (r / per, place[r % per]);
+            rows[s * steps + i * group + g]
+                .get(k * n + c)
+                .copied()
+                .unwrap_or(0.0)
         });
         let a = crate::engines::kernels::product(j.as_ref(), basis);
         let tool_grid = crate::analysis::uncertainty::ToolGrid {
