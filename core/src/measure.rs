@@ -127,6 +127,8 @@ pub(crate) fn refuse_copies(points: &[Measurement], file: &str) -> Result<()> {
         k.extend(p.measured.iter().map(|v| v.to_bits()));
         k.push(p.reflector as u64);
         k.push(p.station_index as u64);
+        // Readings stated to come from different sides (`approach_<AXIS>`) are not copies.
+        k.extend(p.approach.0.iter().map(|&s| s as u64));
         k
     };
     let mut order: Vec<usize> = (0..points.len()).collect();

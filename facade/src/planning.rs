@@ -507,22 +507,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let machine = model.machine();
     let candidates = checked_candidates(machine, request)?;
     let grid = crate::shared::default_grid(machine, 5)?;
-    // A bidirectional plan's candidates are pairs: each point approached from each side.
-    let weighed = match &request.bidirectional {
-        Some(overrun) => pairs(machine, &candidates, overrun)?,
-        None => candidates.clone(),
-    };
-    let group = weighed.n_points() / candidates.n_points().max(1);
-    let space = Space::grouped(
-        model,
-        (&weighed, group),
-        &request.noise,
-        request.tool,
-        &grid.positions,
-    )
-    .ok_or_else(|| {
-        Error::Singular("the candidates' Jacobians are not finite at the nominal machine".into())
-    })?;
+    let (weighed, space) = design_space(model, &candidates, request, &grid.positions)?;
     let (reference, design) = reference_and_design(&space, request, &candidates)?;
     let visits_of_reference = request.repeats + 2;
     let (sequence, _) = order::sequence(
@@ -583,17 +568,39 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             efficiency,
             time_s: t0.elapsed().as_secs_f64(),
             bidirectional: bidirectional.map(|b| BothSides { designed, ..b }),
-            reversal_axes: model
-                .spec()
-                .effects
-                .reversal
-                .iter()
-                .map(|r| r.axis().to_string())
-                .collect(),
+            reversal_axes: reversal_axes(model),
         },
         plan: reindex(planned, machine, plan_model.machine()),
         model: plan_model,
     })
+}
+
+/// The axes `model` gives a reversal value (`[effects] reversal`).
+fn reversal_axes(model: &Model) -> Vec<String> {
+    let reversal = &model.spec().effects.reversal;
+    reversal.iter().map(|r| r.axis().to_string()).collect()
+}
+
+/// The candidates the design weighs (a bidirectional plan's in pairs: each point approached
+/// from each side, [`pairs`]) and their information.
+fn design_space(
+    model: &Model,
+    candidates: &Plan,
+    request: &Request,
+    grid: &[Commands],
+) -> Result<(Plan, Space)> {
+    let weighed = match &request.bidirectional {
+        Some(overrun) => pairs(model.machine(), candidates, overrun)?,
+        None => candidates.clone(),
+    };
+    let group = weighed.n_points() / candidates.n_points().max(1);
+    let space = Space::grouped(model, (&weighed, group), &request.noise, request.tool, grid)
+        .ok_or_else(|| {
+            Error::Singular(
+                "the candidates' Jacobians are not finite at the nominal machine".into(),
+            )
+        })?;
+    Ok((weighed, space))
 }
 
 /// Every step of `candidates` twice, from below then from above on every axis that moves

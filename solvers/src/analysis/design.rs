@@ -168,33 +168,7 @@ impl Space {
         if rows.iter().flatten().any(|v| !v.is_finite()) {
             return None;
         }
-        // A station whose every measurement is a scalar has one row per candidate, else three
-        // (a scalar measurement's row first, then zeros).
-        let widths: Vec<usize> = (0..stations)
-            .map(|s| {
-                if (0..steps).all(|i| rows[s * steps + i].len() == n) {
-                    1
-                } else {
-                    3
-                }
-            })
-            .collect();
-        // A candidate's rows: from each station, each measurement of its group, each row.
-        let place: Vec<(usize, usize, usize)> = widths
-            .iter()
-            .enumerate()
-            .flat_map(|(s, &w)| (0..group).flat_map(move |g| (0..w).map(move |k| (s, g, k))))
-            .collect();
-        let per = place.len();
-        // Candidate-major: candidate i's rows from station s are measurements s·steps +
-        // i·group + g's.
-        let j = Mat::from_fn(per * m, n, |r, c| {
-            let (i, (s, g, k)) = (r / per, place[r % per]);
-            rows[s * steps + i * group + g]
-                .get(k * n + c)
-                .copied()
-                .unwrap_or(0.0)
-        });
+        let (j, per) = stacked(&rows, n, (stations, steps, group));
         let a = crate::engines::kernels::product(j.as_ref(), basis);
         let tool_grid = crate::analysis::uncertainty::ToolGrid {
             commands: grid.to_vec(),
@@ -424,6 +398,43 @@ impl Space {
         }
         Some((equivalence, done))
     }
+}
+
+/// The candidates' rows stacked candidate-major (`rows`: each measurement's whitened rows, `n`
+/// columns, station-major: `stations` × `steps`), each candidate `group` consecutive steps,
+/// and the rows per candidate. A station whose every measurement is a scalar gives one row per
+/// measurement, else three (a scalar measurement's row first, then zeros).
+fn stacked(
+    rows: &[Vec<f64>],
+    n: usize,
+    (stations, steps, group): (usize, usize, usize),
+) -> (Mat<f64>, usize) {
+    let m = steps / group;
+    let widths: Vec<usize> = (0..stations)
+        .map(|s| {
+            if (0..steps).all(|i| rows[s * steps + i].len() == n) {
+                1
+            } else {
+                3
+            }
+        })
+        .collect();
+    // A candidate's rows: from each station, each measurement of its group, each row.
+    let place: Vec<(usize, usize, usize)> = widths
+        .iter()
+        .enumerate()
+        .flat_map(|(s, &w)| (0..group).flat_map(move |g| (0..w).map(move |k| (s, g, k))))
+        .collect();
+    let per = place.len();
+    // Candidate i's rows from station s are measurements s·steps + i·group + g's.
+    let j = Mat::from_fn(per * m, n, |r, c| {
+        let (i, (s, g, k)) = (r / per, place[r % per]);
+        rows[s * steps + i * group + g]
+            .get(k * n + c)
+            .copied()
+            .unwrap_or(0.0)
+    });
+    (j, per)
 }
 
 /// Measurement `i`'s whitened Jacobian rows at `p0` (row-major, `n` columns each): its three

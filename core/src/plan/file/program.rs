@@ -373,7 +373,10 @@ fn header(
             clearance.join(" ")
         ),
     ];
-    lines.extend(approach_note(plan, machine, options));
+    if let Some(note) = approach_note(plan, machine, options) {
+        lines.push(note);
+        lines.push(APPROACH_RULES.to_string());
+    }
     lines.push(wait_note(options, steps.len(), machine.stations().len()));
     for l in lines {
         out.push_str(&d.comment(&l));
@@ -403,13 +406,16 @@ fn approach_note(plan: &Plan, machine: &Machine, options: &ProgramOptions) -> Op
     Some(format!(
         "approach: the plan states from which side each axis arrives; before each measurement \
          such an axis goes to its position minus or plus the overrun ({}), then arrives moving \
-         in the stated direction at feed F{} (G91 G1 incremental, then G90): the other axes at \
-         the clearance, each clearance axis alone, never a rapid beyond a position away from \
-         the clearance",
+         in the stated direction at feed F{}",
         axes.join(", "),
         options.dialect.value(options.approach_feed)
     ))
 }
+
+/// The header's line on how the approach moves are written and kept safe.
+const APPROACH_RULES: &str = "approach moves: G91 G1 incremental, then G90; the other axes at \
+     the clearance, each clearance axis alone; no rapid takes a clearance axis beyond a position \
+     away from the clearance";
 
 /// The header's line on the waits of a program of `measurements` measured from `stations`.
 fn wait_note(options: &ProgramOptions, measurements: usize, stations: usize) -> String {
