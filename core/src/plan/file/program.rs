@@ -240,7 +240,7 @@ fn check_approaches(plan: &Plan, machine: &Machine, overrun: &Overrun) -> Result
 }
 
 /// The measuring program of `plan` on `machine` (G-code in the options' dialect, the machine's
-/// axis words in mm and degrees as machine coordinates, `G53` on every move, whatever work
+/// axis words in mm and degrees as machine coordinates, `G53` on every rapid, whatever work
 /// offset is in force).
 ///
 /// - It starts with `%` (and `O0001` for Fanuc), a header naming the plan (`title`), its size,
@@ -252,6 +252,20 @@ fn check_approaches(plan: &Plan, machine: &Machine, overrun: &Overrun) -> Result
 ///   held, then approaches (only the clearance axes move: rotary ones first, then linear ones).
 ///   When no other axis changes between two poses it moves the clearance axes directly. No
 ///   rapid ever moves a clearance axis and another axis at once.
+/// - **Approach moves**, for a plan that states directions of approach ([`Plan::approach`]:
+///   a bidirectional plan, a plan file's `approach_<AXIS>` columns, the order's directions for
+///   the axes without a column): each axis with a direction (+1 or −1) at a visit arrives at its
+///   position moving in that direction over at least the overrun ([`ProgramOptions::overrun`]).
+///   The other axes do so at the clearance: a rapid to the position minus (plus) the overrun,
+///   then a feed move to it, those axes together. Each clearance axis does so alone, after the
+///   others: a rapid to the overrun's distance on the side it comes from, then at feed to where
+///   its approach starts (through the position, when that is beyond it: an overshoot away from
+///   the clearance is never a rapid), then to the position. Feed moves are incremental
+///   (`G91 G1 … F`, then `G90`), the differences of the written positions: they end where a
+///   `G53` move would, whatever the work offset (Fanuc's `G53` moves at rapid only). An axis
+///   that arrived at the pose in the stated direction at the visit before is not moved again;
+///   an axis with no direction (0) moves as without approach moves. Refused when an approach
+///   would start outside the axis' travel (the message names the plan row and the axis).
 /// - At each visit of a pose it waits ([`Wait::Time`]) the options' settling time plus
 ///   `seconds_per_point` for each reflector measured there, so that without settling the waits
 ///   add up to the plan's duration at that time per point (per station: a plan measured from
