@@ -560,6 +560,54 @@ mod tests {
         );
     }
 
+    /// A group of measurements weighs as their sum: the same step twice, grouped by two, is
+    /// one step measured twice (the I-criterion equal to 1e-6: measured 8e-9, the rounding of the
+    /// nearly singular information), and a bidirectional pair (from
+    /// below, then from above) brings what two measurements from one side cannot: the
+    /// reversal value of X, the D-criterion (log det F) larger by more than 1 (measured 9.3: the
+    /// pair's B is the data's, the one side's mostly the prior's).
+    #[test]
+    fn a_group_weighs_as_the_sum_of_its_measurements() {
+        use volver_core::approach::Approach;
+        use volver_core::model::ReversalSpec;
+        let mut spec = Model::default_xcfz().spec().clone();
+        spec.effects.reversal.push(ReversalSpec::Axis("X".into()));
+        let model = Model::new(Machine::default_xcfz(), spec).unwrap();
+        let plan =
+            Plan::parse_grid(model.machine(), "X=0:1400:700,C=0:270:90,Z=0:600:300").unwrap();
+        let (up, down) = (Approach::all(3, 1), Approach::all(3, -1));
+        let doubled = |sides: [Approach; 2]| Plan {
+            sequence: Some(plan.steps().iter().flat_map(|s| [*s, *s]).collect()),
+            approach: Some((0..plan.n_points()).flat_map(|_| sides).collect()),
+            ..plan.clone()
+        };
+        let (tool, noise) = (centroid(&model), TrackerNoise::PAPER);
+        let one_side = Plan {
+            approach: Some(vec![up; plan.n_points()]),
+            ..plan.clone()
+        };
+        let space = |p: &Plan, group| {
+            Space::grouped(&model, (p, group), &noise, tool, &plan.positions).unwrap()
+        };
+        let single = space(&one_side, 1);
+        let same = space(&doubled([up, up]), 2);
+        let both = space(&doubled([up, down]), 2);
+        assert_eq!((same.len(), both.len()), (single.len(), single.len()));
+        let once = vec![1.0; single.len()];
+        let twice = vec![2.0; single.len()];
+        let (a, b) = (
+            same.value(&once, Criterion::I).unwrap(),
+            single.value(&twice, Criterion::I).unwrap(),
+        );
+        assert!((a / b - 1.0).abs() < 1e-6, "{a} {b}");
+        let (d_same, d_both) = (
+            same.value(&once, Criterion::D).unwrap(),
+            both.value(&once, Criterion::D).unwrap(),
+        );
+        assert!(d_both > d_same + 1.0, "{d_same} {d_both}");
+        assert!(Space::grouped(&model, (&one_side, 5), &noise, tool, &plan.positions).is_none());
+    }
+
     /// A range's one row carries the information of its three whitened rows, and a layout of
     /// ranges alone has one row per station and candidate.
     #[test]
