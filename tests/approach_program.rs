@@ -240,8 +240,9 @@ fn layout(letters: &[(char, f64, f64)], mm: f64, deg: f64) -> ([f64; 6], [(f64, 
 /// A designed bidirectional plan on the XCFZ grinder (default overrun 5 mm and 1°): its plan
 /// file states every axis' direction, each pose reached from below then from above (X, C and
 /// Z moving), and rs274 sees every measurement made with each axis arriving in the stated
-/// direction over at least the overrun, within the travel, the clearance rules kept. The same
-/// program with the approach moves removed is refused by the judge.
+/// direction over at least the overrun, within the travel, the clearance rules kept. Its Fanuc
+/// program moves the same; the program with the approach moves removed is refused by the
+/// judge.
 #[test]
 fn a_bidirectional_plans_program_arrives_from_the_stated_sides() {
     if !rs274::require() {
@@ -289,6 +290,32 @@ fn a_bidirectional_plans_program_arrives_from_the_stated_sides() {
     let events = interpret(Path::new(&p("plan.nc")));
     let seen = judge(&events, &expect).unwrap();
     assert_eq!(seen.approaches, 3 * expect.visits.len(), "{seen:?}");
+    // The Fanuc program (decimal points, G01, G04 P in ms) moves the same once its number
+    // line is dropped and its dwells are read in milliseconds.
+    ok(&[
+        "plan",
+        "--plan-file",
+        &p("plan.csv"),
+        "--gcode",
+        &p("fanuc.nc"),
+        "--dialect",
+        "fanuc",
+    ]);
+    let fanuc = std::fs::read_to_string(p("fanuc.nc")).unwrap();
+    assert!(fanuc.contains("\nG91 G01 X5. ") || fanuc.contains("\nG91 G01 X-5. "));
+    let translated: String = fanuc
+        .lines()
+        .filter(|l| !l.starts_with("O0"))
+        .map(|l| match l.strip_prefix("G04 P") {
+            Some(rest) => {
+                let (ms, comment) = rest.split_once(' ').unwrap_or((rest, ""));
+                format!("G4 P{} {comment}\n", ms.parse::<f64>().unwrap() / 1000.0)
+            }
+            None => format!("{l}\n"),
+        })
+        .collect();
+    std::fs::write(p("fanuc.ngc"), translated).unwrap();
+    assert_eq!(interpret(Path::new(&p("fanuc.ngc"))), events);
     // Without its approach moves (the feed blocks), the program is refused.
     let nc = std::fs::read_to_string(p("plan.nc")).unwrap();
     let bare: String = nc
