@@ -138,13 +138,15 @@ pub fn from_order(order: &[Commands], n_axes: usize) -> Vec<Approach> {
 /// assert_eq!(parse_sign(" +1 "), Some(1));
 /// assert_eq!(parse_sign("-"), Some(-1));
 /// assert_eq!(parse_sign("0"), Some(0));
+/// assert_eq!(parse_sign("+0"), Some(0));
 /// assert_eq!(parse_sign("up"), None);
 /// ```
 pub fn parse_sign(text: &str) -> Option<i8> {
     match text.trim() {
         "+1" | "1" | "+" | "1.0" | "+1.0" => Some(1),
         "-1" | "-" | "-1.0" => Some(-1),
-        "0" | "0.0" => Some(0),
+        // `+0` as measurement files write an unknown direction (`{:+}`).
+        "0" | "+0" | "-0" | "0.0" => Some(0),
         _ => None,
     }
 }

@@ -94,6 +94,14 @@ impl Dialect {
         }
     }
 
+    /// The feed-move word: `G1` or `G01`.
+    pub fn feed(self) -> &'static str {
+        match self {
+            Dialect::LinuxCnc => "G1",
+            Dialect::Fanuc => "G01",
+        }
+    }
+
     /// The program stop word (`M0`, `M00`), or with `optional` the optional stop (`M1`, `M01`).
     pub fn stop(self, optional: bool) -> &'static str {
         match (self, optional) {

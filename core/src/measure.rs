@@ -38,7 +38,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 mod read;
-pub(crate) use read::{axis_columns, read_commands};
+pub(crate) use read::{approach_columns, axis_columns, read_commands};
 
 /// What one measurement observed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -146,6 +146,8 @@ pub(crate) fn refuse_copies(points: &[Measurement], file: &str) -> Result<()> {
         k.extend(p.measured.iter().map(|v| v.to_bits()));
         k.push(p.reflector as u64);
         k.push(p.station_index as u64);
+        // Readings stated to come from different sides (`approach_<AXIS>`) are not copies.
+        k.extend(p.approach.0.iter().map(|&s| s as u64));
         k
     };
     let mut order: Vec<usize> = (0..points.len()).collect();

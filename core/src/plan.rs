@@ -33,6 +33,7 @@ use crate::machine::{Commands, Machine, MachineAxis};
 
 pub mod file;
 pub mod order;
+pub mod sides;
 
 /// The named presets, in the order `volver simulate --help` lists them.
 pub const PRESETS: [&str; 7] = [
@@ -88,6 +89,12 @@ pub struct Plan {
     /// The measuring sequence, when it is not every reflector of `reflectors` at every position
     /// in order (a designed plan: `volver plan`, [`crate::plan::file`]).
     pub sequence: Option<Vec<Step>>,
+    /// The direction of approach each measurement states, one per measurement in
+    /// [`Plan::steps`] order: a plan whose program overruns each position and comes back from a
+    /// chosen side ([`Plan::bidirectional`], a plan file's `approach_<AXIS>` columns), 0 where
+    /// an axis' direction is not stated (no approach move: unknown). `None`: the directions
+    /// are the measuring order's ([`Plan::approaches`]).
+    pub approach: Option<Vec<crate::approach::Approach>>,
 }
 
 /// One measurement of a plan: the reflector `reflector` (machine index) at `positions[position]`.
@@ -152,22 +159,31 @@ impl Plan {
     /// b.sort();
     /// assert_eq!(a, b);
     /// ```
+    ///
+    /// Directions the plan states go with their measurements (each is made by its own approach
+    /// move, whatever comes before it).
     pub fn shuffled(&self, seed: u64) -> Plan {
         let mut steps = self.steps();
+        let mut approach = self.approach.clone();
         let mut rng = crate::random::Rng::new(seed ^ 0x5EED_0F0D_E125_u64);
         for i in (1..steps.len()).rev() {
             let j = (rng.next_u64() % (i as u64 + 1)) as usize;
             steps.swap(i, j);
+            if let Some(a) = approach.as_mut().filter(|a| a.len() == steps.len()) {
+                a.swap(i, j);
+            }
         }
         Plan {
             name: format!("{} (shuffled, seed {seed})", self.name),
             sequence: Some(steps),
+            approach,
             ..self.clone()
         }
     }
 
     /// The direction of approach of every measurement when the plan is run `passes` times in
-    /// a row (once from each station), in that order: each axis' last move before the point
+    /// a row (once from each station), in that order: the directions the plan states
+    /// ([`Plan::approach`], the same in every pass), else each axis' last move before the point
     /// ([`crate::approach::from_order`]; a pass continues from where the previous one ended).
     ///
     /// ```
@@ -180,7 +196,26 @@ impl Plan {
     /// // X at 1400 arrived moving +; the second pass starts with a move back to 0 (−).
     /// assert_eq!((a[4].0[0], a[6].0[0]), (1, -1));
     /// ```
+    ///
+    /// A bidirectional plan states both directions at every pose:
+    ///
+    /// ```
+    /// use volver_core::machine::Machine;
+    /// use volver_core::plan::{Plan, sides::Overrun};
+    /// let m = Machine::default_xcfz();
+    /// let plan = Plan::parse_grid(&m, "X=0:1400:700,C=90,Z=300").unwrap();
+    /// let both = plan.bidirectional(&m, &Overrun::default()).unwrap();
+    /// let x: Vec<i8> = both.approaches(1).iter().map(|a| a.0[0]).collect();
+    /// // X = 0 is the end of its travel: approached from above (−) both times.
+    /// assert_eq!(x, [-1, -1, -1, -1, 1, 1, -1, -1, 1, 1, 1, 1]);
+    /// ```
     pub fn approaches(&self, passes: usize) -> Vec<crate::approach::Approach> {
+        if let Some(stated) = &self.approach {
+            let n = self.n_points();
+            return (0..passes)
+                .flat_map(|_| (0..n).map(|i| stated.get(i).copied().unwrap_or_default()))
+                .collect();
+        }
         let steps = self.steps();
         let order: Vec<Commands> = (0..passes)
             .flat_map(|_| steps.iter().map(|s| self.positions[s.position]))
@@ -353,6 +388,7 @@ impl Plan {
             positions: cartesian(&per_axis),
             reflectors: (0..machine.reflectors().len()).collect(),
             sequence: None,
+            approach: None,
         })
     }
 }

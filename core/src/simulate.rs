@@ -329,6 +329,18 @@ impl Simulation {
                 ),
             ));
         }
+        if let Some(a) = &self.plan.approach
+            && a.len() != self.plan.n_points()
+        {
+            return Err(Error::input(
+                place("plan.approach"),
+                format!(
+                    "{} stated directions of approach for {} measurements: one per measurement",
+                    a.len(),
+                    self.plan.n_points()
+                ),
+            ));
+        }
         if let Some(&r) = self
             .plan
             .reflectors

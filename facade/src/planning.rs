@@ -19,13 +19,16 @@ use volver_core::measure::MeasurementSet;
 use volver_core::model::Model;
 use volver_core::noise::TrackerNoise;
 use volver_core::plan::order::{self, Visit};
+use volver_core::plan::sides::{self, Overrun};
 use volver_core::plan::{AxisRange, MAX_PLAN_POSITIONS, Plan, Step};
 use volver_core::problem::Problem;
-use volver_core::simulate::{Effect, Magnitudes, Simulation, Truth};
 use volver_core::units::{S_PER_H, UM_PER_MM};
 use volver_solvers::design::{Criterion, Design, Space};
 use volver_solvers::gauge::Gauge;
 use volver_solvers::uncertainty::{NoiseModel, ToolGrid};
+
+mod compare;
+pub use compare::{Compared, compare};
 
 /// The most candidate points a design weighs (their whitened rows are held in memory: 50 000
 /// points of a 200-parameter model take 240 MB).
@@ -34,7 +37,8 @@ pub const MAX_CANDIDATES: usize = 50_000;
 /// What to plan.
 #[derive(Clone, Debug)]
 pub struct Request {
-    /// Measurements in the plan (the reference pose's repeats included).
+    /// Measurements in the plan (the reference pose's repeats included); a bidirectional plan
+    /// measures each of them twice.
     pub points: usize,
     /// The design criterion.
     pub criterion: Criterion,
@@ -56,6 +60,10 @@ pub struct Request {
     /// Candidate reflector positions beside the machine's (on the last tool-side axis), which
     /// the design may choose.
     pub extra_reflectors: Vec<ReflectorSpec>,
+    /// Each measurement made twice, from below then from above on every moving axis, over
+    /// this overrun ([`volver_core::plan::sides`]): the design weighs each pair's information,
+    /// a reversal's included; `None`: one measurement each, its directions the order's.
+    pub bidirectional: Option<Overrun>,
 }
 
 impl Default for Request {
@@ -71,6 +79,7 @@ impl Default for Request {
             seconds_per_point: volver_core::simulate::DEFAULT_SECONDS_PER_POINT,
             iterations: 300,
             extra_reflectors: Vec::new(),
+            bidirectional: None,
         }
     }
 }
@@ -135,6 +144,23 @@ pub struct Report {
     pub efficiency: Option<crate::uncertainty::EfficiencyU>,
     /// Wall time of the planning (s).
     pub time_s: f64,
+    /// How a bidirectional plan approaches its poses; `None` for a plan measured once each.
+    pub bidirectional: Option<BothSides>,
+    /// The axes the model gives a reversal value (`[effects] reversal`).
+    pub reversal_axes: Vec<String>,
+}
+
+/// How a bidirectional plan approaches its poses.
+#[derive(Clone, Debug, Serialize)]
+pub struct BothSides {
+    /// The measurements designed, each made twice (`points` is twice this).
+    pub designed: usize,
+    /// Each moving axis' overrun: its letter, the overrun (mm or degrees) and whether it was
+    /// clipped to half the axis' travel.
+    pub overrun: Vec<(String, f64, bool)>,
+    /// Each moving axis' poses approached from one side only (within the overrun of an end
+    /// of its travel): its letter and the count.
+    pub one_sided_poses: Vec<(String, usize)>,
 }
 
 /// A reflector position and what the candidates leave unidentified with it.
@@ -481,16 +507,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     let machine = model.machine();
     let candidates = checked_candidates(machine, request)?;
     let grid = crate::shared::default_grid(machine, 5)?;
-    let space = Space::new(
-        model,
-        &candidates,
-        &request.noise,
-        request.tool,
-        &grid.positions,
-    )
-    .ok_or_else(|| {
-        Error::Singular("the candidates' Jacobians are not finite at the nominal machine".into())
-    })?;
+    let (weighed, space) = design_space(model, &candidates, request, &grid.positions)?;
     let (reference, design) = reference_and_design(&space, request, &candidates)?;
     let visits_of_reference = request.repeats + 2;
     let (sequence, _) = order::sequence(
@@ -514,6 +531,8 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             request.points
         ),
     );
+    let designed = planned.n_points();
+    let (planned, bidirectional) = both_sides(machine, planned, request.bidirectional.as_ref())?;
     let nominal = Nominal::of(model, &planned)?;
     let ((u95_mean_um, u95_max_um), efficiency) = (
         nominal.predicted_u(model, &request.noise, request.tool, &grid.positions)?,
@@ -521,7 +540,7 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
     );
     let unidentified = crate::shared::held_text(model, nominal.gauge.as_ref());
     let unidentifiable_by_candidates =
-        crate::shared::held_text(model, Nominal::of(model, &candidates)?.gauge.as_ref());
+        crate::shared::held_text(model, Nominal::of(model, &weighed)?.gauge.as_ref());
     // Advice for what the candidates cannot identify (the request's extra reflectors are
     // candidates already).
     let reflector_advice = advice(model, request.per_axis, unidentifiable_by_candidates.len())?;
@@ -548,10 +567,102 @@ pub fn plan(model: &Model, request: &Request) -> Result<Planned> {
             aliasing: order::aliasing(machine, &planned.positions, &planned.steps()),
             efficiency,
             time_s: t0.elapsed().as_secs_f64(),
+            bidirectional: bidirectional.map(|b| BothSides { designed, ..b }),
+            reversal_axes: reversal_axes(model),
         },
         plan: reindex(planned, machine, plan_model.machine()),
         model: plan_model,
     })
+}
+
+/// The axes `model` gives a reversal value (`[effects] reversal`).
+fn reversal_axes(model: &Model) -> Vec<String> {
+    let reversal = &model.spec().effects.reversal;
+    reversal.iter().map(|r| r.axis().to_string()).collect()
+}
+
+/// The candidates the design weighs (a bidirectional plan's in pairs: each point approached
+/// from each side, [`pairs`]) and their information.
+fn design_space(
+    model: &Model,
+    candidates: &Plan,
+    request: &Request,
+    grid: &[Commands],
+) -> Result<(Plan, Space)> {
+    let weighed = match &request.bidirectional {
+        Some(overrun) => pairs(model.machine(), candidates, overrun)?,
+        None => candidates.clone(),
+    };
+    let group = weighed.n_points() / candidates.n_points().max(1);
+    let space = Space::grouped(model, (&weighed, group), &request.noise, request.tool, grid)
+        .ok_or_else(|| {
+            Error::Singular(
+                "the candidates' Jacobians are not finite at the nominal machine".into(),
+            )
+        })?;
+    Ok((weighed, space))
+}
+
+/// Every step of `candidates` twice, from below then from above on every axis that moves
+/// among them ([`sides::sides`]): the candidates of a bidirectional design, in pairs.
+fn pairs(machine: &Machine, candidates: &Plan, overrun: &Overrun) -> Result<Plan> {
+    overrun.check()?;
+    let moving = sides::moving_axes(machine, &candidates.positions);
+    let per_axis = overrun.per_axis(machine);
+    let steps = candidates.steps();
+    let mut sequence = Vec::with_capacity(2 * steps.len());
+    let mut approach = Vec::with_capacity(2 * steps.len());
+    for s in &steps {
+        for a in sides::sides(
+            machine,
+            &candidates.positions[s.position],
+            &moving,
+            &per_axis,
+        ) {
+            sequence.push(*s);
+            approach.push(a);
+        }
+    }
+    Ok(Plan {
+        name: format!("{} in pairs", candidates.name),
+        sequence: Some(sequence),
+        approach: Some(approach),
+        ..candidates.clone()
+    })
+}
+
+/// `planned` measured from both sides when `overrun` is given ([`Plan::bidirectional`]), with
+/// how (its `designed` left to the caller); else as it is.
+fn both_sides(
+    machine: &Machine,
+    planned: Plan,
+    overrun: Option<&Overrun>,
+) -> Result<(Plan, Option<BothSides>)> {
+    let Some(overrun) = overrun else {
+        return Ok((planned, None));
+    };
+    let both = planned.bidirectional(machine, overrun)?;
+    let moving = sides::moving_axes(machine, &both.positions);
+    let ends = sides::one_sided(&both, machine, overrun);
+    let mut report = BothSides {
+        designed: 0,
+        overrun: Vec::new(),
+        one_sided_poses: Vec::new(),
+    };
+    for (k, ax) in machine
+        .axes()
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| moving[k])
+    {
+        let (o, clipped) = overrun.on(ax);
+        let letter = ax.axis.to_string();
+        report
+            .overrun
+            .push((letter.clone(), ax.to_file_units(o), clipped));
+        report.one_sided_poses.push((letter, ends[k]));
+    }
+    Ok((both, Some(report)))
 }
 
 /// The reference pose and the design of what is left: the reference pose's visits come out of
@@ -590,13 +701,19 @@ fn checked_candidates(machine: &Machine, request: &Request) -> Result<Plan> {
     crate::shared::check_station_noises(machine, &request.noise)?;
     let per_axis = request.per_axis;
     let candidates = candidate_grid(machine, per_axis)?;
-    if candidates.n_points() > MAX_CANDIDATES {
+    let sides = if request.bidirectional.is_some() {
+        2
+    } else {
+        1
+    };
+    if sides * candidates.n_points() > MAX_CANDIDATES {
         return Err(Error::Request(format!(
-            "{} candidate points ({} poses × {} reflectors): at most {MAX_CANDIDATES}; use a \
+            "{} candidate points ({} poses × {} reflectors{}): at most {MAX_CANDIDATES}; use a \
              smaller --per-axis",
-            candidates.n_points(),
+            sides * candidates.n_points(),
             candidates.positions.len(),
-            candidates.reflectors.len()
+            candidates.reflectors.len(),
+            if sides == 2 { " × 2 sides" } else { "" }
         )));
     }
     Ok(candidates)
@@ -692,91 +809,6 @@ fn file_units_rounded(machine: &Machine, pose: &Commands) -> Vec<f64> {
         .collect()
 }
 
-/// One simulated test of a compared plan: its fit's tool-point error and how many coordinates
-/// its U (k = 2) covers.
-struct Replica {
-    /// EMM of the identified tool point over the grid, after the set-up's transform (µm).
-    emm_um: f64,
-    /// Coordinates within their U.
-    inside: usize,
-    /// Coordinates checked.
-    total: usize,
-}
-
-/// Simulates `plan` on `truth` with `noise` (seed `seed`), fits `model` and checks the tool
-/// point over `tg` against the truth.
-fn replica(
-    model: &Model,
-    plan: &Plan,
-    truth: &Truth,
-    seed: u64,
-    noise: &TrackerNoise,
-    tg: &ToolGrid,
-    label: &str,
-) -> Result<Replica> {
-    let mut sim = Simulation::new(plan.clone(), truth.clone(), seed);
-    sim.noise = *noise;
-    let data = sim.run()?.measurements;
-    let problem = Problem::new(model, &data)?;
-    let id = volver_solvers::strategy::fit(problem.clone());
-    if id.termination.failed() {
-        return Err(Error::NotSolved(format!(
-            "{label}, seed {seed}: {}",
-            id.termination
-        )));
-    }
-    let base = tg.points(&truth.model, &truth.params);
-    let d = tg.deviations(model, &id.params, &base, true);
-    let emm = (0..base.len())
-        .map(|k| (d[3 * k].powi(2) + d[3 * k + 1].powi(2) + d[3 * k + 2].powi(2)).sqrt())
-        .sum::<f64>()
-        / base.len() as f64;
-    let cov = volver_solvers::uncertainty::linear(
-        &problem,
-        id.gauge.as_ref(),
-        &id.params,
-        volver_solvers::Objective::Phi,
-        NoiseModel::Tracker(*noise),
-    )
-    .ok_or_else(|| Error::Singular(format!("{label}, seed {seed}: the fit's covariance")))?;
-    let (mut inside, mut total) = (0usize, 0usize);
-    for (k, u) in tg
-        .uncertainty(model, &id.params, &cov, true)
-        .iter()
-        .enumerate()
-    {
-        let u = u.u95_mm();
-        for c in 0..3 {
-            total += 1;
-            inside += usize::from(d[3 * k + c].abs() <= u[c]);
-        }
-    }
-    Ok(Replica {
-        emm_um: emm * UM_PER_MM,
-        inside,
-        total,
-    })
-}
-
-/// Whether the diagnosis of `plan` simulated on `truth` with `effect` (seed `seed`) finds the
-/// effect first.
-fn drift_found(
-    model: &Model,
-    plan: &Plan,
-    truth: Truth,
-    seed: u64,
-    noise: &TrackerNoise,
-    effect: &Effect,
-) -> Result<bool> {
-    let mut sim = Simulation::new(plan.clone(), truth, seed);
-    sim.noise = *noise;
-    sim.effects = vec![effect.clone()];
-    let data = sim.run()?.measurements;
-    let diagnosis = crate::diagnosis::diagnose_with(model, &data, Some(noise))?;
-    let name = effect.id();
-    Ok(diagnosis.finding().is_some_and(|c| c.id.starts_with(name)))
-}
-
 /// `plan` (reflector indices of `from`) with the indices of the same reflector ids in `to`.
 fn reindex(mut plan: Plan, from: &Machine, to: &Machine) -> Plan {
     let map = |r: usize| to.reflector_index(&from.reflectors()[r].id).unwrap_or(r);
@@ -817,80 +849,6 @@ fn compact(positions: &[Commands], sequence: &[Step], name: String) -> Plan {
         positions: kept,
         reflectors,
         sequence: Some(steps),
+        approach: None,
     }
-}
-
-/// One plan of a comparison.
-#[derive(Clone, Debug, Serialize)]
-pub struct Compared {
-    /// The plan's label (as given).
-    pub label: String,
-    /// Its measurements.
-    pub points: usize,
-    /// Predicted U (k = 2) of the tool point after the set-up's transform, mean over the grid
-    /// (µm).
-    pub u95_mean_um: f64,
-    /// The realised error of the identified tool point against the truth after the set-up's
-    /// transform: EMM over the grid, mean over the seeds (µm).
-    pub realised_emm_um: f64,
-    /// The same per seed (µm).
-    pub realised_per_seed_um: Vec<f64>,
-    /// The share of grid coordinates whose realised deviation is within the U predicted for
-    /// the fit of that seed, over every seed.
-    pub coverage: f64,
-    /// Seeds where a hidden drift (`drift`) was the diagnosis' finding, of those run.
-    pub drift_found: usize,
-    /// Seeds run with the drift.
-    pub drift_runs: usize,
-}
-
-/// Compares `plans` on `seeds` simulated truths (random errors of `model`'s structure at the
-/// default magnitudes, seeds 1…`seeds`, the tracker's `noise`): see [`Compared`]. With `drift`
-/// (an effect such as `thermal-drift=10,-5,60`), each seed is also simulated with it hidden
-/// and diagnosed with `model`.
-pub fn compare(
-    model: &Model,
-    plans: &[(String, Plan)],
-    seeds: u64,
-    noise: &TrackerNoise,
-    tool: [f64; 3],
-    drift: Option<&str>,
-) -> Result<Vec<Compared>> {
-    let machine = model.machine();
-    let grid = crate::shared::default_grid(machine, 5)?;
-    let tg = ToolGrid {
-        commands: grid.positions.clone(),
-        tool,
-    };
-    let drift = drift.map(Effect::parse).transpose()?;
-    let mut rows = Vec::new();
-    for (label, plan) in plans {
-        let (u95_mean_um, _) =
-            Nominal::of(model, plan)?.predicted_u(model, noise, tool, &grid.positions)?;
-        let mut realised = Vec::new();
-        let (mut inside, mut total) = (0usize, 0usize);
-        let (mut found, mut runs) = (0usize, 0usize);
-        for seed in 1..=seeds {
-            let truth = Truth::random(machine, model.spec(), &Magnitudes::default(), seed)?;
-            let r = replica(model, plan, &truth, seed, noise, &tg, label)?;
-            realised.push(r.emm_um);
-            inside += r.inside;
-            total += r.total;
-            if let Some(effect) = &drift {
-                runs += 1;
-                found += usize::from(drift_found(model, plan, truth, seed, noise, effect)?);
-            }
-        }
-        rows.push(Compared {
-            label: label.clone(),
-            points: plan.n_points(),
-            u95_mean_um,
-            realised_emm_um: realised.iter().sum::<f64>() / realised.len().max(1) as f64,
-            realised_per_seed_um: realised,
-            coverage: inside as f64 / total.max(1) as f64,
-            drift_found: found,
-            drift_runs: runs,
-        });
-    }
-    Ok(rows)
 }

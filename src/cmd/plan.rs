@@ -10,6 +10,7 @@ use volver::core::fsio::write_atomic;
 use volver::core::machine::Machine;
 use volver::core::noise::TrackerNoise;
 use volver::core::plan::file::{self, ProgramOptions, Wait};
+use volver::core::plan::sides::Overrun;
 use volver::core::units::S_PER_H;
 use volver::planning::{Request, compare, plan};
 
@@ -89,6 +90,25 @@ pub struct PlanArgs {
     /// measuring time or the stop (s, 0–3600; not part of the plan's duration).
     #[arg(long, default_value_t = 0.0)]
     dwell_s: f64,
+    /// Measures each pose from both sides, as ISO 230-2 does: every designed measurement made
+    /// twice, back to back, first with every moving axis arriving from below (+), then from
+    /// above (−), each over the overrun (the plan file's approach_<AXIS> columns; the
+    /// measuring program writes the approach moves). The measurements and the measuring time
+    /// double (with --hours, the design takes half as many).
+    #[arg(long, conflicts_with = "plan_file")]
+    bidirectional: bool,
+    /// The overrun of a linear axis (mm): how far it travels in the stated direction before a
+    /// measured position (at most half its travel; a position within it of a travel end is
+    /// approached from the only side the travel allows).
+    #[arg(long, default_value_t = volver::core::plan::sides::DEFAULT_OVERRUN_MM)]
+    overrun: f64,
+    /// The overrun of a rotary axis (degrees).
+    #[arg(long, default_value_t = volver::core::plan::sides::DEFAULT_OVERRUN_DEG)]
+    overrun_deg: f64,
+    /// The feed of the measuring program's approach moves (mm/min; degrees/min for a rotary
+    /// axis moving alone), for plans that state directions of approach.
+    #[arg(long, default_value_t = file::DEFAULT_APPROACH_FEED)]
+    approach_feed: f64,
     /// Compares plans instead: comma-separated plan files or presets (test4 …; test4/R1+R2
     /// measures only those reflectors).
     #[arg(long, value_name = "PLAN,PLAN…")]
@@ -125,10 +145,11 @@ pub fn run(a: PlanArgs) -> Result<()> {
     }
     // Checked before the design, which takes a while.
     let stations = model.machine().stations().len();
+    let sides = if a.bidirectional { 2 } else { 1 };
     let points = match (a.points, a.hours) {
         (Some(n), _) => n,
-        // Every station measures the plan.
-        (None, Some(h)) => Request::points_for_hours(h, a.seconds_per_point, stations)?,
+        // Every station measures the plan; a bidirectional plan each measurement twice.
+        (None, Some(h)) => Request::points_for_hours(h, a.seconds_per_point, stations)? / sides,
         (None, None) => 1040,
     };
     let program = program_options(&a, model.machine())?;
@@ -189,17 +210,79 @@ fn request_of(
         noise,
         per_axis: match a.per_axis {
             Some(n) => n,
+            // A bidirectional design weighs every candidate from both sides.
             None => volver::planning::default_per_axis(
                 model.machine(),
-                model.machine().reflectors().len() + extra_reflectors.len(),
+                (model.machine().reflectors().len() + extra_reflectors.len())
+                    * if a.bidirectional { 2 } else { 1 },
             )?,
         },
         seed: a.seed,
         repeats: a.repeats,
         seconds_per_point: a.seconds_per_point,
         extra_reflectors,
+        bidirectional: a.bidirectional.then(|| overrun_of(a)),
         ..Request::default()
     })
+}
+
+/// The overrun of the command line (`--overrun`, `--overrun-deg`).
+fn overrun_of(a: &PlanArgs) -> Overrun {
+    Overrun {
+        linear_mm: a.overrun,
+        rotary_deg: a.overrun_deg,
+    }
+}
+
+/// Prints how a bidirectional plan approaches its poses, or, for a plan measured once each of a
+/// model with reversal values, what measures them.
+fn print_sides(r: &volver::planning::Report, seconds_per_point: f64) {
+    let Some(b) = &r.bidirectional else {
+        if !r.reversal_axes.is_empty() {
+            println!(
+                "  the model has reversal values ({}): this plan's order decides from which side \
+                 each pose is reached; --bidirectional measures every pose from both",
+                r.reversal_axes.join(", ")
+            );
+        }
+        return;
+    };
+    let overrun: Vec<String> = b
+        .overrun
+        .iter()
+        .map(|(l, o, clipped)| {
+            let unit = if "ABC".contains(l.as_str()) {
+                "°"
+            } else {
+                " mm"
+            };
+            let half = if *clipped { " (half its travel)" } else { "" };
+            format!("{l} {o}{unit}{half}")
+        })
+        .collect();
+    println!(
+        "  bidirectional (ISO 230-2): each of the {} designed measurements made twice, back to \
+         back, every moving axis arriving from below (+) then from above (−) over its overrun \
+         ({}): {} measurements, the measuring time doubled ({:.1} h at {} s per point)",
+        b.designed,
+        overrun.join(", "),
+        r.points,
+        r.duration_h,
+        seconds_per_point
+    );
+    let ends: Vec<String> = b
+        .one_sided_poses
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(l, n)| format!("{l} at {n}"))
+        .collect();
+    if !ends.is_empty() {
+        println!(
+            "  poses within the overrun of a travel end, approached on that axis from the only \
+             side the travel allows, both times: {}",
+            ends.join(", ")
+        );
+    }
 }
 
 /// Prints the plan's report `r` (titled `title`) and the files written.
@@ -231,6 +314,7 @@ fn print_planned(
         r.candidates,
         r.time_s
     );
+    print_sides(r, a.seconds_per_point);
     println!(
         "  design: {:?}-optimal, equivalence ratio {:.3} (1 at the optimum) after {} iterations",
         r.criterion, r.equivalence, r.iterations
@@ -293,6 +377,25 @@ fn program_options(a: &PlanArgs, machine: &Machine) -> Result<Option<ProgramOpti
             file::MAX_SETTLE_S
         );
     }
+    for (name, v, unit) in [
+        ("--overrun", a.overrun, "mm"),
+        ("--overrun-deg", a.overrun_deg, "degrees"),
+    ] {
+        if !(v.is_finite() && v > 0.0) {
+            bail!(
+                "{name} {v:?}: the distance ({unit}) an axis travels in the stated direction \
+                 before a measured position is a positive number"
+            );
+        }
+    }
+    let feed = a.approach_feed;
+    if !(feed.is_finite() && feed > 0.0 && feed <= file::MAX_APPROACH_FEED) {
+        bail!(
+            "--approach-feed {feed:?}: the approach moves' feed is more than 0 and at most {} \
+             mm/min",
+            file::MAX_APPROACH_FEED
+        );
+    }
     if a.gcode.is_none() {
         return Ok(None);
     }
@@ -331,6 +434,8 @@ fn program_options(a: &PlanArgs, machine: &Machine) -> Result<Option<ProgramOpti
         clearance,
         seconds_per_point: spp,
         settle_s: a.dwell_s,
+        overrun: overrun_of(a),
+        approach_feed: a.approach_feed,
     }))
 }
 
@@ -361,6 +466,20 @@ fn program_of_file(a: &PlanArgs, path: &Path) -> Result<()> {
         },
         options.dialect
     );
+    if let Some(stated) = &plan.approach {
+        let (up, down) = stated.iter().fold((0, 0), |(u, d), s| {
+            (
+                u + usize::from(s.0.contains(&1)),
+                d + usize::from(s.0.contains(&-1)),
+            )
+        });
+        println!(
+            "  the plan states directions of approach ({up} measurements with an axis arriving \
+             from below, {down} from above): each such axis travels the overrun ({} mm, {}°) \
+             in its direction before the position, at F{}",
+            a.overrun, a.overrun_deg, a.approach_feed
+        );
+    }
     println!("  measuring program: {}", out.display());
     Ok(())
 }

@@ -108,11 +108,21 @@ pub struct SimulateArgs {
     /// range part applies, e.g. --noise normal:0,0,0.1,0.15 for U(k = 2) = 0.2 µm + 0.3 µm/m).
     #[arg(long, default_value = "point", value_parser = ["point", "spherical", "range"])]
     observe: String,
-    /// Measuring order: plan (the plan's or plan file's order) or shuffled (its measurements in
-    /// a random order drawn from --seed, as an optimised route takes them: each axis reaches
-    /// its positions from either side, which a reversal effect makes visible).
-    #[arg(long, default_value = "plan", value_parser = ["plan", "shuffled"])]
+    /// Measuring order: plan (the plan's or plan file's order; a plan file's approach_<AXIS>
+    /// columns give its directions), shuffled (its measurements in a random order drawn from
+    /// --seed, as an optimised route takes them: each axis reaches its positions from either
+    /// side, which a reversal effect makes visible) or bidirectional (each visit of a pose
+    /// measured twice, every moving axis arriving from below then from above over the
+    /// overrun, as ISO 230-2 measures; the directions are written in approach_<AXIS> columns).
+    #[arg(long, default_value = "plan", value_parser = ["plan", "shuffled", "bidirectional"])]
     order: String,
+    /// With --order bidirectional: a linear axis' overrun (mm); a position within it of a
+    /// travel end is approached from the only side the travel allows.
+    #[arg(long, default_value_t = volver::core::plan::sides::DEFAULT_OVERRUN_MM)]
+    overrun: f64,
+    /// With --order bidirectional: a rotary axis' overrun (degrees).
+    #[arg(long, default_value_t = volver::core::plan::sides::DEFAULT_OVERRUN_DEG)]
+    overrun_deg: f64,
 }
 
 /// Runs `volver simulate`.
@@ -317,6 +327,18 @@ fn plan_of(
     let plan = plan_in_order(a, machine, preset)?;
     Ok(match a.order.as_str() {
         "shuffled" => plan.shuffled(a.seed),
+        "bidirectional" => {
+            let overrun = volver::core::plan::sides::Overrun {
+                linear_mm: a.overrun,
+                rotary_deg: a.overrun_deg,
+            };
+            plan.bidirectional(machine, &overrun).with_context(|| {
+                format!(
+                    "--order bidirectional --overrun {} --overrun-deg {}",
+                    a.overrun, a.overrun_deg
+                )
+            })?
+        }
         _ => plan,
     })
 }

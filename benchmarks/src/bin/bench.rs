@@ -168,6 +168,7 @@ fn build(size: &Size) -> (Model, MeasurementSet) {
                 positions,
                 reflectors: (0..machine.reflectors().len()).collect(),
                 sequence: None,
+                approach: None,
             }
         }
     };

@@ -143,7 +143,7 @@ fn refuse_foreign_axes(machine: &Machine, header: &Header) -> Result<()> {
 
 /// The `approach_<AXIS>` columns of `header`: (chain axis, column); a column for an axis the
 /// machine lacks is refused.
-fn approach_columns(machine: &Machine, header: &Header) -> Result<Vec<(usize, usize)>> {
+pub(crate) fn approach_columns(machine: &Machine, header: &Header) -> Result<Vec<(usize, usize)>> {
     let mut out = Vec::new();
     for h in header.names() {
         let Some(letter) = h.strip_prefix("approach_") else {

@@ -83,12 +83,13 @@ impl std::str::FromStr for Criterion {
 
 /// The candidates' information, ready for designs.
 pub struct Space {
-    /// The candidates' whitened rows in the free coordinates (`per` per candidate point, in
-    /// `candidates.steps()` order: from each station 3, or 1 where it measures ranges alone).
+    /// The candidates' whitened rows in the free coordinates (`per` per candidate, in
+    /// `candidates.steps()` order: from each station and each measurement of the candidate's
+    /// group 3, or 1 where the station measures ranges alone).
     a: Mat<f64>,
-    /// Rows per candidate: 3 per station of the machine, 1 per station of ranges alone (a
-    /// range's information has rank one: the two other rows would be zero, a third of the
-    /// work of every iteration on a layout of ranges).
+    /// Rows per candidate: 3 per station of the machine and measurement of the group, 1 per
+    /// station of ranges alone (a range's information has rank one: the two other rows would
+    /// be zero, a third of the work of every iteration on a layout of ranges).
     per: usize,
     /// `Q` of the I-criterion (nf × nf).
     q: Mat<f64>,
@@ -130,6 +131,25 @@ impl Space {
         tool: [f64; 3],
         grid: &[Commands],
     ) -> Option<Space> {
+        Space::grouped(model, (candidates, 1), noise, tool, grid)
+    }
+
+    /// [`Space::new`] for candidates of `group` consecutive steps of `candidates` each, measured
+    /// together: a bidirectional plan's pair (the same reflector at the same pose approached
+    /// from below, then from above, [`volver_core::plan::sides`]), whose information is the sum
+    /// of both, the reversal's columns included. `None` as [`Space::new`], or when the steps
+    /// do not divide into groups.
+    pub fn grouped(
+        model: &Model,
+        (candidates, group): (&Plan, usize),
+        noise: &TrackerNoise,
+        tool: [f64; 3],
+        grid: &[Commands],
+    ) -> Option<Space> {
+        let steps = candidates.n_points();
+        if group == 0 || steps % group != 0 {
+            return None;
+        }
         let p0 = model.initial_params();
         let data = crate::analysis::observability::nominal_data(model, candidates);
         let problem = Problem::new(model, &data).ok()?;
@@ -137,7 +157,7 @@ impl Space {
         let ns = NullSpace::from_constraints(model.constraints(), &p0).ok()?;
         let (n, nf, rows_total) = (p0.len(), ns.n_free(), problem.n_points());
         let stations = model.machine().stations().len();
-        let m = rows_total / stations;
+        let m = steps / group;
         let basis = ns.basis();
         // Each measurement's whitened Jacobian rows (n columns): three, or for a scalar
         // residual (a range) the one row that carries its information.
@@ -148,28 +168,7 @@ impl Space {
         if rows.iter().flatten().any(|v| !v.is_finite()) {
             return None;
         }
-        // A station whose every measurement is a scalar has one row per candidate, else three
-        // (a scalar measurement's row first, then zeros).
-        let widths: Vec<usize> = (0..stations)
-            .map(|s| {
-                if (0..m).all(|i| rows[s * m + i].len() == n) {
-                    1
-                } else {
-                    3
-                }
-            })
-            .collect();
-        let per: usize = widths.iter().sum();
-        let place: Vec<(usize, usize)> = widths
-            .iter()
-            .enumerate()
-            .flat_map(|(s, &w)| (0..w).map(move |k| (s, k)))
-            .collect();
-        // Candidate-major: candidate i's rows from station s are measurement s·m + i's.
-        let j = Mat::from_fn(per * m, n, |r, c| {
-            let (i, (s, k)) = (r / per, place[r % per]);
-            rows[s * m + i].get(k * n + c).copied().unwrap_or(0.0)
-        });
+        let (j, per) = stacked(&rows, n, (stations, steps, group));
         let a = crate::engines::kernels::product(j.as_ref(), basis);
         let tool_grid = crate::analysis::uncertainty::ToolGrid {
             commands: grid.to_vec(),
@@ -401,6 +400,43 @@ impl Space {
     }
 }
 
+/// The candidates' rows stacked candidate-major (`rows`: each measurement's whitened rows, `n`
+/// columns, station-major: `stations` × `steps`), each candidate `group` consecutive steps,
+/// and the rows per candidate. A station whose every measurement is a scalar gives one row per
+/// measurement, else three (a scalar measurement's row first, then zeros).
+fn stacked(
+    rows: &[Vec<f64>],
+    n: usize,
+    (stations, steps, group): (usize, usize, usize),
+) -> (Mat<f64>, usize) {
+    let m = steps / group;
+    let widths: Vec<usize> = (0..stations)
+        .map(|s| {
+            if (0..steps).all(|i| rows[s * steps + i].len() == n) {
+                1
+            } else {
+                3
+            }
+        })
+        .collect();
+    // A candidate's rows: from each station, each measurement of its group, each row.
+    let place: Vec<(usize, usize, usize)> = widths
+        .iter()
+        .enumerate()
+        .flat_map(|(s, &w)| (0..group).flat_map(move |g| (0..w).map(move |k| (s, g, k))))
+        .collect();
+    let per = place.len();
+    // Candidate i's rows from station s are measurements s·steps + i·group + g's.
+    let j = Mat::from_fn(per * m, n, |r, c| {
+        let (i, (s, g, k)) = (r / per, place[r % per]);
+        rows[s * steps + i * group + g]
+            .get(k * n + c)
+            .copied()
+            .unwrap_or(0.0)
+    });
+    (j, per)
+}
+
 /// Measurement `i`'s whitened Jacobian rows at `p0` (row-major, `n` columns each): its three
 /// rows, or for a scalar residual (a range, whose Jacobian's second and third rows are zero,
 /// so that its whitened rows `W e₀ J₀` are all multiples of one) the single row `‖W e₀‖ J₀`
@@ -522,6 +558,54 @@ mod tests {
             i_one - i_quiet < 0.5 * (i_loud - i_quiet),
             "I: {i_quiet} {i_one} {i_loud}"
         );
+    }
+
+    /// A group of measurements weighs as their sum: the same step twice, grouped by two, is
+    /// one step measured twice (the I-criterion equal to 1e-6: measured 8e-9, the rounding of the
+    /// nearly singular information), and a bidirectional pair (from
+    /// below, then from above) brings what two measurements from one side cannot: the
+    /// reversal value of X, the D-criterion (log det F) larger by more than 1 (measured 9.3: the
+    /// pair's B is the data's, the one side's mostly the prior's).
+    #[test]
+    fn a_group_weighs_as_the_sum_of_its_measurements() {
+        use volver_core::approach::Approach;
+        use volver_core::model::ReversalSpec;
+        let mut spec = Model::default_xcfz().spec().clone();
+        spec.effects.reversal.push(ReversalSpec::Axis("X".into()));
+        let model = Model::new(Machine::default_xcfz(), spec).unwrap();
+        let plan =
+            Plan::parse_grid(model.machine(), "X=0:1400:700,C=0:270:90,Z=0:600:300").unwrap();
+        let (up, down) = (Approach::all(3, 1), Approach::all(3, -1));
+        let doubled = |sides: [Approach; 2]| Plan {
+            sequence: Some(plan.steps().iter().flat_map(|s| [*s, *s]).collect()),
+            approach: Some((0..plan.n_points()).flat_map(|_| sides).collect()),
+            ..plan.clone()
+        };
+        let (tool, noise) = (centroid(&model), TrackerNoise::PAPER);
+        let one_side = Plan {
+            approach: Some(vec![up; plan.n_points()]),
+            ..plan.clone()
+        };
+        let space = |p: &Plan, group| {
+            Space::grouped(&model, (p, group), &noise, tool, &plan.positions).unwrap()
+        };
+        let single = space(&one_side, 1);
+        let same = space(&doubled([up, up]), 2);
+        let both = space(&doubled([up, down]), 2);
+        assert_eq!((same.len(), both.len()), (single.len(), single.len()));
+        let once = vec![1.0; single.len()];
+        let twice = vec![2.0; single.len()];
+        let (a, b) = (
+            same.value(&once, Criterion::I).unwrap(),
+            single.value(&twice, Criterion::I).unwrap(),
+        );
+        assert!((a / b - 1.0).abs() < 1e-6, "{a} {b}");
+        let (d_same, d_both) = (
+            same.value(&once, Criterion::D).unwrap(),
+            both.value(&once, Criterion::D).unwrap(),
+        );
+        assert!(d_both > d_same + 1.0, "{d_same} {d_both}");
+        assert!(Space::grouped(&model, (&one_side, 5), &noise, tool, &plan.positions).is_none());
     }
 
     /// A range's one row carries the information of its three whitened rows, and a layout of
