@@ -470,6 +470,7 @@ fn a_reversal_acts_as_a_command_shifted_by_half_of_it_the_way_the_axis_came() {
             .collect(),
         reflectors: vec![0],
         sequence: None,
+        approach: None,
     };
     let mut sim = Simulation::new(plan, zero_truth(), 3);
     sim.noise = TrackerNoise::NONE;
