@@ -195,7 +195,10 @@ impl ErrorTables {
 /// 230-2 B times the axis' side sign).
 pub(super) fn reversal_at(model: &Model, params: &[f64], commands: &Commands, k: usize) -> f64 {
     let sigma = model.machine().axes()[k].side.sign();
-    sigma * model.reversal_at(k, commands.0[k], params, None).unwrap_or(0.0)
+    sigma
+        * model
+            .reversal_at(k, commands.0[k], params, None)
+            .unwrap_or(0.0)
 }
 
 /// [`uncarried`] for tables written in `format`: the parts no per-axis table carries, and for a
