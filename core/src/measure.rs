@@ -129,6 +129,9 @@ pub struct MeasurementSet {
     /// a drift's value at `t_s = 0` is the one at the test's start. Zero for a set made in
     /// memory (a simulation starts at zero).
     pub time_origin_s: f64,
+    /// The axes whose directions of approach the file stated (`approach_<AXIS>` columns, chain
+    /// order); the others' were derived from the measuring order. None for a set made in memory.
+    pub approach_stated: [bool; MAX_AXES],
 }
 
 /// The largest measured coordinate accepted (mm): 1 km, beyond the reach of any laser
@@ -285,7 +288,10 @@ pub(crate) fn read_rows_stated(
     refuse_copies(&points, &file)?;
     refuse_unknown_stations(machine, &points, &file)?;
     fill_approach(&mut points, stated);
-    Ok(MeasurementSet::from_file_times(points))
+    Ok(MeasurementSet {
+        approach_stated: stated,
+        ..MeasurementSet::from_file_times(points)
+    })
 }
 
 /// The measuring order of `points`: their time stamps' order when every point has one (ties in
@@ -394,6 +400,7 @@ impl MeasurementSet {
         MeasurementSet {
             points,
             time_origin_s,
+            approach_stated: [false; MAX_AXES],
         }
     }
 

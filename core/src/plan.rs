@@ -34,6 +34,7 @@ use crate::machine::{Commands, Machine, MachineAxis};
 pub mod file;
 pub mod order;
 pub mod sides;
+mod taken;
 
 /// The named presets, in the order `volver simulate --help` lists them.
 pub const PRESETS: [&str; 7] = [

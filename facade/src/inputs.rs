@@ -130,6 +130,20 @@ pub fn load_with(
     data: &Path,
     import: Option<&Path>,
 ) -> Result<(Machine, Model, MeasurementSet)> {
+    load_taken_by(machine, model, data, import, None)
+}
+
+/// [`load_with`], each measurement's direction of approach taken from `plan`, the plan file the
+/// data were taken by, when given ([`MeasurementSet::take_approach_from_plan`]: its stated
+/// directions, a bidirectional plan's, else its order's; the measurement file's own
+/// `approach_<AXIS>` columns win, a contradiction is refused).
+pub fn load_taken_by(
+    machine: Option<&Path>,
+    model: Option<&Path>,
+    data: &Path,
+    import: Option<&Path>,
+    plan: Option<&Path>,
+) -> Result<(Machine, Model, MeasurementSet)> {
     let (m, model) = machine_and_model(machine, model)?;
     let mut unit: Option<(String, f64)> = None;
     let set = match import {
@@ -144,6 +158,16 @@ pub fn load_with(
         }
         None => MeasurementSet::load(&m, data).context("reading the measurements")?,
     };
+    let mut set = set;
+    if let Some(path) = plan {
+        let p = volver_core::plan::file::load(&m, path).context("reading the plan file")?;
+        set.take_approach_from_plan(
+            &m,
+            &p,
+            &path.display().to_string(),
+            &data.display().to_string(),
+        )?;
+    }
     if let Some(w) = set.time_unit_warning(&data.display().to_string()) {
         eprintln!("  warning: {w}");
     }

@@ -114,6 +114,7 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
                 model: a.model.clone(),
                 data: path.clone(),
                 import: None,
+                plan_file: None,
             };
             let (_, model, data) = inputs.load()?;
             (model, data, path.display().to_string())

@@ -39,6 +39,13 @@ pub struct Inputs {
     /// `volver_core::import`).
     #[arg(long, value_name = "PROFILE")]
     pub import: Option<PathBuf>,
+    /// The plan file the data were taken by (CSV, as `volver plan` writes it): each
+    /// measurement's direction of approach (for a reversal) from the plan — the directions a
+    /// bidirectional plan states, else its order — instead of the data's own order; the rows
+    /// must be the plan's in its order (once per station), and `approach_<AXIS>` columns of the
+    /// measurement file win (a contradiction is refused).
+    #[arg(long, value_name = "PLAN")]
+    pub plan_file: Option<PathBuf>,
 }
 
 impl Inputs {
@@ -49,6 +56,7 @@ impl Inputs {
             self.model.as_deref(),
             Some(self.data.as_path()),
             self.import.as_deref(),
+            self.plan_file.as_deref(),
         ]
         .into_iter()
         .chain(more.iter().copied())
@@ -58,11 +66,12 @@ impl Inputs {
 
     /// Reads the three files.
     pub fn load(&self) -> Result<(Machine, Model, MeasurementSet)> {
-        Ok(volver::inputs::load_with(
+        Ok(volver::inputs::load_taken_by(
             self.machine.as_deref(),
             self.model.as_deref(),
             &self.data,
             self.import.as_deref(),
+            self.plan_file.as_deref(),
         )?)
     }
 }

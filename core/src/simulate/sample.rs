@@ -374,6 +374,7 @@ impl Sampler<'_> {
             measurements: MeasurementSet {
                 points: self.points,
                 time_origin_s: 0.0,
+                approach_stated: Default::default(),
             },
             noise_free: self.noise_free,
             truth: self.truth,

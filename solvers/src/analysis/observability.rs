@@ -107,6 +107,7 @@ pub fn nominal_data(model: &Model, plan: &Plan) -> MeasurementSet {
     MeasurementSet {
         points,
         time_origin_s: 0.0,
+        approach_stated: Default::default(),
     }
 }
 
