@@ -13,37 +13,17 @@
 
 mod common;
 
-use common::rs274::{self, Event};
-use common::volver;
+use common::rs274::{self, AXES, Event, TOL};
+use common::{ok, volver};
 use std::path::{Path, PathBuf};
 use volver::core::machine::Machine;
 use volver::core::measure::MeasurementSet;
 use volver::core::plan::Plan;
 use volver::core::plan::sides::Overrun;
 
-/// The machine-position order of rs274's events.
-const AXES: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
-
-/// rs274 prints 4 decimals.
-const TOL: f64 = 2e-4;
-
 /// A fresh directory for one test.
 fn dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("volver-approach-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// Runs volver with `args` and returns its stdout, failing with its stderr.
-fn ok(args: &[&str]) -> String {
-    let o = volver(args);
-    assert!(
-        o.status.success(),
-        "volver {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
+    common::scratch_dir("approach", tag)
 }
 
 /// One visit of the plan file, read independently of volver: its pose (rs274's order) and
@@ -218,13 +198,6 @@ fn arrived(v: &Visit, pos: &[f64; 6], runs: &[Run; 6], e: &Expect, i: usize) -> 
 }
 
 /// rs274's events of `program`.
-fn interpret(program: &Path) -> Vec<Event> {
-    match rs274::run(program, None, None) {
-        Ok(run) => run.events,
-        Err(e) => panic!("{e}\n{}", std::fs::read_to_string(program).unwrap()),
-    }
-}
-
 /// `letters` (the machine's axes) with their overruns and travels in rs274's order.
 fn layout(letters: &[(char, f64, f64)], mm: f64, deg: f64) -> ([f64; 6], [(f64, f64); 6]) {
     let mut overrun = [0.0; 6];
@@ -287,7 +260,7 @@ fn a_bidirectional_plans_program_arrives_from_the_stated_sides() {
                 && expect.visits.iter().any(|v| v.sides[k] == -1)
         );
     }
-    let events = interpret(Path::new(&p("plan.nc")));
+    let events = rs274::interpret(Path::new(&p("plan.nc")), None);
     let seen = judge(&events, &expect).unwrap();
     assert_eq!(seen.approaches, 3 * expect.visits.len(), "{seen:?}");
     // The Fanuc program (decimal points, G01, G04 P in ms) moves the same once its number
@@ -315,7 +288,7 @@ fn a_bidirectional_plans_program_arrives_from_the_stated_sides() {
         })
         .collect();
     std::fs::write(p("fanuc.ngc"), translated).unwrap();
-    assert_eq!(interpret(Path::new(&p("fanuc.ngc"))), events);
+    assert_eq!(rs274::interpret(Path::new(&p("fanuc.ngc")), None), events);
     // Without its approach moves (the feed blocks), the program is refused.
     let nc = std::fs::read_to_string(p("plan.nc")).unwrap();
     let bare: String = nc
@@ -324,7 +297,7 @@ fn a_bidirectional_plans_program_arrives_from_the_stated_sides() {
         .map(|l| format!("{l}\n"))
         .collect();
     std::fs::write(p("bare.nc"), bare).unwrap();
-    let e = judge(&interpret(Path::new(&p("bare.nc"))), &expect).unwrap_err();
+    let e = judge(&rs274::interpret(Path::new(&p("bare.nc")), None), &expect).unwrap_err();
     assert!(e.contains("arrived at") || e.contains("waits at"), "{e}");
     let _ = std::fs::remove_dir_all(&d);
 }
@@ -385,7 +358,7 @@ fn a_plan_file_with_stated_sides_on_the_head_head_preset() {
         overrun,
         travel,
     };
-    let events = interpret(Path::new(&p("plan.nc")));
+    let events = rs274::interpret(Path::new(&p("plan.nc")), None);
     let seen = judge(&events, &expect).unwrap();
     assert_eq!(expect.visits.len(), 6);
     assert_eq!(seen.approaches, 3 + 3 + 3 + 3 + 1 + 3, "{seen:?}");

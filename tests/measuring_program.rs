@@ -11,33 +11,13 @@
 
 mod common;
 
-use common::rs274::{self, Event};
-use common::volver;
+use common::rs274::{self, AXES, Event, TOL, interpret};
+use common::{ok, volver};
 use std::path::{Path, PathBuf};
-
-/// The machine-position order of rs274's events.
-const AXES: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
-
-/// rs274 prints 4 decimals.
-const TOL: f64 = 2e-4;
 
 /// A fresh directory for one test.
 fn dir(tag: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("volver-mprog-{tag}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-/// Runs volver with `args` and returns its stdout, failing with its stderr.
-fn ok(args: &[&str]) -> String {
-    let o = volver(args);
-    assert!(
-        o.status.success(),
-        "volver {args:?}: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
-    String::from_utf8_lossy(&o.stdout).into_owned()
+    common::scratch_dir("mprog", tag)
 }
 
 /// Runs volver with `args`, expecting a refusal; returns its stderr.
@@ -236,13 +216,6 @@ fn alike(a: &[Event], b: &[Event]) -> bool {
 }
 
 /// rs274's events of `program`, with the parameter file `vars` (a work offset) when given.
-fn interpret(program: &Path, vars: Option<&Path>) -> Vec<Event> {
-    match rs274::run(program, None, vars) {
-        Ok(run) => run.events,
-        Err(e) => panic!("{e}\n{}", std::fs::read_to_string(program).unwrap()),
-    }
-}
-
 /// The plan's duration (s) that `plan --json` printed.
 fn duration_s(json: &str) -> f64 {
     let v: serde_json::Value = serde_json::from_str(json).unwrap();

@@ -179,3 +179,25 @@ pub fn planned_for_a_250_mm_tool() -> ([f64; 3], volver::planning::Planned) {
     .unwrap();
     (tool, planned)
 }
+
+/// A fresh directory `volver-<prefix>-<tag>-<pid>` under the system's temporary folder (removed
+/// first when it exists).
+#[allow(dead_code)]
+pub fn scratch_dir(prefix: &str, tag: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("volver-{prefix}-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Runs volver with `args` and returns its stdout, failing with its stderr.
+#[allow(dead_code)]
+pub fn ok(args: &[&str]) -> String {
+    let o = volver(args);
+    assert!(
+        o.status.success(),
+        "volver {args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}

@@ -314,3 +314,21 @@ fn arc(s: &State, v: &[f64]) -> Event {
         rate: s.feed,
     })
 }
+
+/// rs274's machine-position order of the axes in its canonical events.
+#[allow(dead_code)]
+pub const AXES: [char; 6] = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+
+/// rs274 prints 4 decimals: positions agree to this (mm or degrees).
+#[allow(dead_code)]
+pub const TOL: f64 = 2e-4;
+
+/// The canonical events of `program` (with the parameter file `vars` when given), failing with
+/// the program when rs274 refuses it.
+#[allow(dead_code)]
+pub fn interpret(program: &Path, vars: Option<&Path>) -> Vec<Event> {
+    match run(program, None, vars) {
+        Ok(run) => run.events,
+        Err(e) => panic!("{e}\n{}", std::fs::read_to_string(program).unwrap()),
+    }
+}
