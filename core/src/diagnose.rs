@@ -38,7 +38,9 @@ use crate::units::UM_PER_MM;
 use std::f64::consts::PI;
 
 mod direction;
-pub use direction::{Coverage, DirectionSplit, MIN_SIDE_POINTS, SideMean, by_direction, coverage};
+pub use direction::{
+    Coverage, DirectionSplit, MIN_SIDE_POINTS, SideMean, before_first_move, by_direction, coverage,
+};
 
 /// Residuals of the points that fall in one bin.
 #[derive(Clone, Debug, PartialEq)]

@@ -287,11 +287,35 @@ pub(crate) fn read_rows_stated(
     }
     refuse_copies(&points, &file)?;
     refuse_unknown_stations(machine, &points, &file)?;
+    refuse_unknown_order(&points, &file)?;
     fill_approach(&mut points, stated);
     Ok(MeasurementSet {
         approach_stated: stated,
         ..MeasurementSet::from_file_times(points)
     })
+}
+
+/// Refuses a file whose measuring order cannot be told: rows out of time order (the stamps say
+/// they were sorted after the test) with some row without a stamp, which the time order cannot
+/// place. The order gives each axis' direction of approach ([`fill_approach`]); read in the
+/// rows' order instead, it would be wrong without a word.
+fn refuse_unknown_order(points: &[Measurement], file: &str) -> Result<()> {
+    let Some(blank) = points.iter().find(|p| p.t_s.is_none()) else {
+        return Ok(());
+    };
+    let stamped: Vec<&Measurement> = points.iter().filter(|p| p.t_s.is_some()).collect();
+    let Some(w) = stamped.windows(2).find(|w| w[1].t_s < w[0].t_s) else {
+        return Ok(());
+    };
+    Err(Error::input(
+        Place::file(file).at_line(blank.line).at_field("t_s"),
+        format!(
+            "no time stamp, while the rows are not in time order (line {} was measured before \
+             line {}): the measuring order, which gives each axis' direction of approach, \
+             cannot be told; give every row its t_s, or put the rows in measuring order",
+            w[1].line, w[0].line
+        ),
+    ))
 }
 
 /// The measuring order of `points`: their time stamps' order when every point has one (ties in
@@ -639,6 +663,21 @@ mod tests {
         let plain = "X,C,Z,reflector,meas_x,meas_y,meas_z\n100,0,0,R1,1,2,3\n200,0,0,R1,1,2,4\n";
         let s = MeasurementSet::from_csv_str(&m(), plain, "d.csv").unwrap();
         assert!(!s.to_csv_string(&m()).contains("approach"));
+    }
+
+    #[test]
+    fn rows_out_of_time_order_need_every_stamp() {
+        let csv = "X,C,Z,reflector,meas_x,meas_y,meas_z,t_s\n\
+                   500,0,0,R1,1,2,3,20\n\
+                   100,0,0,R1,1,2,4,\n\
+                   300,0,0,R1,1,2,5,10\n";
+        let e = MeasurementSet::from_csv_str(&m(), csv, "d.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("d.csv:3") && e.contains("cannot be told"), "{e}");
+        // In time order, a blank stamp is accepted (the rows' order is the measuring order).
+        let csv = csv.replace(",20\n", ",5\n");
+        assert!(MeasurementSet::from_csv_str(&m(), &csv, "d.csv").is_ok());
     }
 
     #[test]

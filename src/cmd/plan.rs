@@ -241,7 +241,9 @@ fn print_sides(r: &volver::planning::Report, seconds_per_point: f64) {
         if !r.reversal_axes.is_empty() {
             println!(
                 "  the model has reversal values ({}): this plan's order decides from which side \
-                 each pose is reached; --bidirectional measures every pose from both",
+                 each pose is reached (the clearance axes, which the measuring program retracts \
+                 between poses, arrive from the clearance's side whatever the order); \
+                 --bidirectional measures every pose from both",
                 r.reversal_axes.join(", ")
             );
         }

@@ -39,9 +39,10 @@ Effects (--effect, repeatable):
   station-drift=ID,VX,VY,VZ           a station's position drifting with time, µm/h
   coupling=AXIS,COMPONENT,BY,AMP_UM   E{COMPONENT}{AXIS} += A·sin(πξ)·η: a straightness bow
                                       growing with the position of BY (ξ, η over 0 … 1)
-  reversal=AXIS,B_UM                  reversal value B of an axis (backlash; µrad for a rotary
-                                      axis): its positioning error is ±B/2 by the direction of
-                                      its last move (the measuring order, --order shuffled)
+  reversal=AXIS,B_UM                  ISO 230-2's reversal value B of an axis (µrad for a rotary
+                                      axis; negative: lost motion): the tool ±B/2 along the axis
+                                      relative to the workpiece by the direction of its last
+                                      move (the measuring order, --order shuffled|bidirectional)
 
 Example:
   volver simulate --plan test4 --seed 7 --out sim --effect thermal-drift=0,0,15";

@@ -9,7 +9,9 @@
 //! that arrived moving forward (+) and those that arrived moving in reverse (−) each give the
 //! least-squares common positioning error that their residuals show beyond the model,
 //! `a = Σ uᵢ·(mᵢ − pᵢ) / Σ |uᵢ|²` (µm, or µrad for a rotary axis; `m` measured, `p` predicted),
-//! with its standard error from the points' own scatter (`√(Σ (uᵢ·(mᵢ − pᵢ) − |uᵢ|² a)²) /
+//! (times the axis' side sign, −1 for an axis that moves the workpiece: the tool's deviation
+//! relative to the workpiece along the command, as ISO 230-2 reads it), with its standard
+//! error from the points' own scatter (`√(Σ (uᵢ·(mᵢ − pᵢ) − |uᵢ|² a)²) /
 //! Σ |uᵢ|²`, scaled by `√(n/(n − 1))`: no noise model is assumed). A reversal B the model lacks
 //! puts `+B/2` on one side and `−B/2` on the other; but the direction also depends on the
 //! position (an axis reaches its lowest position only moving in reverse, its highest only
@@ -19,8 +21,8 @@
 //! reached from both sides, weighed by `W₊W₋/(W₊ + W₋)` (`W` a side's `Σ|uᵢ|²`) over those
 //! positions. That is the reversal value the residuals show, in the sign of the model's
 //! `reversal.X.b` ([`DirectionSplit::difference`]); its standard error comes from each point's
-//! deviation from its side's value at its position. Points whose axis had not moved yet
-//! (direction 0) are left out. A range alone counts by its line of sight.
+//! deviation from its side's value at its position. Points measured before their axis first
+//! moved ([`before_first_move`]: their direction is assumed or unknown) are left out. A range alone counts by its line of sight.
 //!
 //! **What the data can separate** ([`coverage`]): the reversal of an axis moves the points by
 //! `s·B/2` (`s` the direction), which at one position is a constant and so is the axis'
@@ -78,7 +80,7 @@ pub struct Coverage {
     pub forward: usize,
     /// Points that arrived moving in its negative direction.
     pub reverse: usize,
-    /// Points reached before the axis first moved (direction unknown).
+    /// Points with no known direction (0: an axis that never moves, or a file's 0).
     pub unknown: usize,
     /// Distinct positions of the axis.
     pub positions: usize,
@@ -100,13 +102,41 @@ impl Coverage {
     }
 }
 
-/// How the `points` arrived at chain axis `k` of `machine` ([`Coverage`]).
+/// Which of `points` were measured before chain axis `k` first moved, in measuring order
+/// ([`crate::measure::measuring_order`]): their direction on that axis is an assumption (the
+/// first move's, [`crate::approach`]) or unknown, so they show nothing of a reversal by
+/// themselves and no position counts as reached from both sides through them.
+pub fn before_first_move(points: &[Measurement], k: usize) -> Vec<bool> {
+    let order = crate::measure::measuring_order(points);
+    let mut out = vec![false; points.len()];
+    let Some(&first) = order.first() else {
+        return out;
+    };
+    let start = points[first].commands.0[k];
+    for &i in &order {
+        if (points[i].commands.0[k] - start).abs() > crate::approach::MOVE_TOLERANCE {
+            break;
+        }
+        out[i] = true;
+    }
+    out
+}
+
+/// How the `points` arrived at chain axis `k` of `machine` ([`Coverage`]); the points measured
+/// before the axis first moved ([`before_first_move`]) count by their side but reach no
+/// position "from both sides".
 pub fn coverage(machine: &Machine, points: &[Measurement], k: usize) -> Coverage {
     let ax = &machine.axes()[k];
     let mut out = Coverage::default();
     let mut sides: BTreeMap<i64, (bool, bool)> = BTreeMap::new();
-    for p in points {
-        let side = sides.entry(position_key(ax, p.commands.0[k])).or_default();
+    let assumed = before_first_move(points, k);
+    for (i, p) in points.iter().enumerate() {
+        let mut ignored = (false, false);
+        let side = if assumed[i] {
+            &mut ignored
+        } else {
+            sides.entry(position_key(ax, p.commands.0[k])).or_default()
+        };
         match p.approach.0[k] {
             1 => {
                 out.forward += 1;
@@ -119,7 +149,13 @@ pub fn coverage(machine: &Machine, points: &[Measurement], k: usize) -> Coverage
             _ => out.unknown += 1,
         }
     }
-    out.positions = sides.len();
+    let mut all: Vec<i64> = points
+        .iter()
+        .map(|p| position_key(ax, p.commands.0[k]))
+        .collect();
+    all.sort_unstable();
+    all.dedup();
+    out.positions = all.len();
     out.positions_both = sides.values().filter(|s| s.0 && s.1).count();
     out
 }
@@ -309,14 +345,22 @@ fn terms(
     let machine = model.machine();
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let mut out: Vec<Vec<Term>> = axes.iter().map(|_| Vec::new()).collect();
-    for (p, r) in problem.data().points.iter().zip(residuals) {
+    let points = &problem.data().points;
+    let assumed: Vec<Vec<bool>> = axes
+        .iter()
+        .map(|&(k, _)| before_first_move(points, k))
+        .collect();
+    for (i, (p, r)) in points.iter().zip(residuals).enumerate() {
         let mut e = PointErrors::<f64>::zero();
         let pose = model.stations()[p.station_index].pose;
         e.tracker.copy_from_slice(&params[pose..pose + TRACKER_DOF]);
         e.station = p.station_index;
         let offset = &machine.reflectors()[p.reflector].offset;
         let (x, jac) = predict_with_errors_jacobian(machine, &p.commands, offset, &e);
-        for (&(k, _), terms) in axes.iter().zip(out.iter_mut()) {
+        for ((&(k, _), terms), assumed) in axes.iter().zip(out.iter_mut()).zip(&assumed) {
+            if assumed[i] {
+                continue;
+            }
             let side = match p.approach.0[k] {
                 1 => 0,
                 -1 => 1,
@@ -324,13 +368,17 @@ fn terms(
             };
             let ax = &machine.axes()[k];
             let u = jac.component[k][ax.axis.direction() + if ax.axis.is_rotary() { 3 } else { 0 }];
-            // Measured − predicted: the residuals are predicted − measured.
+            // Measured − predicted (the residuals are predicted − measured), times the axis'
+            // side: the tool's deviation relative to the workpiece along the command, whose
+            // forward − reverse is ISO 230-2's B (an error of a workpiece-side axis moves the
+            // workpiece, so the tool the other way).
+            let sigma = ax.side.sign();
             let (dot, w) = match p.observation {
-                Observation::Point => (-dot(u, *r), dot(u, u)),
+                Observation::Point => (-sigma * dot(u, *r), dot(u, u)),
                 Observation::Range => {
                     let len = dot(x, x).sqrt().max(f64::MIN_POSITIVE);
                     let along = dot(u, x.map(|v| v / len));
-                    (-along * r[0], along * along)
+                    (-sigma * along * r[0], along * along)
                 }
             };
             terms.push(Term {

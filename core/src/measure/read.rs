@@ -146,7 +146,11 @@ fn refuse_foreign_axes(machine: &Machine, header: &Header) -> Result<()> {
 pub(crate) fn approach_columns(machine: &Machine, header: &Header) -> Result<Vec<(usize, usize)>> {
     let mut out = Vec::new();
     for h in header.names() {
-        let Some(letter) = h.strip_prefix("approach_") else {
+        let lower = h.to_ascii_lowercase();
+        let Some(letter) = lower
+            .strip_prefix("approach_")
+            .map(|l| &h[h.len() - l.len()..])
+        else {
             continue;
         };
         let mut chars = letter.chars();

@@ -151,7 +151,7 @@ pub struct BallScrewSpec {
 /// tracker_drift = true          # trackerdrift.rx, .ry, .rz (rad/h): the tracker's small rotations += ω·t
 /// station_drift = true          # stationdrift.S1.x … (mm/h): each station's position += v·t
 /// field = ["X*Z", "X*t"]        # field.X*Z.x_1_1 … (mm): a smooth displacement of the tool point
-/// reversal = ["X", "C"]         # reversal.X.b (mm; rad for a rotary axis): ±B/2 by the direction of approach
+/// reversal = ["X", "C"]         # reversal.X.b (mm; rad for a rotary axis): ISO 230-2's B, the tool ±B/2 by the direction of approach
 /// # reversal = [{ axis = "X", degree = 1 }]   # B(x) = b + b1·P₁(x̂): a reversal varying along the axis
 /// [[effects.ball_screw]]
 /// axis = "X"

@@ -82,7 +82,8 @@ impl MeasurementSet {
             }
             for k in 0..n_axes {
                 let from_plan = planned[at].0[k];
-                if !self.approach_stated[k] {
+                if !self.approach_stated[k] || p.approach.0[k] == 0 {
+                    // Not stated by the file, or stated unknown: the plan's.
                     p.approach.0[k] = from_plan;
                 } else if plan.approach.is_some() && from_plan != 0 && p.approach.0[k] != from_plan
                 {

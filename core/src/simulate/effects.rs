@@ -164,8 +164,8 @@ pub const EFFECTS: [(&str, &str, &str); 12] = [
     (
         "reversal",
         "reversal=AXIS,B_UM",
-        "reversal value B of an axis (µm; µrad for a rotary axis): ±B/2 by its direction of \
-         approach",
+        "ISO 230-2's reversal value B of an axis (µm; µrad for a rotary axis): the tool ±B/2 \
+         along it by its direction of approach",
     ),
 ];
 

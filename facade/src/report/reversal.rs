@@ -28,9 +28,10 @@ pub(super) fn section(p: &Page, s: &mut String) -> Result<()> {
     let _ = writeln!(
         s,
         "<h2>Reversal (direction of approach)</h2><p>Each axis' reversal value B (ISO 230-2): \
-         the positioning error approaching in the axis' positive direction minus the one \
-         approaching in its negative; the model adds ±B/2 to the positioning error by the \
-         direction of each point's last move. U (k = 2) as for the error functions. A reversal \
+         the deviation of the tool relative to the workpiece along the axis' command \
+         approaching in its positive direction minus the one approaching in its negative \
+         (negative: lost motion; positive: overshoot); the model moves the tool by ±B/2 along \
+         the axis by the direction of each point's last move. U (k = 2) as for the error functions. A reversal \
          can be identified only where the axis was approached from both sides.</p>"
     );
     let mut rows = Vec::new();

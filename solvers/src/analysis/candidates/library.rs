@@ -309,8 +309,8 @@ fn reversals(model: &Model, out: &mut Vec<Candidate>) {
             model,
             format!("reversal:{letter}"),
             format!(
-                "a reversal of {letter} (backlash, lost motion: ISO 230-2's B, ±B/2 on its \
-                 positioning error by the direction of approach)"
+                "a reversal of {letter} (backlash, lost motion: ISO 230-2's B, the tool ±B/2 \
+                 along the axis relative to the workpiece by the direction of approach)"
             ),
             |s| s.effects.reversal.push(ReversalSpec::Axis(letter.clone())),
         ));
