@@ -205,3 +205,93 @@ fn the_plan_file_gives_an_exports_directions_of_approach() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// A plan that states no direction is measured as volver's measuring program moves: its
+/// clearance axis Z, retracted between poses, arrives from the clearance's side whatever the
+/// plan's order says. Judged by LinuxCNC's `rs274`: the program `plan --gcode` writes is
+/// interpreted, and at each wait (one per pose, its reflectors measured there) each axis'
+/// direction is the sign of its last move in rs274's canonical moves; the directions
+/// `simulate --plan-file` gives the measurements (its file's `approach_` columns, else the
+/// order's, read back) are those, for every axis of every measurement after the axis' first move.
+#[test]
+fn a_plan_is_measured_in_the_directions_its_program_moves() {
+    if !common::rs274::require() {
+        return;
+    }
+    let d = dir().join("program");
+    std::fs::create_dir_all(&d).unwrap();
+    let m = Machine::default_xcfz();
+    // Z up and down with X and C changing: the order's Z directions are both, the program's
+    // only from the clearance (Z = 600) down, but at Z = 600 itself.
+    let plan = Plan::parse_grid(
+        &m,
+        "X=0,C=0,Z=0;X=700,C=90,Z=300;X=0,C=180,Z=150;X=1400,C=90,Z=450;X=700,C=0,Z=600;X=0,C=90,Z=300",
+    )
+    .unwrap();
+    std::fs::write(d.join("plan.csv"), file::to_csv(&plan, &m, "no direction")).unwrap();
+    let p = |f: &str| d.join(f).display().to_string();
+    common::ok(&[
+        "plan",
+        "--plan-file",
+        &p("plan.csv"),
+        "--gcode",
+        &p("plan.nc"),
+    ]);
+    common::simulate(&p("sim"), &["--plan-file", &p("plan.csv"), "--seed", "2"]);
+    let data =
+        volver::core::measure::MeasurementSet::load(&m, &d.join("sim/measurements.csv")).unwrap();
+    let events = common::rs274::interpret(&d.join("plan.nc"), None);
+    // rs274's order is X Y Z A B C; the machine's chain XCFZ.
+    let slot = |k: usize| match m.axes()[k].axis.letter() {
+        'X' => 0,
+        'Z' => 2,
+        _ => 5,
+    };
+    let (mut now, mut dir, mut waits) = ([f64::NAN; 6], [0i8; 6], Vec::new());
+    for e in &events {
+        use common::rs274::Event;
+        match e {
+            Event::Traverse(to) | Event::Feed(to, _, _) => {
+                for j in 0..6 {
+                    if (to[j] - now[j]).abs() > 1e-6 {
+                        dir[j] = if to[j] > now[j] { 1 } else { -1 };
+                    }
+                }
+                now = *to;
+            }
+            Event::Dwell(_) => waits.push(dir),
+            _ => {}
+        }
+    }
+    assert_eq!(waits.len(), plan.positions.len(), "one wait per pose");
+    println!(
+        "rs274: {} waits, Z directions {:?}",
+        waits.len(),
+        waits.iter().map(|w| w[2]).collect::<Vec<_>>()
+    );
+    let mut order_z_both = [false; 2];
+    for (i, pt) in data.points.iter().enumerate() {
+        let seen = waits[i / 2]; // two reflectors at each pose
+        for k in 0..3 {
+            if i / 2 == 0 && seen[slot(k)] == 0 {
+                continue; // before the axis' first move: assumed
+            }
+            assert_eq!(
+                pt.approach.0[k],
+                seen[slot(k)],
+                "line {}: axis {} arrived {} in rs274's moves",
+                pt.line,
+                m.axes()[k].axis,
+                seen[slot(k)]
+            );
+        }
+    }
+    for a in plan.approaches(1) {
+        order_z_both[usize::from(a.0[2] > 0)] = true;
+    }
+    assert_eq!(
+        order_z_both,
+        [true, true],
+        "the order alone would give Z both sides"
+    );
+}

@@ -224,6 +224,27 @@ impl Plan {
         crate::approach::from_order(&order, crate::chain::MAX_AXES)
     }
 
+    /// The directions of approach [`Plan::approaches`] gives, but as volver's measuring program
+    /// makes them on `machine` when it has a clearance position ([`file::program_approaches`]
+    /// with [`file::ProgramOptions::new`]: its clearance axes, retracted between poses, arrive
+    /// from the clearance's side), repeated for each of `passes` runs (the program run once per
+    /// station). Without a clearance, or when the program cannot be written (an approach
+    /// outside the travel), the order's.
+    pub fn program_or_order_approaches(
+        &self,
+        machine: &Machine,
+        passes: usize,
+    ) -> Vec<crate::approach::Approach> {
+        let options = file::ProgramOptions::new(machine);
+        if options.clearance.is_empty() {
+            return self.approaches(passes);
+        }
+        match file::program_approaches(self, machine, &options) {
+            Ok(one) => (0..passes).flat_map(|_| one.iter().copied()).collect(),
+            Err(_) => self.approaches(passes),
+        }
+    }
+
     /// A named preset of the paper (see the module documentation). The presets are defined for
     /// machines with the axes X, C and Z; each axis must reach the preset's range.
     pub fn preset(machine: &Machine, name: &str) -> Result<Plan> {

@@ -57,7 +57,9 @@ pub struct SimulateArgs {
     #[arg(long)]
     plan: Option<String>,
     /// A plan file instead (CSV: the axes, reflector, optionally order; as `volver plan`
-    /// writes it): its rows are measured in the file's order.
+    /// writes it): its rows are measured in the file's order, each axis arriving as volver's
+    /// measuring program brings it (with the machine's [clearance]: the clearance axes from
+    /// the clearance's side; the stated directions of approach).
     #[arg(long, conflicts_with_all = ["plan", "reflectors"])]
     plan_file: Option<PathBuf>,
     /// Seed of the true errors, the harmonics' phases and the noise.
@@ -326,7 +328,7 @@ fn plan_of(
     preset: Option<&volver::core::presets::Preset>,
 ) -> Result<Plan> {
     let plan = plan_in_order(a, machine, preset)?;
-    Ok(match a.order.as_str() {
+    let mut plan = match a.order.as_str() {
         "shuffled" => plan.shuffled(a.seed),
         "bidirectional" => {
             let overrun = volver::core::plan::sides::Overrun {
@@ -341,7 +343,13 @@ fn plan_of(
             })?
         }
         _ => plan,
-    })
+    };
+    // A plan file is measured as volver's measuring program runs it: its clearance axes,
+    // retracted between poses, arrive from the clearance's side.
+    if a.plan_file.is_some() {
+        plan.approach = Some(plan.program_or_order_approaches(machine, 1));
+    }
+    Ok(plan)
 }
 
 /// The plan of `--plan`, `--plan-file` or the preset, in its own order.

@@ -45,7 +45,7 @@ mod program;
 mod route;
 pub use program::{
     DEFAULT_APPROACH_FEED, MAX_APPROACH_FEED, MAX_SECONDS_PER_POINT, MAX_SETTLE_S,
-    MIN_SECONDS_PER_POINT, ProgramOptions, Wait, gcode,
+    MIN_SECONDS_PER_POINT, ProgramOptions, Wait, gcode, program_approaches,
 };
 
 /// The plan file of `plan` on `machine`, `comment` (one line or several) first as `#` lines.

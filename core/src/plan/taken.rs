@@ -15,8 +15,10 @@ impl MeasurementSet {
     /// were taken by: the data in their measuring order ([`measuring_order`]) are the plan's
     /// measurements in its order, once per station (the plan measured from each station in
     /// turn), each row checked to be the plan's (its commands within 1e-5 mm or rad, its
-    /// reflector). The plan's directions ([`Plan::approaches`]: a bidirectional plan's stated
-    /// ones, else its order's) replace those derived from the data's order; an axis whose
+    /// reflector). The directions volver's measuring program of the plan gives
+    /// ([`Plan::program_or_order_approaches`]: a bidirectional plan's stated ones; the
+    /// clearance axes from the clearance's side; the others by the plan's order) replace those
+    /// derived from the data's order; an axis whose
     /// direction the measurement file states (`approach_<AXIS>` columns) keeps the file's, and
     /// a file's direction the plan states otherwise is refused as a contradiction. `plan_file`
     /// and `data_file` name the files in messages.
@@ -57,7 +59,7 @@ impl MeasurementSet {
             ));
         }
         let steps = plan.steps();
-        let planned = plan.approaches(n / m);
+        let planned = plan.program_or_order_approaches(machine, n / m);
         let order = measuring_order(&self.points);
         for (at, &i) in order.iter().enumerate() {
             let step = steps[at % m];

@@ -5,6 +5,7 @@ use super::super::Plan;
 use super::super::sides::{Overrun, fits};
 use super::route::Route;
 use crate::approach::Approach;
+use crate::chain::MAX_AXES;
 use crate::dialect::{Dialect, MAX_DWELL_S};
 use crate::error::{Error, Place, Result};
 use crate::machine::Machine;
@@ -305,6 +306,58 @@ pub fn gcode(
     options: &ProgramOptions,
     title: &str,
 ) -> Result<String> {
+    Ok(run(plan, machine, options, title)?.0)
+}
+
+/// The direction of approach of each of `plan`'s measurements as its measuring program
+/// ([`gcode`] with `options`) makes them: each axis' last move as written before the
+/// measurement — the clearance axes, retracted between poses, arrive from the clearance's side
+/// whatever the order of the poses says; an axis with a stated direction arrives in it. Before
+/// an axis' first move, the direction of that move ([`crate::approach`]); 0 for an axis that
+/// never moves. What real data taken by the program have ([`MeasurementSet::take_approach_from_plan`]).
+///
+/// ```
+/// use volver_core::machine::Machine;
+/// use volver_core::plan::{Plan, file};
+/// let m = Machine::default_xcfz(); // [clearance] Z = 600.0
+/// // Z steps up, X back and forth: between poses the program retracts Z to 600 and brings it
+/// // down, so Z arrives at 0 and 300 moving − whatever the plan's order says (+ from 0 to
+/// // 300); at 600, the clearance itself, it arrived by the retract, moving +.
+/// let plan = Plan::parse_grid(&m, "X=0,C=0,Z=0;X=700,C=0,Z=300;X=0,C=0,Z=600").unwrap();
+/// let a = file::program_approaches(&plan, &m, &file::ProgramOptions::new(&m)).unwrap();
+/// let z: Vec<i8> = a.iter().map(|a| a.0[2]).collect();
+/// assert_eq!(z, [-1, -1, -1, -1, 1, 1]);
+/// assert_eq!(plan.approaches(1)[2].0[2], 1);
+/// ```
+///
+/// [`MeasurementSet::take_approach_from_plan`]: crate::measure::MeasurementSet::take_approach_from_plan
+pub fn program_approaches(
+    plan: &Plan,
+    machine: &Machine,
+    options: &ProgramOptions,
+) -> Result<Vec<Approach>> {
+    let (_, arrived) = run(plan, machine, options, "")?;
+    let mut out = Vec::with_capacity(plan.n_points());
+    for (v, a) in visits(plan).iter().zip(arrived) {
+        out.extend(std::iter::repeat_n(a, v.reflectors.len()));
+    }
+    // Before an axis' first move: that move's direction.
+    for k in 0..MAX_AXES {
+        if let Some(first) = out.iter().position(|a| a.0[k] != 0) {
+            let s = out[first].0[k];
+            out[..first].iter_mut().for_each(|a| a.0[k] = s);
+        }
+    }
+    Ok(out)
+}
+
+/// [`gcode`] and the directions each visit's axes arrive with.
+fn run(
+    plan: &Plan,
+    machine: &Machine,
+    options: &ProgramOptions,
+    title: &str,
+) -> Result<(String, Vec<Approach>)> {
     options.check(machine)?;
     let visits = visits(plan);
     let most = visits.iter().map(|v| v.reflectors.len()).max().unwrap_or(0);
@@ -331,16 +384,18 @@ pub fn gcode(
         &options.clearance,
         (overrun, options.approach_feed),
     );
+    let mut arrived = Vec::with_capacity(visits.len());
     for (k, v) in visits.iter().enumerate() {
         let pose = plan.positions[v.position];
         let number = (k < 99_999).then_some(k + 1);
         route.visit(&pose, v.approach.as_ref(), number);
+        arrived.push(route.arrived);
         wait(&mut route.out, machine, options, k, v);
     }
     route.retract();
     let mut out = route.out;
     out.push_str(d.program_end());
-    Ok(out)
+    Ok((out, arrived))
 }
 
 /// The program's header comments: the plan, its size, the clearance, the waits.

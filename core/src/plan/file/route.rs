@@ -27,6 +27,9 @@ pub(super) struct Route<'a> {
     approached: [i8; MAX_AXES],
     /// The visit's block number, taken by its first block.
     number: Option<usize>,
+    /// Each axis' direction of its last move as written (0 before its first known move): the
+    /// direction of approach the program gives a measurement.
+    pub(super) arrived: Approach,
 }
 
 impl<'a> Route<'a> {
@@ -49,6 +52,7 @@ impl<'a> Route<'a> {
             now: Commands([f64::NAN; MAX_AXES]),
             approached: [0; MAX_AXES],
             number: None,
+            arrived: Approach::UNKNOWN,
         }
     }
 
@@ -226,6 +230,9 @@ impl<'a> Route<'a> {
         self.number();
         let _ = write!(self.out, "G53 {} {}", self.d.rapid(), words.join(" "));
         self.end_block(note);
+        self.arrived = self
+            .arrived
+            .after_move(&self.now, to, self.machine.axes().len());
         for &j in &moved {
             self.now.0[j] = to.0[j];
             self.approached[j] = 0;
@@ -261,6 +268,9 @@ impl<'a> Route<'a> {
         );
         self.end_block(note);
         self.out.push_str("G90\n");
+        self.arrived = self
+            .arrived
+            .after_move(&self.now, to, self.machine.axes().len());
         for &j in &moved {
             self.now.0[j] = to.0[j];
             self.approached[j] = 0;
