@@ -110,30 +110,14 @@ fn repeated_points_estimate_the_noise_error() {
     let problem = Problem::new(&out.truth.model, &out.measurements).unwrap();
     let (est, pairs) = repeat_noise(&problem).unwrap();
     // Each point and its reading in the second pass are repeats when every axis arrived from the
-    // same side both times: not the first pass' points at X's first position (X, the slowest
-    // axis, had not moved yet: taken to arrive as its first move, forward; in the second pass it
-    // arrives there moving back), but those of them whose other axes match (the first points'
-    // C and Z, taken to arrive as their first moves). C = 0° and 360° are reached from opposite
-    // sides of C (0° after the turn back): not repeats — but for the very first C = 0° points,
-    // taken to arrive forward as C's first move, which repeat the C = 360° ones.
+    // same side both times: all but the first pass' points at X's first position (X, the
+    // slowest axis, had not moved yet: their direction is assumed, and assumed directions
+    // repeat nothing). C = 0° and 360° are reached from opposite sides of C (0° after the turn
+    // back): not repeats.
     let pts = &out.measurements.points;
     let n = pts.len() / 2;
-    let same_sides = (0..n)
-        .filter(|&i| pts[i].approach == pts[i + n].approach)
-        .count();
-    let first_turn = pts
-        .iter()
-        .take_while(|p| p.commands.0[1] < 1e-9 && p.commands.0[0] == pts[0].commands.0[0])
-        .count();
-    assert!(
-        pairs >= same_sides && pairs <= same_sides + first_turn * 2,
-        "{pairs} {same_sides}"
-    );
-    // Six positions of X (0, 300 … 1200, 1400): the five after the first all repeat.
-    assert!(
-        pairs >= n - n / 6 && pairs < n,
-        "{pairs} pairs of {n} points"
-    );
+    // Six positions of X (0, 300 … 1200, 1400).
+    assert_eq!(pairs, n - n / 6, "{pairs} pairs of {n} points");
     let ratio = est.emm_um / out.record.noise_error.emm_um;
     println!(
         "repeat estimate {} µm vs noise error {} µm",

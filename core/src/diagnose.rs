@@ -433,7 +433,9 @@ pub fn repeat_noise(problem: &Problem) -> Option<(ErrorStats, usize)> {
 
 /// The pairs of repeated points, each point with the next repeat of it: measured at the same
 /// pose with the same reflector and station (rotary positions a full turn apart are the same
-/// pose) **and with every axis arriving from the same side** ([`crate::measure::repeat_key`]).
+/// pose) **and with every axis arriving from the same side** ([`crate::measure::repeat_key`]),
+/// leaving out the points measured before one of their axes first moved (their direction is
+/// assumed there, [`before_first_move`]).
 /// Two readings of one pose reached from opposite sides of an axis differ by its reversal
 /// besides the noise (the C = 0° and C = 360° points of test 4, the first reached after the
 /// table turned back, the second moving forward): they are not repeats, and the residuals'
@@ -442,7 +444,15 @@ pub fn repeat_pairs(problem: &Problem) -> Vec<(usize, usize)> {
     let machine = problem.model().machine();
     let pts = &problem.data().points;
     let key = |i: usize| crate::measure::repeat_key(machine, &pts[i]);
-    let mut order: Vec<usize> = (0..pts.len()).collect();
+    // A point measured before one of its axes first moved has an assumed direction there: it
+    // repeats nothing for sure.
+    let mut assumed = vec![false; pts.len()];
+    for k in 0..machine.axes().len() {
+        for (a, b) in assumed.iter_mut().zip(before_first_move(pts, k)) {
+            *a |= b;
+        }
+    }
+    let mut order: Vec<usize> = (0..pts.len()).filter(|&i| !assumed[i]).collect();
     order.sort_by_key(|&i| (key(i), i));
     order
         .windows(2)
