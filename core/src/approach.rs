@@ -120,14 +120,20 @@ pub fn from_order(order: &[Commands], n_axes: usize) -> Vec<Approach> {
         }
         out.push(state);
     }
-    // The points before each axis' first move: that move's direction.
-    for k in 0..n_axes.min(MAX_AXES) {
-        if let Some(first) = out.iter().position(|a| a.0[k] != 0) {
-            let s = out[first].0[k];
-            out[..first].iter_mut().for_each(|a| a.0[k] = s);
+    assume_first_moves(&mut out);
+    out
+}
+
+/// The directions of the points before each axis' first known direction in `approaches`
+/// (measuring order) set to that direction: the assumption of [`from_order`] (see the module
+/// documentation); an axis with no known direction keeps 0.
+pub fn assume_first_moves(approaches: &mut [Approach]) {
+    for k in 0..MAX_AXES {
+        if let Some(first) = approaches.iter().position(|a| a.0[k] != 0) {
+            let s = approaches[first].0[k];
+            approaches[..first].iter_mut().for_each(|a| a.0[k] = s);
         }
     }
-    out
 }
 
 /// A direction of approach read from a file's cell: `+1`, `1`, `+` (forward), `-1`, `-`

@@ -223,17 +223,13 @@ fn print_reversals(a: &Assessment, model: &Model) {
     }
     let parts: Vec<String> = axes
         .iter()
-        .map(|(k, _)| {
+        .map(|(k, range)| {
             let ax = &model.machine().axes()[*k];
             let mid = 0.5 * (ax.min + ax.max);
             let mut g = vec![0.0; a.id.params.len()];
             let b = model.reversal_at(*k, mid, &a.id.params, Some(&mut g));
             let u = K * a.covariance.u(&g);
-            let (s, unit) = if ax.axis.is_rotary() {
-                (volver::core::units::URAD_PER_RAD, "µrad")
-            } else {
-                (UM_PER_MM, "µm")
-            };
+            let (s, unit) = model.params()[range.start].unit.micro();
             format!(
                 "{} {:.3} ± {:.3} {unit}",
                 ax.axis,

@@ -6,7 +6,6 @@ use super::figures::table;
 use crate::error::Result;
 use crate::plot::escape;
 use std::fmt::Write;
-use volver_core::units::{UM_PER_MM, URAD_PER_RAD};
 use volver_solvers::uncertainty::K;
 
 /// The reversal section: one row per axis with a reversal (at its travel's start, middle and
@@ -37,11 +36,8 @@ pub(super) fn section(p: &Page, s: &mut String) -> Result<()> {
     let mut rows = Vec::new();
     for (k, range) in axes {
         let ax = &model.machine().axes()[k];
-        let (scale, unit) = if ax.axis.is_rotary() {
-            (URAD_PER_RAD, "µrad")
-        } else {
-            (UM_PER_MM, "µm")
-        };
+        // B's unit: the reversal parameters' (mm or rad), printed in µm or µrad.
+        let (scale, unit) = model.params()[range.start].unit.micro();
         let counts = approach_counts(problem.data(), k);
         let positions: Vec<f64> = if range.len() > 1 {
             vec![ax.min, 0.5 * (ax.min + ax.max), ax.max]

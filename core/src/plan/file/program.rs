@@ -5,7 +5,6 @@ use super::super::Plan;
 use super::super::sides::{Overrun, fits};
 use super::route::Route;
 use crate::approach::Approach;
-use crate::chain::MAX_AXES;
 use crate::dialect::{Dialect, MAX_DWELL_S};
 use crate::error::{Error, Place, Result};
 use crate::machine::Machine;
@@ -341,13 +340,7 @@ pub fn program_approaches(
     for (v, a) in visits(plan).iter().zip(arrived) {
         out.extend(std::iter::repeat_n(a, v.reflectors.len()));
     }
-    // Before an axis' first move: that move's direction.
-    for k in 0..MAX_AXES {
-        if let Some(first) = out.iter().position(|a| a.0[k] != 0) {
-            let s = out[first].0[k];
-            out[..first].iter_mut().for_each(|a| a.0[k] = s);
-        }
-    }
+    crate::approach::assume_first_moves(&mut out);
     Ok(out)
 }
 

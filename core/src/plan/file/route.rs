@@ -230,13 +230,7 @@ impl<'a> Route<'a> {
         self.number();
         let _ = write!(self.out, "G53 {} {}", self.d.rapid(), words.join(" "));
         self.end_block(note);
-        self.arrived = self
-            .arrived
-            .after_move(&self.now, to, self.machine.axes().len());
-        for &j in &moved {
-            self.now.0[j] = to.0[j];
-            self.approached[j] = 0;
-        }
+        self.arrive(to, &moved);
     }
 
     /// A feed move to `to` from a known position: an incremental move (`G91 G1`, the written
@@ -268,10 +262,16 @@ impl<'a> Route<'a> {
         );
         self.end_block(note);
         self.out.push_str("G90\n");
+        self.arrive(to, &moved);
+    }
+
+    /// The machine at `to` after a move of the axes `moved`: each moved axis' direction is the
+    /// move's, and none arrived by an approach.
+    fn arrive(&mut self, to: &Commands, moved: &[usize]) {
         self.arrived = self
             .arrived
             .after_move(&self.now, to, self.machine.axes().len());
-        for &j in &moved {
+        for &j in moved {
             self.now.0[j] = to.0[j];
             self.approached[j] = 0;
         }
