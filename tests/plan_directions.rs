@@ -20,11 +20,9 @@ use volver::core::machine::Machine;
 use volver::core::plan::sides::Overrun;
 use volver::core::plan::{Plan, file};
 
-fn dir() -> PathBuf {
-    let d = std::env::temp_dir().join(format!("volver-plan-directions-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A scratch directory of its own for each test: the two run in parallel in one process.
+fn dir(tag: &str) -> PathBuf {
+    common::scratch_dir("plan-directions", tag)
 }
 
 /// `identify` of `data` with the reversal model, `extra` arguments: its stdout (or stderr when
@@ -102,7 +100,7 @@ fn strip(text: &str) -> String {
 
 #[test]
 fn the_plan_file_gives_an_exports_directions_of_approach() {
-    let d = dir();
+    let d = dir("export");
     let m = Machine::default_xcfz();
     let grid = Plan::parse_grid(&m, "X=0:1400:200,C=0:300:60,Z=0:600:300").unwrap();
     let plan = grid.bidirectional(&m, &Overrun::default()).unwrap();
@@ -218,8 +216,7 @@ fn a_plan_is_measured_in_the_directions_its_program_moves() {
     if !common::rs274::require() {
         return;
     }
-    let d = dir().join("program");
-    std::fs::create_dir_all(&d).unwrap();
+    let d = dir("program");
     let m = Machine::default_xcfz();
     // Z up and down with X and C changing: the order's Z directions are both, the program's
     // only from the clearance (Z = 600) down, but at Z = 600 itself.
