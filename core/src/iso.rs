@@ -309,6 +309,58 @@ impl ErrorId {
         })
     }
 
+    /// The factor that turns volver's value of this error into ISO 230-1's right-hand reading:
+    /// −1 for the squareness errors **C0X, A0Y and B0Z**, +1 for every other error.
+    ///
+    /// volver's model applies one rule to every squareness `R0K` of a linear axis K (the
+    /// paper's eq. 8, written for B0Z): moving K by `u − u_ref` moves the tool relative to the
+    /// workpiece by `−R0K·(u − u_ref)` along the third direction j (B0Z along x, A0Z along y,
+    /// C0Y along x, A0Y along z, C0X along y, B0X along z), whichever side of the chain K is
+    /// on. ISO 230-1 reads a squareness as the angle, right-handed about R, by which K's line
+    /// of motion is turned from its nominal direction, which moves the tool by
+    /// `R0K·(e_R × e_K)·(u − u_ref)`; `e_R × e_K` is `+e_j` for B0Z,
+    /// C0X and A0Y (R, K, j in cyclic order) and `−e_j` for A0Z, B0X and C0Y. So the two
+    /// readings agree for A0Z, B0X and C0Y and are opposite for C0X, A0Y and B0Z. Every export
+    /// and table in volver writes the ISO reading (`value × iso_sign`).
+    ///
+    /// ```
+    /// use volver_core::iso::ErrorId;
+    /// let sign = |n: &str| n.parse::<ErrorId>().unwrap().iso_sign();
+    /// assert_eq!((sign("B0Z"), sign("C0X"), sign("A0Y")), (-1.0, -1.0, -1.0));
+    /// assert_eq!((sign("A0Z"), sign("B0X"), sign("C0Y")), (1.0, 1.0, 1.0));
+    /// assert_eq!((sign("X0C"), sign("EXX")), (1.0, 1.0));
+    /// ```
+    pub fn iso_sign(self) -> f64 {
+        if !self.is_squareness() {
+            return 1.0;
+        }
+        let (r, k) = (self.component().direction(), self.axis().direction());
+        // (r, k, j) in cyclic order x → y → z: e_r × e_k = +e_j.
+        if (r + 1) % 3 == k { -1.0 } else { 1.0 }
+    }
+
+    /// For a squareness error, its rule in words: volver's model and ISO 230-1's reading
+    /// ([`ErrorId::iso_sign`]), e.g. "B0Z: moving Z by Δ from its reference moves the tool
+    /// relative to the workpiece by −B0Z·Δ along x in volver's model; ISO 230-1's B0Z … has
+    /// the opposite sign". `None` for other errors.
+    pub fn squareness_rule(self) -> Option<String> {
+        let j = self.squareness_partner()?.component();
+        let (k, r) = (self.axis(), self.component());
+        let axis_name = |d: usize| ["x", "y", "z"][d];
+        let iso = if self.iso_sign() < 0.0 {
+            "the opposite sign"
+        } else {
+            "the same sign"
+        };
+        Some(format!(
+            "{self}: moving {k} by Δ from its reference moves the tool relative to the workpiece \
+             by −{self}·Δ along {} in volver's model; ISO 230-1's {self} (the turn of {k}'s line of motion, right-handed about \
+             {}) has {iso}",
+            axis_name(j.direction()),
+            axis_name(r.direction()),
+        ))
+    }
+
     /// Checks that the error exists for its axis: every component error does; location errors of
     /// a rotary axis are the two positions and two orientations perpendicular to it (X0C, Y0C,
     /// A0C, B0C for C); a linear axis has the two squareness errors perpendicular to it (A0Z,

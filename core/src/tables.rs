@@ -12,7 +12,10 @@
 //! squareness errors are constants. Thermal drift, the tracker pose and reflector offsets belong
 //! to the measurement, not to the machine, and are not exported. The squareness rule of the model
 //! is kept: with the paper's rule the squareness sits in the straightness' slope and the
-//! squareness constants are zero, so a controller that applies both gets it once.
+//! squareness constants are zero, so a controller that applies both gets it once. Squareness
+//! constants are written in **ISO 230-1's sign** (the right-hand turn of the axis' line of
+//! motion about the named axis, [`ErrorId::iso_sign`]), which is the opposite of the model's
+//! parameter for C0X, A0Y and B0Z; the ISG and Etalon files say so in a comment.
 //!
 //! What the tables carry is computed, not assumed: [`ErrorTables::tool_point`] is the tool point
 //! as a control applies them, and [`uncarried`] lists every machine part the tables cannot
@@ -111,7 +114,9 @@ impl AxisTable {
 /// Every exported error of a machine.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ErrorTables {
-    /// The constants (location and squareness errors): name and value (mm or rad).
+    /// The constants (location and squareness errors): name and value (mm or rad) in ISO
+    /// 230-1's sign ([`ErrorId::iso_sign`]: the squareness errors C0X, A0Y and B0Z are the
+    /// negatives of the model's parameters of those names).
     pub constants: Vec<(String, f64)>,
     /// The tables, in chain order.
     pub axes: Vec<AxisTable>,
@@ -222,7 +227,8 @@ impl ErrorTables {
             .filter(|t| matches!(t.id, ErrorId::Location { .. }))
             .map(|t| {
                 let v = at_reference.location[t.axis][t.id.component().index()];
-                (t.id.to_string(), v)
+                // ISO 230-1's reading: C0X, A0Y and B0Z are the negatives of the model's.
+                (t.id.to_string(), v * t.id.iso_sign())
             })
             .collect();
         let mut axes = Vec::new();
@@ -315,6 +321,26 @@ impl ErrorTables {
         Some(d)
     }
 
+    /// The `//` comment lines that state the sign of the squareness constants, when the tables
+    /// hold one (empty otherwise).
+    fn squareness_note(&self) -> String {
+        let names: Vec<&str> = self
+            .constants
+            .iter()
+            .filter(|(n, _)| n.parse::<ErrorId>().is_ok_and(|id| id.is_squareness()))
+            .map(|(n, _)| n.as_str())
+            .collect();
+        if names.is_empty() {
+            return String::new();
+        }
+        format!(
+            "// squareness ({}): ISO 230-1 sign, the angle (rad) by which the axis' line of \
+             motion is turned right-handed about the named axis (C0X, A0Y and B0Z are the \
+             negatives of volver's model parameters of those names)\n",
+            names.join(", ")
+        )
+    }
+
     /// The ISG CSV text (see the module documentation).
     pub fn to_isg_csv(&self) -> String {
         let mut s = String::from(
@@ -323,6 +349,7 @@ impl ErrorTables {
              // units: positions mm (linear axes) or degrees (rotary axes); errors mm or rad\n",
         );
         s.push_str(&self.no_direction_note());
+        s.push_str(&self.squareness_note());
         if !self.constants.is_empty() {
             s.push_str("// location and squareness errors (constant)\n");
             let names: Vec<&str> = self.constants.iter().map(|c| c.0.as_str()).collect();
@@ -364,6 +391,7 @@ impl ErrorTables {
              // Gridpoints rows: position value\n",
         );
         s.push_str(&self.no_direction_note());
+        s.push_str(&self.squareness_note());
         for (name, v) in &self.constants {
             s.push_str(&format!("[{name}]\nVALUE = {}\n", fmt_value(*v)));
         }

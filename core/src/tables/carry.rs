@@ -78,7 +78,8 @@ impl ErrorTables {
                 .parse()
                 .map_err(|_| Error::UnknownErrorName { name: name.clone() })?;
             let k = chain_index(id.axis())?;
-            e.location[k][id.component().index()] = *v;
+            // The tables hold ISO 230-1's sign; the chain takes the model's.
+            e.location[k][id.component().index()] = *v * id.iso_sign();
             e.has_location[k] = true;
         }
         for t in &self.axes {
