@@ -244,8 +244,9 @@ pub enum ErrorId {
         axis: Axis,
     },
     /// `{component}0{axis}`: a constant location error. For a rotary axis the position of its line
-    /// (X0C, Y0C) or its orientation (A0C, B0C); for a linear axis its squareness (B0Z: Z tilted
-    /// about y, towards x; A0Z: Z tilted about x, towards y; C0Y: Y tilted about z, towards x).
+    /// (X0C, Y0C) or its orientation (A0C, B0C); for a linear axis its squareness (B0Z: Z's
+    /// line turned about y, moving the tool along x; A0Z: about x, along y; C0Y: Y's line about
+    /// z, along x). The model's sign rule and ISO 230-1's reading: [`ErrorId::iso_sign`].
     Location {
         /// Translation (X, Y, Z) or rotation (A, B, C) component.
         component: Axis,

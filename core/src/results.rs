@@ -18,6 +18,7 @@ use crate::iso::{Group, Unit};
 use crate::machine::{Machine, MachineSpec};
 use crate::model::{ErrorModelSpec, Model};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::Path;
 
 /// The `format` field of every results file.
@@ -63,6 +64,34 @@ pub struct ResultsFile {
     /// machine at that instant, the test's start.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_origin_s: Option<f64>,
+    /// What the values mean where a reader could take them the other way, by topic: written by
+    /// [`ResultsFile::from_model`], not read back (older files have none). `squareness`: the
+    /// sign rule of the model's squareness parameters and how ISO 230-1's reading relates
+    /// ([`ErrorId::iso_sign`](crate::iso::ErrorId::iso_sign)), when the model has one.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub conventions: BTreeMap<String, String>,
+}
+
+/// The `conventions` entries of a results file of `model`: the squareness sign rule of each
+/// squareness parameter the model has.
+fn conventions(model: &Model) -> BTreeMap<String, String> {
+    let rules: Vec<String> = model
+        .terms()
+        .iter()
+        .filter_map(|t| t.id.squareness_rule())
+        .collect();
+    let mut c = BTreeMap::new();
+    if !rules.is_empty() {
+        c.insert(
+            "squareness".to_string(),
+            format!(
+                "parameters in volver's sign; exports (tables, controller files, the report) \
+                 give ISO 230-1's. {}",
+                rules.join(". ")
+            ),
+        );
+    }
+    c
 }
 
 /// The covariance of a fit's parameters, as factors: `Cov(p) = D Dᵀ + H Hᵀ` (the data's part and
@@ -200,6 +229,7 @@ impl ResultsFile {
                 .collect(),
             uncertainty: None,
             time_origin_s: None,
+            conventions: conventions(model),
         })
     }
 

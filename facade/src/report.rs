@@ -668,7 +668,10 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
     let consts = location_rows(model, params, cov.as_ref());
     if !consts.is_empty() {
         s.push_str(&table(
-            &["location / squareness error", "value ± U (k = 2)"],
+            &[
+                "location / squareness error (ISO 230-1 sign)",
+                "value ± U (k = 2)",
+            ],
             &consts,
         ));
     }
@@ -682,7 +685,8 @@ fn location_rows(model: &Model, params: &[f64], cov: Option<&Covariance>) -> Vec
         .iter()
         .filter(|t| matches!(t.id, ErrorId::Location { .. }))
         .map(|t| {
-            let v = params[t.params.start];
+            // ISO 230-1's sign (a squareness C0X, A0Y, B0Z is the parameter's negative).
+            let v = params[t.params.start] * t.id.iso_sign();
             let mut g = vec![0.0; params.len()];
             g[t.params.start] = 1.0;
             let u = cov.map_or(0.0, |c| K * c.u(&g));
@@ -727,17 +731,17 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
                     .collect();
                 K * c.u(&g)
             });
+            // ISO 230-1's sign: C0X, A0Y and B0Z are the negatives of the model's reading.
+            let iso = id.iso_sign() * URAD_PER_RAD;
             let mut row = vec![
                 id.to_string(),
-                format!("{:.3} ± {:.3} µrad", v * URAD_PER_RAD, u * URAD_PER_RAD),
+                format!("{:.3} ± {:.3} µrad", v * iso, u * URAD_PER_RAD),
             ];
             if let Some(t) = &true_sq {
                 row.push(
                     t.iter()
                         .find(|(i, _)| i == id)
-                        .map_or("–".into(), |(_, w)| {
-                            format!("{:.3} µrad", w * URAD_PER_RAD)
-                        }),
+                        .map_or("–".into(), |(_, w)| format!("{:.3} µrad", w * iso)),
                 );
             }
             row
@@ -746,7 +750,7 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
     if !sq.is_empty() {
         let _ = writeln!(
             s,
-            "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}):</p>",
+            "<p>Squareness implied by the model (its parameter plus its straightness partner's slope, rule: {}), in ISO 230-1's sign: the angle by which the axis' line of motion is turned right-handed about the named axis (C0X, A0Y and B0Z are the negatives of volver's parameters of those names):</p>",
             model.spec().squareness
         );
         let head: &[&str] = if true_sq.is_some() {

@@ -705,7 +705,8 @@ impl Model {
     /// The squareness of every linear axis implied by the parameters, whatever the rule: the
     /// squareness parameter (if modelled) plus the slope of its straightness partner's best-fit
     /// line (if modelled), in rad. With the paper's rule the first is zero and this is the
-    /// squareness "taken from the straightness".
+    /// squareness "taken from the straightness". In the model's sign: ISO 230-1's reading is
+    /// each value times [`ErrorId::iso_sign`] (the opposite for C0X, A0Y and B0Z).
     pub fn squareness(&self, params: &[f64]) -> Vec<(ErrorId, f64)> {
         let mut out = Vec::new();
         for ax in self.machine.axes() {
