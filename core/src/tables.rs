@@ -228,7 +228,8 @@ impl ErrorTables {
             .map(|t| {
                 let v = at_reference.location[t.axis][t.id.component().index()];
                 // ISO 230-1's reading: C0X, A0Y and B0Z are the negatives of the model's.
-                (t.id.to_string(), v * t.id.iso_sign())
+                // (+ 0.0: a zero stays +0, not −0, in the files.)
+                (t.id.to_string(), v * t.id.iso_sign() + 0.0)
             })
             .collect();
         let mut axes = Vec::new();

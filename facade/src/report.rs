@@ -686,7 +686,7 @@ fn location_rows(model: &Model, params: &[f64], cov: Option<&Covariance>) -> Vec
         .filter(|t| matches!(t.id, ErrorId::Location { .. }))
         .map(|t| {
             // ISO 230-1's sign (a squareness C0X, A0Y, B0Z is the parameter's negative).
-            let v = params[t.params.start] * t.id.iso_sign();
+            let v = params[t.params.start] * t.id.iso_sign() + 0.0;
             let mut g = vec![0.0; params.len()];
             g[t.params.start] = 1.0;
             let u = cov.map_or(0.0, |c| K * c.u(&g));
@@ -735,7 +735,7 @@ fn squareness(p: &Page, s: &mut String) -> Result<()> {
             let iso = id.iso_sign() * URAD_PER_RAD;
             let mut row = vec![
                 id.to_string(),
-                format!("{:.3} ± {:.3} µrad", v * iso, u * URAD_PER_RAD),
+                format!("{:.3} ± {:.3} µrad", v * iso + 0.0, u * URAD_PER_RAD),
             ];
             if let Some(t) = &true_sq {
                 row.push(
