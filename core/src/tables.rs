@@ -72,6 +72,7 @@ use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
 mod carry;
 mod direction;
+pub mod per_axis;
 mod read;
 pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
 pub use direction::{Directional, TableFormat, uncarried_in};
