@@ -71,9 +71,12 @@ use crate::model::Model;
 use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
 mod carry;
+mod controller;
 mod direction;
+pub mod linuxcnc;
 pub mod per_axis;
 mod read;
+pub mod siemens;
 pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
 pub use direction::{Directional, TableFormat, uncarried_in};
 
