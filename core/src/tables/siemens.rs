@@ -134,18 +134,19 @@ pub(crate) struct Stored {
     pub notes: Vec<String>,
 }
 
-/// Checks `values` (one per position of `t`) against the reference point of `reference_axis`
-/// (Siemens: zero there) and shifts them when `opts` allow; returns the shifted values and the
-/// note saying so.
+/// Checks `values` (one per position of `t`, `sign` × the correction) against the reference
+/// point of `reference_axis` (Siemens: zero there) and shifts them when `opts` allow; returns
+/// the shifted values and the note saying so.
 pub(crate) fn at_reference(
     t: &AxisCorrection,
-    values: &[f64],
+    (values, sign): (&[f64], f64),
     reference_axis: &MachineAxis,
     opts: &SiemensOptions,
     format: &str,
 ) -> Result<(Vec<f64>, Option<String>)> {
     let r = reference_axis.to_file_units(reference_axis.reference);
     let v0 = interpolate(&t.positions, values, r);
+    let c0 = v0 * sign;
     if v0.abs() <= REFERENCE_TOLERANCE {
         return Ok((values.to_vec(), None));
     }
@@ -161,14 +162,15 @@ pub(crate) fn at_reference(
                 number(r),
                 reference_axis.file_unit(),
                 reference_axis.axis,
-                number(v0),
+                number(c0),
                 if t.output.is_rotary() { "deg" } else { "mm" },
             ),
         ));
     }
     let note = format!(
-        "shifted by {} so that it is zero at the reference point {} (this moves the axis' zero)",
-        fmt(-v0),
+        "the correction is shifted by {} so that it is zero at the reference point {} (this \
+         moves the axis' zero)",
+        fmt(-c0),
         fmt(r)
     );
     Ok((values.iter().map(|v| v - v0).collect(), Some(note)))
@@ -270,7 +272,7 @@ pub fn siemens_lec_with(
         let mean: Vec<f64> = (table.forward.iter().zip(&table.reverse))
             .map(|(f, r)| -(f + r) / 2.0)
             .collect();
-        let (values, shift) = at_reference(table, &mean, a, opts, LEC)?;
+        let (values, shift) = at_reference(table, (&mean, -1.0), a, opts, LEC)?;
         let md = (
             opts.enc_comp_max_points,
             "MD38000 $MA_MM_ENC_COMP_MAX_POINTS",

@@ -123,7 +123,7 @@ fn cross_table(
         ));
     }
     let values: Vec<f64> = table.forward.iter().map(|v| sign * v).collect();
-    let (values, shift) = at_reference(table, &values, input, opts, CEC)?;
+    let (values, shift) = at_reference(table, (&values, sign), input, opts, CEC)?;
     let md = (opts.cec_max_points, "MD18342 $MN_MM_CEC_MAX_POINTS");
     let mut st = stored(table, values, input, md, CEC)?;
     st.notes.extend(shift);
