@@ -88,13 +88,9 @@ fn strtod(s: &str) -> Option<(f64, &str)> {
             i = j;
         }
     }
+    // `1.` and `.5` are numbers to strtod; Rust parses `.5` but not every such form.
     let text = s[..i].trim_end_matches('.');
-    let v: f64 = if text.is_empty() || text == "-" || text == "+" {
-        0.0
-    } else {
-        text.parse().ok()?
-    };
-    Some((v, &s[i..]))
+    Some((text.parse().ok()?, &s[i..]))
 }
 
 /// `sscanf(line, "%lf %lf %lf", …)`: the numbers read before the first failure.
@@ -145,7 +141,7 @@ impl LinuxCncJoint {
 
     /// `EMCMOT_SET_JOINT_COMP`.
     fn set_comp(&mut self, nominal: f64, fwd: f64, rev: f64) {
-        if self.entries.len() - 1 >= 256 {
+        if self.kept() >= 256 {
             self.refused.push("too many compensation entries".into());
             return;
         }

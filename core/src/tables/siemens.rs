@@ -32,6 +32,28 @@
 //! mean of both directions, and its half-differences go in the CEC file as two tables of the
 //! axis on itself with `$AN_CEC_DIRECTION` 1 and −1 (the manual's "position-dependent backlash
 //! compensation … using two tables", 4.4.3, `$AN_CEC_DIRECTION`). Load both files.
+//!
+//! ```
+//! use volver_core::iso::Axis;
+//! use volver_core::machine::Machine;
+//! use volver_core::tables::per_axis::{AxisCorrection, Family, PerAxisTables};
+//! use volver_core::tables::siemens::siemens_lec;
+//! let t = PerAxisTables {
+//!     family: Family::Leadscrew,
+//!     tools: vec![[0.0; 3]],
+//!     tables: vec![AxisCorrection {
+//!         input: Axis::X,
+//!         output: Axis::X,
+//!         positions: vec![0.0, 700.0, 1400.0],
+//!         forward: vec![0.0, -0.004, -0.008],
+//!         reverse: vec![0.0, -0.004, -0.008],
+//!     }],
+//! };
+//! let lec = siemens_lec(&t, &Machine::default_xcfz()).unwrap();
+//! // A correction of −4 µm is written +0.004: the control subtracts the value.
+//! assert!(lec.contains("$AA_ENC_COMP[0,1,X1]=0.004\n"));
+//! assert!(lec.contains("$AA_ENC_COMP_STEP[0,X1]=700.0\n"));
+//! ```
 
 use super::controller::{check_table, constant_step, interpolate, label, machine_axis, refuse};
 use super::per_axis::{AxisCorrection, PerAxisTables};
