@@ -56,6 +56,10 @@
 //!   error of an axis with a reversal; `value` their mean) and empty on the others (the value
 //!   holds both ways). Files without them are read as before.
 //!
+//! Per-axis **correction** tables for controls without volumetric compensation
+//! ([`per_axis::PerAxisTables`]) are written by [`linuxcnc`] (LinuxCNC's `COMP_FILE`) and
+//! [`siemens`] (SINUMERIK `%_N_AX_EEC_INI`, `%_N_NC_CEC_INI`), each in its control's sign.
+//!
 //! ```
 //! use volver_core::model::Model;
 //! use volver_core::tables::ErrorTables;
@@ -74,8 +78,12 @@ use crate::model::Model;
 use crate::units::{UM_PER_MM, URAD_PER_RAD};
 
 mod carry;
+mod controller;
 mod direction;
+pub mod linuxcnc;
+pub mod per_axis;
 mod read;
+pub mod siemens;
 pub use carry::{THERMAL_SIZE_AFTER_S, Uncarried, uncarried};
 pub use direction::{Directional, TableFormat, uncarried_in};
 

@@ -48,6 +48,7 @@ pub fn tool_grid(m: &volver::core::machine::Machine) -> volver::solvers::uncerta
     let tool = std::array::from_fn(|c| r.iter().map(|x| x.offset[c]).sum::<f64>() / r.len() as f64);
     volver::solvers::uncertainty::ToolGrid { commands, tool }
 }
+pub mod controllers;
 pub mod rs274;
 
 /// The truth `truth` (values by parameter name; a name `truth_model` lacks is 0) written in
