@@ -60,12 +60,15 @@ fn rendered(content: &str) -> String {
             _ if in_tag => {}
             '&' => {
                 // An entity: up to its ';', one character.
-                for d in chars.by_ref() {
-                    if d == ';' {
-                        break;
-                    }
-                }
-                out.push('?');
+                let name: String = chars.by_ref().take_while(|&d| d != ';').collect();
+                out.push(match name.as_str() {
+                    "amp" => '&',
+                    "lt" => '<',
+                    "gt" => '>',
+                    "quot" => '"',
+                    "apos" => '\'',
+                    _ => '?',
+                });
             }
             _ => out.push(c),
         }
