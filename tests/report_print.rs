@@ -353,3 +353,23 @@ fn chromium_prints_the_demos_report_on_a4_pages_with_no_chart_cut() {
     }
     assert!(cut.is_empty(), "{}", cut.join("\n"));
 }
+
+/// The demo on each five-axis preset (three linear axes: maps in the X–Y, X–Z and Y–Z planes,
+/// two rotary axes): no chart label overlaps another or leaves its chart, and the print style
+/// sheet and identity block are there.
+#[test]
+fn five_axis_reports_keep_their_labels_apart_and_inside() {
+    let mut problems = Vec::new();
+    for preset in ["table-table", "head-head", "head-table"] {
+        let dir = common::scratch_dir("report-print", preset);
+        run_in(&dir, &["demo", "--machine", preset]);
+        let html = std::fs::read_to_string(dir.join("volver-demo/report.html")).unwrap();
+        for plane in ["X–Y", "X–Z", "Y–Z"] {
+            assert!(html.contains(&format!("Error module in the {plane} plane")), "{preset} {plane}");
+        }
+        assert!(html.contains("@page{size:A4") && html.contains("Approved by the customer"));
+        problems.extend(svg_text::problems(&html, 0.5).into_iter().map(|p| format!("{preset}: {p}")));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
