@@ -72,7 +72,15 @@ fn no_chart_label_overlaps_another_or_leaves_its_chart() {
     let mut problems = svg_text::problems(&html, 0.5);
     run_in(
         dir,
-        &["report", "--data", DATA, "--reference", DATA, "--out", "cv.html"],
+        &[
+            "report",
+            "--data",
+            DATA,
+            "--reference",
+            DATA,
+            "--out",
+            "cv.html",
+        ],
     );
     let cv = std::fs::read_to_string(dir.join("cv.html")).unwrap();
     assert!(cv.contains("Residual on the reference after compensation"));
@@ -97,8 +105,17 @@ fn the_identity_fields_appear_escaped_with_flags_over_the_file() {
     run_in(
         dir,
         &[
-            "report", "--data", DATA, "--report-info", "visit.toml", "--operator", "A. <B>",
-            "--date", "2026-11-27", "--out", "id.html",
+            "report",
+            "--data",
+            DATA,
+            "--report-info",
+            "visit.toml",
+            "--operator",
+            "A. <B>",
+            "--date",
+            "2026-11-27",
+            "--out",
+            "id.html",
         ],
     );
     let html = std::fs::read_to_string(dir.join("id.html")).unwrap();
@@ -127,7 +144,11 @@ fn the_identity_fields_appear_escaped_with_flags_over_the_file() {
 #[test]
 fn bad_identity_input_is_named_and_nothing_is_written() {
     let dir = common::scratch_dir("report-print", "bad");
-    std::fs::write(dir.join("visit.toml"), "[report]\ncustomer = \"A\"\ncustmer = \"B\"\n").unwrap();
+    std::fs::write(
+        dir.join("visit.toml"),
+        "[report]\ncustomer = \"A\"\ncustmer = \"B\"\n",
+    )
+    .unwrap();
     let fails = |args: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_volver"))
             .args(args)
@@ -137,13 +158,41 @@ fn bad_identity_input_is_named_and_nothing_is_written() {
         assert!(!out.status.success(), "{args:?}");
         String::from_utf8_lossy(&out.stderr).to_string()
     };
-    let e = fails(&["report", "--data", "none.csv", "--report-info", "visit.toml", "--out", "r.html"]);
+    let e = fails(&[
+        "report",
+        "--data",
+        "none.csv",
+        "--report-info",
+        "visit.toml",
+        "--out",
+        "r.html",
+    ]);
     assert!(e.contains("visit.toml:3") && e.contains("custmer"), "{e}");
-    let e = fails(&["report", "--data", "none.csv", "--air-temperature", "2000", "--out", "r.html"]);
+    let e = fails(&[
+        "report",
+        "--data",
+        "none.csv",
+        "--air-temperature",
+        "2000",
+        "--out",
+        "r.html",
+    ]);
     assert!(e.contains("--air-temperature 2000"), "{e}");
-    let e = fails(&["report", "--data", "none.csv", "--report-info", "visit.toml", "--out", "visit.toml"]);
+    let e = fails(&[
+        "report",
+        "--data",
+        "none.csv",
+        "--report-info",
+        "visit.toml",
+        "--out",
+        "visit.toml",
+    ]);
     assert!(e.contains("visit.toml"), "{e}");
-    assert!(std::fs::read_to_string(dir.join("visit.toml")).unwrap().contains("custmer"));
+    assert!(
+        std::fs::read_to_string(dir.join("visit.toml"))
+            .unwrap()
+            .contains("custmer")
+    );
     assert!(!dir.join("r.html").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -205,7 +254,13 @@ fn stressed_charts_keep_their_labels_apart_and_inside() {
         "Y (mm)",
         &[("after the set-up's rigid transform", cells.clone()), ("raw", cells.clone())],
     ));
-    svgs.push(plot::vector_diagrams("Error vectors", "X (mm)", "Y (mm)", 2000.0, &[("before", cells)]));
+    svgs.push(plot::vector_diagrams(
+        "Error vectors",
+        "X (mm)",
+        "Y (mm)",
+        2000.0,
+        &[("before", cells)],
+    ));
     let view = LayoutView {
         title: "plan (x–y)".into(),
         xlabel: "x (mm)".into(),
@@ -250,7 +305,12 @@ fn require_chromium() -> bool {
 /// Runs headless Chromium on `page` with `args` (its profile in `profile`).
 fn chromium(profile: &Path, page: &Path, args: &[&str]) {
     let out = Command::new("chromium")
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"])
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+        ])
         .arg(format!("--user-data-dir={}", profile.display()))
         .args(args)
         .arg(format!("file://{}", page.display()))
@@ -282,16 +342,30 @@ fn chromium_prints_the_demos_report_on_a4_pages_with_no_chart_cut() {
     chromium(
         &profile,
         &report,
-        &["--no-pdf-header-footer", &format!("--print-to-pdf={}", pdf.display())],
+        &[
+            "--no-pdf-header-footer",
+            &format!("--print-to-pdf={}", pdf.display()),
+        ],
     );
     chromium(
         &profile,
         &report,
-        &["--window-size=1400,4000", &format!("--screenshot={}", png.display())],
+        &[
+            "--window-size=1400,4000",
+            &format!("--screenshot={}", png.display()),
+        ],
     );
     let shot = std::fs::read(&png).unwrap();
-    assert!(shot.starts_with(b"\x89PNG") && shot.len() > 10_000, "{} bytes", shot.len());
-    let info = Command::new("pdfinfo").args(["-l", "1000"]).arg(&pdf).output().unwrap();
+    assert!(
+        shot.starts_with(b"\x89PNG") && shot.len() > 10_000,
+        "{} bytes",
+        shot.len()
+    );
+    let info = Command::new("pdfinfo")
+        .args(["-l", "1000"])
+        .arg(&pdf)
+        .output()
+        .unwrap();
     let info = String::from_utf8_lossy(&info.stdout).to_string();
     let pages: usize = info
         .lines()
@@ -315,9 +389,17 @@ fn chromium_prints_the_demos_report_on_a4_pages_with_no_chart_cut() {
         .collect();
     assert_eq!(sizes.len(), pages, "{info}");
     for (w, h) in sizes {
-        assert!((w - 595.28).abs() < 1.0 && (h - 841.89).abs() < 1.0, "{w} × {h} pt");
+        assert!(
+            (w - 595.28).abs() < 1.0 && (h - 841.89).abs() < 1.0,
+            "{w} × {h} pt"
+        );
     }
-    let text = Command::new("pdftotext").args(["-layout"]).arg(&pdf).arg("-").output().unwrap();
+    let text = Command::new("pdftotext")
+        .args(["-layout"])
+        .arg(&pdf)
+        .arg("-")
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&text.stdout).to_string();
     let by_page: Vec<&str> = text.split('\u{c}').collect();
     let html = std::fs::read_to_string(&report).unwrap();
@@ -332,7 +414,10 @@ fn chromium_prints_the_demos_report_on_a4_pages_with_no_chart_cut() {
             .iter()
             .filter(|b| (b.corners[0][1] - b.corners[3][1]).abs() < 1e-6)
             .collect();
-        let low = level.iter().map(|b| b.corners[0][1]).fold(f64::MIN, f64::max);
+        let low = level
+            .iter()
+            .map(|b| b.corners[0][1])
+            .fold(f64::MIN, f64::max);
         let last = &level
             .iter()
             .filter(|b| b.corners[0][1] > low - 1.0)
@@ -365,10 +450,17 @@ fn five_axis_reports_keep_their_labels_apart_and_inside() {
         run_in(&dir, &["demo", "--machine", preset]);
         let html = std::fs::read_to_string(dir.join("volver-demo/report.html")).unwrap();
         for plane in ["X–Y", "X–Z", "Y–Z"] {
-            assert!(html.contains(&format!("Error module in the {plane} plane")), "{preset} {plane}");
+            assert!(
+                html.contains(&format!("Error module in the {plane} plane")),
+                "{preset} {plane}"
+            );
         }
         assert!(html.contains("@page{size:A4") && html.contains("Approved by the customer"));
-        problems.extend(svg_text::problems(&html, 0.5).into_iter().map(|p| format!("{preset}: {p}")));
+        problems.extend(
+            svg_text::problems(&html, 0.5)
+                .into_iter()
+                .map(|p| format!("{preset}: {p}")),
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
     assert!(problems.is_empty(), "{}", problems.join("\n"));

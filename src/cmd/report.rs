@@ -258,13 +258,11 @@ fn results_path(a: &ReportArgs) -> PathBuf {
 /// Checks the report and its results file against the inputs and each other before anything
 /// runs.
 fn claim_outputs(a: &ReportArgs) -> Result<()> {
-    let inputs = a
-        .inputs
-        .paths(&[
-            a.reference.as_deref(),
-            a.truth.as_deref(),
-            a.report_info.as_deref(),
-        ]);
+    let inputs = a.inputs.paths(&[
+        a.reference.as_deref(),
+        a.truth.as_deref(),
+        a.report_info.as_deref(),
+    ]);
     let mut outputs = volver::core::fsio::Outputs::new(inputs);
     outputs.claim(&a.out)?;
     outputs

@@ -93,7 +93,9 @@ pub fn charts(html: &str) -> Vec<Chart> {
     let mut out = Vec::new();
     let mut rest = html;
     while let Some(start) = rest.find("<svg") {
-        let body_end = rest[start..].find("</svg>").map_or(rest.len(), |e| start + e);
+        let body_end = rest[start..]
+            .find("</svg>")
+            .map_or(rest.len(), |e| start + e);
         let svg = &rest[start..body_end];
         let open_end = svg.find('>').unwrap_or(svg.len());
         let open = &svg[..open_end];

@@ -76,7 +76,10 @@ mod tests {
         let t = "EAZ — not determined by the data (held combination EAZ.c1 +0.35, ECZ.c3 +0.28)";
         let lines = wrap(t, 180.0, 11.0);
         assert!(lines.len() >= 2, "{lines:?}");
-        assert!(lines.iter().all(|l| text_width(l, 11.0) <= 180.0), "{lines:?}");
+        assert!(
+            lines.iter().all(|l| text_width(l, 11.0) <= 180.0),
+            "{lines:?}"
+        );
         assert_eq!(lines.join(" "), t);
         assert_eq!(wrap("abcdefghij", 6.6 * 4.0, 11.0), ["abcd", "efgh", "ij"]);
         assert_eq!(wrap("", 100.0, 11.0), [""]);

@@ -68,7 +68,10 @@ impl Identity {
         let parsed: File = toml::from_str(text).map_err(|e| {
             let mut place = Place::file(file);
             if let Some(span) = e.span() {
-                place = place.at_line(text.get(..span.start).map_or(1, |t| t.matches('\n').count() + 1));
+                place = place.at_line(
+                    text.get(..span.start)
+                        .map_or(1, |t| t.matches('\n').count() + 1),
+                );
             }
             Error::Core(volver_core::Error::input(
                 place,
@@ -198,7 +201,7 @@ impl Identity {
         s.push_str(
             "</table>\n<table class=\"sign\"><tr><th>Measured by (name, signature, date)</th>\
              <th>Approved by the customer (name, signature, date)</th></tr>\
-             <tr><td>&nbsp;</td><td>&nbsp;</td></tr></table></section>\n",
+             <tr><td></td><td></td></tr></table></section>\n",
         );
         s
     }
@@ -236,7 +239,10 @@ mod tests {
         let e = Identity::from_toml_str("[report]\nair_temperature_c = \"warm\"\n", "v.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("v.toml:2") && e.contains("air_temperature_c") || e.contains("float"), "{e}");
+        assert!(
+            e.contains("v.toml:2") && e.contains("air_temperature_c") || e.contains("float"),
+            "{e}"
+        );
         let e = Identity::from_toml_str("[report]\nair_temperature_c = 2000.0\n", "v.toml")
             .unwrap_err()
             .to_string();

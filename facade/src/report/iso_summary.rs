@@ -124,7 +124,10 @@ fn volumetric_rows(p: &Page, cov: &Covariance, tool: [f64; 3]) -> Vec<Vec<String
         }
         let emax = worst.map_or(0.0, module) * UM_PER_MM;
         let u_emax = K * cov.u(&g) * UM_PER_MM;
-        for (name, v, u, left) in [("EMM", emm, u_emm, res_emm), ("EMax", emax, u_emax, res_emax)] {
+        for (name, v, u, left) in [
+            ("EMM", emm, u_emm, res_emm),
+            ("EMax", emax, u_emax, res_emax),
+        ] {
             rows.push(vec![
                 format!("volumetric {name}"),
                 format!("tool point, {frame}"),
@@ -152,19 +155,8 @@ fn kind(id: ErrorId) -> String {
     match (c.is_rotary(), c == a) {
         (false, true) => "positioning".into(),
         (false, false) => format!("straightness, {c} direction"),
-        (true, _) => format!("angular about {c} ({})", ["roll", "pitch", "yaw"][angular_slot(a, c)]),
-    }
-}
-
-/// Roll (about the axis' own direction), pitch or yaw, as ISO 230-1 names them for a linear
-/// axis: 0 roll, 1 pitch, 2 yaw (pitch about the horizontal axis across, yaw about the
-/// vertical, Z's pitch and yaw about X and Y).
-fn angular_slot(axis: volver_core::iso::Axis, about: volver_core::iso::Axis) -> usize {
-    use volver_core::iso::Axis::*;
-    match (axis, about) {
-        (X, A) | (Y, B) | (Z, C) => 0,
-        (X, B) | (Y, A) | (Z, A) => 1,
-        _ => 2,
+        (true, _) if c.direction() == a.direction() => format!("roll (angular about {c})"),
+        (true, _) => format!("angular about {c}"),
     }
 }
 
@@ -191,7 +183,8 @@ fn axis_rows(model: &Model, params: &[f64], cov: &Covariance) -> Vec<Vec<String>
         for i in 0..SAMPLES {
             let u = ax.min + (ax.max - ax.min) * i as f64 / (SAMPLES - 1) as f64;
             let mut gi = vec![0.0; n];
-            let Some(value) = model.error_value_gradient(t.id, u, params, &mut gi[t.params.clone()])
+            let Some(value) =
+                model.error_value_gradient(t.id, u, params, &mut gi[t.params.clone()])
             else {
                 continue;
             };
@@ -220,8 +213,12 @@ fn axis_rows(model: &Model, params: &[f64], cov: &Covariance) -> Vec<Vec<String>
 
 /// The indices of the largest and the smallest value.
 fn extremes(v: &[f64]) -> (usize, usize) {
-    let imax = (0..v.len()).max_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
-    let imin = (0..v.len()).min_by(|&a, &b| v[a].total_cmp(&v[b])).unwrap_or(0);
+    let imax = (0..v.len())
+        .max_by(|&a, &b| v[a].total_cmp(&v[b]))
+        .unwrap_or(0);
+    let imin = (0..v.len())
+        .min_by(|&a, &b| v[a].total_cmp(&v[b]))
+        .unwrap_or(0);
     (imax, imin)
 }
 
@@ -239,7 +236,12 @@ fn remove_line(x: &[f64], v: &mut [f64], g: &mut [Vec<f64>]) {
     }
     let detrend = |y: &mut [f64]| {
         let mean = y.iter().sum::<f64>() / k;
-        let slope = x.iter().zip(y.iter()).map(|(xi, yi)| (xi - xm) * yi).sum::<f64>() / sxx;
+        let slope = x
+            .iter()
+            .zip(y.iter())
+            .map(|(xi, yi)| (xi - xm) * yi)
+            .sum::<f64>()
+            / sxx;
         for (yi, xi) in y.iter_mut().zip(x) {
             *yi -= mean + slope * (xi - xm);
         }
