@@ -458,45 +458,50 @@ pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
                 escape(line)
             );
         }
-        let mut band: Vec<String> =
-            p.x.iter()
-                .zip(p.value.iter().zip(&p.sigma))
-                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v + 2.0 * s)))
-                .collect();
-        band.extend(
-            p.x.iter()
-                .zip(p.value.iter().zip(&p.sigma))
-                .rev()
-                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v - 2.0 * s))),
-        );
-        let _ = writeln!(
-            s,
-            "<polygon class=\"band\" points=\"{}\" fill=\"#9dc3e6\" stroke=\"none\"/>",
-            band.join(" ")
-        );
-        let line = |v: &[f64]| -> String {
-            p.x.iter()
-                .zip(v)
-                .map(|(x, y)| format!("{:.1},{:.1}", f.x(*x), f.y(*y)))
-                .collect::<Vec<_>>()
-                .join(" ")
-        };
-        if let Some(t) = &p.truth {
-            let _ = writeln!(
-                s,
-                "<polyline class=\"truth\" points=\"{}\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"5 3\" stroke-width=\"1.5\"/>",
-                line(t)
-            );
-        }
-        let _ = writeln!(
-            s,
-            "<polyline class=\"identified\" points=\"{}\" fill=\"none\" stroke=\"#1f4e79\" stroke-width=\"1.8\"/>",
-            line(&p.value)
-        );
+        function_curves(&mut s, p, &f);
         f.axes(&mut s, &p.xlabel, &p.unit);
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// One panel's U band, truth (dashed, when known) and identified function in frame `f`.
+fn function_curves(s: &mut String, p: &FunctionPanel, f: &Frame) {
+    let mut band: Vec<String> =
+        p.x.iter()
+            .zip(p.value.iter().zip(&p.sigma))
+            .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v + 2.0 * s)))
+            .collect();
+    band.extend(
+        p.x.iter()
+            .zip(p.value.iter().zip(&p.sigma))
+            .rev()
+            .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v - 2.0 * s))),
+    );
+    let _ = writeln!(
+        s,
+        "<polygon class=\"band\" points=\"{}\" fill=\"#9dc3e6\" stroke=\"none\"/>",
+        band.join(" ")
+    );
+    let line = |v: &[f64]| -> String {
+        p.x.iter()
+            .zip(v)
+            .map(|(x, y)| format!("{:.1},{:.1}", f.x(*x), f.y(*y)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    if let Some(t) = &p.truth {
+        let _ = writeln!(
+            s,
+            "<polyline class=\"truth\" points=\"{}\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"5 3\" stroke-width=\"1.5\"/>",
+            line(t)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "<polyline class=\"identified\" points=\"{}\" fill=\"none\" stroke=\"#1f4e79\" stroke-width=\"1.8\"/>",
+        line(&p.value)
+    );
 }
 
 /// One view of [`layout_views`]: the measured points and the stations projected on two axes
@@ -572,39 +577,46 @@ pub fn layout_views(title: &str, views: &[LayoutView]) -> String {
                 f.y(p[1])
             );
         }
-        // Each station's label beside it, moved down or up a line at a time off the labels
-        // already placed; left of the station where it would run into the next view.
-        let mut placed: Vec<[f64; 4]> = Vec::new();
-        for (id, p) in &v.stations {
-            let (x, y) = (f.x(p[0]), f.y(p[1]));
-            let lw = text_width(id, FONT);
-            let right = x + 8.0 + lw <= f.x0 + side + gap - 10.0;
-            let lx = if right { x + 8.0 } else { x - 8.0 - lw };
-            let ly = (0..40)
-                .map(|k| y - 6.0 + 13.0 * if k % 2 == 0 { k / 2 } else { -(k + 1) / 2 } as f64)
-                .find(|ly| {
-                    let b = [lx, ly - 0.75 * FONT, lx + lw, ly + 0.25 * FONT];
-                    placed
-                        .iter()
-                        .all(|q| b[2] < q[0] || q[2] < b[0] || b[3] < q[1] || q[3] < b[1])
-                })
-                .unwrap_or(y - 6.0);
-            placed.push([lx, ly - 0.75 * FONT - 1.0, lx + lw, ly + 0.25 * FONT + 1.0]);
-            let _ = writeln!(
-                s,
-                "<path class=\"station\" d=\"M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z\" fill=\"#c0392b\"/><text x=\"{lx:.1}\" y=\"{ly:.1}\" fill=\"#c0392b\">{}</text>",
-                x,
-                y - 7.0,
-                x - 6.0,
-                y + 4.0,
-                x + 6.0,
-                y + 4.0,
-                escape(id)
-            );
-        }
+        station_marks(&mut s, &f, &v.stations, f.x0 + side + gap - 10.0);
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// The stations in frame `f` as labelled triangles: each label beside its station, moved down
+/// or up a line at a time off the labels already placed, left of the station where it would
+/// pass `limit` (px, the next view).
+fn station_marks(s: &mut String, f: &Frame, stations: &[(String, [f64; 2])], limit: f64) {
+    // Each station's label beside it, moved down or up a line at a time off the labels
+    // already placed; left of the station where it would run into the next view.
+    let mut placed: Vec<[f64; 4]> = Vec::new();
+    for (id, p) in stations {
+        let (x, y) = (f.x(p[0]), f.y(p[1]));
+        let lw = text_width(id, FONT);
+        let right = x + 8.0 + lw <= limit;
+        let lx = if right { x + 8.0 } else { x - 8.0 - lw };
+        let ly = (0..40)
+            .map(|k| y - 6.0 + 13.0 * if k % 2 == 0 { k / 2 } else { -(k + 1) / 2 } as f64)
+            .find(|ly| {
+                let b = [lx, ly - 0.75 * FONT, lx + lw, ly + 0.25 * FONT];
+                placed
+                    .iter()
+                    .all(|q| b[2] < q[0] || q[2] < b[0] || b[3] < q[1] || q[3] < b[1])
+            })
+            .unwrap_or(y - 6.0);
+        placed.push([lx, ly - 0.75 * FONT - 1.0, lx + lw, ly + 0.25 * FONT + 1.0]);
+        let _ = writeln!(
+            s,
+            "<path class=\"station\" d=\"M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z\" fill=\"#c0392b\"/><text x=\"{lx:.1}\" y=\"{ly:.1}\" fill=\"#c0392b\">{}</text>",
+            x,
+            y - 7.0,
+            x - 6.0,
+            y + 4.0,
+            x + 6.0,
+            y + 4.0,
+            escape(id)
+        );
+    }
 }
 
 #[cfg(test)]

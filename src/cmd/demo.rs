@@ -702,6 +702,17 @@ fn write_results(
     Ok(table_paths)
 }
 
+/// The demo report's identity block: nothing but what the demo is (a field not given prints
+/// as "—").
+fn demo_identity() -> report::Identity {
+    report::Identity {
+        remarks: Some(
+            "Synthetic data written by volver demo: no customer, instrument or operator.".into(),
+        ),
+        ..report::Identity::default()
+    }
+}
+
 /// Step 7, continued: The HTML report of both fits.
 fn write_report(
     setup: &Setup,
@@ -720,13 +731,7 @@ fn write_report(
     } else {
         check.tool
     };
-    // The identity block: nothing but what the demo is (a field not given prints as "—").
-    let identity = report::Identity {
-        remarks: Some(
-            "Synthetic data written by volver demo: no customer, instrument or operator.".into(),
-        ),
-        ..report::Identity::default()
-    };
+    let identity = demo_identity();
     let title = format!(
         "{} — volver demo, synthetic data",
         identity.title(&fits[0].model.machine().spec().name)

@@ -68,10 +68,15 @@ impl Identity {
         let parsed: File = toml::from_str(text).map_err(|e| {
             let mut place = Place::file(file);
             if let Some(span) = e.span() {
-                place = place.at_line(
-                    text.get(..span.start)
-                        .map_or(1, |t| t.matches('\n').count() + 1),
-                );
+                let line = text
+                    .get(..span.start)
+                    .map_or(1, |t| t.matches('\n').count() + 1);
+                place = place.at_line(line);
+                // The key written on that line, when it is `key = value`.
+                let key = text.lines().nth(line - 1).and_then(|l| l.split_once('='));
+                if let Some((key, _)) = key {
+                    place = place.at_field(format!("report.{}", key.trim()));
+                }
             }
             Error::Core(volver_core::Error::input(
                 place,
@@ -240,7 +245,7 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("v.toml:2") && e.contains("air_temperature_c") || e.contains("float"),
+            e.contains("v.toml:2: field 'report.air_temperature_c'"),
             "{e}"
         );
         let e = Identity::from_toml_str("[report]\nair_temperature_c = 2000.0\n", "v.toml")
