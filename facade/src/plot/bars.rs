@@ -1,27 +1,32 @@
-//! Bar charts whose labels never touch: horizontal under their bar when they fit its width,
-//! else at 45° when neighbours clear each other's height, else vertical, every k-th one when
-//! even that is too tight; the chart grows to hold them, and the reference line's label sits
-//! right of the frame, clear of the bars' values.
+//! Bar charts whose labels never touch: horizontal under their bar, wrapped to its width in at
+//! most three lines, when they fit (a chart of a few bars widens them, up to 200 px, for their
+//! labels), else at 45° when neighbours clear each other's height, else vertical, every k-th
+//! one when even that is too tight; the chart grows to hold them, and the reference line's
+//! label sits right of the frame, clear of the bars' values.
 
-use super::text::{FONT, stride, text_width};
+use super::text::{FONT, stride, text_width, wrap};
 use super::{Frame, escape, fmt_tick, header, left_margin, ticks};
 use std::fmt::Write;
+
+/// The most lines a level label is wrapped into.
+const LEVEL_LINES: usize = 3;
 
 /// How the bars' labels are set.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Labels {
-    /// Centred under the bar.
-    Level,
+    /// Centred under the bar, in this many lines at most.
+    Level(usize),
     /// At 45°, down to the right from under the bar's centre.
     Slanted,
     /// At 90° (reading downwards), every `n`-th bar's.
     Upright(usize),
 }
 
-/// The labels' setting for bars `bw` px wide whose widest label is `widest` px.
-fn labels_for(bw: f64, widest: f64, n: usize) -> Labels {
-    if widest <= bw - 4.0 {
-        Labels::Level
+/// The labels' setting for `n` bars `bw` px wide whose labels wrapped to the bar's width take
+/// `lines` lines at most.
+fn labels_for(bw: f64, lines: usize, n: usize) -> Labels {
+    if lines <= LEVEL_LINES {
+        Labels::Level(lines)
     } else if bw * std::f64::consts::FRAC_1_SQRT_2 >= FONT + 2.0 {
         Labels::Slanted
     } else {
@@ -38,12 +43,18 @@ pub fn bars(
     reference: Option<(&str, f64)>,
 ) -> String {
     let n = data.len().max(1) as f64;
-    let bw = (560.0 / n).clamp(14.0, 70.0);
     let widths: Vec<f64> = data.iter().map(|d| text_width(&d.0, FONT)).collect();
     let widest = widths.iter().copied().fold(0.0, f64::max);
-    let setting = labels_for(bw, widest, data.len());
+    let mut bw = (560.0 / n).clamp(14.0, 70.0);
+    if data.len() <= 4 {
+        // A few bars: as wide as their labels need, up to 200 px.
+        bw = bw.max((widest + 8.0).min(200.0));
+    }
+    let wrapped: Vec<Vec<String>> = data.iter().map(|d| wrap(&d.0, bw - 4.0, FONT)).collect();
+    let lines = wrapped.iter().map(Vec::len).max().unwrap_or(1);
+    let setting = labels_for(bw, lines, data.len());
     let below = match setting {
-        Labels::Level => 24.0,
+        Labels::Level(k) => 11.0 + 13.0 * k as f64,
         Labels::Slanted => 14.0 + (widest + FONT) * std::f64::consts::FRAC_1_SQRT_2,
         Labels::Upright(_) => 16.0 + widest,
     };
@@ -69,7 +80,7 @@ pub fn bars(
         .map(|(i, w)| {
             let cx = f.x(i as f64 + 0.5);
             match setting {
-                Labels::Level => cx + w / 2.0,
+                Labels::Level(_) => cx + w.min(bw - 4.0) / 2.0,
                 Labels::Slanted => cx + (w + FONT) * std::f64::consts::FRAC_1_SQRT_2,
                 Labels::Upright(_) => cx + FONT,
             }
@@ -83,7 +94,7 @@ pub fn bars(
     let h = f.y0 + f.h + below;
     let mut s = header(w, h, title);
     grid(&mut s, &f, unit);
-    draw_bars(&mut s, &f, bw, data, setting);
+    draw_bars(&mut s, &f, bw, data, &wrapped, setting);
     if let (Some((_, v)), Some(text)) = (reference, reference_text) {
         let y = f.y(v);
         // The label beside the line, right of the frame, kept within the frame's height.
@@ -141,9 +152,16 @@ fn grid(s: &mut String, f: &Frame, unit: &str) {
     );
 }
 
-/// The bars in frame `f`, each `bw` wide, with their labels set as `setting` says and their
-/// values above them where the value fits the bar's width.
-fn draw_bars(s: &mut String, f: &Frame, bw: f64, data: &[(String, f64)], setting: Labels) {
+/// The bars in frame `f`, each `bw` wide, with their labels set as `setting` says (level ones
+/// in their `wrapped` lines) and their values above them where the value fits the bar's width.
+fn draw_bars(
+    s: &mut String,
+    f: &Frame,
+    bw: f64,
+    data: &[(String, f64)],
+    wrapped: &[Vec<String>],
+    setting: Labels,
+) {
     for (i, (label, v)) in data.iter().enumerate() {
         let x = f.x(i as f64 + 0.15);
         let _ = writeln!(
@@ -157,12 +175,14 @@ fn draw_bars(s: &mut String, f: &Frame, bw: f64, data: &[(String, f64)], setting
         let cx = x + 0.35 * bw;
         let bottom = f.y0 + f.h;
         let _ = match setting {
-            Labels::Level => writeln!(
-                s,
-                "<text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-                bottom + 15.0,
-                escape(label)
-            ),
+            Labels::Level(_) => wrapped[i].iter().enumerate().try_for_each(|(j, line)| {
+                writeln!(
+                    s,
+                    "<text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                    bottom + 15.0 + 13.0 * j as f64,
+                    escape(line)
+                )
+            }),
             Labels::Slanted => writeln!(
                 s,
                 "<text transform=\"translate({:.1},{:.1}) rotate(45)\">{}</text>",
@@ -196,10 +216,22 @@ mod tests {
 
     #[test]
     fn labels_are_set_by_what_fits() {
-        assert_eq!(labels_for(70.0, 40.0, 8), Labels::Level);
-        assert_eq!(labels_for(70.0, 90.0, 8), Labels::Slanted);
+        assert_eq!(labels_for(70.0, 2, 8), Labels::Level(2));
+        assert_eq!(labels_for(70.0, 4, 8), Labels::Slanted);
         // 14 px bars: 45° labels 9.9 px apart would touch; upright every other one.
-        assert_eq!(labels_for(14.0, 30.0, 40), Labels::Upright(1));
-        assert_eq!(labels_for(10.0, 30.0, 40), Labels::Upright(2));
+        assert_eq!(labels_for(14.0, 5, 40), Labels::Upright(1));
+        assert_eq!(labels_for(10.0, 5, 40), Labels::Upright(2));
+    }
+
+    /// One bar with a long label (`volver report`'s cross-validation row): the bar widens to
+    /// 200 px and the label wraps into three level lines under it.
+    #[test]
+    fn a_long_label_of_a_few_bars_wraps_under_its_bar() {
+        let label = "volver-demo/test4/measurements.csv (model \"paper model\" + raise-axis:C)";
+        let svg = bars("t", "%", &[(label.to_string(), 33.7)], None);
+        assert!(svg.contains("width=\"140.0\""), "{svg}");
+        // Three lines and the value, centred on the bar.
+        assert_eq!(svg.matches("<text x=\"150.0\"").count(), 4, "{svg}");
+        assert!(!svg.contains("rotate(45)"));
     }
 }
