@@ -1,15 +1,18 @@
 //! Bar charts whose labels never touch: horizontal under their bar, wrapped to its width in at
-//! most three lines, when they fit (a chart of a few bars widens them, up to 200 px, for their
-//! labels), else at 45° when neighbours clear each other's height, else vertical, every k-th
-//! one when even that is too tight; the chart grows to hold them, and the reference line's
-//! label sits right of the frame, clear of the bars' values.
+//! most three lines (six for a few bars), when they fit (a chart of up to four bars widens
+//! them, up to 200 px, for their labels), else at 45° when neighbours clear each other's
+//! height, else vertical, every k-th one when even that is too tight; the chart grows to hold
+//! them, and the reference line's label sits right of the frame, clear of the bars' values.
 
 use super::text::{FONT, stride, text_width, wrap};
 use super::{Frame, escape, fmt_tick, header, left_margin, ticks};
 use std::fmt::Write;
 
-/// The most lines a level label is wrapped into.
-const LEVEL_LINES: usize = 3;
+/// The most lines a level label is wrapped into: three, six under a chart of up to four bars
+/// (which has the room below).
+fn level_lines(n: usize) -> usize {
+    if n <= 4 { 6 } else { 3 }
+}
 
 /// How the bars' labels are set.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,7 +28,7 @@ enum Labels {
 /// The labels' setting for `n` bars `bw` px wide whose labels wrapped to the bar's width take
 /// `lines` lines at most.
 fn labels_for(bw: f64, lines: usize, n: usize) -> Labels {
-    if lines <= LEVEL_LINES {
+    if lines <= level_lines(n) {
         Labels::Level(lines)
     } else if bw * std::f64::consts::FRAC_1_SQRT_2 >= FONT + 2.0 {
         Labels::Slanted
@@ -218,13 +221,14 @@ mod tests {
     fn labels_are_set_by_what_fits() {
         assert_eq!(labels_for(70.0, 2, 8), Labels::Level(2));
         assert_eq!(labels_for(70.0, 4, 8), Labels::Slanted);
+        assert_eq!(labels_for(200.0, 5, 1), Labels::Level(5));
         // 14 px bars: 45° labels 9.9 px apart would touch; upright every other one.
         assert_eq!(labels_for(14.0, 5, 40), Labels::Upright(1));
         assert_eq!(labels_for(10.0, 5, 40), Labels::Upright(2));
     }
 
     /// One bar with a long label (`volver report`'s cross-validation row): the bar widens to
-    /// 200 px and the label wraps into three level lines under it.
+    /// 200 px and the label wraps into three level lines under it (at most 29 characters each).
     #[test]
     fn a_long_label_of_a_few_bars_wraps_under_its_bar() {
         let label = "volver-demo/test4/measurements.csv (model \"paper model\" + raise-axis:C)";
