@@ -2,7 +2,17 @@
 //! uncertainty bands, bar charts. No scripts, no fonts beyond the viewer's sans-serif, so the
 //! SVG can be inlined in HTML or opened on its own.
 
+mod bars;
+mod text;
+
+pub use bars::bars;
+pub use text::{CHAR_EM, FONT, text_width};
+
 use std::fmt::Write;
+use text::{stride, wrap};
+
+/// The fonts the charts and the report name, Arial-metric first (see [`CHAR_EM`]).
+pub const FONT_FAMILY: &str = "Arial, 'Liberation Sans', Helvetica, sans-serif";
 
 /// Escapes text for SVG/HTML.
 pub fn escape(s: &str) -> String {
@@ -12,9 +22,17 @@ pub fn escape(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The chart's size of at least `w` × `h` that holds its title (14 px bold) on one line.
+fn width_for_title(w: f64, title: &str) -> f64 {
+    w.max(text_width(title, 14.0) + 20.0).ceil()
+}
+
+/// The opening of a chart `w` × `h` (widened to hold its title, [`width_for_title`]) with its
+/// title.
 fn header(w: f64, h: f64, title: &str) -> String {
+    let w = width_for_title(w, title);
     format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"sans-serif\" font-size=\"11\">\n\
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" viewBox=\"0 0 {w} {h}\" font-family=\"{FONT_FAMILY}\" font-size=\"{FONT}\">\n\
          <rect width=\"{w}\" height=\"{h}\" fill=\"white\"/>\n\
          <text x=\"10\" y=\"18\" font-size=\"14\" font-weight=\"bold\">{}</text>\n",
         escape(title)
@@ -73,35 +91,62 @@ impl Frame {
     fn y(&self, v: f64) -> f64 {
         self.y0 + self.h * (1.0 - (v - self.yr.0) / (self.yr.1 - self.yr.0))
     }
-    /// Axes, ticks and labels.
+    /// Axes, ticks and labels: the tick labels thinned where neighbours would touch, the
+    /// vertical axis' label left of the widest tick label (within [`left_margin`]).
     fn axes(&self, s: &mut String, xlabel: &str, ylabel: &str) {
         let _ = writeln!(
             s,
             "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>",
             self.x0, self.y0, self.w, self.h
         );
-        for t in ticks(self.xr.0, self.xr.1) {
-            let x = self.x(t);
-            let _ = writeln!(
+        let xt = ticks(self.xr.0, self.xr.1);
+        let xl: Vec<String> = xt.iter().map(|&t| fmt_tick(t)).collect();
+        let spacing = match xt.as_slice() {
+            [a, b, ..] => self.x(*b) - self.x(*a),
+            _ => self.w,
+        };
+        let every = stride(xt.len(), spacing, 6.0, |i| text_width(&xl[i], FONT));
+        for (i, (t, label)) in xt.iter().zip(&xl).enumerate() {
+            let x = self.x(*t);
+            let _ = write!(
                 s,
-                "<line x1=\"{x:.1}\" y1=\"{:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#444\"/><text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+                "<line x1=\"{x:.1}\" y1=\"{:.1}\" x2=\"{x:.1}\" y2=\"{:.1}\" stroke=\"#444\"/>",
                 self.y0 + self.h,
                 self.y0 + self.h + 4.0,
-                self.y0 + self.h + 15.0,
-                fmt_tick(t)
             );
+            if i % every == 0 {
+                let _ = write!(
+                    s,
+                    "<text x=\"{x:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{label}</text>",
+                    self.y0 + self.h + 15.0,
+                );
+            }
+            s.push('\n');
         }
-        for t in ticks(self.yr.0, self.yr.1) {
-            let y = self.y(t);
-            let _ = writeln!(
+        let yt = ticks(self.yr.0, self.yr.1);
+        let spacing = match yt.as_slice() {
+            [a, b, ..] => self.y(*a) - self.y(*b),
+            _ => self.h,
+        };
+        let every = stride(yt.len(), spacing, 2.0, |_| FONT);
+        for (i, t) in yt.iter().enumerate() {
+            let y = self.y(*t);
+            let _ = write!(
                 s,
-                "<line x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#444\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
+                "<line x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#444\"/>",
                 self.x0 - 4.0,
                 self.x0,
-                self.x0 - 6.0,
-                y + 4.0,
-                fmt_tick(t)
             );
+            if i % every == 0 {
+                let _ = write!(
+                    s,
+                    "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text>",
+                    self.x0 - 6.0,
+                    y + 4.0,
+                    fmt_tick(*t)
+                );
+            }
+            s.push('\n');
         }
         let _ = writeln!(
             s,
@@ -113,11 +158,25 @@ impl Frame {
         let _ = writeln!(
             s,
             "<text transform=\"translate({:.1},{:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
-            self.x0 - 40.0,
+            self.x0 - tick_label_width(self.yr) - 10.0 - 0.25 * FONT,
             self.y0 + self.h / 2.0,
             escape(ylabel)
         );
     }
+}
+
+/// The widest tick label of a scale over `range` (px).
+fn tick_label_width(range: (f64, f64)) -> f64 {
+    ticks(range.0, range.1)
+        .iter()
+        .map(|&t| text_width(&fmt_tick(t), FONT))
+        .fold(0.0, f64::max)
+}
+
+/// The room (px) left of a frame that its vertical scale over `range` takes: the ticks, the
+/// widest tick label, its vertical label (one line), and a margin.
+fn left_margin(range: (f64, f64)) -> f64 {
+    (tick_label_width(range) + 10.0 + FONT + 4.0).ceil()
 }
 
 /// A colour of the viridis-like scale for t in [0, 1].
@@ -187,13 +246,15 @@ pub fn colour_maps(
         let ys = distinct(cells.iter().map(|c| c.y));
         let dx = spacing(&xs);
         let dy = spacing(&ys);
+        let yr = (ys[0] - dy / 2.0, ys[ys.len() - 1] + dy / 2.0);
+        let lm = left_margin(yr).max(60.0);
         let f = Frame {
-            x0: 60.0 + pw * i as f64,
+            x0: lm + pw * i as f64,
             y0: 50.0,
-            w: pw - 80.0,
+            w: pw - 20.0 - lm,
             h: 250.0,
             xr: (xs[0] - dx / 2.0, xs[xs.len() - 1] + dx / 2.0),
-            yr: (ys[0] - dy / 2.0, ys[ys.len() - 1] + dy / 2.0),
+            yr,
         };
         let _ = writeln!(
             s,
@@ -268,7 +329,12 @@ pub fn vector_diagrams(
     panels: &[(&str, Vec<Cell>)],
 ) -> String {
     let pw = 330.0;
-    let (w, h) = (pw * panels.len() as f64 + 40.0, 370.0);
+    let note = format!(
+        "An arrow of 10 µm is drawn {:.0} mm long on the axes' scale.",
+        10.0 * magnification * 1e-3
+    );
+    let h = 370.0;
+    let w = (pw * panels.len() as f64 + 40.0).max(text_width(&note, FONT) + 20.0);
     let mut s = header(w, h, &format!("{title} (arrows × {magnification:.0})"));
     let _ = writeln!(
         s,
@@ -283,10 +349,11 @@ pub fn vector_diagrams(
             let m = 0.12 * (r.1 - r.0);
             (r.0 - m, r.1 + m)
         };
+        let lm = left_margin(pad(yr)).max(60.0);
         let f = Frame {
-            x0: 60.0 + pw * i as f64,
+            x0: lm + pw * i as f64,
             y0: 50.0,
-            w: pw - 80.0,
+            w: pw - 20.0 - lm,
             h: 250.0,
             xr: pad(xr),
             yr: pad(yr),
@@ -314,9 +381,9 @@ pub fn vector_diagrams(
     }
     let _ = writeln!(
         s,
-        "<text x=\"10\" y=\"{:.1}\">An arrow of 10 µm is drawn {:.0} mm long on the axes' scale.</text>",
+        "<text x=\"10\" y=\"{:.1}\">{}</text>",
         h - 10.0,
-        10.0 * magnification * 1e-3
+        escape(&note)
     );
     s.push_str("</svg>\n");
     s
@@ -346,8 +413,17 @@ pub struct FunctionPanel {
 pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
     let cols = 3usize;
     let rows = panels.len().div_ceil(cols).max(1);
-    let (pw, ph) = (290.0, 200.0);
-    let (w, h) = (pw * cols as f64 + 20.0, ph * rows as f64 + 60.0);
+    // Each panel's name above its frame, wrapped to the panel's width; every row as high as
+    // the longest name needs.
+    let pw = 290.0;
+    let names: Vec<Vec<String>> = panels
+        .iter()
+        .map(|p| wrap(&p.name, pw - 20.0, FONT))
+        .collect();
+    let lines = names.iter().map(Vec::len).max().unwrap_or(1) as f64;
+    let (title_h, frame_h) = (13.0 * lines, 120.0);
+    let ph = title_h + 8.0 + frame_h + 42.0;
+    let (w, h) = (pw * cols as f64 + 20.0, ph * rows as f64 + 50.0);
     let mut s = header(w, h, title);
     let _ = writeln!(
         s,
@@ -363,169 +439,69 @@ pub fn error_functions(title: &str, panels: &[FunctionPanel]) -> String {
             .chain(p.truth.iter().flatten().copied());
         let yr = range(lo_hi);
         let m = 0.08 * (yr.1 - yr.0);
+        let yr = (yr.0 - m, yr.1 + m);
+        let (left, top) = (10.0 + pw * c as f64, 50.0 + ph * r as f64);
+        let lm = left_margin(yr).max(50.0);
         let f = Frame {
-            x0: 65.0 + pw * c as f64,
-            y0: 60.0 + ph * r as f64,
-            w: pw - 85.0,
-            h: ph - 70.0,
+            x0: left + lm,
+            y0: top + title_h + 8.0,
+            w: pw - lm - 20.0,
+            h: frame_h,
             xr: range(p.x.iter().copied()),
-            yr: (yr.0 - m, yr.1 + m),
+            yr,
         };
-        let mut band: Vec<String> =
-            p.x.iter()
-                .zip(p.value.iter().zip(&p.sigma))
-                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v + 2.0 * s)))
-                .collect();
-        band.extend(
-            p.x.iter()
-                .zip(p.value.iter().zip(&p.sigma))
-                .rev()
-                .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v - 2.0 * s))),
-        );
-        let _ = writeln!(
-            s,
-            "<polygon class=\"band\" points=\"{}\" fill=\"#9dc3e6\" stroke=\"none\"/>",
-            band.join(" ")
-        );
-        let line = |v: &[f64]| -> String {
-            p.x.iter()
-                .zip(v)
-                .map(|(x, y)| format!("{:.1},{:.1}", f.x(*x), f.y(*y)))
-                .collect::<Vec<_>>()
-                .join(" ")
-        };
-        if let Some(t) = &p.truth {
+        for (j, line) in names[i].iter().enumerate() {
             let _ = writeln!(
                 s,
-                "<polyline class=\"truth\" points=\"{}\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"5 3\" stroke-width=\"1.5\"/>",
-                line(t)
+                "<text x=\"{left:.1}\" y=\"{:.1}\" font-weight=\"bold\">{}</text>",
+                top + 11.0 + 13.0 * j as f64,
+                escape(line)
             );
         }
-        let _ = writeln!(
-            s,
-            "<polyline class=\"identified\" points=\"{}\" fill=\"none\" stroke=\"#1f4e79\" stroke-width=\"1.8\"/>",
-            line(&p.value)
-        );
+        function_curves(&mut s, p, &f);
         f.axes(&mut s, &p.xlabel, &p.unit);
-        let _ = writeln!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" font-weight=\"bold\">{}</text>",
-            f.x0 + 6.0,
-            f.y0 + 14.0,
-            escape(&p.name)
-        );
     }
     s.push_str("</svg>\n");
     s
 }
 
-/// A bar chart: one bar per (label, value), with an optional dashed reference line (label,
-/// value).
-pub fn bars(
-    title: &str,
-    unit: &str,
-    data: &[(String, f64)],
-    reference: Option<(&str, f64)>,
-) -> String {
-    let n = data.len().max(1) as f64;
-    let bw = (560.0 / n).clamp(14.0, 70.0);
-    // Narrow bars get their labels at 45°, which need room below the axis.
-    let longest = data.iter().map(|d| d.0.chars().count()).max().unwrap_or(0) as f64;
-    let below = if bw < 50.0 {
-        20.0 + 4.6 * longest
-    } else {
-        70.0
-    };
-    let (w, h) = ((bw * n + 110.0 + 3.3 * longest).max(440.0), 230.0 + below);
-    let mut s = header(w, h, title);
-    let vmax = data
-        .iter()
-        .map(|d| d.1)
-        .chain(reference.map(|r| r.1))
-        .fold(0.0_f64, f64::max)
-        .max(1e-12)
-        * 1.12;
-    let f = Frame {
-        x0: 70.0,
-        y0: 40.0,
-        w: bw * n,
-        h: 190.0,
-        xr: (0.0, n),
-        yr: (0.0, vmax),
-    };
+/// One panel's U band, truth (dashed, when known) and identified function in frame `f`.
+fn function_curves(s: &mut String, p: &FunctionPanel, f: &Frame) {
+    let mut band: Vec<String> =
+        p.x.iter()
+            .zip(p.value.iter().zip(&p.sigma))
+            .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v + 2.0 * s)))
+            .collect();
+    band.extend(
+        p.x.iter()
+            .zip(p.value.iter().zip(&p.sigma))
+            .rev()
+            .map(|(x, (v, s))| format!("{:.1},{:.1}", f.x(*x), f.y(v - 2.0 * s))),
+    );
     let _ = writeln!(
         s,
-        "<rect x=\"{:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"none\" stroke=\"#444\"/>",
-        f.x0, f.y0, f.w, f.h
+        "<polygon class=\"band\" points=\"{}\" fill=\"#9dc3e6\" stroke=\"none\"/>",
+        band.join(" ")
     );
-    for t in ticks(0.0, vmax) {
+    let line = |v: &[f64]| -> String {
+        p.x.iter()
+            .zip(v)
+            .map(|(x, y)| format!("{:.1},{:.1}", f.x(*x), f.y(*y)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    if let Some(t) = &p.truth {
         let _ = writeln!(
             s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\">{}</text><line x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#ddd\"/>",
-            f.x0 - 6.0,
-            f.y(t) + 4.0,
-            fmt_tick(t),
-            f.x0,
-            f.x0 + f.w,
-            y = f.y(t)
+            "<polyline class=\"truth\" points=\"{}\" fill=\"none\" stroke=\"#c0392b\" stroke-dasharray=\"5 3\" stroke-width=\"1.5\"/>",
+            line(t)
         );
     }
     let _ = writeln!(
         s,
-        "<text transform=\"translate(20,{:.1}) rotate(-90)\" text-anchor=\"middle\">{}</text>",
-        f.y0 + f.h / 2.0,
-        escape(unit)
+        "<polyline class=\"identified\" points=\"{}\" fill=\"none\" stroke=\"#1f4e79\" stroke-width=\"1.8\"/>",
+        line(&p.value)
     );
-    draw_bars(&mut s, &f, bw, data);
-    if let Some((label, v)) = reference {
-        let y = f.y(v);
-        let _ = writeln!(
-            s,
-            "<line class=\"reference\" x1=\"{:.1}\" y1=\"{y:.1}\" x2=\"{:.1}\" y2=\"{y:.1}\" stroke=\"#c0392b\" stroke-dasharray=\"6 4\"/><text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"end\" fill=\"#c0392b\">{} {v:.2}</text>",
-            f.x0,
-            f.x0 + f.w,
-            f.x0 + f.w,
-            y - 4.0,
-            escape(label)
-        );
-    }
-    s.push_str("</svg>\n");
-    s
-}
-
-/// The bars of [`bars`] in frame `f`, each `bw` wide, with their labels (at 45° when narrow)
-/// and values.
-fn draw_bars(s: &mut String, f: &Frame, bw: f64, data: &[(String, f64)]) {
-    let rotate = bw < 50.0;
-    for (i, (label, v)) in data.iter().enumerate() {
-        let x = f.x(i as f64 + 0.15);
-        let _ = writeln!(
-            s,
-            "<rect class=\"bar\" x=\"{x:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{:.1}\" fill=\"#4a7ab5\"><title>{}: {v:.4}</title></rect>",
-            f.y(*v),
-            0.7 * bw,
-            (f.y(0.0) - f.y(*v)).max(0.0),
-            escape(label)
-        );
-        let cx = x + 0.35 * bw;
-        if rotate {
-            let _ = writeln!(
-                s,
-                "<text transform=\"translate({cx:.1},{:.1}) rotate(45)\">{}</text>",
-                f.y0 + f.h + 10.0,
-                escape(label)
-            );
-        } else {
-            let _ = writeln!(
-                s,
-                "<text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text><text x=\"{cx:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-                f.y0 + f.h + 14.0,
-                escape(label),
-                f.y(*v) - 3.0,
-                fmt_tick((v * 100.0).round() / 100.0)
-            );
-        }
-    }
 }
 
 /// One view of [`layout_views`]: the measured points and the stations projected on two axes
@@ -601,25 +577,46 @@ pub fn layout_views(title: &str, views: &[LayoutView]) -> String {
                 f.y(p[1])
             );
         }
-        for (id, p) in &v.stations {
-            let (x, y) = (f.x(p[0]), f.y(p[1]));
-            let _ = writeln!(
-                s,
-                "<path class=\"station\" d=\"M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z\" fill=\"#c0392b\"/><text x=\"{:.1}\" y=\"{:.1}\" fill=\"#c0392b\">{}</text>",
-                x,
-                y - 7.0,
-                x - 6.0,
-                y + 4.0,
-                x + 6.0,
-                y + 4.0,
-                x + 8.0,
-                y - 6.0,
-                escape(id)
-            );
-        }
+        station_marks(&mut s, &f, &v.stations, f.x0 + side + gap - 10.0);
     }
     s.push_str("</svg>\n");
     s
+}
+
+/// The stations in frame `f` as labelled triangles: each label beside its station, moved down
+/// or up a line at a time off the labels already placed, left of the station where it would
+/// pass `limit` (px, the next view).
+fn station_marks(s: &mut String, f: &Frame, stations: &[(String, [f64; 2])], limit: f64) {
+    // Each station's label beside it, moved down or up a line at a time off the labels
+    // already placed; left of the station where it would run into the next view.
+    let mut placed: Vec<[f64; 4]> = Vec::new();
+    for (id, p) in stations {
+        let (x, y) = (f.x(p[0]), f.y(p[1]));
+        let lw = text_width(id, FONT);
+        let right = x + 8.0 + lw <= limit;
+        let lx = if right { x + 8.0 } else { x - 8.0 - lw };
+        let ly = (0..40)
+            .map(|k| y - 6.0 + 13.0 * if k % 2 == 0 { k / 2 } else { -(k + 1) / 2 } as f64)
+            .find(|ly| {
+                let b = [lx, ly - 0.75 * FONT, lx + lw, ly + 0.25 * FONT];
+                placed
+                    .iter()
+                    .all(|q| b[2] < q[0] || q[2] < b[0] || b[3] < q[1] || q[3] < b[1])
+            })
+            .unwrap_or(y - 6.0);
+        placed.push([lx, ly - 0.75 * FONT - 1.0, lx + lw, ly + 0.25 * FONT + 1.0]);
+        let _ = writeln!(
+            s,
+            "<path class=\"station\" d=\"M{:.1},{:.1} L{:.1},{:.1} L{:.1},{:.1} Z\" fill=\"#c0392b\"/><text x=\"{lx:.1}\" y=\"{ly:.1}\" fill=\"#c0392b\">{}</text>",
+            x,
+            y - 7.0,
+            x - 6.0,
+            y + 4.0,
+            x + 6.0,
+            y + 4.0,
+            escape(id)
+        );
+    }
 }
 
 #[cfg(test)]

@@ -3,6 +3,8 @@
 
 mod figures;
 mod findings;
+mod identity;
+mod iso_summary;
 mod reversal;
 mod truth;
 
@@ -24,6 +26,7 @@ use volver_solvers::init::init_tracker;
 use volver_solvers::strategy::Identification;
 use volver_solvers::uncertainty::{Covariance, K, PointUncertainty};
 
+pub use identity::Identity;
 pub use truth::{TruthInModel, truth_in_model};
 
 /// One fitted model revision shown in the report.
@@ -93,8 +96,11 @@ pub fn measurement_parts(model: &Model) -> Vec<&'static str> {
 
 /// Everything the report shows.
 pub struct ReportInput<'a> {
-    /// Title.
+    /// Title (see [`Identity::title`]: the machine and the customer).
     pub title: String,
+    /// Who the verification was for, on which machine, when, where, with what and by whom:
+    /// the header block a customer signs ("—" for a field not given).
+    pub identity: Identity,
     /// The measurement file's name.
     pub data_label: String,
     /// The measurements.
@@ -139,6 +145,7 @@ impl<'a> ReportInput<'a> {
         let tool = crate::shared::reflector_centroid(last.model);
         ReportInput {
             title: title.into(),
+            identity: Identity::default(),
             data_label: data_label.into(),
             data,
             fits,
@@ -207,6 +214,7 @@ pub fn html(input: &ReportInput) -> Result<String> {
     machine_and_model(&page, &mut s)?;
     stations(&page, &mut s)?;
     summary(&page, &mut s)?;
+    iso_summary::section(&page, &mut s)?;
     maps(&page, &mut s)?;
     error_functions(&page, &mut s)?;
     squareness(&page, &mut s)?;
@@ -240,21 +248,41 @@ struct Page<'a> {
     truth: Option<TruthInModel>,
 }
 
-/// The document head, the title and the notes.
+/// The report's style sheet: the screen layout, and for print (a browser's "print to PDF")
+/// A4 pages with every chart and table kept on one page and scaled to the page's width.
+const STYLE: &str = "\
+body{font-family:Arial,'Liberation Sans',Helvetica,sans-serif;max-width:1100px;margin:2em auto;color:#222;line-height:1.4}\
+h1{font-size:1.6em} h2{border-bottom:1px solid #ccc;margin-top:2em}\
+table{border-collapse:collapse;margin:0.6em 0} td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}\
+th{background:#eef2f7} td:first-child{text-align:left}\
+.note{background:#f6f8fa;padding:0.6em 1em;border-left:4px solid #4a7ab5}\
+.warning{background:#fdf3f2;padding:0.6em 1em;border-left:4px solid #c0392b}\
+table.identity{width:100%} table.identity th{text-align:left;width:16%} table.identity td{text-align:left;width:34%}\
+table.sign{width:100%;margin-top:0.8em} table.sign th{text-align:left;width:50%;background:none;font-weight:normal}\
+table.sign td{height:3.2em}\
+table.iso td:nth-child(2){text-align:left}\
+p{orphans:3;widows:3} p:has(+table),p:has(+svg){break-after:avoid;page-break-after:avoid}\
+svg{display:block;max-width:100%;height:auto;margin:0.5em 0}\
+@page{size:A4;margin:14mm 12mm 16mm 12mm}\
+@media print{\
+body{max-width:none;margin:0;font-size:9.5pt;line-height:1.3}\
+h1{font-size:15pt;margin-top:0} h2{font-size:12.5pt;margin-top:1.2em}\
+h2,h3{break-after:avoid;page-break-after:avoid}\
+svg,table,.note,.warning,section.identity{break-inside:avoid;page-break-inside:avoid}\
+svg{max-width:100%;height:auto}\
+td,th{padding:2px 5px}\
+}";
+
+/// The document head, the title, the identity block a customer signs, and the notes.
 fn head(p: &Page, s: &mut String) -> Result<()> {
-    let Page { input, .. } = p;
+    let Page { input, m, .. } = p;
     let _ = write!(
         s,
-        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>\
-         body{{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222;line-height:1.4}}\
-         h1{{font-size:1.6em}} h2{{border-bottom:1px solid #ccc;margin-top:2em}}\
-         table{{border-collapse:collapse;margin:0.6em 0}} td,th{{border:1px solid #ccc;padding:3px 8px;text-align:right}}\
-         th{{background:#eef2f7}} td:first-child{{text-align:left}} .note{{background:#f6f8fa;padding:0.6em 1em;border-left:4px solid #4a7ab5}}\
-         .warning{{background:#fdf3f2;padding:0.6em 1em;border-left:4px solid #c0392b}}\
-         svg{{max-width:100%;height:auto}}</style></head><body>\n<h1>{}</h1>\n",
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{}</title>\n<style>{STYLE}</style></head><body>\n<h1>{}</h1>\n",
         escape(&input.title),
         escape(&input.title)
     );
+    s.push_str(&input.identity.header_html(&m.spec().name));
     for n in &input.notes {
         let _ = writeln!(s, "<p class=\"note\">{}</p>", escape(n));
     }
@@ -562,8 +590,9 @@ fn maps(p: &Page, s: &mut String) -> Result<()> {
             .collect();
         let _ = writeln!(
             s,
-            "<h2>Error over the measured volume</h2><p>Mean error module per position in each plane of the linear axes ({}; over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.</p>",
-            names.join(", ")
+            "<h2>Error over the measured volume</h2><p>Mean error module per position in each plane of the linear axes ({}; over the other axes and the reflectors): before, the measured points against the nominal machine (tracker pose fitted); after, against the identified model — the error left after compensation.{}</p>",
+            names.join(", "),
+            escape(&unmapped(m, &planes))
         );
     }
     let mb = diagnose::to_machine_frame(problem, before_params, before);
@@ -604,6 +633,33 @@ fn maps(p: &Page, s: &mut String) -> Result<()> {
         tool_point_uncertainty(s, input, model, params, last.id.gauge.as_ref(), cov)?;
     }
     Ok(())
+}
+
+/// What the maps leave out, in words: each rotary axis (its positions are averaged over in
+/// every map; its errors are drawn as functions of its angle) and each linear axis the data do
+/// not move (no plane with it).
+fn unmapped(m: &volver_core::machine::Machine, planes: &[(usize, usize)]) -> String {
+    let mut out = String::new();
+    for a in m.axes() {
+        if a.axis.is_rotary() {
+            let _ = write!(
+                out,
+                " {} is rotary: every map averages over its positions; its errors are drawn \
+                 against its angle under Identified error functions.",
+                a.axis
+            );
+        }
+    }
+    for (k, a) in m.axes().iter().enumerate() {
+        if !a.axis.is_rotary() && !planes.iter().any(|&(p, q)| p == k || q == k) {
+            let _ = write!(
+                out,
+                " {} is not mapped: the data do not move it with another linear axis.",
+                a.axis
+            );
+        }
+    }
+    out
 }
 
 /// The identified error functions with their U bands, the constants and the implied squareness.
@@ -655,16 +711,23 @@ fn error_functions(p: &Page, s: &mut String) -> Result<()> {
         },
         plot::escape(&check.statement())
     );
-    s.push_str(&plot::error_functions(
-        "Component errors",
-        &function_panels(
-            model,
-            params,
-            cov.as_ref(),
-            last.id.gauge.as_ref(),
-            truth.as_ref().map(|t| (*model, t.params.as_slice())),
-        ),
-    ));
+    // Nine panels (three rows) per chart, so that a chart fits a printed page.
+    let panels = function_panels(
+        model,
+        params,
+        cov.as_ref(),
+        last.id.gauge.as_ref(),
+        truth.as_ref().map(|t| (*model, t.params.as_slice())),
+    );
+    let parts = panels.len().div_ceil(9);
+    for (i, chunk) in panels.chunks(9).enumerate() {
+        let title = if parts > 1 {
+            format!("Component errors ({} of {parts})", i + 1)
+        } else {
+            "Component errors".to_string()
+        };
+        s.push_str(&plot::error_functions(&title, chunk));
+    }
     let consts = location_rows(model, params, cov.as_ref());
     if !consts.is_empty() {
         s.push_str(&table(

@@ -702,6 +702,17 @@ fn write_results(
     Ok(table_paths)
 }
 
+/// The demo report's identity block: nothing but what the demo is (a field not given prints
+/// as "—").
+fn demo_identity() -> report::Identity {
+    report::Identity {
+        remarks: Some(
+            "Synthetic data written by volver demo: no customer, instrument or operator.".into(),
+        ),
+        ..report::Identity::default()
+    }
+}
+
 /// Step 7, continued: The HTML report of both fits.
 fn write_report(
     setup: &Setup,
@@ -720,14 +731,11 @@ fn write_report(
     } else {
         check.tool
     };
-    let title = if setup.xcfz() {
-        "volver demo — XCFZ grinder, synthetic test 4".to_string()
-    } else {
-        format!(
-            "volver demo — {}, synthetic test",
-            fits[0].model.machine().spec().name
-        )
-    };
+    let identity = demo_identity();
+    let title = format!(
+        "{} — volver demo, synthetic data",
+        identity.title(&fits[0].model.machine().spec().name)
+    );
     let note = if setup.xcfz() {
         format!(
             "Synthetic verification of the XCFZ grinder (plan test4, seed {DEMO_SEED}) with an effect the paper's model lacks ({DEMO_EFFECT}). The paper's model left EMM {} µm; the diagnosis named {}; with it the fit ends at {} µm against a noise error of {} µm. Compensation with the final errors takes the true tool-point error from EMM {} to {} µm in the workpiece frame, and to {} µm after the best rigid transform (which a workpiece set-up takes up).",
@@ -758,6 +766,7 @@ fn write_report(
     };
     let input = ReportInput {
         title,
+        identity,
         data_label: out_dir
             .join(&setup.data_dir)
             .join("measurements.csv")

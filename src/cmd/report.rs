@@ -38,11 +38,97 @@ pub struct ReportArgs {
     /// the tool point passes.
     #[arg(long, default_value_t = 25.0)]
     max_u_um: f64,
+    /// The report's identity fields: a TOML file with a `[report]` table (customer, machine,
+    /// serial, date, place, instrument, calibration, calibration_date, operator,
+    /// air_temperature_c, machine_temperature_c, remarks; every field optional); the flags
+    /// below override it field by field.
+    #[arg(long, value_name = "FILE")]
+    report_info: Option<PathBuf>,
+    #[command(flatten)]
+    identity: IdentityArgs,
+}
+
+/// The identity fields as flags (over `--report-info`'s); a field given nowhere is shown as
+/// "—". No date is assumed: a report reads no clock.
+#[derive(clap::Args)]
+struct IdentityArgs {
+    /// The customer.
+    #[arg(long)]
+    customer: Option<String>,
+    /// The machine as the customer names it (default: the machine file's name).
+    #[arg(long)]
+    machine_name: Option<String>,
+    /// The machine's serial number.
+    #[arg(long)]
+    serial: Option<String>,
+    /// The date of the measurement, as it is to be printed.
+    #[arg(long)]
+    date: Option<String>,
+    /// Where the machine stands.
+    #[arg(long)]
+    place: Option<String>,
+    /// The measuring instrument (make, model, serial).
+    #[arg(long)]
+    instrument: Option<String>,
+    /// The instrument's calibration certificate.
+    #[arg(long)]
+    calibration: Option<String>,
+    /// The date of that calibration.
+    #[arg(long)]
+    calibration_date: Option<String>,
+    /// Who measured.
+    #[arg(long)]
+    operator: Option<String>,
+    /// The air temperature during the measurement, °C.
+    #[arg(long, value_name = "CELSIUS", allow_hyphen_values = true)]
+    air_temperature: Option<f64>,
+    /// The machine's temperature during the measurement, °C.
+    #[arg(long, value_name = "CELSIUS", allow_hyphen_values = true)]
+    machine_temperature: Option<f64>,
+    /// Free remarks.
+    #[arg(long)]
+    remarks: Option<String>,
+}
+
+/// The identity: `--report-info`'s `[report]` table, each flag given over it.
+fn identity(a: &ReportArgs) -> Result<volver::report::Identity> {
+    let file = match &a.report_info {
+        Some(p) => volver::report::Identity::load(p)
+            .with_context(|| format!("reading the report's identity fields ({})", p.display()))?,
+        None => volver::report::Identity::default(),
+    };
+    let f = &a.identity;
+    let flags = volver::report::Identity {
+        customer: f.customer.clone(),
+        machine: f.machine_name.clone(),
+        serial: f.serial.clone(),
+        date: f.date.clone(),
+        place: f.place.clone(),
+        instrument: f.instrument.clone(),
+        calibration: f.calibration.clone(),
+        calibration_date: f.calibration_date.clone(),
+        operator: f.operator.clone(),
+        air_temperature_c: f.air_temperature,
+        machine_temperature_c: f.machine_temperature,
+        remarks: f.remarks.clone(),
+    };
+    for (flag, v) in [
+        ("--air-temperature", f.air_temperature),
+        ("--machine-temperature", f.machine_temperature),
+    ] {
+        if let Some(t) = v
+            && !(-100.0..=200.0).contains(&t)
+        {
+            anyhow::bail!("{flag} {t}: no workshop temperature (expected −100 … 200 °C)");
+        }
+    }
+    Ok(file.overridden_by(flags))
 }
 
 /// Runs `volver report`.
 pub fn run(a: ReportArgs) -> Result<()> {
     claim_outputs(&a)?;
+    let identity = identity(&a)?;
     let (machine, model, data) = a.inputs.load()?;
     volver::compensation::check_max_u(a.max_u_um)?;
     let tool = volver::compensation::tool_point_of(a.tool_offset.as_deref(), None, &model)?;
@@ -94,7 +180,8 @@ pub fn run(a: ReportArgs) -> Result<()> {
         volver::inputs::noise_rule(None, last_model.machine())?.0,
     )?;
     let input = volver::report::ReportInput {
-        title: format!("volver report — {}", a.inputs.data.display()),
+        title: identity.title(&machine.spec().name),
+        identity,
         data_label: a.inputs.data.display().to_string(),
         data: &data,
         fits,
@@ -171,9 +258,11 @@ fn results_path(a: &ReportArgs) -> PathBuf {
 /// Checks the report and its results file against the inputs and each other before anything
 /// runs.
 fn claim_outputs(a: &ReportArgs) -> Result<()> {
-    let inputs = a
-        .inputs
-        .paths(&[a.reference.as_deref(), a.truth.as_deref()]);
+    let inputs = a.inputs.paths(&[
+        a.reference.as_deref(),
+        a.truth.as_deref(),
+        a.report_info.as_deref(),
+    ]);
     let mut outputs = volver::core::fsio::Outputs::new(inputs);
     outputs.claim(&a.out)?;
     outputs

@@ -50,6 +50,7 @@ pub fn tool_grid(m: &volver::core::machine::Machine) -> volver::solvers::uncerta
 }
 pub mod controllers;
 pub mod rs274;
+pub mod svg_text;
 
 /// The truth `truth` (values by parameter name; a name `truth_model` lacks is 0) written in
 /// `model`'s parameters and moved onto the gauge of the fit `id` (the point of the gauge
