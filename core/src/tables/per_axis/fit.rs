@@ -28,10 +28,13 @@
 //! of it is in the leftover. With a reversal, the mean of both directions is zero there, the
 //! forward and reverse values ∓B/2.
 //!
-//! **Nodes.** Over each axis' travel the tables' positions are equally spaced, every
-//! `linear_step` mm (`rotary_step` degrees) when the step divides the travel, else the largest
-//! spacing below it that does. A rotary axis whose travel is a full turn has a periodic table:
-//! its last position is its first one turned once and holds the same value.
+//! **Nodes.** Over each axis' travel the tables' positions are equally spaced from one end to
+//! the other, every `linear_step` mm (`rotary_step` degrees) when the step divides the travel
+//! and puts the reference position on a node, else the largest spacing below it that does (of
+//! at least a quarter of the step; failing that, the largest spacing below the step that
+//! divides the travel, the reference between two nodes). A rotary axis whose travel is a full
+//! turn has a periodic table: its last position is its first one turned once and holds the same
+//! value.
 //!
 //! **The measure.** The sample commands put every axis on its nodes only, so that at a sample
 //! each table's value is one node's value: an error that is a sum of functions of one axis
@@ -196,8 +199,8 @@ impl Nodes {
     fn new(a: &MachineAxis, step: f64) -> Result<Nodes> {
         let travel = a.max - a.min;
         let step_internal = a.from_file_units(step);
-        let intervals = (travel / step_internal - 1e-9).ceil().max(1.0);
-        if intervals + 1.0 > crate::tables::MAX_TABLE_ROWS as f64 {
+        let fewest = (travel / step_internal - 1e-9).ceil().max(1.0);
+        if fewest + 1.0 > crate::tables::MAX_TABLE_ROWS as f64 {
             return Err(Error::InvalidOption {
                 name: "step",
                 message: format!(
@@ -206,11 +209,12 @@ impl Nodes {
                     crate::error::number(step),
                     a.file_unit(),
                     a.axis,
-                    crate::tables::MAX_TABLE_ROWS
+                    crate::tables::MAX_TABLE_ROWS,
+                    intervals = fewest + 1.0
                 ),
             });
         }
-        let n = intervals as usize;
+        let n = intervals_through_reference(a, fewest as usize);
         let h = travel / n as f64;
         let periodic = a.axis.is_rotary() && (travel - TAU).abs() < 1e-9 && n >= 2;
         let canonical = |i: usize| if periodic && i == n { 0 } else { i };
@@ -221,9 +225,15 @@ impl Nodes {
         let (pinned, follows) = if t < 1e-9 || t > 1.0 - 1e-9 {
             (canonical(r.round() as usize), None)
         } else if t > 0.5 {
-            (canonical(below + 1), Some((canonical(below), -(1.0 - t) / t)))
+            (
+                canonical(below + 1),
+                Some((canonical(below), -(1.0 - t) / t)),
+            )
         } else {
-            (canonical(below), Some((canonical(below + 1), -t / (1.0 - t))))
+            (
+                canonical(below),
+                Some((canonical(below + 1), -t / (1.0 - t))),
+            )
         };
         let mut map = vec![None; n + 1];
         let mut unknowns = 0;
@@ -457,13 +467,7 @@ impl Layout {
 
     /// The tables of the unknowns `x` (file units), leadscrew tables with their reversal; tables
     /// of zeros left out.
-    fn tables(
-        &self,
-        model: &Model,
-        params: &[f64],
-        x: &[f64],
-        request: &Request,
-    ) -> PerAxisTables {
+    fn tables(&self, model: &Model, params: &[f64], x: &[f64], request: &Request) -> PerAxisTables {
         let axes = model.machine().axes();
         let reversal = crate::compensate::reversal_axes(model);
         let mut tables = Vec::new();
@@ -507,6 +511,18 @@ impl Layout {
             tables,
         }
     }
+}
+
+/// The fewest intervals from `fewest` to four times as many that divide axis `a`'s travel
+/// with its reference position on a node; `fewest` when none does.
+fn intervals_through_reference(a: &MachineAxis, fewest: usize) -> usize {
+    let r = (a.reference - a.min) / (a.max - a.min);
+    (fewest..=4 * fewest)
+        .find(|&n| {
+            let x = r * n as f64;
+            (x - x.round()).abs() < 1e-9 * n as f64
+        })
+        .unwrap_or(fewest)
 }
 
 /// Calls `f` with every multi-index of the tensor product of `lists` (none when one is empty).
@@ -582,7 +598,11 @@ fn solve(normal: Vec<f64>, rhs: Vec<f64>) -> Result<Vec<f64>> {
         for j in 0..n {
             m[(i, j)] *= scale[i] * scale[j];
         }
-        m[(i, i)] = if scale[i] > 0.0 { m[(i, i)] + RIDGE } else { 1.0 };
+        m[(i, i)] = if scale[i] > 0.0 {
+            m[(i, i)] + RIDGE
+        } else {
+            1.0
+        };
     }
     let b = DVector::from_iterator(n, (0..n).map(|i| rhs[i] * scale[i]));
     if !(m.iter().all(|v| v.is_finite()) && b.iter().all(|v| v.is_finite())) {
@@ -615,7 +635,11 @@ mod tests {
         let mut x = m.axes()[0].clone();
         x.reference = 130.0;
         let n = Nodes::new(&x, 100.0).unwrap();
-        let vals: Vec<f64> = n.map.iter().map(|s| s.map_or(0.0, |(v, f)| f * (v as f64 + 1.0))).collect();
+        let vals: Vec<f64> = n
+            .map
+            .iter()
+            .map(|s| s.map_or(0.0, |(v, f)| f * (v as f64 + 1.0)))
+            .collect();
         let [(i, wi), (j, wj)] = n.weights(130.0);
         assert!((wi * vals[i] + wj * vals[j]).abs() < 1e-15);
         assert_eq!(n.unknowns, n.n);
@@ -644,7 +668,10 @@ mod tests {
         for (k, nodes) in layout.nodes.iter().enumerate() {
             for i in 0..nodes.sampled() {
                 let p = nodes.position(i);
-                assert!(s.iter().any(|q| (q.0[k] - p).abs() < 1e-9), "axis {k} node {i}");
+                assert!(
+                    s.iter().any(|q| (q.0[k] - p).abs() < 1e-9),
+                    "axis {k} node {i}"
+                );
             }
         }
     }

@@ -233,11 +233,11 @@ pub fn leftover(
                 let c = tables.corrections(m, q, approach)?;
                 let mut moved = *q;
                 moved.0.iter_mut().zip(&c.0).for_each(|(v, d)| *v += d);
-                let state = PointState {
-                    t_s: 0.0,
-                    approach,
-                };
-                Ok(minus(model.tool_point_in(&moved.0, tool, state, params), nominal))
+                let state = PointState { t_s: 0.0, approach };
+                Ok(minus(
+                    model.tool_point_in(&moved.0, tool, state, params),
+                    nominal,
+                ))
             };
             let compensated = comp.compensate(q)?;
             points.push(LeftoverPoint {
