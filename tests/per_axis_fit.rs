@@ -4,6 +4,8 @@
 //! angular error with its Abbe offset leaving exactly the non-separable part of a product
 //! f(x)·g(z) under the stated measure (the tensor grid of the tables' positions).
 
+mod common;
+
 use volver_core::approach::Approach;
 use volver_core::iso::ErrorId;
 use volver_core::kinematics::{PointErrors, tool_in_workpiece};
@@ -434,4 +436,99 @@ fn an_abbe_offset_leaves_the_hand_computed_non_separable_part() {
         );
         assert!(left.before.emax_mm > 2.0 * largest);
     }
+}
+
+/// `volver tables` prints what each way of compensating leaves and writes it per grid point:
+/// a hand-set X positioning error (cubic) and a straightness of Z in x (linear in z). The
+/// CSV's error before compensation is recomputed here from the model; the leadscrew tables
+/// leave the straightness (up to its full size at the top of Z), the cross-axis tables only the
+/// interpolation of the cubic between their positions, volumetric compensation nothing.
+#[test]
+fn volver_tables_prints_and_writes_what_per_axis_tables_leave() {
+    let dir = common::scratch_dir("per-axis", "cli");
+    let model = preset("xcfz", "");
+    let mut p = model.initial_params();
+    set(&model, &mut p, "EXX.c3", 0.004);
+    zero_at_reference(&model, &mut p, "EXX");
+    set(&model, &mut p, "EXZ.c1", 0.006); // 12 µm over Z's travel
+    zero_at_reference(&model, &mut p, "EXZ");
+    let results = dir.join("hand.json");
+    volver::core::results::ResultsFile::from_model(&model, &p)
+        .unwrap()
+        .save(&results)
+        .unwrap();
+    let out_dir = dir.join("t");
+    let args = |length: &'static str| -> Vec<String> {
+        [
+            "tables",
+            "--results",
+            results.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--step",
+            "100",
+            "--rotary-step",
+            "30",
+            "--tool-offset",
+            "0,-25,-50",
+            "--tool-length",
+            length,
+            "--force",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let bad = common::volver(&args("200:0").iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--tool-length 200:0"));
+    assert!(!out_dir.join("per-axis-leftover.csv").exists());
+    let printed = common::ok(&args("0:200").iter().map(String::as_str).collect::<Vec<_>>());
+    for label in [
+        "uncompensated",
+        "leadscrew tables (LinuxCNC COMP_FILE, Siemens $AA_ENC_COMP)",
+        "leadscrew + cross-axis tables (Siemens $AA_ENC_COMP + $AN_CEC)",
+        "error tables (ISG-kernel / Etalon volumetric compensation)",
+        "volumetric compensation (volver compensate",
+    ] {
+        assert!(printed.contains(label), "{label}: {printed}");
+    }
+    let summary = std::fs::read_to_string(out_dir.join("per-axis-leftover.txt")).unwrap();
+    assert!(
+        summary.contains("(0, -25, -50), (0, -25, -150), (0, -25, -250)"),
+        "{summary}"
+    );
+    let csv = std::fs::read_to_string(out_dir.join("per-axis-leftover.csv")).unwrap();
+    let mut lines = csv.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), 12 * 11 * 12 * 3);
+    let m = model.machine();
+    let (mut lead, mut cross, mut before): (f64, f64, f64) = (0.0, 0.0, 0.0);
+    for r in &rows {
+        let q = m.commands_from_file_units(&[r[col("X_mm")], r[col("C_deg")], r[col("Z_mm")]]);
+        let tool = [
+            r[col("tool_x_mm")],
+            r[col("tool_y_mm")],
+            r[col("tool_z_mm")],
+        ];
+        let a = model.tool_point(&q.0, &tool, &p);
+        let b = tool_in_workpiece(m, &q.0, &tool, &PointErrors::<f64>::zero());
+        let e = norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]) * 1e3;
+        assert!((r[col("before_um")] - e).abs() < 1e-4, "{r:?}: {e}");
+        lead = lead.max(r[col("leadscrew_um")]);
+        cross = cross.max(r[col("cross_axis_um")]);
+        before = before.max(e);
+        assert!(r[col("volumetric_um")] < 1e-4);
+        // The error tables carry both errors: they leave their interpolation alone.
+        assert!(r[col("error_tables_um")] < 0.2, "{r:?}");
+    }
+    assert!(
+        before > 12.0 && lead > 11.0 && lead < before,
+        "{before} {lead}"
+    );
+    assert!(cross < 0.2, "{cross}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -38,8 +38,11 @@
 //!
 //! **The measure.** The sample commands put every axis on its nodes only, so that at a sample
 //! each table's value is one node's value: an error that is a sum of functions of one axis
-//! each, in the directions the output axes move the tool (a positioning error EXX(x), ECC of a
-//! rotary axis), is then reproduced exactly at the nodes. The samples are the tensor grid of
+//! each, in the directions the output axes move the tool (a positioning error EXX(x)), is then
+//! cancelled exactly at the nodes. A rotary axis' positioning error (ECC) is such an error to
+//! first order only: volver's angular errors are ISO 230-1's small angles, a point moving by
+//! `ε × r`, while a table turns the axis' command exactly, which leaves `½ε²ρ` at a distance
+//! `ρ` from the axis (0.00005 µm for 10 µrad at 1 m). The samples are the tensor grid of
 //! every axis' nodes (a full turn's last node is its first) when it has at most
 //! [`SAMPLE_BUDGET`] commands. A larger grid is thinned: each axis keeps a subset `S_k` of `m`
 //! nodes evenly spread (its ends and its reference among them), `m` as large as the budget

@@ -14,8 +14,8 @@ use crate::model::{Model, PointState};
 /// The most commands of [`evaluation_grid`] (each evaluated at every tool point).
 pub const EVALUATION_BUDGET: usize = 20_000;
 
-/// The most positions per axis of [`evaluation_grid`] (a full turn takes one more).
-pub const EVALUATION_POSITIONS: usize = 11;
+/// The most positions per axis of [`evaluation_grid`] (a full turn takes one fewer).
+pub const EVALUATION_POSITIONS: usize = 12;
 
 impl AxisCorrection {
     /// The correction at input position `position` (file units) for the output axis arriving
@@ -144,15 +144,17 @@ pub struct Leftover {
 }
 
 /// The evaluation grid over `machine`'s travel: the tensor grid of `n` positions per axis
-/// from one end of its travel to the other (equal steps; a full turn in `n + 1` equal steps
+/// from one end of its travel to the other (equal steps; a full turn in `n − 1` equal steps
 /// from its start, its end being its start), `n` the largest up to [`EVALUATION_POSITIONS`]
-/// with at most [`EVALUATION_BUDGET`] commands (11 on a machine of three axes: every 10 % of
-/// a linear travel, every 30° of a full turn; 7 on one of five).
+/// with at most [`EVALUATION_BUDGET`] commands: 12 on a machine of three axes (every 1/11 of a
+/// linear travel, every 32.7° of a full turn), 7 on one of five. Steps of odd fractions of the
+/// travel put most positions between the tables' positions, so that what their linear
+/// interpolation leaves is in the leftover.
 ///
 /// ```
 /// let m = volver_core::machine::Machine::default_xcfz();
 /// let g = volver_core::tables::per_axis::evaluation_grid(&m);
-/// assert_eq!(g.len(), 11 * 12 * 11);
+/// assert_eq!(g.len(), 12 * 11 * 12);
 /// ```
 pub fn evaluation_grid(machine: &Machine) -> Vec<Commands> {
     let axes = machine.axes();
@@ -161,19 +163,19 @@ pub fn evaluation_grid(machine: &Machine) -> Vec<Commands> {
     };
     let size = |n: usize| -> usize {
         axes.iter()
-            .map(|a| if full_turn(a) { n + 1 } else { n })
+            .map(|a| if full_turn(a) { n - 1 } else { n })
             .product()
     };
-    let n = (2..=EVALUATION_POSITIONS)
+    let n = (3..=EVALUATION_POSITIONS)
         .rev()
         .find(|&n| size(n) <= EVALUATION_BUDGET)
-        .unwrap_or(2);
+        .unwrap_or(3);
     let lists: Vec<Vec<f64>> = axes
         .iter()
         .map(|a| {
             if full_turn(a) {
-                (0..=n)
-                    .map(|i| a.min + (a.max - a.min) * i as f64 / (n + 1) as f64)
+                (0..n - 1)
+                    .map(|i| a.min + (a.max - a.min) * i as f64 / (n - 1) as f64)
                     .collect()
             } else {
                 (0..n)
