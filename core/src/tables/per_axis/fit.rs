@@ -225,7 +225,7 @@ impl Nodes {
         let below = (r.floor() as usize).min(n - 1);
         let t = r - below as f64;
         // The pinned node, and with the reference between nodes the one it follows.
-        let (pinned, follows) = if t < 1e-9 || t > 1.0 - 1e-9 {
+        let (pinned, follows) = if !(1e-9..=1.0 - 1e-9).contains(&t) {
             (canonical(r.round() as usize), None)
         } else if t > 0.5 {
             (
