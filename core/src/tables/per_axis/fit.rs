@@ -111,7 +111,8 @@ pub const MAX_UNKNOWNS: usize = 6000;
 ///     assert!((v - exx(pos + v)).abs() < 1e-12);
 ///     assert!((v - exx(*pos)).abs() < 2e-6); // EXX's slope times the correction
 /// }
-/// assert!(left.before.emax_mm > 0.01 && left.tables.emax_mm < 1e-4); // interpolation
+/// // Left: the parabola between positions 100 mm apart, h²/8 · EXX'' = 0.153 µm at most.
+/// assert!(left.before.emax_mm > 0.01 && left.tables.emax_mm < 0.000154);
 /// ```
 ///
 /// # Errors
