@@ -296,14 +296,20 @@ impl Nodes {
     }
 
     /// `m` of the sampled nodes evenly spread, both ends and the reference among them (all when
-    /// `m` reaches their count).
+    /// `m` reaches their count); over a full turn evenly spread over the turn, from its start.
     fn thinned(&self, m: usize) -> Vec<usize> {
         let count = self.sampled();
         if m >= count {
             return (0..count).collect();
         }
         let mut v: Vec<usize> = (0..m)
-            .map(|i| ((i * (count - 1)) as f64 / (m - 1).max(1) as f64).round() as usize)
+            .map(|i| {
+                if self.periodic {
+                    ((i * count) as f64 / m as f64).round() as usize
+                } else {
+                    ((i * (count - 1)) as f64 / (m - 1).max(1) as f64).round() as usize
+                }
+            })
             .collect();
         v.push(self.reference);
         v.sort_unstable();
