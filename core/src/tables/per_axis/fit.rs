@@ -48,7 +48,11 @@
 //! nodes evenly spread (its ends and its reference among them), `m` as large as the budget
 //! allows, and the samples are the union over the axes `k` of all of `k`'s nodes times the
 //! other axes' subsets, `N_k × Π_{j≠k} S_j` (every node of every table sampled, each command
-//! once). Every sample is weighed equally, every tool point too.
+//! once). Every sample is weighed equally, every tool point too. **Known weakness:** on a
+//! five-axis machine at fine steps (10 mm, 5°) the subsets are small (3 nodes), and cross-axis
+//! tables fitted on that measure generalise badly (the head-head demo: they leave more than
+//! leadscrew tables alone over the evaluation grid, where at 100 mm, 20° they leave a third);
+//! use coarser steps there until the measure is improved.
 //!
 //! **Reversal.** The leadscrew table of an axis with a reversal (ISO 230-2's B, the model's
 //! `reversal.X.b`, [`crate::compensate::reversal_axes`]) holds the mean fit ± B/2 in command
