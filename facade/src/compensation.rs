@@ -4,9 +4,11 @@
 
 mod check;
 mod gate;
+mod per_axis;
 
 pub use check::{DirectionCheck, TruthCheck, check_on_truth, travel_grid};
 pub use gate::{Statement, Vouch, vouch};
+pub use per_axis::{PerAxisComparison, compare_per_axis, tool_points};
 
 use crate::error::{Context, Error, Result};
 pub use crate::shared::reflector_centroid;

@@ -615,6 +615,11 @@ pub struct TablesArgs {
     /// parts per-axis tables cannot carry (a field over the axes, a part that grows with time).
     #[arg(long)]
     force: bool,
+    /// The tool lengths the per-axis tables serve, MIN:MAX mm along the tool's axis (0,0,-1:
+    /// down the spindle) from the tool point: three tool points (MIN, the middle, MAX) weighed
+    /// equally; default: the tool point alone.
+    #[arg(long, value_name = "MIN:MAX", allow_hyphen_values = true)]
+    tool_length: Option<String>,
 }
 
 /// Prints how closely the tables give the model's tool point and every part of the model they
@@ -718,11 +723,18 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
             "errors-etalon.txt",
             "errors.csv",
             "errors-u95.csv",
+            "per-axis-leftover.csv",
+            "per-axis-leftover.txt",
         ],
     )?;
     let (model, params, record) = load_results(&a.results, a.accept)?;
     check_max_u(a.max_u_um)?;
     let tool = tool_point_of(a.tool_offset.as_deref(), None, &model)?;
+    let tools = volver::compensation::tool_points(
+        tool,
+        volver::compensation::tool_axis_of(None)?,
+        a.tool_length.as_deref(),
+    )?;
     let tables = ErrorTables::from_model(&model, &params, a.step, a.rotary_step)?;
     println!(
         "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
@@ -754,8 +766,52 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
     }
     let consts: Vec<&str> = tables.constants.iter().map(|c| c.0.as_str()).collect();
     println!("  constants: {}", consts.join(" "));
+    paths.extend(per_axis_leftover(&a, &model, &params, &tables, &tools)?);
     for p in paths {
         println!("  written {}", p.display());
     }
     Ok(())
+}
+
+/// What per-axis tables leave beside the other ways of compensating, printed one line each and
+/// written to per-axis-leftover.csv (per grid point) and per-axis-leftover.txt (the summary);
+/// returns their paths.
+fn per_axis_leftover(
+    a: &TablesArgs,
+    model: &Model,
+    params: &[f64],
+    tables: &ErrorTables,
+    tools: &[[f64; 3]],
+) -> Result<Vec<PathBuf>> {
+    let m = model.machine();
+    let c = volver::compensation::compare_per_axis(
+        model,
+        params,
+        tables,
+        tools,
+        a.step,
+        a.rotary_step,
+    )?;
+    let points: Vec<String> = tools.iter().map(|t| point_mm(*t)).collect();
+    println!(
+        "  what each leaves of the tool point's error over {} commands of the travel at tool \
+         point(s) {} mm:",
+        c.leadscrew.1.grid.len(),
+        points.join(", ")
+    );
+    for line in c.lines(m) {
+        println!("    {line}");
+    }
+    let source = a.results.display().to_string();
+    let files = [
+        ("per-axis-leftover.csv", c.to_csv(m)),
+        ("per-axis-leftover.txt", c.summary(m, &source)),
+    ];
+    let mut out = Vec::new();
+    for (name, text) in files {
+        let p = a.out.join(name);
+        write_atomic(&p, text).with_context(|| format!("writing {}", p.display()))?;
+        out.push(p);
+    }
+    Ok(out)
 }

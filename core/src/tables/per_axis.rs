@@ -95,3 +95,13 @@ pub struct ErrorSize {
     /// The commands (machine units: mm, rad) at which the largest is.
     pub emax_at: Commands,
 }
+
+// The projection of a model's error on these tables and what they leave (issue 47, item 2).
+mod fit;
+mod leftover;
+pub use fit::{
+    GAUSS_NEWTON_PASSES, MAX_UNKNOWNS, RIDGE, SAMPLE_BUDGET, ZERO_VALUE, fit, fit_tables,
+};
+pub use leftover::{
+    EVALUATION_BUDGET, EVALUATION_POSITIONS, Leftover, LeftoverPoint, evaluation_grid, leftover,
+};
