@@ -7,7 +7,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use cmd::{
     compare, compensate, demo, diagnose, history, identify, layout, plan, report, simulate, study,
-    uncertainty,
+    tables, uncertainty,
 };
 
 /// Volumetric verification of multi-axis machine tools with a laser tracker.
@@ -64,7 +64,7 @@ enum Command {
     Compensate(compensate::CompensateArgs),
     /// Exports identified errors as controller tables over each axis' positions: ISG CSV,
     /// Etalon exchange style and plain CSV (errors, not corrections).
-    Tables(compensate::TablesArgs),
+    Tables(tables::TablesArgs),
     /// The tool point of a results file at each command of a grid, in the workpiece frame (CSV,
     /// or --json): to put an identified model beside another (a simulation's truth, a second
     /// fit).
@@ -130,7 +130,7 @@ fn dispatch(command: Command) -> Result<()> {
         Command::Study(a) => study::run(a),
         Command::Simulate(a) => simulate::run(a),
         Command::Compensate(a) => compensate::compensate_command(a),
-        Command::Tables(a) => compensate::tables_command(a),
+        Command::Tables(a) => tables::tables_command(a),
         Command::Predict(a) => compensate::predict_command(a),
         Command::Uncertainty(a) => uncertainty::uncertainty_command(a),
         Command::Plan(a) => plan::run(a),

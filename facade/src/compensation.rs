@@ -3,10 +3,12 @@
 //! expanded uncertainty, a compensation checked on a known machine.
 
 mod check;
+mod controllers;
 mod gate;
 mod per_axis;
 
 pub use check::{DirectionCheck, TruthCheck, check_on_truth, travel_grid};
+pub use controllers::{Files, Format, controller_files, parse_formats};
 pub use gate::{Statement, Vouch, vouch};
 pub use per_axis::{PerAxisComparison, compare_per_axis, tool_points};
 

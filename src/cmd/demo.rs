@@ -119,7 +119,8 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let noise =
         volver::solvers::uncertainty::NoiseModel::Tracker(volver::core::noise::TrackerNoise::PAPER);
     let fit_check = volver::uncertainty::check_fit(&Problem::new(&model2, data)?, &id2, noise);
-    let table_paths = write_results(out_dir, &model2, &id2, &cov, fit_check)?;
+    let mut table_paths = write_results(out_dir, &model2, &id2, &cov, fit_check)?;
+    table_paths.extend(per_axis_files(out_dir, &model2, &id2.params, check.tool)?);
     let first_label = if setup.xcfz() {
         "paper model"
     } else {
@@ -711,6 +712,45 @@ fn demo_identity() -> report::Identity {
         ),
         ..report::Identity::default()
     }
+}
+
+/// Step 7, continued: the per-axis tables of LinuxCNC and Siemens controls (the projections
+/// of the identified error, `volver tables`) and what they leave beside volumetric
+/// compensation, at the tool point; returns the files' paths.
+fn per_axis_files(
+    out_dir: &Path,
+    model: &Model,
+    params: &[f64],
+    tool: [f64; 3],
+) -> Result<Vec<PathBuf>> {
+    use volver::compensation::{Format, compare_per_axis, controller_files};
+    let tables = ErrorTables::from_model(model, params, 10.0, 5.0)?;
+    let c = compare_per_axis(model, params, &tables, &[tool], 10.0, 5.0)?;
+    println!(
+        "\n   What each way of compensating leaves of the tool point's error over {} commands of \
+         the travel (tool point {} mm):",
+        c.leadscrew.1.grid.len(),
+        volver::compensation::point_mm(tool)
+    );
+    for line in c.lines(model.machine()) {
+        println!("     {line}");
+    }
+    let options = volver::core::tables::siemens::SiemensOptions::default();
+    let mut paths = Vec::new();
+    for (f, files) in controller_files(&c, model.machine(), &Format::ALL, &options) {
+        match files {
+            Ok(files) => {
+                for (name, text) in files {
+                    let p = out_dir.join("tables").join(name);
+                    volver::core::fsio::write_atomic(&p, text)
+                        .with_context(|| format!("writing {}", p.display()))?;
+                    paths.push(p);
+                }
+            }
+            Err(why) => println!("   {f} tables not written: {why}"),
+        }
+    }
+    Ok(paths)
 }
 
 /// Step 7, continued: The HTML report of both fits.

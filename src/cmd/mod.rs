@@ -11,6 +11,7 @@ pub mod plan;
 pub mod report;
 pub mod simulate;
 pub mod study;
+pub mod tables;
 pub mod uncertainty;
 
 use anyhow::Result;

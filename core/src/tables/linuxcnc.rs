@@ -132,7 +132,7 @@ pub fn linuxcnc_files(t: &PerAxisTables, machine: &Machine) -> Result<Vec<CompFi
                      (the rest would be refused): a step of at least {} {} over its {} {} gives \
                      at most {MAX_LINES}",
                     label(table),
-                    number(span / (MAX_LINES - 1) as f64),
+                    number((span / (MAX_LINES - 1) as f64 * 1e3).ceil() / 1e3),
                     a.file_unit(),
                     number(span),
                     a.file_unit()

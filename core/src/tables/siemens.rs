@@ -220,7 +220,7 @@ pub(crate) fn stored(
                 label(t),
                 max_points.1,
                 max_points.0,
-                number(span / (max_points.0.max(2) - 1) as f64),
+                number((span / (max_points.0.max(2) - 1) as f64 * 1e3).ceil() / 1e3),
                 a.file_unit(),
                 number(span),
                 a.file_unit()
