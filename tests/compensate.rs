@@ -736,7 +736,9 @@ fn the_report_is_one_self_contained_html_file() {
 }
 
 /// A model whose errors are set by hand: EXX rises linearly by 0.2 µm per mm of X (2 µm at
-/// X = 10 mm, 10 µm at 50 mm), ECC is a constant 5 µrad, and the squareness B0Z is 20 µrad.
+/// X = 10 mm, 10 µm at 50 mm), ECC is a constant 5 µrad, and the squareness B0Z is 20 µrad
+/// (the model's parameter: ISO 230-1's B0Z, which every export and the report give, is −20 µrad,
+/// `ErrorId::iso_sign`).
 fn hand_set() -> (Model, Vec<f64>) {
     let model = Model::from_toml_str(
         Machine::default_xcfz(),
@@ -783,14 +785,14 @@ fn tables_state_hand_set_errors_in_their_units() {
             "EXX,X,50.000000,mm,10.000000000,um",
             "EXX,X,0.000000,mm,0.000000000,um",
             "ECC,C,30.000000,deg,5.000000,urad",
-            "B0Z,Z,,,20.000000,urad",
+            "B0Z,Z,,,-20.000000,urad",
         ] {
             assert!(
                 plain.lines().any(|l| l == line),
                 "plain CSV lacks {line}:\n{plain}"
             );
         }
-        // ISG: the X block's row at 10 mm holds 0.002 mm; the constants block B0Z 2e-5 rad.
+        // ISG: the X block's row at 10 mm holds 0.002 mm; the constants block B0Z −2e-5 rad (ISO).
         assert!(
             isg.lines().any(|l| l == "10.000000 0.002000000000"),
             "{isg}"
@@ -800,7 +802,7 @@ fn tables_state_hand_set_errors_in_their_units() {
             "{isg}"
         );
         let b0z = isg.lines().position(|l| l == "B0Z").expect("B0Z header");
-        assert_eq!(isg.lines().nth(b0z + 1), Some("0.000020000000"));
+        assert_eq!(isg.lines().nth(b0z + 1), Some("-0.000020000000"));
         // Etalon: the same in its Gridpoints and VALUE lines.
         assert!(
             etalon.contains(
@@ -809,7 +811,7 @@ fn tables_state_hand_set_errors_in_their_units() {
             "{etalon}"
         );
         assert!(
-            etalon.contains("[B0Z]\nVALUE = 0.000020000000\n"),
+            etalon.contains("[B0Z]\nVALUE = -0.000020000000\n"),
             "{etalon}"
         );
         assert!(etalon.contains("  30.000000 0.000005000000\n"), "{etalon}");
@@ -1148,7 +1150,8 @@ fn hand_set_errors_appear_in_identify_json_and_the_report() {
         String::from_utf8_lossy(&out.stderr)
     );
     let html = std::fs::read_to_string(&html_path).unwrap();
-    assert!(html.contains("<td>B0Z</td><td>20.000 ± "), "B0Z row");
+    // ISO 230-1's sign in the report: the parameter's negative for B0Z.
+    assert!(html.contains("<td>B0Z</td><td>-20.000 ± "), "B0Z row");
     let (fit, q) = volver::core::results::ResultsFile::load(&dir.join("r.json"))
         .unwrap()
         .to_model("r.json")

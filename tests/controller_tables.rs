@@ -263,7 +263,7 @@ fn linuxcnc_limits_are_refused_by_the_writer_and_by_the_control() {
     );
     let e = linuxcnc_files(&t, &m).unwrap_err().to_string();
     assert!(e.contains("257 points") && e.contains("at most 256"), "{e}");
-    assert!(e.contains("a step of at least 1.003921568627451 mm"), "{e}");
+    assert!(e.contains("a step of at least 1.004 mm"), "{e}");
     // The control keeps 256 entries and refuses the 257th.
     let text: String = p257.iter().map(|p| format!("{p} 0 0\n")).collect();
     let j = LinuxCncJoint::load(&text, 1);
