@@ -246,3 +246,97 @@ fn a_control_limit_refuses_a_named_format_and_skips_a_default_one() {
     let bad = run(Some("fanuc"));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("not a format"));
 }
+
+/// An axis whose reference is not on a round position (X at 705 mm of 0 … 1 400): the tables
+/// keep the step asked for (141 positions every 10 mm, the reference between 700 and 710 with
+/// the interpolated correction zero there) rather than a 5 mm spacing through the reference
+/// (281 positions, more than either control takes), and the controls' readers give back the
+/// hand correction EXX(x) = 1.5e-5·(x − 705) at every position.
+#[test]
+fn a_reference_between_table_positions_keeps_the_step_and_the_controls_take_the_tables() {
+    let d = common::scratch_dir("controller-files", "reference");
+    let text = volver::core::presets::named("xcfz")
+        .unwrap()
+        .machine_toml
+        .replacen("reference = 0.0", "reference = 705.0", 1);
+    let machine = Machine::from_toml_str(&text, "m.toml").unwrap();
+    let model = Model::from_toml_str(machine, MODEL, "hand.toml").unwrap();
+    let mut p = model.initial_params();
+    // EXX = c0 + c1·ξ, ξ = 2x/1400 − 1: zero at 705 mm (ξ = 0.00714…).
+    let c1 = 1.5e-5 * 700.0;
+    p[model.param_index("EXX.c1").unwrap()] = c1;
+    p[model.param_index("EXX.c0").unwrap()] = -c1 * (2.0 * 705.0 / 1400.0 - 1.0);
+    ResultsFile::from_model(&model, &p)
+        .unwrap()
+        .save(&d.join("hand.json"))
+        .unwrap();
+    let s = |f: &str| d.join(f).display().to_string();
+    let o = volver(&[
+        "tables",
+        "--results",
+        &s("hand.json"),
+        "--out",
+        &s("out"),
+        "--format",
+        "linuxcnc,siemens-lec",
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = read(&d, "compX.txt");
+    assert_eq!(text.lines().count(), 141, "{text}");
+    let mut x = LinuxCncJoint::load(&text, 1);
+    let lec = siemens_lec(
+        &parse_siemens(&read(&d, "siemens-lec-AX_EEC.INI")).unwrap(),
+        0,
+        200,
+    )
+    .unwrap();
+    for i in 0..=140 {
+        let p = 10.0 * i as f64;
+        let want = 1.5e-5 * (p - 705.0);
+        close(x.trim(p, 1.0), want, &format!("LinuxCNC X at {p}"));
+        close(
+            lec_correction(&lec, "X1", p),
+            want,
+            &format!("Siemens X at {p}"),
+        );
+    }
+    close(
+        lec_correction(&lec, "X1", 705.0),
+        0.0,
+        "Siemens X at the reference",
+    );
+}
+
+/// Siemens axis names are identifiers, each axis and each name once, and the limits at least
+/// one table of two points: anything else is refused before a file is written.
+#[test]
+fn bad_siemens_options_are_refused_before_anything_is_written() {
+    let d = hand_set("siemens-options", false);
+    let s = |p: &str| d.join(p).display().to_string();
+    for (flag, value, says) in [
+        ("--siemens-axes", "X=AX1;C=AX4", "not a Siemens axis name"),
+        ("--siemens-axes", "X=AX1,C=AX1", "given twice"),
+        ("--siemens-axes", "X=AX1,X=AX2", "given twice"),
+        ("--siemens-axes", "Y=AX2", "not an axis of the machine"),
+        ("--siemens-max-points", "1", "at least 2 points"),
+        ("--siemens-max-tables", "0", "at least 1 table"),
+    ] {
+        let o = volver(&[
+            "tables",
+            "--results",
+            &s("hand.json"),
+            "--out",
+            &s("out"),
+            "--force",
+            flag,
+            value,
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !o.status.success() && err.contains(says),
+            "{flag} {value}: {err}"
+        );
+        assert!(!d.join("out").exists(), "{flag} {value}: wrote files");
+    }
+}

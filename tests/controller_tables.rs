@@ -21,8 +21,11 @@ use volver::core::tables::siemens::{
 
 /// A four-axis machine: X −100 … 900, Y 0 … 500, Z 0 … 400 mm, C 0 … 360°, references 0.
 fn machine() -> Machine {
-    Machine::from_toml_str(
-        r#"
+    Machine::from_toml_str(&machine_text(), "test.toml").expect("test machine")
+}
+
+fn machine_text() -> String {
+    r#"
 name = "test"
 chain = "CYFXZ"
 [axes.X]
@@ -37,10 +40,8 @@ range = [0.0, 360.0]
 id = "R1"
 offset = [0.0, 0.0, 0.0]
 [tracker]
-"#,
-        "test.toml",
-    )
-    .expect("test machine")
+"#
+    .to_string()
 }
 
 /// The table of `output` over `input` at `positions`, forward `f` and reverse `r` by hand.
@@ -601,4 +602,37 @@ fn siemens_axis_names_limits_and_the_reference_point() {
             .to_string()
             .contains("table Y(X) has different forward and reverse")
     );
+}
+
+/// A rotary table over −180° … 180° is written as Siemens' modulo tables run, from 0° to 360°
+/// (808D p. 109), its values turned with it: the control then gives the hand correction at
+/// every angle of the turn, read either way.
+#[test]
+fn siemens_writes_a_turn_from_minus_180_as_a_modulo_table_from_0_to_360() {
+    let m = Machine::from_toml_str(
+        &machine_text().replace("range = [0.0, 360.0]", "range = [-180.0, 180.0]"),
+        "test.toml",
+    )
+    .unwrap();
+    // A correction of C zero at its reference 0° (as Siemens asks), not symmetric in θ.
+    let f = |t: f64| 1.0e-3 * (t.to_radians().sin() + 0.5 * (1.0 - t.to_radians().cos()));
+    let t = tables(
+        Family::Leadscrew,
+        vec![table(Axis::C, Axis::C, grid(-180.0, 180.0, 10.0), f, f)],
+    );
+    let text = siemens_lec(&t, &m).unwrap();
+    assert!(text.contains("$AA_ENC_COMP_MIN[0,C1]=0.0"), "{text}");
+    assert!(text.contains("$AA_ENC_COMP_MAX[0,C1]=360.0"), "{text}");
+    assert!(text.contains("$AA_ENC_COMP_IS_MODULO[0,C1]=1"), "{text}");
+    let lec = read_lec(&parse_siemens(&text).unwrap(), 0, 200).unwrap();
+    for i in 0..=72 {
+        let theta = -180.0 + 5.0 * i as f64;
+        let on_control = theta.rem_euclid(360.0);
+        let want = if i % 2 == 0 {
+            f(theta)
+        } else {
+            0.5 * (f(theta - 5.0) + f(theta + 5.0))
+        };
+        close(lec_correction(&lec, "C1", on_control), want, 2e-9, "C"); // 9 decimals
+    }
 }

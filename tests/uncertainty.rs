@@ -437,6 +437,22 @@ fn tables_state_the_u_of_every_error_and_refuse_an_undetermined_tool() {
     let mut forced = below.to_vec();
     forced.push("--force");
     assert!(volver(&forced).status.success());
+    // The same tool point reached through --tool-length from the reflectors' centroid: the
+    // gate holds at every tool point the per-axis tables serve, not the first alone.
+    let lengths = dir.join("lengths");
+    let out = volver(&[
+        "tables",
+        "--results",
+        fit.to_str().unwrap(),
+        "--out",
+        lengths.to_str().unwrap(),
+        "--tool-length",
+        "0:200",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "--tool-length passed the U gate");
+    assert!(err.contains("--max-u-um"), "{err}");
+    assert!(!lengths.join("errors.csv").exists());
     // compensate vouches the same way for its tool point.
     let points = dir.join("points.csv");
     std::fs::write(&points, "X,C,Z\n700,90,300\n").unwrap();

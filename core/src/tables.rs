@@ -470,5 +470,10 @@ fn plain_unit(name: &str) -> (f64, &'static str, usize) {
 }
 
 fn fmt_value(v: f64) -> String {
-    format!("{v:.12}")
+    let s = format!("{v:.12}");
+    // A value that rounds to zero is written 0, not −0.
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
+    }
 }

@@ -725,6 +725,16 @@ fn per_axis_files(
 ) -> Result<Vec<PathBuf>> {
     use volver::compensation::{Format, compare_per_axis, controller_files};
     let tables = ErrorTables::from_model(model, params, 10.0, 5.0)?;
+    // As `volver tables` without --force: no controller file for a model with parts that
+    // per-axis tables cannot carry (a drift over time, a field over the axes).
+    let uncarried = volver::compensation::carry(model, params, &tables, tool)?.lines();
+    if !uncarried.is_empty() {
+        println!(
+            "\n   LinuxCNC and Siemens tables not written: per-axis tables cannot carry {}",
+            uncarried.join("; ")
+        );
+        return Ok(Vec::new());
+    }
     let c = compare_per_axis(model, params, &tables, &[tool], 10.0, 5.0)?;
     println!(
         "\n   What each way of compensating leaves of the tool point's error over {} commands of \

@@ -45,6 +45,10 @@ pub struct TablesArgs {
     /// first (README, "Controller files").
     #[arg(long, default_value = "lec")]
     siemens_cec_sign: String,
+    /// How many CEC tables the Siemens control offers (the 828D has 8; an 840D sl as its
+    /// option and MD18340 $MN_MM_CEC_MAX_TABLES say).
+    #[arg(long, default_value_t = 8)]
+    siemens_max_tables: usize,
     /// Step over linear axes (mm).
     #[arg(long, default_value_t = 10.0)]
     step: f64,
@@ -167,9 +171,18 @@ fn direction_note(
 
 /// The Siemens writers' options from the flags.
 fn siemens_options(a: &TablesArgs, model: &Model) -> Result<SiemensOptions> {
+    if a.siemens_max_points < 2 || a.siemens_max_tables < 1 {
+        bail!(
+            "--siemens-max-points {} / --siemens-max-tables {}: a table needs at least 2 points \
+             and the control at least 1 table",
+            a.siemens_max_points,
+            a.siemens_max_tables
+        );
+    }
     let mut o = SiemensOptions {
         enc_comp_max_points: a.siemens_max_points,
         cec_max_points: a.siemens_max_points,
+        cec_max_tables: a.siemens_max_tables,
         ..SiemensOptions::default()
     };
     o.cec_sign = match a.siemens_cec_sign.trim() {
@@ -192,6 +205,16 @@ fn siemens_options(a: &TablesArgs, model: &Model) -> Result<SiemensOptions> {
         else {
             bail!("--siemens-axes: {axis} is not an axis of the machine");
         };
+        // A Siemens identifier: letters, digits and underscores, a letter first (`;` would
+        // start a comment, `=`, `$`, spaces break the assignment).
+        let identifier = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !identifier {
+            bail!("--siemens-axes: {name:?} is not a Siemens axis name (letters, digits, _)");
+        }
+        if o.axis_names.iter().any(|(l, n)| *l == letter || n == name) {
+            bail!("--siemens-axes: axis {letter} or the name {name} is given twice");
+        }
         o.axis_names.push((letter, name.to_string()));
     }
     Ok(o)
@@ -245,10 +268,13 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         "volver tables — the errors of {} as controller tables (ERRORS, not corrections; mm, rad)",
         a.results.display()
     );
-    apply(
-        vouch(&model, &params, record.as_ref(), tool, a.max_u_um)?,
-        a.force,
-    )?;
+    // The U gate at every tool point the tables serve (--tool-length gives several).
+    for t in &tools {
+        apply(
+            vouch(&model, &params, record.as_ref(), *t, a.max_u_um)?,
+            a.force,
+        )?;
+    }
     let carry = judge_carry(&model, &params, &tables, tool, a.force)?;
     direction_note(model.machine(), &tables, &carry);
     for t in &tables.axes {
@@ -262,22 +288,11 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
     }
     let consts: Vec<&str> = tables.constants.iter().map(|c| c.0.as_str()).collect();
     println!("  constants: {}", consts.join(" "));
-    let c = per_axis_comparison(&a, &model, &params, &tables, &tools)?;
     // Every file's text first: nothing is written when one cannot be.
     let mut files = error_table_files(&a, &formats, &model, &params, record.as_ref(), &tables)?;
-    files.extend(leftover_files(&a, &model, &c));
-    for (f, result) in controller_files(&c, model.machine(), &formats, &siemens) {
-        match result {
-            Ok(texts) => files.extend(texts),
-            Err(why) if named => bail!("--format {f}: {why}"),
-            Err(why) => {
-                println!(
-                    "  warning: {f} not written: {why} (--siemens-max-points, another --step, or --format \
-                 without {f})"
-                )
-            }
-        }
-    }
+    files.extend(per_axis_files(
+        &a, &formats, named, &model, &params, &tables, &tools, &siemens,
+    )?);
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     for (name, text) in files {
         let p = a.out.join(&name);
@@ -285,6 +300,48 @@ pub fn tables_command(a: TablesArgs) -> Result<()> {
         println!("  written {}", p.display());
     }
     Ok(())
+}
+
+/// The per-axis projections' files: what they leave (per-axis-leftover.csv / .txt) and the
+/// controller formats among `formats`. A projection or a control that cannot take the tables
+/// (too many values, a limit of the control) is an error when `named` (the user chose the
+/// formats), else a warning and no such file.
+#[allow(clippy::too_many_arguments)]
+fn per_axis_files(
+    a: &TablesArgs,
+    formats: &[Format],
+    named: bool,
+    model: &Model,
+    params: &[f64],
+    tables: &ErrorTables,
+    tools: &[[f64; 3]],
+    siemens: &SiemensOptions,
+) -> Result<Vec<(String, String)>> {
+    let controls = formats.iter().any(|f| f.is_controller());
+    let c = match per_axis_comparison(a, model, params, tables, tools) {
+        Ok(c) => c,
+        Err(e) if named && controls => return Err(e.context("the per-axis projection")),
+        Err(e) => {
+            println!("  warning: per-axis tables not fitted, none written: {e:#}");
+            return Ok(Vec::new());
+        }
+    };
+    let mut files = leftover_files(a, model, &c);
+    for (f, result) in controller_files(&c, model.machine(), formats, siemens) {
+        match result {
+            Ok(texts) => files.extend(texts),
+            Err(why) if named => bail!("--format {f}: {why}"),
+            Err(why) => println!(
+                "  warning: {f} not written: {why} (another --step{}, or --format without {f})",
+                if f == Format::Linuxcnc {
+                    ""
+                } else {
+                    ", --siemens-max-points or --siemens-max-tables"
+                }
+            ),
+        }
+    }
+    Ok(files)
 }
 
 /// The error tables' files among `formats` (with errors.csv, its U companion when the results

@@ -96,6 +96,28 @@ pub struct ErrorSize {
     pub emax_at: Commands,
 }
 
+impl ErrorSize {
+    /// The size of `errors` — each the index in `grid` of its command and the error vector
+    /// (mm) — and where the largest is (the first of equal ones; zeros at `grid[0]` when there
+    /// is none).
+    pub fn of(grid: &[Commands], errors: impl IntoIterator<Item = (usize, [f64; 3])>) -> ErrorSize {
+        let (mut sum, mut count, mut largest) = (0.0, 0usize, (0.0, 0));
+        for (command, d) in errors {
+            let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            sum += n;
+            count += 1;
+            if n > largest.0 {
+                largest = (n, command);
+            }
+        }
+        ErrorSize {
+            emm_mm: sum / count.max(1) as f64,
+            emax_mm: largest.0,
+            emax_at: grid.get(largest.1).copied().unwrap_or_default(),
+        }
+    }
+}
+
 // The projection of a model's error on these tables and what they leave (issue 47, item 2).
 mod fit;
 mod leftover;

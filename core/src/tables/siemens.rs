@@ -231,6 +231,28 @@ pub(crate) fn stored(
     let full_turn = a.axis.is_rotary() && ((max - min) - 360.0).abs() <= 1e-9;
     let modulo = full_turn && (values[0] - values[n - 1]).abs() <= 1e-9;
     let mut notes = Vec::new();
+    // A modulo table of a rotary axis runs from 0° to 360° (808D p. 109): a table over another
+    // turn (−180° … 180°) is turned to start at 0° when 0° is one of its positions.
+    let k = (-min / step).round();
+    if modulo && min.abs() > 1e-9 && (min + k * step).abs() <= 1e-9 * step.max(1.0) {
+        let m = n - 1;
+        let k = (k as i64).rem_euclid(m as i64) as usize;
+        let mut turned: Vec<f64> = (0..m).map(|i| values[(i + k) % m]).collect();
+        turned.push(turned[0]);
+        notes.push(format!(
+            "a full turn from {} to {} deg, written from 0 to 360 deg as modulo tables run",
+            fmt(min),
+            fmt(max)
+        ));
+        return Ok(Stored {
+            min: 0.0,
+            max: 360.0,
+            step,
+            values: turned,
+            modulo,
+            notes,
+        });
+    }
     if full_turn && !modulo {
         notes.push(format!(
             "not modulo: its values at {} and {} deg differ by {}, so the table holds its end \

@@ -119,21 +119,10 @@ pub fn compare_per_axis(
 
 /// The EMM and EMax of `v` (one vector per point of `left`, mm).
 fn size_of(grid: &[Commands], left: &Leftover, v: &[[f64; 3]]) -> ErrorSize {
-    let norm = |d: &[f64; 3]| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    let mut largest = (0.0, 0);
-    let mut sum = 0.0;
-    for (p, d) in left.points.iter().zip(v) {
-        let n = norm(d);
-        sum += n;
-        if n > largest.0 {
-            largest = (n, p.command);
-        }
-    }
-    ErrorSize {
-        emm_mm: sum / v.len().max(1) as f64,
-        emax_mm: largest.0,
-        emax_at: grid[largest.1],
-    }
+    ErrorSize::of(
+        grid,
+        left.points.iter().zip(v).map(|(p, d)| (p.command, *d)),
+    )
 }
 
 impl PerAxisComparison {

@@ -33,7 +33,9 @@ pub struct Identity {
     pub machine: Option<String>,
     /// The machine's serial number.
     pub serial: Option<String>,
-    /// The date of the measurement, as written (e.g. `2026-11-27`).
+    /// The date of the measurement, as written (e.g. `"2026-11-27"`, or TOML's own date
+    /// `2026-11-27` unquoted).
+    #[serde(default, deserialize_with = "text_or_date")]
     pub date: Option<String>,
     /// Where the machine stands (site, hall).
     pub place: Option<String>,
@@ -41,7 +43,8 @@ pub struct Identity {
     pub instrument: Option<String>,
     /// The instrument's calibration certificate (number, laboratory).
     pub calibration: Option<String>,
-    /// The date of that calibration, as written.
+    /// The date of that calibration, as written (text or TOML date).
+    #[serde(default, deserialize_with = "text_or_date")]
     pub calibration_date: Option<String>,
     /// Who measured.
     pub operator: Option<String>,
@@ -51,6 +54,23 @@ pub struct Identity {
     pub machine_temperature_c: Option<f64>,
     /// Free remarks (conditions, deviations from the plan).
     pub remarks: Option<String>,
+}
+
+/// A date field: a string as written, or a TOML date / date-time (`2026-11-27` unquoted) in its
+/// own notation.
+fn text_or_date<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> std::result::Result<Option<String>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum TextOrDate {
+        Text(String),
+        Date(toml::value::Datetime),
+    }
+    Ok(Some(match TextOrDate::deserialize(d)? {
+        TextOrDate::Text(s) => s,
+        TextOrDate::Date(t) => t.to_string(),
+    }))
 }
 
 /// The file: one `[report]` table.
@@ -118,21 +138,25 @@ impl Identity {
         Identity::from_toml_str(&text, &path.display().to_string())
     }
 
-    /// `self` with every field that `over` gives replaced by it (flags over the file).
+    /// `self` with every field that `over` gives replaced by it (flags over the file). A text
+    /// that is blank (empty or white space) counts as not given, in either: a signed document
+    /// shows "—" there, never an empty cell.
     pub fn overridden_by(self, over: Identity) -> Identity {
+        let given = |v: Option<String>| v.map(|s| s.trim().to_string()).filter(|s| !s.is_empty());
+        let pick = |o: Option<String>, s: Option<String>| given(o).or(given(s));
         Identity {
-            customer: over.customer.or(self.customer),
-            machine: over.machine.or(self.machine),
-            serial: over.serial.or(self.serial),
-            date: over.date.or(self.date),
-            place: over.place.or(self.place),
-            instrument: over.instrument.or(self.instrument),
-            calibration: over.calibration.or(self.calibration),
-            calibration_date: over.calibration_date.or(self.calibration_date),
-            operator: over.operator.or(self.operator),
+            customer: pick(over.customer, self.customer),
+            machine: pick(over.machine, self.machine),
+            serial: pick(over.serial, self.serial),
+            date: pick(over.date, self.date),
+            place: pick(over.place, self.place),
+            instrument: pick(over.instrument, self.instrument),
+            calibration: pick(over.calibration, self.calibration),
+            calibration_date: pick(over.calibration_date, self.calibration_date),
+            operator: pick(over.operator, self.operator),
             air_temperature_c: over.air_temperature_c.or(self.air_temperature_c),
             machine_temperature_c: over.machine_temperature_c.or(self.machine_temperature_c),
-            remarks: over.remarks.or(self.remarks),
+            remarks: pick(over.remarks, self.remarks),
         }
     }
 
@@ -233,6 +257,23 @@ mod tests {
         let rows = id.rows("M");
         assert_eq!(rows[1], ("Machine", "M".to_string()));
         assert_eq!(rows[3], ("Date of measurement", "—".to_string()));
+        // A blank field is not given: "—", and a blank flag does not hide the file's value.
+        let file = Identity::from_toml_str(
+            "[report]\ncustomer = \"\"\nserial = \"  \"\noperator = \"B\"\n",
+            "visit.toml",
+        )
+        .unwrap();
+        let flags = Identity {
+            operator: Some(" ".into()),
+            ..Identity::default()
+        };
+        let id = file.overridden_by(flags);
+        assert_eq!((id.customer.as_deref(), id.serial.as_deref()), (None, None));
+        assert_eq!(id.operator.as_deref(), Some("B"));
+        assert_eq!(id.title("M"), "Volumetric verification of M");
+        // TOML's own date, unquoted, is taken as written.
+        let id = Identity::from_toml_str("[report]\ndate = 2026-11-27\n", "visit.toml").unwrap();
+        assert_eq!(id.date.as_deref(), Some("2026-11-27"));
     }
 
     #[test]

@@ -285,18 +285,5 @@ fn error_size(
     points: &[LeftoverPoint],
     f: &dyn Fn(&LeftoverPoint) -> [f64; 3],
 ) -> ErrorSize {
-    let mut sum = 0.0;
-    let mut largest = (0.0, 0);
-    for p in points {
-        let d = crate::problem::norm(f(p));
-        sum += d;
-        if d > largest.0 {
-            largest = (d, p.command);
-        }
-    }
-    ErrorSize {
-        emm_mm: sum / points.len().max(1) as f64,
-        emax_mm: largest.0,
-        emax_at: grid[largest.1],
-    }
+    ErrorSize::of(grid, points.iter().map(|p| (p.command, f(p))))
 }
