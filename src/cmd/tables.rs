@@ -27,10 +27,11 @@ pub struct TablesArgs {
     out: PathBuf,
     /// The formats to write, comma-separated (default all): isg (errors-isg.csv), etalon
     /// (errors-etalon.txt), csv (errors.csv and errors-u95.csv), linuxcnc (compX.txt per axis
-    /// and linuxcnc-ini.txt), siemens-lec (siemens-lec-AX_EEC.INI: leadscrew tables alone),
-    /// siemens-cec (siemens-cec-AX_EEC.INI and siemens-cec-NC_CEC.INI: leadscrew and
-    /// cross-axis tables, loaded together). With the default, a control format whose limits
-    /// the tables exceed is left out with a warning; named, it is an error.
+    /// and linuxcnc-ini.txt), siemens-lec (siemens-lec-AX_EEC.INI: leadscrew tables alone;
+    /// with a reversal also siemens-lec-NC_CEC.INI, its direction halves), siemens-cec
+    /// (siemens-cec-AX_EEC.INI and siemens-cec-NC_CEC.INI: leadscrew and cross-axis tables,
+    /// loaded together). With the default, a control format whose limits the tables exceed is
+    /// left out with a warning; named, it is an error.
     #[arg(long, value_name = "LIST")]
     format: Option<String>,
     /// Siemens machine axis names, e.g. X=AX1,C=AX4,Z=AX3 (default: the letter and 1, X1 …).
