@@ -105,32 +105,7 @@ fn close(a: f64, b: f64, tol: f64, what: &str) {
 
 #[test]
 fn linuxcnc_applies_the_hand_corrections_at_points_between_them_beyond_the_ends_and_by_direction() {
-    let t = tables(
-        Family::Leadscrew,
-        vec![
-            table(
-                Axis::X,
-                Axis::X,
-                grid(-100.0, 900.0, 10.0),
-                x_positioning,
-                x_positioning,
-            ),
-            table(
-                Axis::Z,
-                Axis::Z,
-                grid(0.0, 400.0, 25.0),
-                z_forward,
-                z_reverse,
-            ),
-            table(
-                Axis::C,
-                Axis::C,
-                grid(0.0, 360.0, 10.0),
-                c_positioning,
-                c_positioning,
-            ),
-        ],
-    );
+    let t = tables(Family::Leadscrew, leadscrew_by_hand());
     let files = linuxcnc_files(&t, &machine()).unwrap();
     assert_eq!(files.len(), 3);
     assert!(
@@ -329,39 +304,42 @@ fn moving(d: i8) -> BTreeMap<String, i8> {
 }
 
 fn hand_set() -> PerAxisTables {
-    tables(
-        Family::CrossAxis,
-        vec![
-            table(
-                Axis::X,
-                Axis::X,
-                grid(-100.0, 900.0, 10.0),
-                x_positioning,
-                x_positioning,
-            ),
-            table(
-                Axis::Z,
-                Axis::Z,
-                grid(0.0, 400.0, 25.0),
-                z_forward,
-                z_reverse,
-            ),
-            table(
-                Axis::C,
-                Axis::C,
-                grid(0.0, 360.0, 10.0),
-                c_positioning,
-                c_positioning,
-            ),
-            table(
-                Axis::X,
-                Axis::Y,
-                grid(-100.0, 900.0, 20.0),
-                y_straightness,
-                y_straightness,
-            ),
-        ],
-    )
+    let mut all = leadscrew_by_hand();
+    all.push(table(
+        Axis::X,
+        Axis::Y,
+        grid(-100.0, 900.0, 20.0),
+        y_straightness,
+        y_straightness,
+    ));
+    tables(Family::CrossAxis, all)
+}
+
+/// The leadscrew tables by hand: X's positioning, Z's with its reversal, C's in degrees.
+fn leadscrew_by_hand() -> Vec<AxisCorrection> {
+    vec![
+        table(
+            Axis::X,
+            Axis::X,
+            grid(-100.0, 900.0, 10.0),
+            x_positioning,
+            x_positioning,
+        ),
+        table(
+            Axis::Z,
+            Axis::Z,
+            grid(0.0, 400.0, 25.0),
+            z_forward,
+            z_reverse,
+        ),
+        table(
+            Axis::C,
+            Axis::C,
+            grid(0.0, 360.0, 10.0),
+            c_positioning,
+            c_positioning,
+        ),
+    ]
 }
 
 #[test]
