@@ -139,7 +139,10 @@ pub(super) fn identifiability(p: &Page, s: &mut String) -> Result<()> {
                 .collect();
             if !rows.is_empty() {
                 s.push_str(&table(
-                    &["relative curvature", "combination the data cannot identify"],
+                    &[
+                        "relative curvature",
+                        "combination the data cannot identify (the model's parameters and signs)",
+                    ],
                     &rows,
                 ));
             }
