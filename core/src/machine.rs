@@ -284,6 +284,11 @@ pub struct MachineAxis {
 }
 
 impl MachineAxis {
+    /// Whether the axis is rotary with a travel of exactly one turn (its ends the same angle).
+    pub fn is_full_turn(&self) -> bool {
+        self.axis.is_rotary() && (self.max - self.min - std::f64::consts::TAU).abs() < 1e-9
+    }
+
     /// Position mapped to [−1, 1] over the travel range (the argument of polynomial bases).
     pub fn normalise(&self, position: f64) -> f64 {
         self.normalise_at(position)

@@ -416,7 +416,7 @@ impl Plan {
 }
 
 /// Every combination of one value per axis (internal units), first axis slowest.
-fn cartesian(per_axis: &[Vec<f64>]) -> Vec<Commands> {
+pub(crate) fn cartesian(per_axis: &[Vec<f64>]) -> Vec<Commands> {
     let mut positions = vec![Commands::default()];
     for (k, values) in per_axis.iter().enumerate() {
         positions = positions

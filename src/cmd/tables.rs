@@ -228,23 +228,7 @@ fn claim_outputs(a: &TablesArgs, formats: &[Format]) -> Result<()> {
         "per-axis-leftover.csv".into(),
         "per-axis-leftover.txt".into(),
     ];
-    for f in formats {
-        let n: Vec<String> = match f {
-            Format::Isg => vec!["errors-isg.csv".into()],
-            Format::Etalon => vec!["errors-etalon.txt".into()],
-            Format::Csv => vec!["errors.csv".into(), "errors-u95.csv".into()],
-            Format::Linuxcnc => "XYZABC"
-                .chars()
-                .map(|c| format!("comp{c}.txt"))
-                .chain(["linuxcnc-ini.txt".to_string()])
-                .collect(),
-            Format::SiemensLec | Format::SiemensCec => ["AX_EEC", "NC_CEC"]
-                .iter()
-                .map(|x| format!("siemens-{}-{x}.INI", &f.name()[8..]))
-                .collect(),
-        };
-        names.extend(n);
-    }
+    names.extend(formats.iter().flat_map(|f| f.file_names()));
     let refs: Vec<&str> = names.iter().map(String::as_str).collect();
     volver::core::fsio::Outputs::new([&a.results]).claim_in(&a.out, &refs)?;
     Ok(())

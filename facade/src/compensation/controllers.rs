@@ -54,6 +54,25 @@ impl Format {
         )
     }
 
+    /// Every file the format may write in the output folder (for LinuxCNC, the file of any
+    /// axis), so that they can be claimed before anything is read.
+    pub fn file_names(self) -> Vec<String> {
+        match self {
+            Format::Isg => vec!["errors-isg.csv".into()],
+            Format::Etalon => vec!["errors-etalon.txt".into()],
+            Format::Csv => vec!["errors.csv".into(), "errors-u95.csv".into()],
+            Format::Linuxcnc => "XYZABC"
+                .chars()
+                .map(|c| format!("comp{c}.txt"))
+                .chain(["linuxcnc-ini.txt".to_string()])
+                .collect(),
+            Format::SiemensLec | Format::SiemensCec => ["AX_EEC", "NC_CEC"]
+                .iter()
+                .map(|part| siemens_file(self, part))
+                .collect(),
+        }
+    }
+
     /// The name `--format` takes.
     pub fn name(self) -> &'static str {
         match self {
@@ -140,8 +159,8 @@ pub fn controller_files(
         .map(|&f| {
             let files = match f {
                 Format::Linuxcnc => linuxcnc(&c.leadscrew.0, machine),
-                Format::SiemensLec => siemens_pair(&c.leadscrew.0, machine, siemens, "lec"),
-                Format::SiemensCec => siemens_pair(&c.cross_axis.0, machine, siemens, "cec"),
+                Format::SiemensLec => siemens_pair(&c.leadscrew.0, machine, siemens, f),
+                Format::SiemensCec => siemens_pair(&c.cross_axis.0, machine, siemens, f),
                 _ => unreachable!("controller formats only"),
             };
             (f, files.map_err(|e| e.to_string()))
@@ -167,16 +186,21 @@ fn linuxcnc(t: &PerAxisTables, machine: &Machine) -> Result<Vec<(String, String)
     Ok(out)
 }
 
-/// Siemens' files of one projection, prefixed `siemens-<tag>-`: the LEC file, and the CEC file
-/// when the projection has cross-axis tables or a table that depends on the direction.
+/// The file of Siemens format `f` holding `part` (`AX_EEC`, `NC_CEC`): `siemens-lec-AX_EEC.INI` …
+fn siemens_file(f: Format, part: &str) -> String {
+    format!("{}-{part}.INI", f.name())
+}
+
+/// Siemens format `f`'s files of one projection: the LEC file, and the CEC file when the
+/// projection has cross-axis tables or a table that depends on the direction.
 fn siemens_pair(
     t: &PerAxisTables,
     machine: &Machine,
     opts: &SiemensOptions,
-    tag: &str,
+    f: Format,
 ) -> Result<Vec<(String, String)>> {
     let mut out = vec![(
-        format!("siemens-{tag}-AX_EEC.INI"),
+        siemens_file(f, "AX_EEC"),
         siemens_lec_with(t, machine, opts)?,
     )];
     if t.tables
@@ -184,7 +208,7 @@ fn siemens_pair(
         .any(|x| !x.is_leadscrew() || x.is_directional())
     {
         out.push((
-            format!("siemens-{tag}-NC_CEC.INI"),
+            siemens_file(f, "NC_CEC"),
             siemens_cec_with(t, machine, opts)?,
         ));
     }

@@ -228,7 +228,7 @@ impl Nodes {
         }
         let n = intervals_through_reference(a, fewest as usize);
         let h = travel / n as f64;
-        let periodic = a.axis.is_rotary() && (travel - TAU).abs() < 1e-9 && n >= 2;
+        let periodic = a.is_full_turn() && n >= 2;
         let canonical = |i: usize| if periodic && i == n { 0 } else { i };
         let r = ((a.reference - a.min) / h).clamp(0.0, n as f64);
         let below = (r.floor() as usize).min(n - 1);

@@ -158,46 +158,22 @@ pub struct Leftover {
 /// ```
 pub fn evaluation_grid(machine: &Machine) -> Vec<Commands> {
     let axes = machine.axes();
-    let full_turn = |a: &crate::machine::MachineAxis| {
-        a.axis.is_rotary() && (a.max - a.min - std::f64::consts::TAU).abs() < 1e-9
-    };
-    let size = |n: usize| -> usize {
-        axes.iter()
-            .map(|a| if full_turn(a) { n - 1 } else { n })
-            .product()
-    };
+    // A full turn's last position is its first: left out.
+    let count =
+        |a: &crate::machine::MachineAxis, n: usize| if a.is_full_turn() { n - 1 } else { n };
     let n = (3..=EVALUATION_POSITIONS)
         .rev()
-        .find(|&n| size(n) <= EVALUATION_BUDGET)
+        .find(|&n| axes.iter().map(|a| count(a, n)).product::<usize>() <= EVALUATION_BUDGET)
         .unwrap_or(3);
     let lists: Vec<Vec<f64>> = axes
         .iter()
         .map(|a| {
-            if full_turn(a) {
-                (0..n - 1)
-                    .map(|i| a.min + (a.max - a.min) * i as f64 / (n - 1) as f64)
-                    .collect()
-            } else {
-                (0..n)
-                    .map(|i| a.min + (a.max - a.min) * i as f64 / (n - 1) as f64)
-                    .collect()
-            }
+            (0..count(a, n))
+                .map(|i| a.min + (a.max - a.min) * i as f64 / (n - 1) as f64)
+                .collect()
         })
         .collect();
-    let mut out = vec![Commands::default()];
-    for (k, list) in lists.iter().enumerate() {
-        out = out
-            .iter()
-            .flat_map(|q| {
-                list.iter().map(move |&v| {
-                    let mut q = *q;
-                    q.0[k] = v;
-                    q
-                })
-            })
-            .collect();
-    }
-    out
+    crate::plan::cartesian(&lists)
 }
 
 /// What `tables` leave of `model`'s tool point error with errors `params` at every command of
