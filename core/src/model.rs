@@ -216,8 +216,71 @@ pub struct Constraints {
     pub rows: Vec<Constraint>,
 }
 
+/// What is wrong with a constraint row ([`Constraints::check_indices`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum ConstraintFault {
+    /// The row names a parameter index beyond the problem's.
+    UnknownParameter {
+        /// The row (from 0).
+        row: usize,
+        /// Its label.
+        label: String,
+        /// The index it names.
+        index: usize,
+    },
+    /// A coefficient or the value of the row is not finite.
+    NotFinite {
+        /// The row (from 0).
+        row: usize,
+        /// Its label.
+        label: String,
+    },
+}
+
 impl Constraints {
+    /// Checks that every row names parameters below `n_params` and has finite coefficients and
+    /// value: what [`Constraints::dense`] and [`Constraints::max_violation`] assume.
+    ///
+    /// ```
+    /// use volver_core::model::{Constraint, ConstraintFault, ConstraintKind, Constraints};
+    /// let c = Constraints {
+    ///     rows: vec![Constraint {
+    ///         kind: ConstraintKind::Fixed,
+    ///         label: "p7 held".into(),
+    ///         coeffs: vec![(7, 1.0)],
+    ///         rhs: 0.0,
+    ///     }],
+    /// };
+    /// assert!(c.check_indices(8).is_ok());
+    /// assert!(matches!(
+    ///     c.check_indices(4),
+    ///     Err(ConstraintFault::UnknownParameter { row: 0, index: 7, .. })
+    /// ));
+    /// ```
+    pub fn check_indices(&self, n_params: usize) -> std::result::Result<(), ConstraintFault> {
+        for (row, r) in self.rows.iter().enumerate() {
+            if let Some(&(index, _)) = r.coeffs.iter().find(|(j, _)| *j >= n_params) {
+                return Err(ConstraintFault::UnknownParameter {
+                    row,
+                    label: r.label.clone(),
+                    index,
+                });
+            }
+            if !r.rhs.is_finite() || r.coeffs.iter().any(|(_, v)| !v.is_finite()) {
+                return Err(ConstraintFault::NotFinite {
+                    row,
+                    label: r.label.clone(),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// Dense `A` (row-major, `rows × n_params`) and `b`.
+    ///
+    /// # Panics
+    /// When a row names a parameter at or beyond `n_params`: check first with
+    /// [`Constraints::check_indices`] (every engine does).
     pub fn dense(&self, n_params: usize) -> (Vec<f64>, Vec<f64>) {
         let mut a = vec![0.0; self.rows.len() * n_params];
         for (i, row) in self.rows.iter().enumerate() {

@@ -1,6 +1,7 @@
 //! The engines and what they share: the native Levenberg–Marquardt ([`lm`]), Clarabel, Ceres
 //! and NLopt behind Cargo features, the normal-equation kernels, the robust losses, the
-//! constraint-reduced coordinates, the run plumbing, the polish ([`polish`]), the gauge
+//! constraint-reduced coordinates, the run plumbing, the check of every claimed convergence
+//! ([`stationarity`]), the polish ([`polish`]), the gauge
 //! ([`gauge`]), the tracker's start ([`init`]), the identification strategies ([`strategy`]) and
 //! the NIST suite ([`nist_suite`]). Every public module is re-exported at the crate root.
 
@@ -20,6 +21,7 @@ pub mod nist_suite;
 pub mod nlopt;
 pub mod polish;
 pub(crate) mod run;
+pub mod stationarity;
 pub mod strategy;
 #[cfg(test)]
 pub(crate) mod test_problems;

@@ -44,7 +44,7 @@ pub use engines::nlopt;
 // timings, block sizes), not as API.
 #[doc(hidden)]
 pub use engines::kernels;
-pub use engines::{gauge, init, lm, nist_suite, polish, strategy};
+pub use engines::{gauge, init, lm, nist_suite, polish, stationarity, strategy};
 pub use error::Error;
 pub use options::{Objective, Options};
 pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};

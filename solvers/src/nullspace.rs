@@ -38,6 +38,29 @@ pub enum ConstraintError {
     /// The SVD of the constraint matrix did not converge.
     #[error("the SVD of the constraint matrix did not converge")]
     Svd,
+    /// A constraint names a parameter the problem does not have.
+    #[error(
+        "constraint {row} (\"{label}\") names parameter {index}, but the problem has {params} \
+         parameters (indices 0 … {params} − 1)"
+    )]
+    UnknownParameter {
+        /// The constraint's row (from 0).
+        row: usize,
+        /// The constraint's label.
+        label: String,
+        /// The parameter index it names.
+        index: usize,
+        /// The problem's parameters.
+        params: usize,
+    },
+    /// A constraint's coefficient or value is not finite.
+    #[error("constraint {row} (\"{label}\") has a coefficient or value that is not finite")]
+    NotFinite {
+        /// The constraint's row (from 0).
+        row: usize,
+        /// The constraint's label.
+        label: String,
+    },
     /// Sizes do not match.
     #[error("constraint matrix is {rows}×{cols} but {expected} values were given")]
     Shape {
@@ -48,6 +71,25 @@ pub enum ConstraintError {
         /// Length of the offending vector.
         expected: usize,
     },
+}
+
+impl ConstraintError {
+    /// The error for a row [`Constraints::check_indices`] refused, in a problem of `params`
+    /// parameters.
+    pub fn from_fault(fault: volver_core::model::ConstraintFault, params: usize) -> Self {
+        use volver_core::model::ConstraintFault;
+        match fault {
+            ConstraintFault::UnknownParameter { row, label, index } => {
+                ConstraintError::UnknownParameter {
+                    row,
+                    label,
+                    index,
+                    params,
+                }
+            }
+            ConstraintFault::NotFinite { row, label } => ConstraintError::NotFinite { row, label },
+        }
+    }
 }
 
 /// The affine parametrisation `p = p₀ + N z` of the constraint set.
@@ -72,6 +114,9 @@ impl NullSpace {
         anchor: &[f64],
     ) -> Result<NullSpace, ConstraintError> {
         let n = anchor.len();
+        constraints
+            .check_indices(n)
+            .map_err(|e| ConstraintError::from_fault(e, n))?;
         let (a, b) = constraints.dense(n);
         NullSpace::new(&a, &b, anchor)
     }

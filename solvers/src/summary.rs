@@ -7,6 +7,8 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use volver_core::metrics::ErrorStats;
 
+pub use crate::engines::stationarity::Stationarity;
+
 /// Why a solve stopped.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[non_exhaustive]
@@ -180,6 +182,15 @@ pub enum Stall {
         /// The window's length.
         of: usize,
     },
+    /// The engine claimed convergence (`claimed`, its criterion) at a point that fails the
+    /// shared first-order check ([`crate::stationarity`]): one more step of the objective's
+    /// majorising model could still remove `gain` of it, or it ended above its start.
+    NotStationary {
+        /// The criterion the engine claimed, in its words.
+        claimed: String,
+        /// What the check measured.
+        measured: Stationarity,
+    },
     /// What an external engine reported, in its words.
     Reported(String),
 }
@@ -198,6 +209,18 @@ impl fmt::Display for Stall {
                  minimum: trial evaluation {last} was not finite ({count} such, {window} of the \
                  last {of})"
             ),
+            Stall::NotStationary { claimed, measured } => {
+                write!(
+                    f,
+                    "the engine claimed \"{claimed}\" at a point that is not stationary: one \
+                     more step could still remove {:.1e} of the objective (tolerance {:.0e})",
+                    measured.gain, measured.tolerance
+                )?;
+                if measured.above_start {
+                    f.write_str(", and it ended above its start")?;
+                }
+                Ok(())
+            }
             Stall::Reported(s) => f.write_str(s),
         }
     }
@@ -334,9 +357,14 @@ pub struct Summary {
     pub phase: String,
     /// Parameters free in this solve (after constraints and held groups).
     pub free_parameters: usize,
-    /// Free directions the data could not identify at the last iteration (held by the
-    /// engine's rank-revealing step; see `LevenbergMarquardt::rank_tolerance`).
+    /// Free directions the data cannot identify at the point reached: the design's curvatures
+    /// at most [`crate::nullspace::RANK_TOLERANCE`] of the largest, counted the same way for
+    /// every engine by the check at the end of the run ([`crate::stationarity`]; 0 when the
+    /// run failed before it).
     pub unidentifiable: usize,
+    /// Observations: the scalar equations the points give (3 per point, 1 per range alone).
+    #[serde(default)]
+    pub observations: usize,
     /// Measured points.
     pub points: usize,
     /// At the start.
@@ -361,6 +389,10 @@ pub struct Summary {
     /// polish it again.
     #[serde(default)]
     pub polished: bool,
+    /// What the shared first-order check measured at the end ([`crate::stationarity`]);
+    /// `None` when it did not run (a failed run, nothing free).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stationarity: Option<Stationarity>,
 }
 
 impl Summary {
@@ -374,6 +406,27 @@ impl Summary {
     pub fn residual_percent(&self) -> f64 {
         let (a, b) = (self.reached.stats.emm_um, self.initial.stats.emm_um);
         if b > 0.0 { 100.0 * a / b } else { 0.0 }
+    }
+
+    /// Whether the data give fewer observations than the solve had free parameters: then at
+    /// least `free − observations` directions are not identified by any data, whatever the
+    /// engine reports (a warning in [`Summary::full_report`] and [`Summary::warning`]).
+    pub fn underdetermined(&self) -> bool {
+        self.observations < self.free_parameters
+    }
+
+    /// The warning a reader needs before trusting the result, if any: fewer observations than
+    /// free parameters.
+    pub fn warning(&self) -> Option<String> {
+        self.underdetermined().then(|| {
+            format!(
+                "fewer observations ({}) than free parameters ({}): at least {} directions are \
+                 fixed by the start and the engine, not by the data",
+                self.observations,
+                self.free_parameters,
+                self.free_parameters - self.observations
+            )
+        })
     }
 
     /// One line.
@@ -404,7 +457,11 @@ impl Summary {
             self.solver, self.phase
         ));
         line(&mut s, "objective", self.objective.to_string());
-        line(&mut s, "points", self.points.to_string());
+        line(
+            &mut s,
+            "points (observations)",
+            format!("{} ({})", self.points, self.observations),
+        );
         line(
             &mut s,
             "free parameters",
@@ -452,6 +509,25 @@ impl Summary {
         );
         line(&mut s, "time", format!("{:.3} s", self.time_s));
         line(&mut s, "termination", self.termination.to_string());
+        if let Some(st) = &self.stationarity {
+            line(
+                &mut s,
+                "first-order check",
+                format!(
+                    "{} (gain {:.1e}, tolerance {:.0e})",
+                    if st.stationary() {
+                        "stationary"
+                    } else {
+                        "NOT stationary"
+                    },
+                    st.gain,
+                    st.tolerance
+                ),
+            );
+        }
+        if let Some(w) = self.warning() {
+            line(&mut s, "WARNING", w);
+        }
         s
     }
 }

@@ -69,6 +69,11 @@ pub struct StrdRun {
     pub time_s: f64,
     /// Why it stopped.
     pub termination: Termination,
+    /// What the shared first-order check measured at the end ([`crate::stationarity`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stationarity: Option<crate::summary::Stationarity>,
+    /// Directions the design cannot identify at the end ([`crate::Summary::unidentifiable`]).
+    pub unidentifiable: usize,
 }
 
 /// Runs `engine` on `dataset` from start `start` (0 or 1).
@@ -103,5 +108,7 @@ pub fn run(dataset: &Dataset, start: usize, engine: &dyn Solver, options: &Optio
         evaluations: s.summary.evaluations,
         time_s: s.summary.time_s,
         termination: s.summary.termination,
+        stationarity: s.summary.stationarity,
+        unidentifiable: s.summary.unidentifiable,
     }
 }

@@ -6,6 +6,7 @@
 use crate::engines::coordinates::{Free, scaled_null_space};
 use crate::engines::kernels::{Normal, accumulate};
 use crate::engines::loss::norms;
+use crate::engines::stationarity;
 use crate::options::Options;
 use crate::summary::{At, Failure, Invalid, Summary, Termination};
 use crate::{Solution, Task, evaluate};
@@ -92,6 +93,14 @@ pub(crate) struct Run<'t, 'a> {
     /// The residual modules at the start (the initial evaluation's), until [`begin`] takes
     /// them.
     start_norms: Vec<f64>,
+    /// The constraints, for the check of a claimed convergence ([`stationarity`]).
+    constraints: &'t volver_core::model::Constraints,
+    /// The objective and the final smoothing of Φ (a fraction of Φ), for the same check.
+    objective: crate::Objective,
+    epsilon: f64,
+    /// The loss's value at the start the engine steps from (projected onto the constraints);
+    /// infinite until [`begin`] has it.
+    start_cost: f64,
 }
 
 impl<'t, 'a> Run<'t, 'a> {
@@ -123,6 +132,9 @@ impl<'t, 'a> Run<'t, 'a> {
                 phase: task.phase.clone(),
                 free_parameters: 0,
                 unidentifiable: 0,
+                observations: (0..problem.n_points())
+                    .map(|i| if problem.scalar(i) { 1 } else { 3 })
+                    .sum(),
                 points: problem.n_points(),
                 initial: Default::default(),
                 reached: Default::default(),
@@ -132,11 +144,23 @@ impl<'t, 'a> Run<'t, 'a> {
                 time_s: 0.0,
                 termination: Termination::NoFreeParameters,
                 polished: false,
+                stationarity: None,
             },
             edge: FiniteEdge::default(),
             t0: Instant::now(),
             start_norms: Vec::new(),
+            constraints: &task.constraints,
+            objective: options.objective,
+            epsilon: options.irls_final_epsilon,
+            start_cost: f64::INFINITY,
         };
+        if let Err(e) = task.constraints.check_indices(n) {
+            let e = crate::nullspace::ConstraintError::from_fault(e, n);
+            return Err(Box::new(run.finish(
+                start.to_vec(),
+                Termination::InvalidInput(Invalid::Constraints(e)),
+            )));
+        }
         if options.objective.whitened() && !problem.whitened() {
             let e = crate::Error::NotWhitened(options.objective.to_string());
             return Err(Box::new(run.finish(
@@ -220,13 +244,49 @@ impl<'t, 'a> Run<'t, 'a> {
         let termination = if !self.summary.reached.phi_mm.is_finite() && !termination.failed() {
             Termination::NumericalFailure(Failure::ObjectiveNotFinite(At::End))
         } else {
-            self.edge.verdict(termination, self.summary.evaluations)
+            let termination = self.edge.verdict(termination, self.summary.evaluations);
+            self.check(&params, termination)
         };
         self.summary.termination = termination;
         self.summary.time_s = self.t0.elapsed().as_secs_f64();
         Solution {
             params,
             summary: self.summary,
+        }
+    }
+}
+
+impl Run<'_, '_> {
+    /// The shared check of the point reached ([`stationarity`]) on a run that did not fail and
+    /// had something free: it records what it measured and the directions the design cannot
+    /// identify, and turns a claimed convergence at a point that fails it into
+    /// [`Stall::NotStationary`](crate::Stall::NotStationary).
+    fn check(&mut self, params: &[f64], termination: Termination) -> Termination {
+        if termination.failed()
+            || termination == Termination::NoFreeParameters
+            || !self.start_cost.is_finite()
+        {
+            return termination;
+        }
+        let Some(measured) = stationarity::measure(
+            self.problem,
+            self.constraints,
+            params,
+            self.objective,
+            self.epsilon,
+            self.start_cost,
+        ) else {
+            return termination;
+        };
+        self.summary.unidentifiable = measured.unidentifiable;
+        self.summary.stationarity = Some(measured.stationarity);
+        if termination.converged() && !measured.stationarity.stationary() {
+            Termination::Stalled(crate::Stall::NotStationary {
+                claimed: termination.to_string(),
+                measured: measured.stationarity,
+            })
+        } else {
+            termination
         }
     }
 }
@@ -278,6 +338,11 @@ pub(crate) fn begin<'t, 'a>(
     let Some(norms0) = norms0 else {
         let t = Termination::NumericalFailure(Failure::ResidualsNotFinite(At::Start));
         return Err(Box::new(run.finish(p0, t)));
+    };
+    let n = norms0.len().max(1) as f64;
+    run.start_cost = match options.objective.loss() {
+        crate::Objective::Phi => norms0.iter().sum::<f64>() / n,
+        _ => norms0.iter().map(|m| m * m).sum::<f64>() / n,
     };
     Ok(Started {
         run,
