@@ -93,6 +93,12 @@ pub struct Row {
     pub termination: String,
     /// How it ended.
     pub reason: Termination,
+    /// What the shared first-order check measured at its end
+    /// ([`volver_solvers::stationarity`]); absent when it did not run.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stationarity: Option<volver_solvers::summary::Stationarity>,
+    /// Free directions the design cannot identify at its end, counted alike for every engine.
+    pub unidentifiable: usize,
 }
 
 /// Runs every engine of `engines` on `model` and `data` (labelled `source`) from the model's
@@ -145,6 +151,8 @@ pub fn compare(
                 time_s: s.time_s,
                 termination: s.termination.to_string(),
                 reason: s.termination,
+                stationarity: s.stationarity,
+                unidentifiable: s.unidentifiable,
             }
         })
         .collect();

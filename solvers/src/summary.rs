@@ -443,7 +443,10 @@ impl Summary {
             self.evaluations,
             self.time_s,
             self.termination
-        )
+        ) + &self
+            .warning()
+            .map(|w| format!("; WARNING: {w}"))
+            .unwrap_or_default()
     }
 
     /// Several lines with every figure.
