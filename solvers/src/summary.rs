@@ -7,8 +7,6 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use volver_core::metrics::ErrorStats;
 
-pub use crate::engines::stationarity::Stationarity;
-
 /// Why a solve stopped.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[non_exhaustive]
@@ -512,9 +510,15 @@ impl Summary {
         );
         line(&mut s, "time", format!("{:.3} s", self.time_s));
         line(&mut s, "termination", self.termination.to_string());
+        self.checks_report(&mut s, &line);
+        s
+    }
+
+    /// The lines of [`Summary::full_report`] on the shared check and the warning.
+    fn checks_report(&self, s: &mut String, line: &dyn Fn(&mut String, &str, String)) {
         if let Some(st) = &self.stationarity {
             line(
-                &mut s,
+                s,
                 "first-order check",
                 format!(
                     "{} (gain {:.1e}, tolerance {:.0e})",
@@ -529,8 +533,37 @@ impl Summary {
             );
         }
         if let Some(w) = self.warning() {
-            line(&mut s, "WARNING", w);
+            line(s, "WARNING", w);
         }
-        s
+    }
+}
+
+/// What the check measured at the end of a run ([`crate::stationarity`]).
+///
+/// ```
+/// use volver_solvers::summary::Stationarity;
+/// let s = Stationarity { gain: 3e-12, tolerance: 1e-8, rounding: 1e-20, above_start: false };
+/// assert!(s.stationary());
+/// assert!(!Stationarity { above_start: true, ..s }.stationary());
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Stationarity {
+    /// The fraction of the objective one more step of its majorising model could remove
+    /// (dimensionless, 0 at a stationary point).
+    pub gain: f64,
+    /// The tolerance the gain was judged against ([`crate::stationarity::TOLERANCE`]).
+    pub tolerance: f64,
+    /// The gain the residuals' rounding alone could give, relative to the objective: a gain
+    /// below it is not judged.
+    pub rounding: f64,
+    /// Whether the objective ended above its start's.
+    pub above_start: bool,
+}
+
+impl Stationarity {
+    /// Whether the point passes: not above the start, and a gain within the tolerance or the
+    /// rounding.
+    pub fn stationary(&self) -> bool {
+        !self.above_start && self.gain <= self.tolerance.max(self.rounding)
     }
 }

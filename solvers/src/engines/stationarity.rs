@@ -15,8 +15,10 @@
 //!   IRLS step's `½ gᵀH⁺g / Σ √(‖rᵢ‖² + ε²)` with `H = Σ Jᵢᵀ Jᵢ / √(‖rᵢ‖² + ε²)` (the weights
 //!   majorise the smoothed Φ the engines minimise, ε = [`Options::irls_final_epsilon`] × Φ, so
 //!   a residual at a kink weighs ~1/ε and its unit vector, whose direction is rounding, gains
-//!   nothing). `H⁺` is the pseudo-inverse over the directions the design identifies
-//!   ([`RANK_TOLERANCE`]). The gain is dimensionless, invariant to the parameters' units and
+//!   nothing). The gain is taken over the directions the design identifies (curvature above
+//!   [`RANK_TOLERANCE`] of the largest, Marquardt-scaled, as the native LM holds them): along the
+//!   others the objective may fall by parts in 10⁴ while the parameters run away, which no
+//!   engine is asked to follow; they are counted instead. The gain is dimensionless, invariant to the parameters' units and
 //!   between 0 and 1 (½ for Φ);
 //! * the **objective against the start**: a run that ends above the objective of its start
 //!   (the start projected onto the constraints) did not converge, whatever its criteria said.
@@ -41,7 +43,6 @@ use crate::engines::kernels::accumulate_weighted;
 use crate::nullspace::RANK_TOLERANCE;
 use crate::options::Objective;
 use faer::{Mat, Side};
-use serde::{Deserialize, Serialize};
 use volver_core::model::Constraints;
 use volver_core::problem::Residuals;
 
@@ -52,35 +53,7 @@ use volver_core::problem::Residuals;
 /// stationary ends far above it.
 pub const TOLERANCE: f64 = 1e-8;
 
-/// What the check measured at the end of a run (see the module).
-///
-/// ```
-/// use volver_solvers::summary::Stationarity;
-/// let s = Stationarity { gain: 3e-12, tolerance: 1e-8, rounding: 1e-20, above_start: false };
-/// assert!(s.stationary());
-/// assert!(!Stationarity { above_start: true, ..s }.stationary());
-/// ```
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Stationarity {
-    /// The fraction of the objective one more step of its majorising model could remove
-    /// (dimensionless, 0 at a stationary point).
-    pub gain: f64,
-    /// The tolerance the gain was judged against ([`TOLERANCE`]).
-    pub tolerance: f64,
-    /// The gain the residuals' rounding alone could give, relative to the objective: a gain
-    /// below it is not judged.
-    pub rounding: f64,
-    /// Whether the objective ended above its start's.
-    pub above_start: bool,
-}
-
-impl Stationarity {
-    /// Whether the point passes: not above the start, and a gain within the tolerance or the
-    /// rounding.
-    pub fn stationary(&self) -> bool {
-        !self.above_start && self.gain <= self.tolerance.max(self.rounding)
-    }
-}
+pub use crate::summary::Stationarity;
 
 /// What the end-of-run pass gives: the check, and the directions the design cannot identify.
 pub(crate) struct Measured {
@@ -142,7 +115,18 @@ pub(crate) fn measure(
     let ns = ns.ok()?;
     let (hd, _) = reduce(&d, ns.basis(), &design.h, None);
     let (hw, gw) = reduce(&d, ns.basis(), &weighted.h, Some(&weighted.g));
-    let quadratic = pseudo_quadratic(&hw, &gw)?;
+    // Only the directions the design identifies are judged (the others are counted).
+    let (mu, dirs) = crate::engines::coordinates::design_from_reduced(&hd)?;
+    let mu_max = mu.iter().copied().fold(0.0_f64, f64::max);
+    let keep: Vec<usize> = (0..mu.len())
+        .filter(|&i| mu[i] > RANK_TOLERANCE * mu_max)
+        .collect();
+    let q = Mat::from_fn(dirs.nrows(), keep.len(), |k, c| dirs[(k, keep[c])]);
+    let hq = crate::engines::kernels::sandwich(hw.as_ref(), q.as_ref());
+    let gq: Vec<f64> = (0..keep.len())
+        .map(|c| (0..gw.len()).map(|k| q[(k, c)] * gw[k]).sum())
+        .collect();
+    let quadratic = pseudo_quadratic(&hq, &gq)?;
     let gain_abs = if phi_loss { 0.5 * quadratic } else { quadratic };
     let relative = |v: f64| if total > 0.0 { v / total } else { 0.0 };
     let cost = if phi_loss { phi } else { total / n as f64 };
@@ -153,7 +137,7 @@ pub(crate) fn measure(
             rounding: relative(rounding_abs),
             above_start: cost > start_cost * (1.0 + 64.0 * f64::EPSILON),
         },
-        unidentifiable: weak_directions(&hd)?.max(flat.len()),
+        unidentifiable: (mu.len() - keep.len()).max(flat.len()),
     })
 }
 
@@ -195,12 +179,4 @@ fn pseudo_quadratic(h: &Mat<f64>, g: &[f64]) -> Option<f64> {
             })
             .sum(),
     )
-}
-
-/// The directions of the reduced design `hd` whose Marquardt-scaled curvature is at most
-/// [`RANK_TOLERANCE`] of the largest (the native LM's default rank test).
-fn weak_directions(hd: &Mat<f64>) -> Option<usize> {
-    let (mu, _) = crate::engines::coordinates::design_from_reduced(hd)?;
-    let mu_max = mu.iter().copied().fold(0.0_f64, f64::max);
-    Some(mu.iter().filter(|&&m| m <= RANK_TOLERANCE * mu_max).count())
 }
