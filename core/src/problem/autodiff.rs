@@ -187,7 +187,7 @@ impl<R: ScalarResidual> PointResidual for Scalar<R> {
 
 /// A [`PointResidual`] as [`Residuals`], its derivatives exact by forward-mode dual numbers:
 /// the Jacobian of a point in `⌈n_params / 16⌉` evaluations of the residual in `DualSVec64`
-/// (one for up to 16 parameters; narrower duals for 4 and 8), the second directional derivative
+/// (one for up to 16 parameters, in duals of 2, 4, 8 or 16 directions), the second directional derivative
 /// in one evaluation in `Dual2_64`. Usable by every engine (`Task::new(AutoDiff(..))` in
 /// `volver-solvers`) and by the analyses that take a task (identifiability).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -217,7 +217,8 @@ impl<R: PointResidual> Residuals for AutoDiff<R> {
     fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
         match params.len() {
             0 => self.0.residual(i, params),
-            1..=4 => jacobian_in::<R, 4>(&self.0, i, params, jac),
+            1..=2 => jacobian_in::<R, 2>(&self.0, i, params, jac),
+            3..=4 => jacobian_in::<R, 4>(&self.0, i, params, jac),
             5..=8 => jacobian_in::<R, 8>(&self.0, i, params, jac),
             _ => jacobian_in::<R, 16>(&self.0, i, params, jac),
         }
