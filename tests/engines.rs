@@ -111,7 +111,13 @@ fn the_readme_engines_code_uses_only_the_crates_it_tells_you_to_depend_on() {
     let rust = blocks("rust");
     assert!(rust.len() >= 2, "the machine fit and the user's residual");
     // The workspace's crates and the ones they build on, by their names in Rust.
-    let crates = ["volver", "volver_core", "volver_solvers", "volver_cli", "num_dual"];
+    let crates = [
+        "volver",
+        "volver_core",
+        "volver_solvers",
+        "volver_cli",
+        "num_dual",
+    ];
     for code in &rust {
         for (at, _) in code.match_indices("::") {
             let before = &code[..at];

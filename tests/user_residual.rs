@@ -153,7 +153,10 @@ fn jacobian_error(problem: &dyn Residuals, q: &[f64], points: &[usize]) -> f64 {
         let plain = problem.residual(i, q);
         for c in 0..3 {
             let tol = 1e-13 * plain[c].abs().max(1e-300);
-            assert!((r[c] - plain[c]).abs() <= tol, "point {i}: {r:?} vs {plain:?}");
+            assert!(
+                (r[c] - plain[c]).abs() <= tol,
+                "point {i}: {r:?} vs {plain:?}"
+            );
         }
         for k in 0..n {
             let h = 1e-6 * q[k].abs().max(1e-6);
@@ -208,7 +211,10 @@ fn the_dual_number_jacobian_matches_central_differences() {
         s.residual_and_jacobian(i, &q, &mut a);
         HandSphere(s.0.clone()).residual_and_jacobian(i, &q, &mut b);
         for (x, y) in a.iter().zip(&b) {
-            assert!((x - y).abs() <= 1e-12 * (1.0 + y.abs()), "point {i}: {x} vs {y}");
+            assert!(
+                (x - y).abs() <= 1e-12 * (1.0 + y.abs()),
+                "point {i}: {x} vs {y}"
+            );
         }
     }
     for ds in nist::all().unwrap() {
@@ -240,7 +246,9 @@ fn the_second_directional_derivative_matches_central_differences() {
         x: (0..40).map(|i| 0.05 * i as f64 - 0.9).collect(),
     });
     let q: Vec<f64> = (0..37).map(|k| 0.4 + 0.03 * k as f64).collect();
-    let v: Vec<f64> = (0..37).map(|k| if k % 3 == 0 { 0.5 } else { -0.2 }).collect();
+    let v: Vec<f64> = (0..37)
+        .map(|k| if k % 3 == 0 { 0.5 } else { -0.2 })
+        .collect();
     let e = second_error(&wide, &q, &v, 1e-5, &[0, 16, 39]);
     assert!(e < 1e-6, "37 parameters: relative error {e}");
     // The hand-written sphere has no curvature of its own: the Gauss–Newton default.
@@ -259,12 +267,29 @@ fn autodiff_and_a_hand_written_jacobian_reach_the_same_optimum() {
             objective,
             ..Options::default()
         };
-        let auto = lm.solve(&Task::new(AutoDiff(sphere(3))), &start, &options, &mut Silent);
-        let hand = lm.solve(&Task::new(HandSphere(sphere(3))), &start, &options, &mut Silent);
+        let auto = lm.solve(
+            &Task::new(AutoDiff(sphere(3))),
+            &start,
+            &options,
+            &mut Silent,
+        );
+        let hand = lm.solve(
+            &Task::new(HandSphere(sphere(3))),
+            &start,
+            &options,
+            &mut Silent,
+        );
         for s in [&auto, &hand] {
-            assert!(s.summary.termination.converged(), "{}", s.summary.termination);
+            assert!(
+                s.summary.termination.converged(),
+                "{}",
+                s.summary.termination
+            );
         }
-        let (a, h) = (auto.summary.reached.cost(objective), hand.summary.reached.cost(objective));
+        let (a, h) = (
+            auto.summary.reached.cost(objective),
+            hand.summary.reached.cost(objective),
+        );
         assert!((a - h).abs() <= 1e-9 * h, "{objective:?}: {a} vs {h}");
         for k in 0..4 {
             let d = (auto.params[k] - hand.params[k]).abs();
@@ -292,7 +317,11 @@ fn a_user_residual_takes_linear_constraints_and_the_identifiability_analysis() {
     let start = [1320.0, -800.0, 970.0, 80.0];
     let lm = LevenbergMarquardt::default();
     let s = lm.solve(&task, &start, &Options::default(), &mut Silent);
-    assert!(s.summary.termination.converged(), "{}", s.summary.termination);
+    assert!(
+        s.summary.termination.converged(),
+        "{}",
+        s.summary.termination
+    );
     assert_eq!(s.params[3], 249.0, "the radius is held");
     // Free: the radius fitted; every direction identified, the radius to a few µm.
     let free = Task::new(AutoDiff(sphere(4)));

@@ -52,7 +52,9 @@ impl PointResidual for Sphere {
     }
 
     fn param_names(&self) -> Vec<String> {
-        ["centre.x", "centre.y", "centre.z", "radius"].map(String::from).to_vec()
+        ["centre.x", "centre.y", "centre.z", "radius"]
+            .map(String::from)
+            .to_vec()
     }
 
     /// A coordinate is rounded relative to the point's distance from the tracker.
@@ -131,7 +133,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 fn start() -> Result<Vec<f64>, Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.as_slice() {
-        [] => Ok(vec![CENTRE[0] + 120.0, CENTRE[1] - 100.0, CENTRE[2] + 120.0, 80.0]),
+        [] => Ok(vec![
+            CENTRE[0] + 120.0,
+            CENTRE[1] - 100.0,
+            CENTRE[2] + 120.0,
+            80.0,
+        ]),
         [flag, list] if flag == "--start" => {
             let start = list
                 .split(',')
@@ -139,7 +146,9 @@ fn start() -> Result<Vec<f64>, Box<dyn std::error::Error>> {
                 .collect::<Result<Vec<f64>, _>>()
                 .map_err(|e| format!("--start {list}: {e}"))?;
             if start.len() != 4 || start.iter().any(|v| !v.is_finite()) {
-                return Err(format!("--start {list}: give four finite numbers x,y,z,r (mm)").into());
+                return Err(
+                    format!("--start {list}: give four finite numbers x,y,z,r (mm)").into(),
+                );
             }
             Ok(start)
         }
@@ -165,7 +174,9 @@ fn check(runs: &[(&str, Solution)]) -> Result<(), Box<dyn std::error::Error>> {
             None => !t.failed() && phi <= phi0,
         };
         if !ok {
-            wrong.push(format!("{name}: Φ {phi} mm ({t}) against the best {best} mm"));
+            wrong.push(format!(
+                "{name}: Φ {phi} mm ({t}) against the best {best} mm"
+            ));
         }
     }
     if !wrong.is_empty() {
