@@ -112,8 +112,9 @@ fn sphere(seed: u64) -> Sphere {
     }
 }
 
-/// Residual `(Σ_k a_k sin(k x_i + p_k) + p_k² x_i, e^{p_0 p_{n−1} x_i}, p_i mod n · x_i)`: every
-/// parameter in every passes' block, cross terms between the first and the last.
+/// Residual `(Σ_k sin(p_k + (k + 1) x_i) / (k + 1) + p_k² x_i, e^{p_0 p_{n−1} x_i},
+/// p_{i mod n} x_i²)`: every parameter in the first coordinate, a cross term between the first
+/// pass of 16 directions and the last in the second.
 #[derive(Debug)]
 struct Wide {
     n: usize,

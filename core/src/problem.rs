@@ -42,7 +42,7 @@ pub use autodiff::{AutoDiff, PointResidual, Scalar, ScalarResidual};
 /// [`Problem`] (a machine and its measurements) and [`CurveFit`] (a NIST StRD curve). The
 /// objectives Φ and ve and the error statistics are provided from [`Residuals::residual`].
 ///
-/// Five methods are required: the sizes, the residual and its exact Jacobian. The others have
+/// Four methods are required: the two sizes, the residual and its exact Jacobian. The others have
 /// defaults: parameters named `p0`, `p1` …, no constraints, zero curvature (the Gauss–Newton
 /// model), observations of unit size, 3-vector residuals. Rather than writing the Jacobian by
 /// hand, write the residual once generic over the scalar ([`PointResidual`]) and let

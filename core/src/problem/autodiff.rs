@@ -187,8 +187,8 @@ impl<R: ScalarResidual> PointResidual for Scalar<R> {
 
 /// A [`PointResidual`] as [`Residuals`], its derivatives exact by forward-mode dual numbers:
 /// the Jacobian of a point in `⌈n_params / 16⌉` evaluations of the residual in `DualSVec64`
-/// (one for up to 16 parameters, in duals of 2, 4, 8 or 16 directions), the second directional derivative
-/// in one evaluation in `Dual2_64`. Usable by every engine (`Task::new(AutoDiff(..))` in
+/// (one for up to 16 parameters, in duals of 2, 4, 8 or 16 directions), the second directional
+/// derivative in one evaluation in `Dual2_64`. Usable by every engine (`Task::new(AutoDiff(..))` in
 /// `volver-solvers`) and by the analyses that take a task (identifiability).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct AutoDiff<R>(pub R);
