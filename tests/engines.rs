@@ -82,3 +82,56 @@ fn every_engine_answers_to_its_name_or_names_its_feature() {
         "{msg}"
     );
 }
+
+/// The README's Engines section tells a library user which crate to depend on: its Rust code
+/// (compiled and run as doctests of the facade) must name no crate of volver's that its
+/// `[dependencies]` lines leave out (issue 48: the code used `volver::` under a dependency on
+/// `volver-solvers` alone).
+#[test]
+fn the_readme_engines_code_uses_only_the_crates_it_tells_you_to_depend_on() {
+    let readme = include_str!("../README.md");
+    let section = readme
+        .split("### Engines")
+        .nth(1)
+        .and_then(|s| s.split("\n### ").next())
+        .expect("the README has an Engines section");
+    let blocks = |lang: &str| -> Vec<String> {
+        section
+            .split(&format!("```{lang}\n"))
+            .skip(1)
+            .map(|b| b.split("```").next().unwrap_or_default().to_string())
+            .collect()
+    };
+    let deps: Vec<String> = blocks("toml")
+        .iter()
+        .flat_map(|b| b.lines().map(str::to_string).collect::<Vec<_>>())
+        .filter_map(|l| l.split_once('=').map(|(k, _)| k.trim().replace('-', "_")))
+        .collect();
+    assert!(deps.contains(&"volver_solvers".to_string()), "{deps:?}");
+    let rust = blocks("rust");
+    assert!(rust.len() >= 2, "the machine fit and the user's residual");
+    // The workspace's crates and the ones they build on, by their names in Rust.
+    let crates = [
+        "volver",
+        "volver_core",
+        "volver_solvers",
+        "volver_cli",
+        "num_dual",
+    ];
+    for code in &rust {
+        for (at, _) in code.match_indices("::") {
+            let before = &code[..at];
+            let root_start = before
+                .rfind(|c: char| !(c.is_alphanumeric() || c == '_'))
+                .map_or(0, |k| k + 1);
+            let root = &before[root_start..];
+            let path_start = before[..root_start].ends_with("::");
+            if !path_start && crates.contains(&root) {
+                assert!(
+                    deps.iter().any(|d| d == root),
+                    "the README's Engines code uses `{root}::` but its dependencies are {deps:?}"
+                );
+            }
+        }
+    }
+}

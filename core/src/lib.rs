@@ -21,7 +21,8 @@
 //! - [`simulate`]: the synthetic data generator (true errors, hidden effects, noise);
 //! - [`metrics`]: EMM and EMax;
 //! - [`diagnose`]: where a model fails (residual breakdowns, periodograms, repeat noise);
-//! - [`problem`]: a model with its measurements: residuals, Φ, ve;
+//! - [`problem`]: a model with its measurements: residuals, Φ, ve; your own residuals with
+//!   exact dual-number derivatives ([`problem::AutoDiff`]);
 //! - [`compensate`]: the inverse model: the command that puts the tool where it belongs;
 //! - [`gcode`]: G-code programs, read and written back compensated;
 //! - [`dialect`]: the words that differ between G-code dialects (LinuxCNC, Fanuc);
@@ -79,3 +80,7 @@ pub mod tables;
 pub mod units;
 
 pub use error::{Error, Place, Result};
+/// The dual numbers of the exact derivatives (`num-dual`), re-exported so that a generic
+/// residual ([`problem::PointResidual`]) and its callers use the version volver's [`scalar::Real`]
+/// is built on.
+pub use num_dual;

@@ -3,7 +3,9 @@
 //! * [`Problem`], an identification problem: a model and the measurements it must explain, with
 //!   residuals `r_i = predicted_i − measured_i` (mm, tracker frame), one per measured point;
 //! * [`CurveFit`], one of NIST's StRD curve fits, so that the engines can be judged on the public
-//!   reference suite.
+//!   reference suite;
+//! * [`AutoDiff`], your own residual written once, generic over the scalar ([`PointResidual`],
+//!   or [`ScalarResidual`] for a curve fit), with exact derivatives by dual numbers.
 //!
 //! The two objectives of the paper, provided by the trait for either:
 //! * **Φ** (eq. 12): the mean error module, `Φ = (1/n) Σ ‖r_i‖` (mm) — the EMM;
@@ -30,12 +32,21 @@ use crate::model::{Constraints, Model, Regressors};
 use crate::noise::TrackerNoise;
 use std::borrow::Cow;
 
+mod autodiff;
+pub use autodiff::{AutoDiff, PointResidual, Scalar, ScalarResidual};
+
 /// Residuals an engine can minimise: `n_points` 3-vectors that depend on `n_params`
 /// parameters, with their exact Jacobian and curvature, under linear equality constraints.
 ///
 /// The engines of `volver-solvers` take any implementation (`&dyn Residuals`); volver's own are
 /// [`Problem`] (a machine and its measurements) and [`CurveFit`] (a NIST StRD curve). The
 /// objectives Φ and ve and the error statistics are provided from [`Residuals::residual`].
+///
+/// Four methods are required: the two sizes, the residual and its exact Jacobian. The others have
+/// defaults: parameters named `p0`, `p1` …, no constraints, zero curvature (the Gauss–Newton
+/// model), observations of unit size, 3-vector residuals. Rather than writing the Jacobian by
+/// hand, write the residual once generic over the scalar ([`PointResidual`]) and let
+/// [`AutoDiff`] derive it, and the curvature, exactly.
 ///
 /// ```
 /// use volver_core::{nist, problem::{CurveFit, Residuals}};
@@ -53,11 +64,15 @@ pub trait Residuals: Send + Sync + std::fmt::Debug {
     /// Number of points (observations of a curve fit).
     fn n_points(&self) -> usize;
 
-    /// Names of the parameters, for reports.
-    fn param_names(&self) -> Vec<String>;
+    /// Names of the parameters, for reports: `p0`, `p1` … by default.
+    fn param_names(&self) -> Vec<String> {
+        (0..self.n_params()).map(|k| format!("p{k}")).collect()
+    }
 
-    /// The linear equality constraints the parameters must satisfy.
-    fn constraints(&self) -> Cow<'_, Constraints>;
+    /// The linear equality constraints the parameters must satisfy: none by default.
+    fn constraints(&self) -> Cow<'_, Constraints> {
+        Cow::Owned(Constraints::default())
+    }
 
     /// Residual of point `i` (mm for a machine).
     fn residual(&self, i: usize, params: &[f64]) -> [f64; 3];
@@ -67,14 +82,25 @@ pub trait Residuals: Send + Sync + std::fmt::Debug {
 
     /// Second derivative of the residual of point `i` along the parameter direction `dir`,
     /// `d²/dt² r_i(params + t·dir)` at t = 0, exact (second-order dual numbers): the curvature
-    /// that geodesic acceleration corrects a Gauss–Newton step by.
-    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3];
+    /// that geodesic acceleration corrects a Gauss–Newton step by, and that the Φ polish adds
+    /// along weakly determined directions.
+    ///
+    /// Default: zero, the Gauss–Newton model (exact for residuals linear in the parameters):
+    /// geodesic acceleration then changes no step and the polish uses the Gauss–Newton matrix.
+    /// [`AutoDiff`] gives the exact value.
+    fn residual_second_directional(&self, _i: usize, _params: &[f64], _dir: &[f64]) -> [f64; 3] {
+        [0.0; 3]
+    }
 
     /// The magnitude of what point `i` measured (mm; for a curve fit, the observation): a
     /// residual is rounded relative to it, not to itself, so a cost computed from residuals much
     /// smaller than their observations carries a rounding of about
-    /// `ε · observation_scale / ‖r‖` relative.
-    fn observation_scale(&self, i: usize) -> f64;
+    /// `ε · observation_scale / ‖r‖` relative. Default: 1 (observations of unit size); give
+    /// the measured magnitude when it is large, or the engines' rounding estimates are too
+    /// tight.
+    fn observation_scale(&self, _i: usize) -> f64 {
+        1.0
+    }
 
     /// Whether point `i`'s residual is a scalar `(r, 0, 0)`, its module the absolute value (a
     /// range alone): its curvature in Φ's smoothed objective is all radial, ε²/(r² + ε²)^³ᐟ²,
@@ -586,27 +612,32 @@ fn whiten_rows(w: &[[f64; 3]; 3], jac: &mut [f64]) {
 }
 
 /// A curve fit: one of NIST's StRD problems, so that the engines can be judged on the public
-/// reference suite. Each observation is a "point" whose residual is `(f(x_i; b) − y_i, 0, 0)`,
-/// Φ is the mean absolute residual and `n · ve` the residual sum of squares; there are no
-/// constraints. Its parameters are named `b1`, `b2`, …
-#[derive(Clone, Copy, Debug)]
-pub struct CurveFit<'a> {
-    dataset: &'a crate::nist::Dataset,
-}
+/// reference suite. Each observation is a scalar "point" whose residual is `(f(x_i; b) − y_i, 0,
+/// 0)`, Φ is the mean absolute residual and `n · ve` the residual sum of squares; there are no
+/// constraints. Its parameters are named `b1`, `b2`, … Its derivatives come from the dataset's
+/// model written once, generic over the scalar ([`crate::nist::Dataset::residual`]), through
+/// [`AutoDiff`].
+pub type CurveFit<'a> = AutoDiff<Scalar<StrdCurve<'a>>>;
 
 impl<'a> CurveFit<'a> {
     /// The curve fit of `dataset` (see the type's documentation).
     pub fn new(dataset: &'a crate::nist::Dataset) -> CurveFit<'a> {
-        CurveFit { dataset }
+        AutoDiff(Scalar(StrdCurve { dataset }))
     }
 
     /// The dataset.
     pub fn dataset(&self) -> &'a crate::nist::Dataset {
-        self.dataset
+        self.0.0.dataset
     }
 }
 
-impl Residuals for CurveFit<'_> {
+/// One of NIST's StRD problems as a [`ScalarResidual`] (see [`CurveFit`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StrdCurve<'a> {
+    dataset: &'a crate::nist::Dataset,
+}
+
+impl ScalarResidual for StrdCurve<'_> {
     fn n_params(&self) -> usize {
         self.dataset.n_params()
     }
@@ -615,45 +646,12 @@ impl Residuals for CurveFit<'_> {
         self.dataset.n_obs()
     }
 
+    fn residual<S: crate::scalar::Real>(&self, i: usize, params: &[S]) -> S {
+        self.dataset.residual(i, params)
+    }
+
     fn param_names(&self) -> Vec<String> {
         (1..=self.n_params()).map(|k| format!("b{k}")).collect()
-    }
-
-    fn constraints(&self) -> Cow<'_, Constraints> {
-        Cow::Owned(Default::default())
-    }
-
-    fn residual(&self, i: usize, params: &[f64]) -> [f64; 3] {
-        [self.dataset.residual(i, params), 0.0, 0.0]
-    }
-
-    fn residual_and_jacobian(&self, i: usize, params: &[f64], jac: &mut [f64]) -> [f64; 3] {
-        // Forward-mode dual numbers, one direction per parameter (NIST's problems have at
-        // most 9).
-        let n = params.len();
-        jac[n..3 * n].iter_mut().for_each(|v| *v = 0.0);
-        let mut b: Vec<num_dual::Dual64> = params
-            .iter()
-            .map(|&v| num_dual::Dual64::from_re(v))
-            .collect();
-        let mut r = f64::NAN;
-        for k in 0..n {
-            b[k].eps = 1.0;
-            let v = self.dataset.residual(i, &b);
-            b[k].eps = 0.0;
-            jac[k] = v.eps;
-            r = v.re;
-        }
-        [r, 0.0, 0.0]
-    }
-
-    fn residual_second_directional(&self, i: usize, params: &[f64], dir: &[f64]) -> [f64; 3] {
-        let b: Vec<num_dual::Dual2_64> = params
-            .iter()
-            .zip(dir)
-            .map(|(&p, &v)| num_dual::Dual2_64::new(p, v, 0.0))
-            .collect();
-        [self.dataset.residual(i, &b).v2, 0.0, 0.0]
     }
 
     fn observation_scale(&self, i: usize) -> f64 {

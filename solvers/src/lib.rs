@@ -49,8 +49,17 @@ pub use error::Error;
 pub use options::{Objective, Options};
 pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};
 
-use volver_core::model::{Constraint, ConstraintKind, Constraints, ParamInfo};
-use volver_core::problem::{Problem, Residuals};
+// What this crate's API speaks in, from volver-core, so that a user depending on volver-solvers
+// alone can write a fit: the residuals (your own through `AutoDiff`), the constraints, the
+// scalar of generic residuals and its dual numbers; the whole of volver-core as `volver_core`.
+pub use volver_core;
+pub use volver_core::model::{Constraint, ConstraintKind, Constraints};
+pub use volver_core::num_dual;
+pub use volver_core::problem::{AutoDiff, PointResidual, Residuals, Scalar, ScalarResidual};
+pub use volver_core::scalar::Real;
+
+use volver_core::model::ParamInfo;
+use volver_core::problem::Problem;
 
 /// What to solve: residuals (a machine [`Problem`] or a NIST curve fit), the constraints to
 /// honour and a label.
