@@ -48,6 +48,23 @@ pub enum Error {
         /// The range, in words.
         expected: &'static str,
     },
+    /// An engine's own count setting (threads, iterations) outside its bounds.
+    #[error("{engine}.{field} = {value}: expected {min} … {max}")]
+    SettingCount {
+        /// The engine's section (`lm`, `ceres`, …).
+        engine: &'static str,
+        /// The setting's field.
+        field: &'static str,
+        /// Its value.
+        value: usize,
+        /// The smallest allowed.
+        min: usize,
+        /// The largest allowed.
+        max: usize,
+    },
+    /// An engine-settings text (TOML) that cannot be read: the parser's words.
+    #[error("engine settings: {0}")]
+    SettingsFile(String),
     /// The final IRLS ε above the initial one.
     #[error(
         "options.irls_final_epsilon = {final_epsilon} exceeds irls_initial_epsilon = {initial_epsilon}"

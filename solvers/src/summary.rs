@@ -361,6 +361,12 @@ pub struct Summary {
     /// polish it again.
     #[serde(default)]
     pub polished: bool,
+    /// The [`crate::Options`] fields set away from their defaults that this engine does not
+    /// read (by field name; `Options`' documentation says which engine reads which), so that a
+    /// setting with no effect is stated rather than silently dropped. Empty for an engine that
+    /// reads them all.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ignored_options: Vec<String>,
 }
 
 impl Summary {
@@ -390,7 +396,20 @@ impl Summary {
             self.evaluations,
             self.time_s,
             self.termination
-        )
+        ) + &self.ignored_note()
+    }
+
+    /// `; options not read by this engine: …` when some are (see
+    /// [`Summary::ignored_options`]), else nothing.
+    fn ignored_note(&self) -> String {
+        if self.ignored_options.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; options not read by this engine: {}",
+                self.ignored_options.join(", ")
+            )
+        }
     }
 
     /// Several lines with every figure.
@@ -452,6 +471,9 @@ impl Summary {
         );
         line(&mut s, "time", format!("{:.3} s", self.time_s));
         line(&mut s, "termination", self.termination.to_string());
+        if !self.ignored_options.is_empty() {
+            line(&mut s, "options not read", self.ignored_options.join(", "));
+        }
         s
     }
 }

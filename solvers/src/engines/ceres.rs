@@ -52,25 +52,44 @@ use volver_ceres_sys as cs;
 use volver_core::problem::{Residuals, norm};
 use volver_core::units::{TINY, UM_PER_MM};
 
-pub use cs::LinearSolver;
+pub use crate::settings::{CeresSettings, LinearSolver};
 
-/// The Ceres engine.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
+/// The Ceres engine with its settings ([`CeresSettings`]: the linear solver and the threads).
+///
+/// ```
+/// # #[cfg(feature = "ceres")] {
+/// use volver_solvers::ceres::{Ceres, CeresSettings, LinearSolver};
+/// use volver_solvers::Solver;
+/// let s = CeresSettings::default().with_threads(2).with_linear_solver(LinearSolver::DenseQr);
+/// assert_eq!(Ceres::new(s).settings().threads, 2);
+/// assert_eq!(Ceres::new(s).name(), "ceres");
+/// # }
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Ceres {
-    /// Linear solver of the trust-region step (default: dense QR, Ceres' default for dense
-    /// problems).
-    pub linear_solver: LinearSolver,
-    /// Threads evaluating residual blocks (default 1).
-    pub threads: usize,
+    settings: CeresSettings,
 }
 
-impl Default for Ceres {
-    fn default() -> Self {
-        Ceres {
-            linear_solver: LinearSolver::DenseQr,
-            threads: 1,
-        }
+impl Ceres {
+    /// The engine with `settings` (checked when it solves: a run with settings out of range
+    /// ends as invalid input naming the field; [`crate::engine_with`] refuses them before).
+    pub fn new(settings: CeresSettings) -> Ceres {
+        Ceres { settings }
+    }
+
+    /// Its settings.
+    pub fn settings(&self) -> &CeresSettings {
+        &self.settings
+    }
+}
+
+/// Ceres' linear solver for volver's.
+fn linear_solver(l: LinearSolver) -> cs::LinearSolver {
+    match l {
+        LinearSolver::DenseQr => cs::LinearSolver::DenseQr,
+        LinearSolver::DenseNormalCholesky => cs::LinearSolver::DenseNormalCholesky,
+        LinearSolver::SparseNormalCholesky => cs::LinearSolver::SparseNormalCholesky,
+        LinearSolver::Cgnr => cs::LinearSolver::Cgnr,
     }
 }
 
@@ -249,7 +268,7 @@ impl Ceres {
     ) -> cs::Options {
         cs::Options {
             trust_region: cs::TrustRegion::LevenbergMarquardt,
-            linear_solver: self.linear_solver,
+            linear_solver: linear_solver(self.settings.linear_solver),
             max_iterations: options.max_iterations.saturating_sub(iterations),
             function_tolerance: continuation.tolerance(options.objective_tolerance),
             // Ceres' gradient test is absolute, in its cost (≈ n Φ or ½ n ve).
@@ -257,7 +276,7 @@ impl Ceres {
             parameter_tolerance: options.parameter_tolerance,
             // Ceres' radius is the inverse of the LM damping.
             initial_trust_region_radius: 1.0 / options.initial_damping.max(TINY),
-            threads: self.threads,
+            threads: self.settings.threads,
             jacobi_scaling: true,
         }
     }
@@ -363,6 +382,9 @@ impl Solver for Ceres {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
+        if let Err(e) = self.settings.validate() {
+            return run.finish(p0, Termination::InvalidInput(crate::Invalid::Refused(e)));
+        }
         let problem = &*task.problem;
         let np = problem.n_points();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;

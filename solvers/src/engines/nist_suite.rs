@@ -25,9 +25,12 @@ pub fn lm() -> crate::engines::lm::LevenbergMarquardt {
     }
 }
 
-/// The engine `name` as the suite runs it: the native LM of [`lm`], the others as built.
+/// The engine `name` as the suite runs it: the native LM of [`lm`] (also the first stage of
+/// `lm+clarabel`), the others with their default settings.
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
-    crate::engine_with(name, lm())
+    let mut settings = crate::Settings::default();
+    settings.lm = lm();
+    crate::engine_with(name, &settings)
 }
 
 /// The options of the suite: least squares (ve), tolerances at the limit of double precision,

@@ -132,6 +132,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 time_s: 0.0,
                 termination: Termination::NoFreeParameters,
                 polished: false,
+                ignored_options: Vec::new(),
             },
             edge: FiniteEdge::default(),
             t0: Instant::now(),
