@@ -1,6 +1,8 @@
 //! What the solvers crate refuses before a solve starts, as one typed error. A run that starts
 //! and then fails is not an error but a [`crate::Termination`] in its summary.
 
+use crate::options::MIN_EVALUATIONS;
+
 /// Why a solve, an engine or a setting cannot be had.
 ///
 /// ```
@@ -78,6 +80,13 @@ pub enum Error {
     /// An iteration or evaluation limit of zero.
     #[error("options.max_iterations and max_evaluations must be ≥ 1")]
     NoLimit,
+    /// An evaluation limit below what every solve takes at its start.
+    #[error(
+        "options.max_evaluations = {0}: a solve takes up to {MIN_EVALUATIONS} evaluations at its \
+         start (the start's residuals and Jacobian, the residuals of the start projected onto \
+         the constraints): give at least {MIN_EVALUATIONS}"
+    )]
+    TooFewEvaluations(usize),
     /// A noise-weighted objective (`ml`, `phi-w`) asked of residuals that are not whitened.
     #[error(
         "objective {0} weighs the residuals by their noise, but these are not whitened: give the \

@@ -347,7 +347,9 @@ pub struct Summary {
     pub reached: Evaluation,
     /// Iterations (steps tried).
     pub iterations: usize,
-    /// Objective evaluations (residual passes), Jacobian passes included.
+    /// Objective evaluations (residual passes), Jacobian passes included: the engine's, from the
+    /// start's evaluation on, never more than [`crate::Options::max_evaluations`] (the
+    /// evaluation of the end point for this summary's [`Summary::reached`] is not counted).
     pub evaluations: usize,
     /// Jacobian passes.
     pub jacobian_evaluations: usize,

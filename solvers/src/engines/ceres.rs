@@ -100,6 +100,11 @@ struct Cost<'t, 'a> {
     d: &'t [f64],
     /// Residual passes (block 0 is evaluated once per pass).
     passes: AtomicUsize,
+    /// The passes the evaluation limit leaves Ceres: a pass past them is refused (every block
+    /// fails, nothing is evaluated, nothing counted), and the run ends on the limit.
+    limit: usize,
+    /// Whether a pass was refused at the limit.
+    over: std::sync::atomic::AtomicBool,
     /// Residual blocks whose residual or Jacobian was not finite.
     nonfinite: AtomicUsize,
     /// The last pass with such a block (0: none).
@@ -114,8 +119,15 @@ impl cs::CostFunction for Cost<'_, '_> {
         residuals: &mut [f64],
         jacobian: Option<&mut [f64]>,
     ) -> bool {
-        if block == 0 {
-            self.passes.fetch_add(1, Ordering::Relaxed);
+        if block == 0 && !self.over.load(Ordering::Relaxed) {
+            if self.passes.load(Ordering::Relaxed) >= self.limit {
+                self.over.store(true, Ordering::Relaxed);
+            } else {
+                self.passes.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if self.over.load(Ordering::Relaxed) {
+            return false;
         }
         // p = s ∘ d in a per-thread buffer: no allocation per residual block.
         thread_local!(static P: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) });
@@ -308,13 +320,23 @@ impl Ceres {
                     progress.on_iteration(it, params)
                 }) {
                 Ok(s) => s,
+                Err(_) if progress.cost.over.load(Ordering::Relaxed) => {
+                    return Termination::EvaluationLimit;
+                }
                 Err(e) => {
                     return Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
                 }
             };
-            run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
+            // Ceres counts its iteration 0 (the start's evaluation) as a successful step.
+            run.summary.iterations +=
+                (summary.successful_steps + summary.unsuccessful_steps).saturating_sub(1);
             run.summary.jacobian_evaluations += summary.jacobian_evaluations;
-            let t = termination_of(&summary, progress.evaluation_limit);
+            let limit = progress.evaluation_limit || progress.cost.over.load(Ordering::Relaxed);
+            let t = if progress.cost.over.load(Ordering::Relaxed) {
+                Termination::EvaluationLimit
+            } else {
+                termination_of(&summary, limit)
+            };
             if final_stage || !t.converged() {
                 return t;
             }
@@ -401,6 +423,10 @@ impl Solver for Ceres {
             problem,
             d,
             passes: AtomicUsize::new(0),
+            limit: options
+                .max_evaluations
+                .saturating_sub(run.summary.evaluations),
+            over: std::sync::atomic::AtomicBool::new(false),
             nonfinite: AtomicUsize::new(0),
             nonfinite_pass: AtomicUsize::new(0),
         };

@@ -343,6 +343,22 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         self.norms.len()
     }
 
+    /// The evaluations a trial step takes: its residuals, and with geodesic acceleration the
+    /// second-derivative pass.
+    fn trial_evaluations(&self) -> usize {
+        1 + usize::from(self.settings.geodesic_acceleration)
+    }
+
+    /// Whether the limits leave room for the worst case of a finish after convergence (the Φ
+    /// polish, the vertex of an L1 fit: [`crate::engines::polish::FINISH_EVALUATIONS`] and
+    /// [`crate::engines::polish::FINISH_STEPS`]); without it the finish is skipped, so that the
+    /// counts stay within the limits.
+    fn room_to_finish(&self) -> bool {
+        let s = &self.run.summary;
+        s.evaluations + crate::engines::polish::FINISH_EVALUATIONS <= self.options.max_evaluations
+            && s.iterations + crate::engines::polish::FINISH_STEPS <= self.options.max_iterations
+    }
+
     /// Φ at the current point (mm).
     fn phi(&self) -> f64 {
         self.norms.iter().sum::<f64>() / self.np() as f64
@@ -422,7 +438,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// decomposed.
     fn jacobian_pass(&mut self) -> Result<crate::engines::kernels::Normal, Termination> {
         let iterations = self.run.summary.iterations;
-        if self.run.summary.evaluations >= self.options.max_evaluations {
+        // A pass is worth its evaluation only with room for a trial after it.
+        if self.run.summary.evaluations + 1 + self.trial_evaluations()
+            > self.options.max_evaluations
+        {
             return Err(Termination::EvaluationLimit);
         }
         let decomposition_failed = |at| {
@@ -811,7 +830,7 @@ impl LevenbergMarquardt {
                 if summary.iterations >= options.max_iterations {
                     break 'passes Termination::IterationLimit;
                 }
-                if summary.iterations > 0 && summary.evaluations >= options.max_evaluations {
+                if summary.evaluations + lm.trial_evaluations() > options.max_evaluations {
                     break 'passes Termination::EvaluationLimit;
                 }
                 lm.run.summary.iterations += 1;

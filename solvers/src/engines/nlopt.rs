@@ -122,6 +122,9 @@ struct State<'o> {
     /// internal tests (L-BFGS' gradient norm) stay meaningful as the cost falls by decades.
     scale: f64,
     calls: usize,
+    /// The calls allowed (the evaluation limit's share), and whether one past it was refused.
+    limit: usize,
+    refused: bool,
     /// Residual passes of volver's own between NLopt's solves (a stage's cost and Φ).
     passes: usize,
     gradients: usize,
@@ -219,6 +222,8 @@ impl Nlopt {
                 eps: Continuation::new(options, phi0).eps(),
                 scale: 1.0,
                 calls: 0,
+                limit: 0,
+                refused: false,
                 passes: 0,
                 gradients: 0,
                 best: f64::INFINITY,
@@ -304,6 +309,12 @@ impl Callback<'_, '_, '_> {
     fn call(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
         let result = catch_unwind(AssertUnwindSafe(|| {
             let mut st = self.state.borrow_mut();
+            if st.calls >= st.limit {
+                // Past the evaluation limit (NLopt's own test comes late in some algorithms):
+                // refused, nothing evaluated, and the solve ends on the limit.
+                st.refused = true;
+                return f64::NAN;
+            }
             st.calls += 1;
             let p = self.vars.params(x);
             let value = self.value(&mut st, &p, grad);
@@ -470,7 +481,12 @@ impl Nlopt {
         }
         let result = opt.optimize(x);
         drop(opt);
-        let t = termination_of(&result);
+        let refused = std::mem::take(&mut callback.state.borrow_mut().refused);
+        let t = if refused {
+            Termination::EvaluationLimit
+        } else {
+            termination_of(&result)
+        };
         // A non-finite trial point is a rejected evaluation, not the end: the run fails
         // only if NLopt itself gives up on it (its result is then kept only if finite).
         let nonfinite = callback.state.borrow_mut().nonfinite.take();
@@ -536,6 +552,10 @@ impl Nlopt {
                 remaining,
                 rows,
             };
+            {
+                let mut st = callback.state.borrow_mut();
+                st.limit = st.calls + remaining;
+            }
             let t = self.solve_once(callback, x, options, &setup);
             let settled = t.converged() || matches!(t, Termination::Stalled(_));
             if final_stage || !settled {
