@@ -193,17 +193,20 @@ pub struct EngineInfo {
     pub description: &'static str,
     /// Its constructor from the engines' [`Settings`] (it reads its own sections; checked by
     /// [`engine_with`]); `None` when this build lacks the feature.
-    pub make: Option<fn(&Settings) -> Box<dyn Solver>>,
+    pub make: Option<MakeEngine>,
 }
+
+/// An engine's constructor from the engines' [`Settings`] ([`EngineInfo::make`]).
+pub type MakeEngine = fn(&Settings) -> Box<dyn Solver>;
 
 /// A constructor that exists only with a Cargo feature.
 macro_rules! with_feature {
     ($name:ident, $feature:literal, |$s:ident| $engine:expr) => {
         #[cfg(feature = $feature)]
-        const $name: Option<fn(&Settings) -> Box<dyn Solver>> =
+        const $name: Option<MakeEngine> =
             Some(|$s: &Settings| -> Box<dyn Solver> { Box::new($engine) });
         #[cfg(not(feature = $feature))]
-        const $name: Option<fn(&Settings) -> Box<dyn Solver>> = None;
+        const $name: Option<MakeEngine> = None;
     };
 }
 

@@ -8,6 +8,9 @@ use volver::comparison::{Comparison, compare};
 use volver::core::model::Model;
 use volver::solvers::{Objective, Options, Solver};
 
+/// An engine made from its name.
+type MakeNamed<'a> = dyn Fn(&str) -> Result<Box<dyn Solver>, volver::solvers::Error> + 'a;
+
 /// Options of `volver compare`.
 #[derive(Args, Debug)]
 pub struct CompareArgs {
@@ -74,11 +77,7 @@ impl CompareArgs {
 
     /// The engines asked for (every engine of the build but `skip` when none is named), each
     /// made by `make`.
-    fn engines(
-        &self,
-        skip: &[&str],
-        make: &dyn Fn(&str) -> Result<Box<dyn Solver>, volver::solvers::Error>,
-    ) -> Result<Vec<Box<dyn Solver>>> {
+    fn engines(&self, skip: &[&str], make: &MakeNamed) -> Result<Vec<Box<dyn Solver>>> {
         let names: Vec<String> = if self.engines.is_empty() {
             volver::solvers::engine_names()
                 .into_iter()

@@ -28,8 +28,10 @@ pub fn lm() -> crate::engines::lm::LevenbergMarquardt {
 /// The engine `name` as the suite runs it: the native LM of [`lm`] (also the first stage of
 /// `lm+clarabel`), the others with their default settings.
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
-    let mut settings = crate::Settings::default();
-    settings.lm = lm();
+    let settings = crate::Settings {
+        lm: lm(),
+        ..Default::default()
+    };
     crate::engine_with(name, &settings)
 }
 
