@@ -20,6 +20,7 @@ pub mod nist_suite;
 pub mod nlopt;
 pub mod polish;
 pub(crate) mod run;
+pub(crate) mod sections;
 pub mod strategy;
 #[cfg(test)]
 pub(crate) mod test_problems;

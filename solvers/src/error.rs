@@ -1,8 +1,6 @@
 //! What the solvers crate refuses before a solve starts, as one typed error. A run that starts
 //! and then fails is not an error but a [`crate::Termination`] in its summary.
 
-use crate::options::MIN_EVALUATIONS;
-
 /// Why a solve, an engine or a setting cannot be had.
 ///
 /// ```
@@ -82,11 +80,16 @@ pub enum Error {
     NoLimit,
     /// An evaluation limit below what every solve takes at its start.
     #[error(
-        "options.max_evaluations = {0}: a solve takes up to {MIN_EVALUATIONS} evaluations at its \
-         start (the start's residuals and Jacobian, the residuals of the start projected onto \
-         the constraints): give at least {MIN_EVALUATIONS}"
+        "options.max_evaluations = {value}: a solve takes up to {min} evaluations at its start \
+         (the start's residuals and Jacobian, the residuals of the start projected onto the \
+         constraints): give at least {min}"
     )]
-    TooFewEvaluations(usize),
+    TooFewEvaluations {
+        /// The limit asked for.
+        value: usize,
+        /// The smallest limit ([`crate::options::MIN_EVALUATIONS`]).
+        min: usize,
+    },
     /// A noise-weighted objective (`ml`, `phi-w`) asked of residuals that are not whitened.
     #[error(
         "objective {0} weighs the residuals by their noise, but these are not whitened: give the \

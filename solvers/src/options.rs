@@ -208,7 +208,10 @@ impl Options {
             return Err(crate::Error::NoLimit);
         }
         if self.max_evaluations < MIN_EVALUATIONS {
-            return Err(crate::Error::TooFewEvaluations(self.max_evaluations));
+            return Err(crate::Error::TooFewEvaluations {
+                value: self.max_evaluations,
+                min: MIN_EVALUATIONS,
+            });
         }
         Ok(())
     }

@@ -110,7 +110,10 @@ fn an_evaluation_limit_below_what_a_start_takes_is_refused() {
         ..Options::default()
     };
     let e = options.validate().unwrap_err();
-    assert_eq!(e, volver_solvers::Error::TooFewEvaluations(2));
+    assert_eq!(
+        e,
+        volver_solvers::Error::TooFewEvaluations { value: 2, min: 3 }
+    );
     assert!(e.to_string().contains("give at least 3"), "{e}");
 }
 

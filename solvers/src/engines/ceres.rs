@@ -52,7 +52,7 @@ use volver_ceres_sys as cs;
 use volver_core::problem::{Residuals, norm};
 use volver_core::units::{TINY, UM_PER_MM};
 
-pub use crate::settings::{CeresSettings, LinearSolver};
+pub use crate::engines::sections::{CeresSettings, LinearSolver};
 
 /// The Ceres engine with its settings ([`CeresSettings`]: the linear solver and the threads).
 ///

@@ -56,7 +56,7 @@ use faer::Mat;
 use volver_core::problem::norm;
 use volver_core::units::{TINY, UM_PER_MM};
 
-pub use crate::settings::ClarabelSettings;
+pub use crate::engines::sections::ClarabelSettings;
 
 /// The prox-linear engine (`clarabel`) with its settings ([`ClarabelSettings`]).
 ///
@@ -526,7 +526,7 @@ impl Solver for ProxLinear {
         observer: &mut dyn Observer,
     ) -> Solution {
         let mut solution = self.solve_here(task, start, options, observer);
-        solution.summary.ignored_options = crate::settings::ignored(options, &UNREAD);
+        solution.summary.ignored_options = crate::engines::sections::ignored(options, &UNREAD);
         solution
     }
 }

@@ -28,7 +28,7 @@ pub fn lm() -> crate::engines::lm::LevenbergMarquardt {
 /// The engine `name` as the suite runs it: the native LM of [`lm`] (also the first stage of
 /// `lm+clarabel`), the others with their default settings.
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
-    let settings = crate::Settings {
+    let settings = super::sections::Settings {
         lm: lm(),
         ..Default::default()
     };

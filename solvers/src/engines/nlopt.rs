@@ -68,7 +68,7 @@ pub enum Algorithm {
     Bobyqa,
 }
 
-pub use crate::settings::NloptSettings;
+pub use crate::engines::sections::NloptSettings;
 
 /// The NLopt engine with one algorithm and its settings ([`NloptSettings`]).
 ///
@@ -179,7 +179,7 @@ impl Solver for Nlopt {
         observer: &mut dyn Observer,
     ) -> Solution {
         let mut solution = self.solve_here(task, start, options, observer);
-        solution.summary.ignored_options = crate::settings::ignored(options, &UNREAD);
+        solution.summary.ignored_options = crate::engines::sections::ignored(options, &UNREAD);
         solution
     }
 }
@@ -304,6 +304,28 @@ struct Callback<'f, 'a, 'o> {
 }
 
 impl Callback<'_, '_, '_> {
+    /// NLopt sees the cost divided by `cost` (a stage's first), 1 when it is not positive.
+    fn rescale(&self, cost: f64) {
+        self.state.borrow_mut().scale = if cost.is_finite() && cost > 0.0 {
+            cost
+        } else {
+            1.0
+        };
+    }
+
+    /// The next solve may make `remaining` calls.
+    fn allow(&self, remaining: usize) {
+        let mut st = self.state.borrow_mut();
+        st.limit = st.calls + remaining;
+    }
+
+    /// The next stage of the continuation, with smoothing `eps` (mm).
+    fn next_stage(&self, eps: f64) {
+        let mut st = self.state.borrow_mut();
+        st.eps = eps;
+        st.best = f64::INFINITY;
+    }
+
     /// One call from NLopt; NaN (a refused point) when the model is not finite there or a
     /// panic unwinds from it (it must not cross the C library).
     fn call(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
@@ -537,11 +559,7 @@ impl Nlopt {
                 .as_ref()
                 .map(|v| cost_of(objective, v, eps))
                 .unwrap_or(f64::NAN);
-            callback.state.borrow_mut().scale = if stage_cost.is_finite() && stage_cost > 0.0 {
-                stage_cost
-            } else {
-                1.0
-            };
+            callback.rescale(stage_cost);
             let final_stage = continuation.is_final();
             let remaining = options.max_evaluations.saturating_sub(spent());
             if remaining == 0 {
@@ -552,10 +570,7 @@ impl Nlopt {
                 remaining,
                 rows,
             };
-            {
-                let mut st = callback.state.borrow_mut();
-                st.limit = st.calls + remaining;
-            }
+            callback.allow(remaining);
             let t = self.solve_once(callback, x, options, &setup);
             let settled = t.converged() || matches!(t, Termination::Stalled(_));
             if final_stage || !settled {
@@ -585,9 +600,7 @@ impl Nlopt {
                 .unwrap_or(phi0_mm);
             known = Some(now);
             continuation.shrink(phi);
-            let mut st = callback.state.borrow_mut();
-            st.eps = continuation.eps();
-            st.best = f64::INFINITY;
+            callback.next_stage(continuation.eps());
         }
     }
 }
