@@ -36,7 +36,7 @@
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let task = Task::new(problem);
 //! let lm = LevenbergMarquardt::default().solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
-//! let socp = ProxLinear.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
+//! let socp = ProxLinear::default().solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! assert!(!socp.summary.termination.failed(), "{}", socp.summary.termination);
 //! // The SOCP reaches Φ's optimum exactly; the LM's IRLS stops at or above it.
 //! let (a, b) = (lm.summary.reached.phi_mm, socp.summary.reached.phi_mm);
