@@ -344,6 +344,7 @@ impl NloptSettings {
 
 /// The fields among `unread` (those an engine does not read) that `options` sets away from
 /// their defaults, by name: what [`crate::Summary::ignored_options`] states.
+#[cfg(any(feature = "clarabel", feature = "nlopt"))]
 pub(crate) fn ignored(options: &crate::Options, unread: &[&'static str]) -> Vec<String> {
     let d = crate::Options::default();
     let changed = |field: &str| match field {
