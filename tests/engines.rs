@@ -1,6 +1,9 @@
 //! The engine table (`volver_solvers::ENGINES`) against what a user reads and gets: the README's
 //! engine table names every engine with its Cargo feature and no other, each engine of the build
 //! answers to its name, and an engine the build lacks is refused with the feature that brings it.
+//! The engines' settings reach the CLI through one file, checked before anything is fitted.
+
+mod common;
 
 use volver::solvers::{ENGINES, engine, engine_names};
 
@@ -134,4 +137,51 @@ fn the_readme_engines_code_uses_only_the_crates_it_tells_you_to_depend_on() {
             }
         }
     }
+}
+
+/// `--engine-settings FILE.toml`: a setting out of range and an unknown field are refused
+/// naming them, `--geodesic-acceleration` is refused with an engine that does not read it, and
+/// valid settings are taken.
+#[test]
+fn engine_settings_reach_identify_through_one_checked_file() {
+    let dir = common::scratch_dir("engine-settings", "identify");
+    let d = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    common::ok(&[
+        "simulate",
+        "--plan",
+        "test3",
+        "--seed",
+        "3",
+        "--out",
+        &d("sim"),
+    ]);
+    let data = d("sim/measurements.csv");
+    let run = |settings: &str, extra: &[&str]| {
+        std::fs::write(dir.join("engines.toml"), settings).unwrap();
+        let mut args = vec![
+            "identify",
+            "--data",
+            &data,
+            "--no-history",
+            "--engine-settings",
+        ];
+        let file = d("engines.toml");
+        args.push(&file);
+        args.extend_from_slice(extra);
+        let out = common::volver(&args);
+        let err = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(!err.contains("panicked"), "{err}");
+        (out.status.success(), err)
+    };
+    let (ok, err) = run("[ceres]\nthreads = 0\n", &[]);
+    assert!(!ok && err.contains("ceres.threads = 0"), "{err}");
+    let (ok, err) = run("[lm]\nthread = 2\n", &[]);
+    assert!(
+        !ok && err.contains("engines.toml") && err.contains("thread"),
+        "{err}"
+    );
+    let (ok, err) = run("", &["--solver", "clarabel", "--geodesic-acceleration"]);
+    assert!(!ok && err.contains("--geodesic-acceleration"), "{err}");
+    let (ok, err) = run("[lm]\nthreads = 2\n", &["--json"]);
+    assert!(ok, "{err}");
 }

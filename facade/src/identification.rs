@@ -41,8 +41,9 @@ pub struct Settings {
     pub engine: String,
     /// The engines' options (objective, limits).
     pub options: Options,
-    /// The native engine's own settings, when [`Settings::engine`] is `lm`.
-    pub lm: volver_solvers::lm::LevenbergMarquardt,
+    /// Every engine's own settings (threads, linear solver, sub-problem tolerances …); the
+    /// engine reads its sections ([`volver_solvers::engine_with`]).
+    pub engines: volver_solvers::Settings,
     /// The phases and sub-loops.
     pub phasing: Phasing,
     /// How many times the phase sequence may run (fig. 14 of the paper).
@@ -60,7 +61,7 @@ impl Default for Settings {
         Settings {
             engine: "lm".into(),
             options: Options::default(),
-            lm: volver_solvers::lm::LevenbergMarquardt::default(),
+            engines: volver_solvers::Settings::default(),
             phasing: Phasing::One,
             subloops: 1,
             noise: NoiseModel::Residual,
@@ -309,7 +310,7 @@ pub fn identify(
     if settings.subloops == 0 {
         return Err(Error::Request("--subloops must be at least 1".into()));
     }
-    let solver = volver_solvers::engine_with(&settings.engine, settings.lm)?;
+    let solver = volver_solvers::engine_with(&settings.engine, &settings.engines)?;
     let options = &settings.options;
     options.validate()?;
     let problem = Problem::new(model, data)?;

@@ -21,6 +21,7 @@ pub mod nist_suite;
 pub mod nlopt;
 pub mod polish;
 pub(crate) mod run;
+pub(crate) mod sections;
 pub mod stationarity;
 pub mod strategy;
 #[cfg(test)]

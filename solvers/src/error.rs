@@ -48,6 +48,23 @@ pub enum Error {
         /// The range, in words.
         expected: &'static str,
     },
+    /// An engine's own count setting (threads, iterations) outside its bounds.
+    #[error("{engine}.{field} = {value}: expected {min} … {max}")]
+    SettingCount {
+        /// The engine's section (`lm`, `ceres`, …).
+        engine: &'static str,
+        /// The setting's field.
+        field: &'static str,
+        /// Its value.
+        value: usize,
+        /// The smallest allowed.
+        min: usize,
+        /// The largest allowed.
+        max: usize,
+    },
+    /// An engine-settings text (TOML) that cannot be read: the parser's words.
+    #[error("engine settings: {0}")]
+    SettingsFile(String),
     /// The final IRLS ε above the initial one.
     #[error(
         "options.irls_final_epsilon = {final_epsilon} exceeds irls_initial_epsilon = {initial_epsilon}"
@@ -61,6 +78,18 @@ pub enum Error {
     /// An iteration or evaluation limit of zero.
     #[error("options.max_iterations and max_evaluations must be ≥ 1")]
     NoLimit,
+    /// An evaluation limit below what every solve takes at its start.
+    #[error(
+        "options.max_evaluations = {value}: a solve takes up to {min} evaluations at its start \
+         (the start's residuals and Jacobian, the residuals of the start projected onto the \
+         constraints): give at least {min}"
+    )]
+    TooFewEvaluations {
+        /// The limit asked for.
+        value: usize,
+        /// The smallest limit ([`crate::options::MIN_EVALUATIONS`]).
+        min: usize,
+    },
     /// A noise-weighted objective (`ml`, `phi-w`) asked of residuals that are not whitened.
     #[error(
         "objective {0} weighs the residuals by their noise, but these are not whitened: give the \

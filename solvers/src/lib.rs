@@ -27,6 +27,7 @@ pub mod engines;
 mod error;
 pub mod nullspace;
 pub mod options;
+pub mod settings;
 pub mod summary;
 
 // The curated surface: each engine and analysis at the path its users know it by
@@ -47,6 +48,7 @@ pub use engines::kernels;
 pub use engines::{gauge, init, lm, nist_suite, polish, stationarity, strategy};
 pub use error::Error;
 pub use options::{Objective, Options};
+pub use settings::Settings;
 pub use summary::{At, Evaluation, Failure, Invalid, Stall, Summary, Termination};
 
 // What this crate's API speaks in, from volver-core, so that a user depending on volver-solvers
@@ -198,44 +200,44 @@ pub struct EngineInfo {
     pub feature: Option<&'static str>,
     /// What it does, in one line.
     pub description: &'static str,
-    /// Its constructor; `None` when this build lacks the feature.
-    pub make: Option<fn() -> Box<dyn Solver>>,
+    /// Its constructor from the engines' [`Settings`] (it reads its own sections; checked by
+    /// [`engine_with`]); `None` when this build lacks the feature.
+    pub make: Option<MakeEngine>,
 }
+
+/// An engine's constructor from the engines' [`Settings`] ([`EngineInfo::make`]).
+pub type MakeEngine = fn(&Settings) -> Box<dyn Solver>;
 
 /// A constructor that exists only with a Cargo feature.
 macro_rules! with_feature {
-    ($name:ident, $feature:literal, $engine:expr) => {
+    ($name:ident, $feature:literal, |$s:ident| $engine:expr) => {
         #[cfg(feature = $feature)]
-        const $name: Option<fn() -> Box<dyn Solver>> =
-            Some(|| -> Box<dyn Solver> { Box::new($engine) });
+        const $name: Option<MakeEngine> =
+            Some(|$s: &Settings| -> Box<dyn Solver> { Box::new($engine) });
         #[cfg(not(feature = $feature))]
-        const $name: Option<fn() -> Box<dyn Solver>> = None;
+        const $name: Option<MakeEngine> = None;
     };
 }
 
-with_feature!(LM_CLARABEL, "clarabel", crate::engines::clarabel::Polished);
-with_feature!(CLARABEL, "clarabel", crate::engines::clarabel::ProxLinear);
-with_feature!(CERES, "ceres", ceres::Ceres::default());
-with_feature!(
-    NLOPT_LBFGS,
-    "nlopt",
-    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Lbfgs)
-);
-with_feature!(
-    NLOPT_SLSQP,
-    "nlopt",
-    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Slsqp)
-);
-with_feature!(
-    NLOPT_MMA,
-    "nlopt",
-    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Mma)
-);
-with_feature!(
-    NLOPT_BOBYQA,
-    "nlopt",
-    crate::engines::nlopt::Nlopt::new(crate::engines::nlopt::Algorithm::Bobyqa)
-);
+with_feature!(LM_CLARABEL, "clarabel", |s| {
+    crate::engines::clarabel::Polished::new(s.lm, s.clarabel)
+});
+with_feature!(CLARABEL, "clarabel", |s| {
+    crate::engines::clarabel::ProxLinear::new(s.clarabel)
+});
+with_feature!(CERES, "ceres", |s| ceres::Ceres::new(s.ceres));
+with_feature!(NLOPT_LBFGS, "nlopt", |s| {
+    crate::engines::nlopt::Nlopt::with_settings(crate::engines::nlopt::Algorithm::Lbfgs, s.nlopt)
+});
+with_feature!(NLOPT_SLSQP, "nlopt", |s| {
+    crate::engines::nlopt::Nlopt::with_settings(crate::engines::nlopt::Algorithm::Slsqp, s.nlopt)
+});
+with_feature!(NLOPT_MMA, "nlopt", |s| {
+    crate::engines::nlopt::Nlopt::with_settings(crate::engines::nlopt::Algorithm::Mma, s.nlopt)
+});
+with_feature!(NLOPT_BOBYQA, "nlopt", |s| {
+    crate::engines::nlopt::Nlopt::with_settings(crate::engines::nlopt::Algorithm::Bobyqa, s.nlopt)
+});
 
 /// Every engine volver knows, in the order [`engine_names`] and `volver compare` give them.
 pub const ENGINES: &[EngineInfo] = &[
@@ -243,7 +245,7 @@ pub const ENGINES: &[EngineInfo] = &[
         name: "lm",
         feature: None,
         description: "native Levenberg–Marquardt on faer",
-        make: Some(|| -> Box<dyn Solver> { Box::new(lm::LevenbergMarquardt::default()) }),
+        make: Some(|s: &Settings| -> Box<dyn Solver> { Box::new(s.lm) }),
     },
     EngineInfo {
         name: "lm+clarabel",
@@ -309,35 +311,40 @@ pub fn engine_names() -> Vec<&'static str> {
         .collect()
 }
 
-/// [`engine`], with the native LM configured as `lm` when `name` is `lm` (an engine's own
-/// settings; the others are built with their defaults).
+/// The engine called `name` configured by `settings` (each engine reads its own sections:
+/// `lm` the `lm` section, `lm+clarabel` the `lm` and `clarabel` sections, `ceres` the `ceres`
+/// section, the `nlopt-*` engines the `nlopt` section; see [`settings`]). The one way to build
+/// a configured engine. An error lists the engines of this build (and the Cargo feature that
+/// brings a known engine this build lacks), or names the setting out of range: every section
+/// is checked, whichever the engine reads.
 ///
 /// ```
-/// use volver_solvers::{engine_with, lm::LevenbergMarquardt};
-/// let lm = LevenbergMarquardt::with_geodesic_acceleration(true);
-/// assert_eq!(engine_with("lm", lm).unwrap().name(), "lm");
-/// assert!(engine_with("simplex", lm).is_err());
+/// use volver_solvers::{engine_with, lm::LevenbergMarquardt, Settings};
+/// let mut settings = Settings::default();
+/// settings.lm = LevenbergMarquardt::with_geodesic_acceleration(true).with_threads(2);
+/// assert_eq!(engine_with("lm", &settings).unwrap().name(), "lm");
+/// assert!(engine_with("simplex", &settings).is_err());
+/// settings.lm.threads = Some(0);
+/// assert_eq!(engine_with("lm", &settings).err().unwrap().to_string(),
+///            "lm.threads = 0: expected 1 … 1024");
 /// ```
-pub fn engine_with(name: &str, lm: lm::LevenbergMarquardt) -> Result<Box<dyn Solver>, Error> {
-    if name == "lm" {
-        Ok(Box::new(lm))
-    } else {
-        engine(name)
-    }
+pub fn engine_with(name: &str, settings: &Settings) -> Result<Box<dyn Solver>, Error> {
+    let known = ENGINES.iter().find(|e| e.name == name);
+    let Some(make) = known.and_then(|e| e.make) else {
+        return Err(Error::UnknownEngine {
+            name: name.to_string(),
+            feature: known.and_then(|e| e.feature),
+            built: engine_names(),
+        });
+    };
+    settings.validate()?;
+    Ok(make(settings))
 }
 
-/// The engine called `name`, or an error listing the engines of this build (and the Cargo
-/// feature that brings a known engine this build lacks).
+/// The engine called `name` with its default settings: [`engine_with`] with
+/// [`Settings::default`].
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, Error> {
-    let known = ENGINES.iter().find(|e| e.name == name);
-    if let Some(make) = known.and_then(|e| e.make) {
-        return Ok(make());
-    }
-    Err(Error::UnknownEngine {
-        name: name.to_string(),
-        feature: known.and_then(|e| e.feature),
-        built: engine_names(),
-    })
+    engine_with(name, &Settings::default())
 }
 
 /// Makes the calling thread one of the threads of rayon's global pool (whose size still comes

@@ -84,7 +84,25 @@ impl std::str::FromStr for Objective {
     }
 }
 
-/// Convergence criteria and tuning, with documented defaults ([`Options::default`]).
+/// Convergence criteria and tuning, with documented defaults ([`Options::default`]), shared by
+/// every engine; each engine's own settings are in [`crate::Settings`].
+///
+/// Which engine reads which field (an engine's summary lists the fields set away from their
+/// defaults that it does not read, [`crate::Summary::ignored_options`]):
+///
+/// | field | lm, lm+clarabel | clarabel | ceres | nlopt-* |
+/// |---|---|---|---|---|
+/// | `objective` | ✓ | ✓ | ✓ | ✓ |
+/// | `parameter_tolerance` | ✓ | ✓ | ✓ | ✓ (`xtol_rel`) |
+/// | `objective_tolerance` | ✓ | ✓ | ✓ | ✓ (`ftol_rel`) |
+/// | `max_iterations` | ✓ | ✓ (sub-problems) | ✓ | — (counts no iterations) |
+/// | `max_evaluations` | ✓ | ✓ | ✓ | ✓ (`maxeval`) |
+/// | `gradient_tolerance` | ✓ | — | ✓ | — |
+/// | `initial_damping` | ✓ | ✓ (proximal weight) | ✓ (1 / trust radius) | — |
+/// | `irls_initial_epsilon`, `irls_final_epsilon` | ✓ | — (Φ kept exact) | ✓ | ✓ |
+///
+/// The limits are counted exactly: a run never counts more iterations than `max_iterations`
+/// nor more evaluations than `max_evaluations`, and one stopped by a limit says which.
 ///
 /// ```
 /// use volver_solvers::Options;
@@ -103,15 +121,18 @@ pub struct Options {
     /// Criterion 2, minimum objective change: stop when an accepted step lowers the objective by
     /// less than `objective_tolerance` times its value. Default 1e-12.
     pub objective_tolerance: f64,
-    /// Criterion 3, iteration limit (accepted or rejected steps). Default 200.
+    /// Criterion 3, iteration limit (accepted or rejected steps; Clarabel's sub-problems solved;
+    /// not read by NLopt, which counts objective calls instead). Default 200.
     pub max_iterations: usize,
-    /// Criterion 4, evaluation limit: objective evaluations, Jacobians included. Default 2000.
+    /// Criterion 4, evaluation limit: objective evaluations, Jacobians included, the start's
+    /// among them (at least [`MIN_EVALUATIONS`]). Default 2000.
     pub max_evaluations: usize,
-    /// Stop when the largest scaled gradient component is below this times the objective.
-    /// Default 1e-13.
+    /// Stop when the largest scaled gradient component is below this times the objective
+    /// (the native LM; Ceres' gradient tolerance; not read by Clarabel and NLopt). Default 1e-13.
     pub gradient_tolerance: f64,
     /// Starting Levenberg–Marquardt damping λ, relative to the damping scale (the diagonal of
-    /// the normal matrix). Default 1e-4.
+    /// the normal matrix); Clarabel's first proximal weight, Ceres' first trust radius its
+    /// inverse; not read by NLopt. Default 1e-4.
     pub initial_damping: f64,
     /// Φ only: the smoothing ε of the IRLS weights `1/√(‖r‖² + ε²)` starts at this fraction of
     /// Φ: in the native LM's majorising stage it stays at this fraction of the current Φ; NLopt
@@ -121,6 +142,10 @@ pub struct Options {
     /// last solve). Default 1e-9.
     pub irls_final_epsilon: f64,
 }
+
+/// The smallest [`Options::max_evaluations`]: what a solve may take at its start (the start's
+/// residuals and Jacobian, the residuals of the start projected onto the constraints).
+pub const MIN_EVALUATIONS: usize = 3;
 
 /// The largest ratio `2‖a‖ / ‖v‖` of geodesic acceleration to step, in the damping norm, that
 /// the native LM accepts (Transtrum & Sethna's α = 0.75).
@@ -181,6 +206,12 @@ impl Options {
         }
         if self.max_iterations == 0 || self.max_evaluations == 0 {
             return Err(crate::Error::NoLimit);
+        }
+        if self.max_evaluations < MIN_EVALUATIONS {
+            return Err(crate::Error::TooFewEvaluations {
+                value: self.max_evaluations,
+                min: MIN_EVALUATIONS,
+            });
         }
         Ok(())
     }

@@ -373,7 +373,9 @@ pub struct Summary {
     pub reached: Evaluation,
     /// Iterations (steps tried).
     pub iterations: usize,
-    /// Objective evaluations (residual passes), Jacobian passes included.
+    /// Objective evaluations (residual passes), Jacobian passes included: the engine's, from the
+    /// start's evaluation on, never more than [`crate::Options::max_evaluations`] (the
+    /// evaluation of the end point for this summary's [`Summary::reached`] is not counted).
     pub evaluations: usize,
     /// Jacobian passes.
     pub jacobian_evaluations: usize,
@@ -391,6 +393,12 @@ pub struct Summary {
     /// `None` when it did not run (a failed run, nothing free).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub stationarity: Option<Stationarity>,
+    /// The [`crate::Options`] fields set away from their defaults that this engine does not
+    /// read (by field name; `Options`' documentation says which engine reads which), so that a
+    /// setting with no effect is stated rather than silently dropped. Empty for an engine that
+    /// reads them all.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub ignored_options: Vec<String>,
 }
 
 impl Summary {
@@ -441,10 +449,24 @@ impl Summary {
             self.evaluations,
             self.time_s,
             self.termination
-        ) + &self
-            .warning()
-            .map(|w| format!("; WARNING: {w}"))
-            .unwrap_or_default()
+        ) + &self.ignored_note()
+            + &self
+                .warning()
+                .map(|w| format!("; WARNING: {w}"))
+                .unwrap_or_default()
+    }
+
+    /// `; options not read by this engine: …` when some are (see
+    /// [`Summary::ignored_options`]), else nothing.
+    fn ignored_note(&self) -> String {
+        if self.ignored_options.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; options not read by this engine: {}",
+                self.ignored_options.join(", ")
+            )
+        }
     }
 
     /// Several lines with every figure.
@@ -510,6 +532,9 @@ impl Summary {
         );
         line(&mut s, "time", format!("{:.3} s", self.time_s));
         line(&mut s, "termination", self.termination.to_string());
+        if !self.ignored_options.is_empty() {
+            line(&mut s, "options not read", self.ignored_options.join(", "));
+        }
         self.checks_report(&mut s, &line);
         s
     }

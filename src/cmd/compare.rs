@@ -8,6 +8,9 @@ use volver::comparison::{Comparison, compare};
 use volver::core::model::Model;
 use volver::solvers::{Objective, Options, Solver};
 
+/// An engine made from its name.
+type MakeNamed<'a> = dyn Fn(&str) -> Result<Box<dyn Solver>, volver::solvers::Error> + 'a;
+
 /// Options of `volver compare`.
 #[derive(Args, Debug)]
 pub struct CompareArgs {
@@ -42,6 +45,10 @@ pub struct CompareArgs {
     /// Evaluation limit of every engine.
     #[arg(long)]
     max_evaluations: Option<usize>,
+    /// The engines' own settings (TOML, sections [lm], [clarabel], [ceres], [nlopt], as
+    /// `identify --engine-settings`); not with --suite, which sets its own.
+    #[arg(long, value_name = "FILE.toml")]
+    engine_settings: Option<PathBuf>,
     /// Hold the directions the data cannot identify first (at the native LM's solution), so
     /// that the engines are compared on a well-posed problem.
     #[arg(long)]
@@ -70,11 +77,7 @@ impl CompareArgs {
 
     /// The engines asked for (every engine of the build but `skip` when none is named), each
     /// made by `make`.
-    fn engines(
-        &self,
-        skip: &[&str],
-        make: fn(&str) -> Result<Box<dyn Solver>, volver::solvers::Error>,
-    ) -> Result<Vec<Box<dyn Solver>>> {
+    fn engines(&self, skip: &[&str], make: &MakeNamed) -> Result<Vec<Box<dyn Solver>>> {
         let names: Vec<String> = if self.engines.is_empty() {
             volver::solvers::engine_names()
                 .into_iter()
@@ -104,6 +107,9 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         }
         if a.noise.is_some() {
             anyhow::bail!("--suite runs its own problems (objective ve): drop --noise");
+        }
+        if a.engine_settings.is_some() {
+            anyhow::bail!("--suite runs the engines with its own settings: drop --engine-settings");
         }
         return nist_suite(&a);
     }
@@ -144,7 +150,11 @@ pub fn compare_command(a: CompareArgs) -> Result<()> {
         ..Options::default()
     })?;
     let (noise, _) = volver::inputs::noise_rule(a.noise.as_deref(), model.machine())?;
-    let engines = a.engines(&[], volver::solvers::engine)?;
+    let settings = match &a.engine_settings {
+        Some(path) => super::identify::engine_settings(path)?,
+        None => volver::solvers::Settings::default(),
+    };
+    let engines = a.engines(&[], &|name| volver::solvers::engine_with(name, &settings))?;
     let c = compare(&model, &data, &source, &engines, &options, a.gauge, noise)?;
     if a.json {
         let v = serde_json::to_value(&c)?;
@@ -219,7 +229,7 @@ fn nist_suite(a: &CompareArgs) -> Result<()> {
     use volver::solvers::nist_suite;
     let options = a.limits(nist_suite::options())?;
     // Every engine that minimises a sum of squares; BOBYQA (derivative-free) is left out.
-    let engines = a.engines(&["nlopt-bobyqa"], nist_suite::engine)?;
+    let engines = a.engines(&["nlopt-bobyqa"], &nist_suite::engine)?;
     let names: Vec<&str> = engines.iter().map(|e| e.name()).collect();
     let datasets = volver::core::nist::all()?;
     let mut runs = Vec::new();

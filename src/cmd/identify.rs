@@ -54,10 +54,16 @@ pub struct IdentifyArgs {
     /// Evaluation limit per phase (criterion 4).
     #[arg(long)]
     max_evaluations: Option<usize>,
-    /// Native LM: bend each step by geodesic acceleration (for strongly nonlinear models; one
-    /// more Jacobian pass per step tried).
+    /// Native LM (lm, lm+clarabel): bend each step by geodesic acceleration (for strongly
+    /// nonlinear models; one more Jacobian pass per step tried). Sets `[lm]
+    /// geodesic_acceleration` over --engine-settings.
     #[arg(long)]
     geodesic_acceleration: bool,
+    /// The engines' own settings (TOML, sections [lm], [clarabel], [ceres], [nlopt]; e.g.
+    /// `[lm] threads = 2`, `[ceres] linear_solver = "dense-normal-cholesky"`): see the
+    /// README's Engines section.
+    #[arg(long, value_name = "FILE.toml")]
+    engine_settings: Option<PathBuf>,
     /// Extend the model with a candidate of `volver diagnose` before fitting (e.g. add:EAC,
     /// raise-axis:C, tracker-tilt); repeatable, applied in order.
     #[arg(long = "add", value_name = "ID")]
@@ -193,9 +199,19 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     let mut settings = Settings::default();
     settings.engine.clone_from(&a.solver);
     settings.options = options;
-    settings.lm = volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(
-        a.geodesic_acceleration,
-    );
+    if let Some(path) = &a.engine_settings {
+        settings.engines = engine_settings(path)?;
+    }
+    if a.geodesic_acceleration {
+        if !a.solver.starts_with("lm") {
+            anyhow::bail!(
+                "--geodesic-acceleration is a setting of the native LM (lm, lm+clarabel), not \
+                 of {}",
+                a.solver
+            );
+        }
+        settings.engines.lm.geodesic_acceleration = true;
+    }
     settings.priors = (!a.prior.is_empty())
         .then(|| volver::solvers::prior::Priors::parse(&a.prior))
         .transpose()?;
@@ -205,9 +221,16 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     }
     settings.subloops = a.subloops;
     settings.accept = a.accept;
-    volver::solvers::engine(&settings.engine)?;
+    volver::solvers::engine_with(&settings.engine, &settings.engines)?;
     settings.options.validate()?;
     Ok(settings)
+}
+
+/// The engines' settings from a TOML file (`--engine-settings`), validated.
+pub(super) fn engine_settings(path: &std::path::Path) -> Result<volver::solvers::Settings> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    volver::solvers::Settings::from_toml_str(&text).with_context(|| format!("{}", path.display()))
 }
 
 /// The history file this fit is appended to: `--history`, or the default beside the data.

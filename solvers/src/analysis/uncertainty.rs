@@ -559,10 +559,8 @@ pub fn monte_carlo(
 ) -> Result<MonteCarlo, crate::Error> {
     // No Newton polish of each replica: it moves a fit by ~1e-9 of its error functions, a
     // millionth of the spread measured here, and costs half of a replica's time.
-    let lm = crate::engines::lm::LevenbergMarquardt {
-        polish: false,
-        ..Default::default()
-    };
+    let mut settings = crate::Settings::default();
+    settings.lm.polish = false;
     if !(2..=MAX_REPLICAS).contains(&n) {
         return Err(crate::Error::CountOutOfRange {
             what: "Monte Carlo replicas",
@@ -571,7 +569,7 @@ pub fn monte_carlo(
             max: MAX_REPLICAS,
         });
     }
-    crate::engine_with(engine, lm)?;
+    crate::engine_with(engine, &settings)?;
     let done = std::sync::atomic::AtomicUsize::new(0);
     // What each measurement observes (its station's point, or range) by the fitted model.
     let predicted: Vec<[f64; 3]> = data
@@ -584,7 +582,7 @@ pub fn monte_carlo(
     let runs: Vec<Option<Vec<f64>>> = (0..n)
         .into_par_iter()
         .map(|r| {
-            let solver = crate::engine_with(engine, lm).ok()?;
+            let solver = crate::engine_with(engine, &settings).ok()?;
             let mut rng = Rng::new(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ (r as u64 + 1));
             let mut set = data.clone();
             for (p, x) in set.points.iter_mut().zip(&predicted) {

@@ -52,25 +52,44 @@ use volver_ceres_sys as cs;
 use volver_core::problem::{Residuals, norm};
 use volver_core::units::{TINY, UM_PER_MM};
 
-pub use cs::LinearSolver;
+pub use crate::engines::sections::{CeresSettings, LinearSolver};
 
-/// The Ceres engine.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[non_exhaustive]
+/// The Ceres engine with its settings ([`CeresSettings`]: the linear solver and the threads).
+///
+/// ```
+/// # #[cfg(feature = "ceres")] {
+/// use volver_solvers::ceres::{Ceres, CeresSettings, LinearSolver};
+/// use volver_solvers::Solver;
+/// let s = CeresSettings::default().with_threads(2).with_linear_solver(LinearSolver::DenseQr);
+/// assert_eq!(Ceres::new(s).settings().threads, 2);
+/// assert_eq!(Ceres::new(s).name(), "ceres");
+/// # }
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Ceres {
-    /// Linear solver of the trust-region step (default: dense QR, Ceres' default for dense
-    /// problems).
-    pub linear_solver: LinearSolver,
-    /// Threads evaluating residual blocks (default 1).
-    pub threads: usize,
+    settings: CeresSettings,
 }
 
-impl Default for Ceres {
-    fn default() -> Self {
-        Ceres {
-            linear_solver: LinearSolver::DenseQr,
-            threads: 1,
-        }
+impl Ceres {
+    /// The engine with `settings` (checked when it solves: a run with settings out of range
+    /// ends as invalid input naming the field; [`crate::engine_with`] refuses them before).
+    pub fn new(settings: CeresSettings) -> Ceres {
+        Ceres { settings }
+    }
+
+    /// Its settings.
+    pub fn settings(&self) -> &CeresSettings {
+        &self.settings
+    }
+}
+
+/// Ceres' linear solver for volver's.
+fn linear_solver(l: LinearSolver) -> cs::LinearSolver {
+    match l {
+        LinearSolver::DenseQr => cs::LinearSolver::DenseQr,
+        LinearSolver::DenseNormalCholesky => cs::LinearSolver::DenseNormalCholesky,
+        LinearSolver::SparseNormalCholesky => cs::LinearSolver::SparseNormalCholesky,
+        LinearSolver::Cgnr => cs::LinearSolver::Cgnr,
     }
 }
 
@@ -81,6 +100,11 @@ struct Cost<'t, 'a> {
     d: &'t [f64],
     /// Residual passes (block 0 is evaluated once per pass).
     passes: AtomicUsize,
+    /// The passes the evaluation limit leaves Ceres: a pass past them is refused (every block
+    /// fails, nothing is evaluated, nothing counted), and the run ends on the limit.
+    limit: usize,
+    /// Whether a pass was refused at the limit.
+    over: std::sync::atomic::AtomicBool,
     /// Residual blocks whose residual or Jacobian was not finite.
     nonfinite: AtomicUsize,
     /// The last pass with such a block (0: none).
@@ -95,8 +119,15 @@ impl cs::CostFunction for Cost<'_, '_> {
         residuals: &mut [f64],
         jacobian: Option<&mut [f64]>,
     ) -> bool {
-        if block == 0 {
-            self.passes.fetch_add(1, Ordering::Relaxed);
+        if block == 0 && !self.over.load(Ordering::Relaxed) {
+            if self.passes.load(Ordering::Relaxed) >= self.limit {
+                self.over.store(true, Ordering::Relaxed);
+            } else {
+                self.passes.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+        if self.over.load(Ordering::Relaxed) {
+            return false;
         }
         // p = s ∘ d in a per-thread buffer: no allocation per residual block.
         thread_local!(static P: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) });
@@ -249,7 +280,7 @@ impl Ceres {
     ) -> cs::Options {
         cs::Options {
             trust_region: cs::TrustRegion::LevenbergMarquardt,
-            linear_solver: self.linear_solver,
+            linear_solver: linear_solver(self.settings.linear_solver),
             max_iterations: options.max_iterations.saturating_sub(iterations),
             function_tolerance: continuation.tolerance(options.objective_tolerance),
             // Ceres' gradient test is absolute, in its cost (≈ n Φ or ½ n ve).
@@ -257,7 +288,7 @@ impl Ceres {
             parameter_tolerance: options.parameter_tolerance,
             // Ceres' radius is the inverse of the LM damping.
             initial_trust_region_radius: 1.0 / options.initial_damping.max(TINY),
-            threads: self.threads,
+            threads: self.settings.threads,
             jacobi_scaling: true,
         }
     }
@@ -289,13 +320,23 @@ impl Ceres {
                     progress.on_iteration(it, params)
                 }) {
                 Ok(s) => s,
+                Err(_) if progress.cost.over.load(Ordering::Relaxed) => {
+                    return Termination::EvaluationLimit;
+                }
                 Err(e) => {
                     return Termination::NumericalFailure(crate::Failure::Reported(e.to_string()));
                 }
             };
-            run.summary.iterations += summary.successful_steps + summary.unsuccessful_steps;
+            // Ceres counts its iteration 0 (the start's evaluation) as a successful step.
+            run.summary.iterations +=
+                (summary.successful_steps + summary.unsuccessful_steps).saturating_sub(1);
             run.summary.jacobian_evaluations += summary.jacobian_evaluations;
-            let t = termination_of(&summary, progress.evaluation_limit);
+            let limit = progress.evaluation_limit || progress.cost.over.load(Ordering::Relaxed);
+            let t = if progress.cost.over.load(Ordering::Relaxed) {
+                Termination::EvaluationLimit
+            } else {
+                termination_of(&summary, limit)
+            };
             if final_stage || !t.converged() {
                 return t;
             }
@@ -363,6 +404,9 @@ impl Solver for Ceres {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
+        if let Err(e) = self.settings.validate() {
+            return run.finish(p0, Termination::InvalidInput(crate::Invalid::Refused(e)));
+        }
         let problem = &*task.problem;
         let np = problem.n_points();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
@@ -379,6 +423,10 @@ impl Solver for Ceres {
             problem,
             d,
             passes: AtomicUsize::new(0),
+            limit: options
+                .max_evaluations
+                .saturating_sub(run.summary.evaluations),
+            over: std::sync::atomic::AtomicBool::new(false),
             nonfinite: AtomicUsize::new(0),
             nonfinite_pass: AtomicUsize::new(0),
         };

@@ -36,7 +36,7 @@
 //! let problem = Problem::new(&model, &data).unwrap();
 //! let task = Task::new(problem);
 //! let lm = LevenbergMarquardt::default().solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
-//! let socp = ProxLinear.solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
+//! let socp = ProxLinear::default().solve(&task, &model.initial_params(), &Options::default(), &mut Silent);
 //! assert!(!socp.summary.termination.failed(), "{}", socp.summary.termination);
 //! // The SOCP reaches Φ's optimum exactly; the LM's IRLS stops at or above it.
 //! let (a, b) = (lm.summary.reached.phi_mm, socp.summary.reached.phi_mm);
@@ -56,13 +56,57 @@ use faer::Mat;
 use volver_core::problem::norm;
 use volver_core::units::{TINY, UM_PER_MM};
 
-/// The prox-linear engine (`clarabel`).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct ProxLinear;
+pub use crate::engines::sections::ClarabelSettings;
 
-/// The native LM followed by a prox-linear polish (`lm+clarabel`).
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Polished;
+/// The prox-linear engine (`clarabel`) with its settings ([`ClarabelSettings`]).
+///
+/// ```
+/// use volver_solvers::clarabel::{ClarabelSettings, ProxLinear};
+/// let e = ProxLinear::new(ClarabelSettings::default().with_socp_max_iterations(50));
+/// assert_eq!(e.settings().socp_max_iterations, 50);
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ProxLinear {
+    settings: ClarabelSettings,
+}
+
+impl ProxLinear {
+    /// The engine with `settings` (checked when it solves: a run with settings out of range
+    /// ends as invalid input naming the field; [`crate::engine_with`] refuses them before).
+    pub fn new(settings: ClarabelSettings) -> ProxLinear {
+        ProxLinear { settings }
+    }
+
+    /// Its settings.
+    pub fn settings(&self) -> &ClarabelSettings {
+        &self.settings
+    }
+}
+
+/// The native LM followed by a prox-linear polish (`lm+clarabel`), each with its settings.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Polished {
+    lm: LevenbergMarquardt,
+    polish: ProxLinear,
+}
+
+impl Polished {
+    /// The LM with `lm`, its polish with `clarabel`.
+    pub fn new(lm: LevenbergMarquardt, clarabel: ClarabelSettings) -> Polished {
+        Polished {
+            lm,
+            polish: ProxLinear::new(clarabel),
+        }
+    }
+}
+
+/// The [`Options`] fields the prox-linear engine does not read: its sub-problem keeps Φ's
+/// norm exact (no smoothing ε) and it has no gradient test.
+const UNREAD: [&str; 3] = [
+    "gradient_tolerance",
+    "irls_initial_epsilon",
+    "irls_final_epsilon",
+];
 
 /// Residuals and the Jacobian in the free coordinates at one point.
 struct Linearisation {
@@ -121,13 +165,13 @@ struct Subproblem {
 }
 
 /// Clarabel's settings for the sub-problems.
-fn settings() -> Result<::clarabel::solver::DefaultSettings<f64>, String> {
+fn settings(s: &ClarabelSettings) -> Result<::clarabel::solver::DefaultSettings<f64>, String> {
     DefaultSettingsBuilder::default()
         .verbose(false)
-        .max_iter(200)
-        .tol_gap_abs(1e-10)
-        .tol_gap_rel(1e-10)
-        .tol_feas(1e-10)
+        .max_iter(s.socp_max_iterations)
+        .tol_gap_abs(s.tol_gap_abs)
+        .tol_gap_rel(s.tol_gap_rel)
+        .tol_feas(s.tol_feas)
         .build()
         .map_err(|e| format!("Clarabel settings: {e:?}"))
 }
@@ -138,8 +182,9 @@ fn step(
     lin: &Linearisation,
     k: usize,
     sub: &Subproblem,
+    clarabel: &ClarabelSettings,
 ) -> Result<Vec<f64>, String> {
-    let settings = settings()?;
+    let settings = settings(clarabel)?;
     let program = if objective.loss() == Objective::Ve {
         ve_program(lin, k, sub)
     } else {
@@ -300,10 +345,6 @@ const MU_FLOOR: f64 = 1e-12;
 /// μ past which a sub-problem Clarabel cannot solve ends the run.
 const MU_MAX: f64 = 1e20;
 
-/// A step is accepted when the objective falls by more than this share of the model's
-/// predicted decrease (the gain ratio ρ).
-const ACCEPTANCE: f64 = 1e-4;
-
 /// What follows a trial.
 enum Next {
     /// Accepted: linearise at the new point.
@@ -320,6 +361,7 @@ enum Next {
 struct Prox<'c, 'a, 'o> {
     task: &'c Task<'a>,
     options: &'o Options,
+    settings: &'o ClarabelSettings,
     free: crate::engines::coordinates::Free,
     p: Vec<f64>,
     z: Vec<f64>,
@@ -381,7 +423,7 @@ impl Prox<'_, '_, '_> {
             run.nonfinite_trial();
         }
         let rho = (self.cost - cost_new) / pred;
-        let accepted = rho > ACCEPTANCE;
+        let accepted = rho > self.settings.acceptance;
         if accepted {
             run.improved();
         }
@@ -457,7 +499,7 @@ impl Prox<'_, '_, '_> {
                 radius: self.radius,
                 scale: self.cost,
             };
-            let next = match step(options.objective, lin, k, &sub) {
+            let next = match step(options.objective, lin, k, &sub, self.settings) {
                 Ok(delta) => self.trial(lin, &delta, run, observer),
                 Err(_) if self.after_failure() => Next::Retry,
                 Err(e) => Next::Stop(Termination::NumericalFailure(crate::Failure::Reported(e))),
@@ -483,6 +525,21 @@ impl Solver for ProxLinear {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
+        let mut solution = self.solve_here(task, start, options, observer);
+        solution.summary.ignored_options = crate::engines::sections::ignored(options, &UNREAD);
+        solution
+    }
+}
+
+impl ProxLinear {
+    /// [`Solver::solve`], but for the options it does not read.
+    fn solve_here(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
         let Started {
             mut run,
             free,
@@ -493,6 +550,9 @@ impl Solver for ProxLinear {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
+        if let Err(e) = self.settings.validate() {
+            return run.finish(p0, Termination::InvalidInput(crate::Invalid::Refused(e)));
+        }
         let np = task.problem.n_points();
         let cost = objective_value(options.objective, &norms0);
         let ve0 = norms0.iter().map(|r| r * r).sum::<f64>() / np as f64;
@@ -503,6 +563,7 @@ impl Solver for ProxLinear {
         let mut prox = Prox {
             task,
             options,
+            settings: &self.settings,
             z: vec![0.0; free.n_free()],
             free,
             p: p0,
@@ -533,6 +594,10 @@ impl Solver for ProxLinear {
     }
 }
 
+/// The fewest evaluations a polish of `lm+clarabel` is started with: the start's residuals
+/// and Jacobian, a linearisation and a trial.
+const POLISH_EVALUATIONS: usize = 4;
+
 impl Solver for Polished {
     fn name(&self) -> &'static str {
         "lm+clarabel"
@@ -545,13 +610,29 @@ impl Solver for Polished {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
-        let first = LevenbergMarquardt::default().solve(task, start, options, observer);
-        if first.summary.termination.failed() {
+        let first = self.lm.solve(task, start, options, observer);
+        // The polish gets what the LM left of the limits; none when the LM failed, or left too
+        // little for a sub-problem (the start's residuals and Jacobian, a
+        // linearisation and a trial).
+        let left = Options {
+            max_iterations: options
+                .max_iterations
+                .saturating_sub(first.summary.iterations),
+            max_evaluations: options
+                .max_evaluations
+                .saturating_sub(first.summary.evaluations),
+            ..options.clone()
+        };
+        if first.summary.termination.failed()
+            || left.max_iterations == 0
+            || left.max_evaluations < POLISH_EVALUATIONS
+        {
             let mut s = first;
             s.summary.solver = self.name().to_string();
             return s;
         }
-        let mut second = ProxLinear.solve(task, &first.params, options, observer);
+        let mut second = self.polish.solve(task, &first.params, &left, observer);
+        second.summary.ignored_options.clear();
         let s = &mut second.summary;
         s.solver = self.name().to_string();
         s.initial = first.summary.initial;

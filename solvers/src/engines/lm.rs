@@ -100,6 +100,7 @@ pub(crate) mod irls;
 mod restrict;
 #[cfg(test)]
 mod tests;
+mod threads;
 
 use crate::engines::coordinates::Free;
 use crate::engines::kernels::{
@@ -135,7 +136,8 @@ const ACCEPTANCE: f64 = 1e-4;
 /// lm.geodesic_acceleration = true;
 /// assert_eq!(lm, LevenbergMarquardt::with_geodesic_acceleration(true));
 /// ```
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields, default)]
 #[non_exhaustive]
 pub struct LevenbergMarquardt {
     /// Directions of the scaled, unweighted normal matrix (the design; not the IRLS-weighted
@@ -163,6 +165,12 @@ pub struct LevenbergMarquardt {
     /// vertex of its L1 optimum whatever this says: that finish is how it converges, and it is
     /// faster than the continuation it replaces (see the module documentation).
     pub polish: bool,
+    /// Threads of the solve's passes: `Some(n)` runs the solve on a rayon pool of `n` threads
+    /// of its own (1 … [`crate::settings::MAX_THREADS`]), built for the solve and dropped after
+    /// it; `None` uses rayon's global pool (`RAYON_NUM_THREADS`, else one thread per core).
+    /// The result does not depend on it, to the bit: each pass reduces its blocks in a tree of
+    /// fixed shape. Default `None`.
+    pub threads: Option<usize>,
 }
 
 impl Default for LevenbergMarquardt {
@@ -171,6 +179,7 @@ impl Default for LevenbergMarquardt {
             rank_tolerance: crate::nullspace::RANK_TOLERANCE,
             geodesic_acceleration: false,
             polish: true,
+            threads: None,
         }
     }
 }
@@ -334,6 +343,22 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
         self.norms.len()
     }
 
+    /// The evaluations a trial step takes: its residuals, and with geodesic acceleration the
+    /// second-derivative pass.
+    fn trial_evaluations(&self) -> usize {
+        1 + usize::from(self.settings.geodesic_acceleration)
+    }
+
+    /// Whether the limits leave room for the worst case of a finish after convergence (the Φ
+    /// polish, the vertex of an L1 fit: [`crate::engines::polish::FINISH_EVALUATIONS`] and
+    /// [`crate::engines::polish::FINISH_STEPS`]); without it the finish is skipped, so that the
+    /// counts stay within the limits.
+    fn room_to_finish(&self) -> bool {
+        let s = &self.run.summary;
+        s.evaluations + crate::engines::polish::FINISH_EVALUATIONS <= self.options.max_evaluations
+            && s.iterations + crate::engines::polish::FINISH_STEPS <= self.options.max_iterations
+    }
+
     /// Φ at the current point (mm).
     fn phi(&self) -> f64 {
         self.norms.iter().sum::<f64>() / self.np() as f64
@@ -413,7 +438,10 @@ impl<'t, 'a, 'o> Lm<'t, 'a, 'o> {
     /// decomposed.
     fn jacobian_pass(&mut self) -> Result<crate::engines::kernels::Normal, Termination> {
         let iterations = self.run.summary.iterations;
-        if self.run.summary.evaluations >= self.options.max_evaluations {
+        // A pass is worth its evaluation only with room for a trial after it.
+        if self.run.summary.evaluations + 1 + self.trial_evaluations()
+            > self.options.max_evaluations
+        {
             return Err(Termination::EvaluationLimit);
         }
         let decomposition_failed = |at| {
@@ -754,22 +782,36 @@ impl Solver for LevenbergMarquardt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
+        // Invalid settings are refused by the solve itself, after the start's evaluation.
+        if let Some(threads) = self.threads.filter(|_| self.validate().is_ok()) {
+            let on_pool = threads::on_threads(threads, observer, |observer| {
+                self.solve_here(task, start, options, observer)
+            });
+            // A pool the system refuses: the caller's threads give the same bits.
+            if let Some(solution) = on_pool {
+                return solution;
+            }
+        }
+        self.solve_here(task, start, options, observer)
+    }
+}
+
+impl LevenbergMarquardt {
+    /// [`Solver::solve`] on the calling thread's rayon pool.
+    fn solve_here(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
         let begun = match begin(self.name(), task, start, options) {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
-        if !(self.rank_tolerance.is_finite() && self.rank_tolerance >= 0.0) {
-            return begun.run.finish(
-                begun.p0,
-                Termination::InvalidInput(crate::Invalid::Refused(
-                    crate::Error::SettingOutOfRange {
-                        engine: "lm",
-                        field: "rank_tolerance",
-                        value: self.rank_tolerance,
-                        expected: "≥ 0",
-                    },
-                )),
-            );
+        if let Err(e) = self.validate() {
+            let t = Termination::InvalidInput(crate::Invalid::Refused(e));
+            return begun.run.finish(begun.p0, t);
         }
         let mut lm = Lm::new(begun, task, options, *self);
         let termination = 'passes: loop {
@@ -788,7 +830,7 @@ impl Solver for LevenbergMarquardt {
                 if summary.iterations >= options.max_iterations {
                     break 'passes Termination::IterationLimit;
                 }
-                if summary.iterations > 0 && summary.evaluations >= options.max_evaluations {
+                if summary.evaluations + lm.trial_evaluations() > options.max_evaluations {
                     break 'passes Termination::EvaluationLimit;
                 }
                 lm.run.summary.iterations += 1;

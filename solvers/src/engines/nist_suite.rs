@@ -25,9 +25,14 @@ pub fn lm() -> crate::engines::lm::LevenbergMarquardt {
     }
 }
 
-/// The engine `name` as the suite runs it: the native LM of [`lm`], the others as built.
+/// The engine `name` as the suite runs it: the native LM of [`lm`] (also the first stage of
+/// `lm+clarabel`), the others with their default settings.
 pub fn engine(name: &str) -> Result<Box<dyn Solver>, crate::Error> {
-    crate::engine_with(name, lm())
+    let settings = super::sections::Settings {
+        lm: lm(),
+        ..Default::default()
+    };
+    crate::engine_with(name, &settings)
 }
 
 /// The options of the suite: least squares (ve), tolerances at the limit of double precision,

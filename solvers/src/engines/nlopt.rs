@@ -68,20 +68,51 @@ pub enum Algorithm {
     Bobyqa,
 }
 
-/// The NLopt engine with one algorithm.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub use crate::engines::sections::NloptSettings;
+
+/// The NLopt engine with one algorithm and its settings ([`NloptSettings`]).
+///
+/// ```
+/// # #[cfg(feature = "nlopt")] {
+/// use volver_solvers::nlopt::{Algorithm, Nlopt, NloptSettings};
+/// use volver_solvers::Solver;
+/// let e = Nlopt::with_settings(Algorithm::Bobyqa, NloptSettings::default().with_max_restarts(2));
+/// assert_eq!((e.name(), e.settings().max_restarts), ("nlopt-bobyqa", 2));
+/// # }
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
 #[non_exhaustive]
 pub struct Nlopt {
     /// The algorithm.
     pub algorithm: Algorithm,
+    settings: NloptSettings,
 }
 
 impl Nlopt {
-    /// The engine running `algorithm`.
+    /// The engine running `algorithm` with the default settings.
     pub fn new(algorithm: Algorithm) -> Nlopt {
-        Nlopt { algorithm }
+        Nlopt::with_settings(algorithm, NloptSettings::default())
+    }
+
+    /// The engine running `algorithm` with `settings` (checked when it solves: a run with
+    /// settings out of range ends as invalid input naming the field; [`crate::engine_with`]
+    /// refuses them before).
+    pub fn with_settings(algorithm: Algorithm, settings: NloptSettings) -> Nlopt {
+        Nlopt {
+            algorithm,
+            settings,
+        }
+    }
+
+    /// Its settings.
+    pub fn settings(&self) -> &NloptSettings {
+        &self.settings
     }
 }
+
+/// The [`Options`] fields NLopt does not read: it counts no iterations (the summary's are its
+/// objective calls), has no damping, and its gradient tests are its own.
+const UNREAD: [&str; 3] = ["max_iterations", "gradient_tolerance", "initial_damping"];
 
 /// What the objective callback tracks between calls.
 struct State<'o> {
@@ -91,6 +122,11 @@ struct State<'o> {
     /// internal tests (L-BFGS' gradient norm) stay meaningful as the cost falls by decades.
     scale: f64,
     calls: usize,
+    /// The calls allowed (the evaluation limit's share), and whether one past it was refused.
+    limit: usize,
+    refused: bool,
+    /// Residual passes of volver's own between NLopt's solves (a stage's cost and Φ).
+    passes: usize,
     gradients: usize,
     best: f64,
     nonfinite: Option<String>,
@@ -142,6 +178,21 @@ impl Solver for Nlopt {
         options: &Options,
         observer: &mut dyn Observer,
     ) -> Solution {
+        let mut solution = self.solve_here(task, start, options, observer);
+        solution.summary.ignored_options = crate::engines::sections::ignored(options, &UNREAD);
+        solution
+    }
+}
+
+impl Nlopt {
+    /// [`Solver::solve`], but for the options it does not read.
+    fn solve_here(
+        &self,
+        task: &Task,
+        start: &[f64],
+        options: &Options,
+        observer: &mut dyn Observer,
+    ) -> Solution {
         let Started {
             mut run,
             free,
@@ -152,6 +203,9 @@ impl Solver for Nlopt {
             Ok(b) => b,
             Err(solution) => return *solution,
         };
+        if let Err(e) = self.settings.validate() {
+            return run.finish(p0, Termination::InvalidInput(crate::Invalid::Refused(e)));
+        }
         let problem = &*task.problem;
         let np = problem.n_points();
         let phi0 = norms0.iter().sum::<f64>() / np as f64;
@@ -168,6 +222,9 @@ impl Solver for Nlopt {
                 eps: Continuation::new(options, phi0).eps(),
                 scale: 1.0,
                 calls: 0,
+                limit: 0,
+                refused: false,
+                passes: 0,
                 gradients: 0,
                 best: f64::INFINITY,
                 nonfinite: None,
@@ -181,7 +238,7 @@ impl Solver for Nlopt {
         let termination = self.stages(&callback, &mut x, options, (&rows, base, phi0));
         let st = callback.state.into_inner();
         run.summary.iterations = st.calls;
-        run.summary.evaluations = base + st.calls;
+        run.summary.evaluations = base + st.calls + st.passes;
         run.summary.jacobian_evaluations += st.gradients;
         run.edge = st.edge.shifted(base);
         let p = vars.params(&x);
@@ -247,11 +304,39 @@ struct Callback<'f, 'a, 'o> {
 }
 
 impl Callback<'_, '_, '_> {
+    /// NLopt sees the cost divided by `cost` (a stage's first), 1 when it is not positive.
+    fn rescale(&self, cost: f64) {
+        self.state.borrow_mut().scale = if cost.is_finite() && cost > 0.0 {
+            cost
+        } else {
+            1.0
+        };
+    }
+
+    /// The next solve may make `remaining` calls.
+    fn allow(&self, remaining: usize) {
+        let mut st = self.state.borrow_mut();
+        st.limit = st.calls + remaining;
+    }
+
+    /// The next stage of the continuation, with smoothing `eps` (mm).
+    fn next_stage(&self, eps: f64) {
+        let mut st = self.state.borrow_mut();
+        st.eps = eps;
+        st.best = f64::INFINITY;
+    }
+
     /// One call from NLopt; NaN (a refused point) when the model is not finite there or a
     /// panic unwinds from it (it must not cross the C library).
     fn call(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
         let result = catch_unwind(AssertUnwindSafe(|| {
             let mut st = self.state.borrow_mut();
+            if st.calls >= st.limit {
+                // Past the evaluation limit (NLopt's own test comes late in some algorithms):
+                // refused, nothing evaluated, and the solve ends on the limit.
+                st.refused = true;
+                return f64::NAN;
+            }
             st.calls += 1;
             let p = self.vars.params(x);
             let value = self.value(&mut st, &p, grad);
@@ -342,13 +427,6 @@ struct Setup<'r> {
     rows: &'r [(Vec<f64>, f64)],
 }
 
-/// Free coordinates are scaled: a unit moves the residuals by ~1 mm; BOBYQA's first trust
-/// region is a thousandth of that.
-const BOBYQA_INITIAL_STEP: f64 = 1e-3;
-
-/// Relative tolerance of SLSQP's equality constraints (of 1 + |b|).
-const EQUALITY_TOLERANCE: f64 = 1e-12;
-
 impl Nlopt {
     /// NLopt's algorithm.
     fn nl_algorithm(&self) -> nl::Algorithm {
@@ -377,7 +455,7 @@ impl Nlopt {
             let n = rows[0].0.len();
             let tol: Vec<f64> = rows
                 .iter()
-                .map(|(_, c)| EQUALITY_TOLERANCE * (1.0 + c.abs()))
+                .map(|(_, c)| self.settings.equality_tolerance * (1.0 + c.abs()))
                 .collect();
             opt.add_equality_mconstraint(
                 m,
@@ -398,7 +476,11 @@ impl Nlopt {
             )?;
         }
         if self.algorithm == Algorithm::Bobyqa {
-            opt.set_initial_step1(BOBYQA_INITIAL_STEP)?;
+            // Free coordinates are scaled: a unit moves the residuals by ~1 mm.
+            opt.set_initial_step1(self.settings.initial_step)?;
+        }
+        if self.algorithm == Algorithm::Lbfgs && self.settings.vector_storage.is_some() {
+            opt.set_vector_storage(self.settings.vector_storage)?;
         }
         Ok(nl::SuccessState::Success)
     }
@@ -421,7 +503,12 @@ impl Nlopt {
         }
         let result = opt.optimize(x);
         drop(opt);
-        let t = termination_of(&result);
+        let refused = std::mem::take(&mut callback.state.borrow_mut().refused);
+        let t = if refused {
+            Termination::EvaluationLimit
+        } else {
+            termination_of(&result)
+        };
         // A non-finite trial point is a rejected evaluation, not the end: the run fails
         // only if NLopt itself gives up on it (its result is then kept only if finite).
         let nonfinite = callback.state.borrow_mut().nonfinite.take();
@@ -434,8 +521,10 @@ impl Nlopt {
     }
 
     /// The solves of the ε-continuation from `x` (moved to the end) until the last converges
-    /// (restarted, rescaled, while a solve still halves the cost) or one fails; `base`: the
-    /// run's evaluations before the first.
+    /// (restarted, rescaled, while a solve still halves the cost, at most
+    /// [`NloptSettings::max_restarts`] times) or one fails; `base`: the run's evaluations before
+    /// the first. The residual passes between the solves (a stage's cost, Φ) count as
+    /// evaluations, within the limit.
     fn stages(
         &self,
         callback: &Callback,
@@ -445,22 +534,34 @@ impl Nlopt {
     ) -> Termination {
         let (problem, objective) = (callback.problem, callback.objective);
         let np = problem.n_points();
-        let cost_at = |x: &[f64], eps: f64| {
-            norms(problem, &callback.vars.params(x)).map(|v| cost_of(objective, &v, eps))
+        let spent = || {
+            let st = callback.state.borrow();
+            base + st.calls + st.passes
+        };
+        // The residual modules at x, a pass counted; `None` past the limit.
+        let norms_at = |x: &[f64]| -> Option<Option<Vec<f64>>> {
+            if spent() >= options.max_evaluations {
+                return None;
+            }
+            callback.state.borrow_mut().passes += 1;
+            Some(norms(problem, &callback.vars.params(x)))
         };
         let mut continuation = Continuation::new(options, phi0_mm);
         let mut restarts = 0;
+        // The modules at x when known (the start's, or the last pass's).
+        let mut known: Option<Option<Vec<f64>>> = None;
         loop {
             let eps = continuation.eps();
-            let stage_cost = cost_at(x, eps).unwrap_or(f64::NAN);
-            callback.state.borrow_mut().scale = if stage_cost.is_finite() && stage_cost > 0.0 {
-                stage_cost
-            } else {
-                1.0
+            let Some(at_x) = known.take().or_else(|| norms_at(x)) else {
+                return Termination::EvaluationLimit;
             };
+            let stage_cost = at_x
+                .as_ref()
+                .map(|v| cost_of(objective, v, eps))
+                .unwrap_or(f64::NAN);
+            callback.rescale(stage_cost);
             let final_stage = continuation.is_final();
-            let used = callback.state.borrow().calls;
-            let remaining = options.max_evaluations.saturating_sub(base + used);
+            let remaining = options.max_evaluations.saturating_sub(spent());
             if remaining == 0 {
                 return Termination::EvaluationLimit;
             }
@@ -469,31 +570,37 @@ impl Nlopt {
                 remaining,
                 rows,
             };
+            callback.allow(remaining);
             let t = self.solve_once(callback, x, options, &setup);
             let settled = t.converged() || matches!(t, Termination::Stalled(_));
-            if final_stage && settled && restarts < MAX_RESTARTS {
+            if final_stage || !settled {
+                if !(final_stage && settled && restarts < self.settings.max_restarts) {
+                    return t;
+                }
                 // A run that still lowered the cost by half restarts, rescaled: L-BFGS's
                 // internal tests are absolute and stop early on exact fits.
-                let now = cost_at(x, eps).unwrap_or(f64::NAN);
-                if now < 0.5 * stage_cost {
-                    restarts += 1;
-                    callback.state.borrow_mut().best = f64::INFINITY;
-                    continue;
+                let Some(now) = norms_at(x) else {
+                    return t;
+                };
+                let now_cost = now.as_ref().map(|v| cost_of(objective, v, eps));
+                if !now_cost.is_some_and(|c| c < 0.5 * stage_cost) {
+                    return t;
                 }
+                restarts += 1;
+                known = Some(now);
+                callback.state.borrow_mut().best = f64::INFINITY;
+                continue;
             }
-            if final_stage || !settled {
-                return t;
-            }
-            let phi = norms(problem, &callback.vars.params(x))
+            let Some(now) = norms_at(x) else {
+                return Termination::EvaluationLimit;
+            };
+            let phi = now
+                .as_ref()
                 .map(|v| v.iter().sum::<f64>() / np as f64)
                 .unwrap_or(phi0_mm);
+            known = Some(now);
             continuation.shrink(phi);
-            let mut st = callback.state.borrow_mut();
-            st.eps = continuation.eps();
-            st.best = f64::INFINITY;
+            callback.next_stage(continuation.eps());
         }
     }
 }
-
-/// Restarts of the last solve, at most, while each still halves the cost.
-const MAX_RESTARTS: usize = 10;

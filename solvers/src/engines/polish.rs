@@ -77,6 +77,15 @@ pub enum Unsettled {
 /// Newton steps allowed to [`settle`].
 const SETTLE_STEPS: usize = 40;
 
+/// The most steps of [`settle`] (and of the vertex of an L1 fit, whose linear programmes are
+/// as many).
+pub(crate) const FINISH_STEPS: usize = SETTLE_STEPS;
+
+/// The most evaluations [`settle`] counts from a given scaling (its start's residuals, then per
+/// step a Jacobian pass, a cut-back and the line search's [`HALVINGS`]), which also bounds the
+/// vertex of an L1 fit (a Jacobian pass and at most [`HALVINGS`] passes per programme).
+pub(crate) const FINISH_EVALUATIONS: usize = 1 + SETTLE_STEPS * (HALVINGS + 2);
+
 /// [`settle`] stops after this many Newton steps in a row find no decrement smaller than the
 /// best seen.
 const STALE_STEPS: usize = 2;

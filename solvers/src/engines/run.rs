@@ -145,6 +145,7 @@ impl<'t, 'a> Run<'t, 'a> {
                 termination: Termination::NoFreeParameters,
                 polished: false,
                 stationarity: None,
+                ignored_options: Vec::new(),
             },
             edge: FiniteEdge::default(),
             t0: Instant::now(),
@@ -233,8 +234,8 @@ impl<'t, 'a> Run<'t, 'a> {
     pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
         // A start of the wrong length cannot be evaluated: it ends as invalid input.
         if params.len() == self.problem.n_params() {
+            // The report's evaluation, not the engine's: not counted against the limit.
             self.summary.reached = evaluate(self.problem, &params);
-            self.summary.evaluations += 1;
         } else {
             self.summary.reached.phi_mm = f64::NAN;
             self.summary.reached.ve_mm2 = f64::NAN;

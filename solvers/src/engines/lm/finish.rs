@@ -69,6 +69,9 @@ impl Lm<'_, '_, '_> {
 impl Lm<'_, '_, '_> {
     /// Φ: Newton polish of the converged point ([`crate::engines::polish::settle`]).
     pub(super) fn polish(&mut self, task: &Task) {
+        if !self.room_to_finish() {
+            return;
+        }
         if let Ok((q, report)) = crate::engines::polish::settle_scaled(
             task,
             &self.p,
@@ -91,7 +94,7 @@ impl Lm<'_, '_, '_> {
     /// moved there, the fit polished), `false` (nothing changed) when the fit is not one, holds
     /// unidentifiable directions, or the finish did not reach a vertex.
     pub(super) fn vertex_finish(&mut self) -> bool {
-        if !self.l1 || self.run.summary.unidentifiable != 0 {
+        if !self.l1 || self.run.summary.unidentifiable != 0 || !self.room_to_finish() {
             return false;
         }
         let outcome = crate::engines::polish::vertex(self.problem, &self.free, self.p.clone());
