@@ -139,18 +139,21 @@ pub fn settle(
     objective: Objective,
     irls_final_epsilon: f64,
 ) -> Result<(Vec<f64>, Settled), Unsettled> {
-    settle_scaled(task, p, None, objective, irls_final_epsilon)
+    settle_scaled(task, p, None, objective, irls_final_epsilon, None)
 }
 
 /// [`settle`] in the column scaling `scale` when the caller has one for this task (the native
 /// LM's, from its start: the Jacobi scaling need not be fresh, and it saves a pass); else the
-/// scaling from the Jacobian at `p`.
+/// scaling from the Jacobian at `p`. With `budget` (steps, evaluations with the Jacobian
+/// passes), the Newton steps stop before one could overrun it (each step takes at most
+/// [`HALVINGS`] + 2 evaluations): an engine's limits then hold however far it has gone.
 pub(crate) fn settle_scaled(
     task: &Task,
     p: &[f64],
     scale: Option<&[f64]>,
     objective: Objective,
     irls_final_epsilon: f64,
+    budget: Option<(usize, usize)>,
 ) -> Result<(Vec<f64>, Settled), Unsettled> {
     let free = free_coordinates(task, p, scale)?;
     if objective.loss() == Objective::Phi && free.n_free() > 0 && l1::all_scalar(&*task.problem) {
@@ -166,7 +169,12 @@ pub(crate) fn settle_scaled(
         return Ok((settle.x, settle.report));
     }
     settle.report.stop = SettleStop::StepLimit;
-    for _ in 0..SETTLE_STEPS {
+    let (steps, evaluations) = budget.unwrap_or((SETTLE_STEPS, usize::MAX));
+    for _ in 0..SETTLE_STEPS.min(steps) {
+        let used = settle.report.evaluations + settle.report.jacobian_evaluations;
+        if used.saturating_add(HALVINGS + 2) > evaluations {
+            break;
+        }
         if let Some(stop) = settle.step()? {
             settle.report.stop = stop;
             break;

@@ -69,7 +69,16 @@ impl Lm<'_, '_, '_> {
 impl Lm<'_, '_, '_> {
     /// Φ: Newton polish of the converged point ([`crate::engines::polish::settle`]).
     pub(super) fn polish(&mut self, task: &Task) {
-        if !self.room_to_finish() {
+        // The vertex of an L1 fit needs its worst case; Newton steps stop within what is left.
+        let vertex = self.objective == crate::Objective::Phi
+            && crate::engines::polish::all_scalar(&*task.problem);
+        let s = &self.run.summary;
+        let left = (
+            self.options.max_iterations.saturating_sub(s.iterations),
+            self.options.max_evaluations.saturating_sub(s.evaluations),
+        );
+        // A start (a Jacobian pass and an evaluation) and one full step, or nothing.
+        if (vertex && !self.room_to_finish()) || left.0 == 0 || left.1 < 36 {
             return;
         }
         if let Ok((q, report)) = crate::engines::polish::settle_scaled(
@@ -78,6 +87,7 @@ impl Lm<'_, '_, '_> {
             Some(&self.free.d),
             self.objective,
             self.options.irls_final_epsilon,
+            (!vertex).then_some(left),
         ) {
             self.run.summary.iterations += report.steps;
             self.run.summary.jacobian_evaluations += report.jacobian_evaluations;
