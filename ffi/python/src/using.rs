@@ -313,7 +313,7 @@ fn tables<'py>(
 
 /// `volver plan --json`: an optimal test of `points` measurements for the machine and model
 /// (criterion i, v or d), its report as a dict and `commands` (N × axes, mm and degrees) and
-/// `reflectors` in measuring order; with `out`, the plan file (CSV) written as `--out` writes it.
+/// `reflector_ids` in measuring order; with `out`, the plan file (CSV) written as `--out` writes it.
 #[pyfunction]
 #[pyo3(signature = (machine=None, model=None, *, points=1040, criterion="i".to_string(), noise=None, tool_offset_mm=None, per_axis=None, repeats=8, seed=1, out=None))]
 #[allow(clippy::too_many_arguments)]
@@ -382,6 +382,6 @@ fn plan<'py>(
         .iter()
         .map(|s| m.reflectors()[s.reflector].id.as_str())
         .collect();
-    result.set_item("reflectors", ids)?;
+    result.set_item("reflector_ids", ids)?;
     Ok(result)
 }

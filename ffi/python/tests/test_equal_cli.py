@@ -103,7 +103,7 @@ def test_compensate_points_equals_the_cli(fit, tmp_path):
     results, _ = fit
     commands = np.array([[100.0, 30.0, 50.0], [700.0, 200.0, 300.0], [1300.0, 330.0, 550.0]])
     points = tmp_path / "points.csv"
-    points.write_text("X,C,Z\n" + "".join(f"{x!r},{c!r},{z!r}\n" for x, c, z in commands))
+    points.write_text("X,C,Z\n" + "".join(f"{x!r},{c!r},{z!r}\n" for x, c, z in commands.tolist()))
     out = tmp_path / "corrected.csv"
     run_cli("compensate", "--results", results, "--points", points, "--out", out)
     python = volver.compensate_points(results, commands)

@@ -30,11 +30,11 @@ def test_a_bad_cell_names_its_file_line_and_column(demo, tmp_path):
 def test_a_bad_machine_file_names_its_line(demo, tmp_path):
     folder, _ = demo
     text = (folder / "machine.toml").read_text().splitlines()
-    k = next(i for i, line in enumerate(text) if line.strip().startswith("min"))
-    text[k] = "min = \"low\""
+    k = text.index("range = [0.0, 1400.0]")
+    text[k] = 'range = "wide"'
     bad = tmp_path / "machine.toml"
     bad.write_text("\n".join(text) + "\n")
-    with pytest.raises(volver.InputError) as caught:
+    with pytest.raises(volver.InputError, match="expected an array") as caught:
         volver.describe(bad, tmp_path / "model.toml")
     e = caught.value
     assert e.file.endswith("machine.toml")
