@@ -175,7 +175,11 @@ pub fn to_py(py: Python<'_>, e: Error) -> PyErr {
         }
         Error::Request(_) => (py.get_type::<RequestError>(), "Request", Where::default()),
         Error::Mismatch(_) => (py.get_type::<MismatchError>(), "Mismatch", Where::default()),
-        Error::NotSolved(_) => (py.get_type::<NotSolvedError>(), "NotSolved", Where::default()),
+        Error::NotSolved(_) => (
+            py.get_type::<NotSolvedError>(),
+            "NotSolved",
+            Where::default(),
+        ),
         Error::Singular(_) => (py.get_type::<SingularError>(), "Singular", Where::default()),
         Error::Implausible(_) => (
             py.get_type::<ImplausibleError>(),

@@ -76,8 +76,9 @@ fn settings(r: &IdentifyRequest) -> volver::Result<Settings> {
     let mut settings = Settings::default();
     settings.engine.clone_from(&r.engine);
     settings.options = options;
-    settings.lm =
-        volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(r.geodesic_acceleration);
+    settings.lm = volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(
+        r.geodesic_acceleration,
+    );
     settings.priors = (!r.priors.is_empty())
         .then(|| Priors::parse(&r.priors))
         .transpose()?;
@@ -103,12 +104,8 @@ fn run_identify(
     let mut settings = settings(r)?;
     let (noise_model, noise_used) = volver::inputs::noise_rule(r.noise.as_deref(), &machine)?;
     settings.noise = noise_model;
-    let outcome = volver::identification::identify(
-        &model,
-        &data,
-        &settings,
-        &mut volver::solvers::Silent,
-    )?;
+    let outcome =
+        volver::identification::identify(&model, &data, &settings, &mut volver::solvers::Silent)?;
     if let Some(out) = &r.out
         && outcome.refusal.is_none()
     {

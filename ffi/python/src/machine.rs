@@ -106,7 +106,11 @@ fn measurements(
         .map(|p| m.reflectors()[p.reflector].id.as_str())
         .collect();
     d.set_item("reflectors", ids)?;
-    let t: Vec<f64> = set.points.iter().map(|p| p.t_s.unwrap_or(f64::NAN)).collect();
+    let t: Vec<f64> = set
+        .points
+        .iter()
+        .map(|p| p.t_s.unwrap_or(f64::NAN))
+        .collect();
     d.set_item("t_s", numpy::PyArray1::from_vec(py, t))?;
     let lines: Vec<usize> = set.points.iter().map(|p| p.line).collect();
     d.set_item("lines", lines)?;
@@ -191,7 +195,12 @@ fn demo_data<'py>(py: Python<'py>, out: PathBuf, machine: &str) -> PyResult<Boun
             preset.model()?
         };
         let m = model.machine();
-        let truth = Truth::random(m, model.spec(), &Magnitudes::default(), volver::inputs::DEMO_SEED)?;
+        let truth = Truth::random(
+            m,
+            model.spec(),
+            &Magnitudes::default(),
+            volver::inputs::DEMO_SEED,
+        )?;
         let plan = if xcfz {
             volver::core::plan::Plan::preset(m, "test4")?
         } else {

@@ -33,7 +33,10 @@ fn predict<'py>(
     tool_offset_mm: Option<[f64; 3]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     if grid.is_some() == commands.is_some() {
-        return Err(request(py, "predict: give grid or commands (one of them)".into()));
+        return Err(request(
+            py,
+            "predict: give grid or commands (one of them)".into(),
+        ));
     }
     let label = results.display().to_string();
     let (model, params) = detached(py, || {
@@ -196,7 +199,10 @@ fn compensate_points<'py>(
     reversal_tolerance_um: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     if commands.is_some() == points.is_some() {
-        return Err(request(py, "compensate_points: give commands or points (one of them)".into()));
+        return Err(request(
+            py,
+            "compensate_points: give commands or points (one of them)".into(),
+        ));
     }
     if decimals > volver::core::gcode::MAX_DECIMALS {
         let most = volver::core::gcode::MAX_DECIMALS;
@@ -221,13 +227,21 @@ fn compensate_points<'py>(
             let label = r.results.display().to_string();
             let (model, _) = detached(py, || Ok(ResultsFile::load(&r.results)?.to_model(&label)?))?;
             let rows = commands_of(py, model.machine(), c)?;
-            (points_csv(&axis_names(model.machine()), &rows), "<commands>".to_string())
+            (
+                points_csv(&axis_names(model.machine()), &rows),
+                "<commands>".to_string(),
+            )
         }
         (None, Some(p)) => {
             let label = p.display().to_string();
-            let text = detached(py, || Ok(std::fs::read_to_string(p).map_err(|e| {
-                volver::core::Error::Io { path: p.clone(), source: e }
-            })?))?;
+            let text = detached(py, || {
+                Ok(
+                    std::fs::read_to_string(p).map_err(|e| volver::core::Error::Io {
+                        path: p.clone(),
+                        source: e,
+                    })?,
+                )
+            })?;
             (text, label)
         }
         (None, None) => unreachable!("checked above"),
@@ -236,7 +250,10 @@ fn compensate_points<'py>(
     let d = PyDict::new(py);
     d.set_item("csv", done.text)?;
     d.set_item("points", done.points)?;
-    d.set_item("max_error_um", done.max_error_mm * volver::core::units::UM_PER_MM)?;
+    d.set_item(
+        "max_error_um",
+        done.max_error_mm * volver::core::units::UM_PER_MM,
+    )?;
     d.set_item("worst_solved_mm", done.worst_solved_mm)?;
     d.set_item("worst_written_mm", done.worst_written_mm)?;
     d.set_item("outside", done.outside)?;
@@ -269,7 +286,10 @@ fn tables<'py>(
         let (model, params, record) = c::load_results(&results, accept)?;
         let tool = c::tool_point_of(tool.as_deref(), None, &model)?;
         c::check_max_u(max_u_um)?;
-        let notes = gate(&c::vouch(&model, &params, record.as_ref(), tool, max_u_um)?, force)?;
+        let notes = gate(
+            &c::vouch(&model, &params, record.as_ref(), tool, max_u_um)?,
+            force,
+        )?;
         let t = volver::core::tables::ErrorTables::from_model(
             &model,
             &params,
@@ -292,7 +312,10 @@ fn tables<'py>(
     for a in &t.axes {
         let one = PyDict::new(py);
         one.set_item("axis", a.axis.to_string())?;
-        one.set_item("positions", numpy::PyArray1::from_vec(py, a.positions.clone()))?;
+        one.set_item(
+            "positions",
+            numpy::PyArray1::from_vec(py, a.positions.clone()),
+        )?;
         let errors = PyDict::new(py);
         for (name, v) in &a.errors {
             errors.set_item(name, numpy::PyArray1::from_vec(py, v.clone()))?;
@@ -336,7 +359,11 @@ fn plan<'py>(
         let (_, model) = volver::inputs::machine_and_model(machine.as_deref(), model.as_deref())?;
         let noise = match &noise {
             Some(t) => TrackerNoise::from_text(t)?,
-            None => model.machine().tracker().noise.unwrap_or(TrackerNoise::PAPER),
+            None => model
+                .machine()
+                .tracker()
+                .noise
+                .unwrap_or(TrackerNoise::PAPER),
         };
         let tool = volver::compensation::tool_point_of(tool.as_deref(), None, &model)?;
         let request = volver::planning::Request {
