@@ -5,7 +5,9 @@
 //! Python sees plain objects (dicts, lists, floats) built from the same serialisable reports
 //! the CLI prints with `--json`, and numpy arrays for points and commands, with the units in
 //! their names (`points_mm`, `tool_points_mm`, `emm_um`). Every error is a `volver.VolverError`
-//! (subclasses by kind, see [`errors`]); the GIL is released while volver works.
+//! (subclasses by kind, see the `errors` module); the GIL is released while volver works.
+
+#![deny(missing_docs)]
 
 mod convert;
 mod errors;
