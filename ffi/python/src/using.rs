@@ -198,12 +198,6 @@ fn compensate_points<'py>(
     tolerance_rad: f64,
     reversal_tolerance_um: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    if commands.is_some() == points.is_some() {
-        return Err(request(
-            py,
-            "compensate_points: give commands or points (one of them)".into(),
-        ));
-    }
     if decimals > volver::core::gcode::MAX_DECIMALS {
         let most = volver::core::gcode::MAX_DECIMALS;
         return Err(request(py, format!("decimals {decimals}: 0 … {most}")));
@@ -223,7 +217,7 @@ fn compensate_points<'py>(
         reversal_tolerance_um,
     };
     let (text, label) = match (&commands, &points) {
-        (Some(c), _) => {
+        (Some(c), None) => {
             let label = r.results.display().to_string();
             let (model, _) = detached(py, || Ok(ResultsFile::load(&r.results)?.to_model(&label)?))?;
             let rows = commands_of(py, model.machine(), c)?;
@@ -244,7 +238,12 @@ fn compensate_points<'py>(
             })?;
             (text, label)
         }
-        (None, None) => unreachable!("checked above"),
+        _ => {
+            return Err(request(
+                py,
+                "compensate_points: give commands or points (one of them)".into(),
+            ));
+        }
     };
     let (done, notes) = detached(py, || run_compensate(&r, &text, &label))?;
     let d = PyDict::new(py);

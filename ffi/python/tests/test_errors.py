@@ -84,3 +84,9 @@ def test_the_u_gate_refuses_a_truth_without_uncertainty(demo):
         volver.compensate_points(folder / "truth.json", np.array([[100.0, 30.0, 50.0]]))
     done = volver.compensate_points(folder / "truth.json", np.array([[100.0, 30.0, 50.0]]), force=True)
     assert done["points"] == 1 and done["notes"][0].startswith("warning:")
+
+
+def test_compensate_needs_commands_or_a_point_file(fit):
+    results, _ = fit
+    with pytest.raises(volver.RequestError, match="one of them"):
+        volver.compensate_points(results)
