@@ -1,7 +1,8 @@
 """volver's demo from Python, a notebook's cells in one script: a synthetic verification of the
 XCFZ grinder whose data hide a 2nd harmonic of the turntable C, identified with the paper's
 model, diagnosed, identified again with the missing effect, then its uncertainty, compensated
-commands and the controller's error tables. Steps 1–4 print the figures `volver demo` prints.
+commands and the controller's error tables. Steps 1–4 print the figures `volver demo` prints
+(the iterations are `volver identify`'s, which counts one step more than the demo's fit).
 
     python examples/demo.py [FOLDER]        (FOLDER: where the files go; volver-demo-py)
 """
