@@ -2,7 +2,7 @@
 XCFZ grinder whose data hide a 2nd harmonic of the turntable C, identified with the paper's
 model, diagnosed, identified again with the missing effect, then its uncertainty, compensated
 commands and the controller's error tables. Steps 1–4 print the figures `volver demo` prints
-(the iterations are `volver identify`'s, which counts one step more than the demo's fit).
+(the iteration count is `volver identify`'s: 11 here where the demo's own fit prints 10).
 
     python examples/demo.py [FOLDER]        (FOLDER: where the files go; volver-demo-py)
 """
