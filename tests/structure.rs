@@ -17,12 +17,13 @@ const MAX_FUNCTION_LINES: usize = 80;
 const MAX_FILE_LINES: usize = 900;
 
 /// Each crate's source folder, relative to the workspace root.
-const CRATES: [&str; 6] = [
+const CRATES: [&str; 7] = [
     "core/src",
     "solvers/src",
     "facade/src",
     "src",
     "ffi/ceres-sys/src",
+    "ffi/python/src",
     "benchmarks/src",
 ];
 

@@ -1,0 +1,221 @@
+//! volver's typed errors as Python exceptions: `VolverError` and one subclass per kind, each
+//! carrying `file`, `line` and `field` (None when the error does not know them), `kind` (the
+//! variant's name) and `context` (what was being done, outermost first).
+
+use pyo3::create_exception;
+use pyo3::exceptions::PyException;
+use pyo3::prelude::*;
+use pyo3::types::PyType;
+use volver::Error;
+use volver::core::Error as CoreError;
+use volver::solvers::Error as EngineError;
+
+create_exception!(
+    volver,
+    VolverError,
+    PyException,
+    "Any error of volver; attributes file, line, field (None when unknown), kind, context."
+);
+create_exception!(
+    volver,
+    InputError,
+    VolverError,
+    "Bad input in a file: `file`, `line` (1-based) and `field` (TOML key, CSV column) say where."
+);
+create_exception!(
+    volver,
+    FileError,
+    VolverError,
+    "A file that could not be read or written (`file`)."
+);
+create_exception!(
+    volver,
+    RequestError,
+    VolverError,
+    "A request that cannot be served as asked: an argument out of its range, an unknown name."
+);
+create_exception!(
+    volver,
+    MismatchError,
+    VolverError,
+    "Inputs that do not belong together (a measurement the model cannot use: `line`)."
+);
+create_exception!(
+    volver,
+    ModelError,
+    VolverError,
+    "A model that cannot be built or evaluated (too many parameters, non-finite values)."
+);
+create_exception!(
+    volver,
+    SolverError,
+    VolverError,
+    "A failure of an engine or of the solvers' analyses."
+);
+create_exception!(
+    volver,
+    NotSolvedError,
+    VolverError,
+    "An identification that did not converge."
+);
+create_exception!(
+    volver,
+    SingularError,
+    VolverError,
+    "A matrix that could not be factorised or inverted."
+);
+create_exception!(
+    volver,
+    ImplausibleError,
+    VolverError,
+    "Identified sizes beyond the stated physical limits."
+);
+create_exception!(
+    volver,
+    RefusedError,
+    VolverError,
+    "The U gate refused the errors (pass force=True to use them anyway)."
+);
+
+/// Adds the exception classes to the module.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    let py = m.py();
+    m.add("VolverError", py.get_type::<VolverError>())?;
+    m.add("InputError", py.get_type::<InputError>())?;
+    m.add("FileError", py.get_type::<FileError>())?;
+    m.add("RequestError", py.get_type::<RequestError>())?;
+    m.add("MismatchError", py.get_type::<MismatchError>())?;
+    m.add("ModelError", py.get_type::<ModelError>())?;
+    m.add("SolverError", py.get_type::<SolverError>())?;
+    m.add("NotSolvedError", py.get_type::<NotSolvedError>())?;
+    m.add("SingularError", py.get_type::<SingularError>())?;
+    m.add("ImplausibleError", py.get_type::<ImplausibleError>())?;
+    m.add("RefusedError", py.get_type::<RefusedError>())?;
+    Ok(())
+}
+
+/// Where an error points: file, line, field.
+#[derive(Default)]
+struct Where {
+    file: Option<String>,
+    line: Option<usize>,
+    field: Option<String>,
+}
+
+/// The exception class, the variant's name and the place of the core's error `e`.
+fn of_core<'py>(py: Python<'py>, e: &CoreError) -> (Bound<'py, PyType>, &'static str, Where) {
+    let mut at = Where::default();
+    let (class, kind) = match e {
+        CoreError::Input { place, .. } => {
+            at.file = Some(place.file.clone());
+            at.line = place.line;
+            at.field.clone_from(&place.field);
+            (py.get_type::<InputError>(), "Input")
+        }
+        CoreError::Io { path, .. } => {
+            at.file = Some(path.display().to_string());
+            (py.get_type::<FileError>(), "Io")
+        }
+        CoreError::InvalidOption { name, .. } => {
+            at.field = Some((*name).to_string());
+            (py.get_type::<RequestError>(), "InvalidOption")
+        }
+        CoreError::MeasurementMismatch { line, .. } => {
+            at.line = Some(*line);
+            (py.get_type::<MismatchError>(), "MeasurementMismatch")
+        }
+        CoreError::MachineMismatch { .. } => (py.get_type::<MismatchError>(), "MachineMismatch"),
+        CoreError::Singular { .. } => (py.get_type::<SingularError>(), "Singular"),
+        CoreError::UnknownErrorName { name } => {
+            at.field = Some(name.clone());
+            (py.get_type::<InputError>(), "UnknownErrorName")
+        }
+        _ => (py.get_type::<ModelError>(), "Model"),
+    };
+    (class, kind, at)
+}
+
+/// The exception class, the variant's name and the field of the solvers' error `e`.
+fn of_solver<'py>(py: Python<'py>, e: &EngineError) -> (Bound<'py, PyType>, &'static str, Where) {
+    let mut at = Where::default();
+    let (class, kind) = match e {
+        EngineError::UnknownEngine { .. } => (py.get_type::<RequestError>(), "UnknownEngine"),
+        EngineError::OutOfRange { field, .. } => {
+            at.field = Some((*field).to_string());
+            (py.get_type::<RequestError>(), "OutOfRange")
+        }
+        EngineError::SettingOutOfRange { field, .. } => {
+            at.field = Some((*field).to_string());
+            (py.get_type::<RequestError>(), "SettingOutOfRange")
+        }
+        _ => (py.get_type::<SolverError>(), "Solver"),
+    };
+    (class, kind, at)
+}
+
+/// The Python exception of volver's error `e`: its class by the innermost error's kind, its
+/// message the whole chain (`reading the machine file: m.toml:3: …`), its attributes set.
+pub fn to_py(py: Python<'_>, e: Error) -> PyErr {
+    let mut context = Vec::new();
+    let mut inner = &e;
+    while let Error::Context { context: c, source } = inner {
+        context.push(c.clone());
+        inner = source;
+    }
+    let (class, kind, at) = match inner {
+        Error::Core(c) => of_core(py, c),
+        Error::Solver(s) => of_solver(py, s),
+        Error::Os(_) => (py.get_type::<FileError>(), "Os", Where::default()),
+        Error::Json(j) => {
+            let at = Where {
+                line: Some(j.line()),
+                ..Where::default()
+            };
+            (py.get_type::<InputError>(), "Json", at)
+        }
+        Error::Request(_) => (py.get_type::<RequestError>(), "Request", Where::default()),
+        Error::Mismatch(_) => (py.get_type::<MismatchError>(), "Mismatch", Where::default()),
+        Error::NotSolved(_) => (
+            py.get_type::<NotSolvedError>(),
+            "NotSolved",
+            Where::default(),
+        ),
+        Error::Singular(_) => (py.get_type::<SingularError>(), "Singular", Where::default()),
+        Error::Implausible(_) => (
+            py.get_type::<ImplausibleError>(),
+            "Implausible",
+            Where::default(),
+        ),
+        Error::Refused(_) => (py.get_type::<RefusedError>(), "Refused", Where::default()),
+        _ => (py.get_type::<VolverError>(), "Volver", Where::default()),
+    };
+    let mut message = context.clone();
+    message.push(inner.to_string());
+    let err = PyErr::from_type(class, message.join(": "));
+    let value = err.value(py);
+    let set = || -> PyResult<()> {
+        value.setattr("file", at.file)?;
+        value.setattr("line", at.line)?;
+        value.setattr("field", at.field)?;
+        value.setattr("kind", kind)?;
+        value.setattr("context", context)?;
+        Ok(())
+    };
+    match set() {
+        Ok(()) => err,
+        Err(e) => e,
+    }
+}
+
+/// Runs volver's work `f` with the GIL released; its error becomes the Python exception.
+pub fn detached<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce() -> volver::Result<T> + Send,
+) -> PyResult<T> {
+    py.detach(f).map_err(|e| to_py(py, e))
+}
+
+/// A request error raised from the bindings themselves (an argument of the wrong shape).
+pub fn request(py: Python<'_>, message: String) -> PyErr {
+    to_py(py, Error::Request(message))
+}

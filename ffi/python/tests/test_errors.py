@@ -1,0 +1,92 @@
+"""volver's typed errors arrive as Python exceptions: a VolverError subclass by kind, with the
+file, line and field volver names; never a crash of the interpreter."""
+
+import pytest
+
+import volver
+
+
+def test_a_bad_cell_names_its_file_line_and_column(demo, tmp_path):
+    folder, _ = demo
+    lines = (folder / "measurements.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    column = header.index("meas_x")
+    cells = lines[2].split(",")
+    cells[column] = "abc"
+    lines[2] = ",".join(cells)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("\n".join(lines) + "\n")
+    with pytest.raises(volver.InputError) as caught:
+        volver.identify(bad)
+    e = caught.value
+    assert isinstance(e, volver.VolverError)
+    assert e.file.endswith("bad.csv")
+    assert e.line == 3
+    assert e.field == "meas_x"
+    assert e.kind == "Input"
+    assert "bad.csv:3" in str(e)
+
+
+def test_a_bad_machine_file_names_its_line(demo, tmp_path):
+    folder, _ = demo
+    text = (folder / "machine.toml").read_text().splitlines()
+    k = text.index("range = [0.0, 1400.0]")
+    text[k] = 'range = "wide"'
+    bad = tmp_path / "machine.toml"
+    bad.write_text("\n".join(text) + "\n")
+    with pytest.raises(volver.InputError, match="expected an array") as caught:
+        volver.describe(bad, tmp_path / "model.toml")
+    e = caught.value
+    assert e.file.endswith("machine.toml")
+    assert e.line == k + 1
+    assert e.context == ["reading the machine file"]
+
+
+def test_a_missing_file_is_a_file_error(tmp_path):
+    with pytest.raises(volver.FileError) as caught:
+        volver.identify(tmp_path / "nothing.csv")
+    assert caught.value.file.endswith("nothing.csv")
+
+
+def test_an_unknown_engine_or_objective_is_a_request_error(demo):
+    folder, _ = demo
+    with pytest.raises(volver.RequestError, match="unknown solver 'newton'"):
+        volver.identify(folder / "measurements.csv", engine="newton")
+    with pytest.raises(volver.VolverError):
+        volver.identify(folder / "measurements.csv", objective="l3")
+    with pytest.raises(volver.RequestError):
+        volver.identify(folder / "measurements.csv", subloops=0)
+
+
+def test_commands_of_the_wrong_shape_are_refused(fit):
+    import numpy as np
+
+    results, _ = fit
+    with pytest.raises(volver.RequestError, match="columns"):
+        volver.predict(results, commands=np.zeros((4, 2)))
+
+
+def test_a_fit_stopped_on_a_limit_raises_with_its_report(demo):
+    folder, _ = demo
+    with pytest.raises(volver.NotSolvedError) as caught:
+        volver.identify(folder / "measurements.csv", max_iterations=1)
+    assert caught.value.result["converged"] is False
+    # accept=True keeps it, as --accept.
+    kept = volver.identify(folder / "measurements.csv", max_iterations=1, accept=True)
+    assert kept["converged"] is False
+
+
+def test_the_u_gate_refuses_a_truth_without_uncertainty(demo):
+    folder, _ = demo
+    import numpy as np
+
+    with pytest.raises(volver.RefusedError, match="force=True"):
+        volver.compensate_points(folder / "truth.json", np.array([[100.0, 30.0, 50.0]]))
+    done = volver.compensate_points(folder / "truth.json", np.array([[100.0, 30.0, 50.0]]), force=True)
+    assert done["points"] == 1 and done["notes"][0].startswith("warning:")
+
+
+def test_compensate_needs_commands_or_a_point_file(fit):
+    results, _ = fit
+    with pytest.raises(volver.RequestError, match="one of them"):
+        volver.compensate_points(results)
