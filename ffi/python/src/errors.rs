@@ -148,6 +148,15 @@ fn of_solver<'py>(py: Python<'py>, e: &EngineError) -> (Bound<'py, PyType>, &'st
             at.field = Some((*field).to_string());
             (py.get_type::<RequestError>(), "SettingOutOfRange")
         }
+        EngineError::SettingCount { field, .. } => {
+            at.field = Some((*field).to_string());
+            (py.get_type::<RequestError>(), "SettingCount")
+        }
+        EngineError::CountOutOfRange { .. } => (py.get_type::<RequestError>(), "CountOutOfRange"),
+        EngineError::TooFewEvaluations { .. } => {
+            at.field = Some("max_evaluations".to_string());
+            (py.get_type::<RequestError>(), "TooFewEvaluations")
+        }
         _ => (py.get_type::<SolverError>(), "Solver"),
     };
     (class, kind, at)

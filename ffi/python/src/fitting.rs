@@ -76,9 +76,15 @@ fn settings(r: &IdentifyRequest) -> volver::Result<Settings> {
     let mut settings = Settings::default();
     settings.engine.clone_from(&r.engine);
     settings.options = options;
-    settings.lm = volver::solvers::lm::LevenbergMarquardt::with_geodesic_acceleration(
-        r.geodesic_acceleration,
-    );
+    if r.geodesic_acceleration {
+        if !r.engine.starts_with("lm") {
+            return Err(volver::Error::Request(format!(
+                "geodesic_acceleration is a setting of the native LM (lm, lm+clarabel), not of {}",
+                r.engine
+            )));
+        }
+        settings.engines.lm.geodesic_acceleration = true;
+    }
     settings.priors = (!r.priors.is_empty())
         .then(|| Priors::parse(&r.priors))
         .transpose()?;
