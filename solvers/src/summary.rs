@@ -208,16 +208,25 @@ impl fmt::Display for Stall {
                  last {of})"
             ),
             Stall::NotStationary { claimed, measured } => {
-                write!(
-                    f,
-                    "the engine claimed \"{claimed}\" at a point that is not stationary: one \
-                     more step could still remove {:.1e} of the objective (tolerance {:.0e})",
-                    measured.gain, measured.tolerance
-                )?;
-                if measured.above_start {
-                    f.write_str(", and it ended above its start")?;
+                write!(f, "the engine claimed \"{claimed}\" at a point that ")?;
+                if measured.gain > measured.tolerance.max(measured.rounding) {
+                    write!(
+                        f,
+                        "is not stationary: one more step could still remove {:.1e} of the \
+                         objective (tolerance {:.0e})",
+                        measured.gain, measured.tolerance
+                    )?;
+                    if measured.above_start {
+                        f.write_str(", and it ended above its start")?;
+                    }
+                    Ok(())
+                } else {
+                    write!(
+                        f,
+                        "is above its start by more than {:.0e} of the objective",
+                        measured.tolerance
+                    )
                 }
-                Ok(())
             }
             Stall::Reported(s) => f.write_str(s),
         }
@@ -581,7 +590,7 @@ pub struct Stationarity {
     /// The gain the residuals' rounding alone could give, relative to the objective: a gain
     /// below it is not judged.
     pub rounding: f64,
-    /// Whether the objective ended above its start's.
+    /// Whether the objective ended above its start's by more than `tolerance` of it.
     pub above_start: bool,
 }
 

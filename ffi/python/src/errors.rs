@@ -153,6 +153,20 @@ fn of_solver<'py>(py: Python<'py>, e: &EngineError) -> (Bound<'py, PyType>, &'st
             (py.get_type::<RequestError>(), "SettingCount")
         }
         EngineError::CountOutOfRange { .. } => (py.get_type::<RequestError>(), "CountOutOfRange"),
+        EngineError::NoLimit => {
+            at.field = Some("max_iterations".to_string());
+            (py.get_type::<RequestError>(), "NoLimit")
+        }
+        EngineError::EpsilonOrder { .. } => (py.get_type::<RequestError>(), "EpsilonOrder"),
+        EngineError::UnknownObjective(_) => {
+            at.field = Some("objective".to_string());
+            (py.get_type::<RequestError>(), "UnknownObjective")
+        }
+        EngineError::UnknownPhasing { .. } => {
+            at.field = Some("strategy".to_string());
+            (py.get_type::<RequestError>(), "UnknownPhasing")
+        }
+        EngineError::SettingsFile(_) => (py.get_type::<RequestError>(), "SettingsFile"),
         EngineError::TooFewEvaluations { .. } => {
             at.field = Some("max_evaluations".to_string());
             (py.get_type::<RequestError>(), "TooFewEvaluations")

@@ -21,7 +21,9 @@
 //!   engine is asked to follow; they are counted instead. The gain is dimensionless, invariant to the parameters' units and
 //!   between 0 and 1 (½ for Φ);
 //! * the **objective against the start**: a run that ends above the objective of its start
-//!   (the start projected onto the constraints) did not converge, whatever its criteria said.
+//!   (the start projected onto the constraints) by more than [`TOLERANCE`] of it did not
+//!   converge, whatever its criteria said (an engine restarted at an optimum may end a few
+//!   parts in 10¹¹ above it: its smoothing of Φ, not a step uphill).
 //!
 //! A claim passes when the gain is at most [`TOLERANCE`], or when the gain is below the
 //! objective's rounding (residuals at the rounding of what they measure:
@@ -135,7 +137,7 @@ pub(crate) fn measure(
             gain: relative(gain_abs),
             tolerance: TOLERANCE,
             rounding: relative(rounding_abs),
-            above_start: cost > start_cost * (1.0 + 64.0 * f64::EPSILON),
+            above_start: cost > start_cost * (1.0 + TOLERANCE),
         },
         unidentifiable: (mu.len() - keep.len()).max(flat.len()),
     })
