@@ -5,8 +5,8 @@
 //! its own scaling) say that it stopped moving, not that it stopped at a minimum: a quasi-Newton
 //! method whose line search fails near a kink of Φ, or that runs into a valley where the
 //! objective is nearly flat (a sphere of 10⁴ mm radius through points that a 50 mm sphere fits),
-//! stops moving too. After every run that claims convergence, [`Run::finish`] measures at the
-//! point reached, in the free coordinates of the constraints:
+//! stops moving too. After every run that claims convergence, `Run::finish` (the end every
+//! engine shares) measures at the point reached, in the free coordinates of the constraints:
 //!
 //! * the **gain**: how much of the objective one more step of its majorising model could still
 //!   remove, relative to the objective — for ve the Gauss–Newton step's `gᵀH⁺g / ‖r‖²` (the
@@ -33,7 +33,6 @@
 //! every engine. The pass is one Jacobian pass at the end; it is not counted in
 //! [`Summary::evaluations`] (it is the check's, not the engine's).
 //!
-//! [`Run::finish`]: crate::engines::run
 //! [`Options::irls_final_epsilon`]: crate::Options::irls_final_epsilon
 //! [`RANK_TOLERANCE`]: crate::nullspace::RANK_TOLERANCE
 //! [`Stall::NotStationary`]: crate::Stall::NotStationary
