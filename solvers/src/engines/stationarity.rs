@@ -103,8 +103,10 @@ pub(crate) fn measure(
     let mut passes = accumulate_weighted(problem, p, &weight, phi_loss, false)?;
     let mut weighted = passes.pop()?;
     let design = passes.pop().unwrap_or_else(|| weighted.clone());
-    // A parameter whose column is at rounding level (see below) is not moved by the check.
-    let flat = rounding_columns(&design.h);
+    // A parameter whose column is at rounding level (see below) is not moved by the check; a
+    // free one is counted as unidentifiable (one a constraint holds is not free).
+    let held = crate::engines::coordinates::held_values(constraints);
+    let mut flat = rounding_columns(&design.h);
     for &j in &flat {
         weighted.g[j] = 0.0;
         for k in 0..p.len() {
@@ -112,6 +114,7 @@ pub(crate) fn measure(
             weighted.h[(k, j)] = 0.0;
         }
     }
+    flat.retain(|j| !held.iter().any(|(k, _)| k == j));
     let (d, ns) = scaled_null_space(&design.h, constraints, p);
     let ns = ns.ok()?;
     let (hd, _) = reduce(&d, ns.basis(), &design.h, None);
