@@ -109,9 +109,7 @@ pub(crate) fn scaled_null_space(
     // of the columns the data see). Not of the largest: a time term's column grows with the
     // unit of the time stamps to the power of its degree (t² in µs: 1e24 × in hours), and one
     // such column would lift the floor over every ordinary column.
-    let mut seen: Vec<f64> = (0..n).map(|j| h[(j, j)]).filter(|c| *c > 0.0).collect();
-    seen.sort_by(f64::total_cmp);
-    let typical = seen.get(seen.len() / 2).copied().unwrap_or(0.0);
+    let typical = typical_column(h);
     let d: Vec<f64> = (0..n)
         .map(|j| {
             let c = h[(j, j)].max(1e-24 * typical);
@@ -120,6 +118,17 @@ pub(crate) fn scaled_null_space(
         .collect();
     let ns = null_space_scaled_by(&d, constraints, anchor);
     (d, ns)
+}
+
+/// The typical squared column norm of `h = JᵀJ`: the median of the diagonal's positive entries
+/// (the columns the data see); 0 when there is none.
+pub(crate) fn typical_column(h: &Mat<f64>) -> f64 {
+    let mut seen: Vec<f64> = (0..h.nrows())
+        .map(|j| h[(j, j)])
+        .filter(|c| *c > 0.0)
+        .collect();
+    seen.sort_by(f64::total_cmp);
+    seen.get(seen.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// The null space of the constraints in the coordinates `s = p / D` for a given column scaling

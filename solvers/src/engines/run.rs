@@ -9,7 +9,7 @@ use crate::engines::loss::norms;
 use crate::engines::stationarity;
 use crate::options::Options;
 use crate::summary::{At, Failure, Invalid, Summary, Termination};
-use crate::{Solution, Task, evaluate};
+use crate::{Solution, Task};
 use std::time::Instant;
 use volver_core::problem::Residuals;
 
@@ -233,9 +233,12 @@ impl<'t, 'a> Run<'t, 'a> {
     /// The solution at `params`, evaluated, with the termination.
     pub(crate) fn finish(mut self, params: Vec<f64>, termination: Termination) -> Solution {
         // A start of the wrong length cannot be evaluated: it ends as invalid input.
+        // The residual modules at the end, for the report and the check alike.
+        let mut norms = Vec::new();
         if params.len() == self.problem.n_params() {
             // The report's evaluation, not the engine's: not counted against the limit.
-            self.summary.reached = evaluate(self.problem, &params);
+            norms = crate::engines::loss::norms_of(self.problem, &params);
+            self.summary.reached = crate::evaluation_with(self.problem, &norms, &params);
         } else {
             self.summary.reached.phi_mm = f64::NAN;
             self.summary.reached.ve_mm2 = f64::NAN;
@@ -246,7 +249,7 @@ impl<'t, 'a> Run<'t, 'a> {
             Termination::NumericalFailure(Failure::ObjectiveNotFinite(At::End))
         } else {
             let termination = self.edge.verdict(termination, self.summary.evaluations);
-            self.check(&params, termination)
+            self.check(&params, &norms, termination)
         };
         self.summary.termination = termination;
         self.summary.time_s = self.t0.elapsed().as_secs_f64();
@@ -262,7 +265,7 @@ impl Run<'_, '_> {
     /// had something free: it records what it measured and the directions the design cannot
     /// identify, and turns a claimed convergence at a point that fails it into
     /// [`Stall::NotStationary`](crate::Stall::NotStationary).
-    fn check(&mut self, params: &[f64], termination: Termination) -> Termination {
+    fn check(&mut self, params: &[f64], norms: &[f64], termination: Termination) -> Termination {
         if termination.failed()
             || termination == Termination::NoFreeParameters
             || !self.start_cost.is_finite()
@@ -273,6 +276,7 @@ impl Run<'_, '_> {
             self.problem,
             self.constraints,
             params,
+            norms,
             self.objective,
             self.epsilon,
             self.start_cost,

@@ -62,7 +62,8 @@ pub(crate) struct Measured {
     pub(crate) unidentifiable: usize,
 }
 
-/// The check at `p` for the loss `objective` (Φ or ve on the residuals given), the smoothing
+/// The check at `p`, whose residual modules are `modules`, for the loss `objective` (Φ or ve on
+/// the residuals given), the smoothing
 /// `epsilon` (a fraction of Φ), the objective of the start `start_cost` (the loss's own value:
 /// Φ or ve of the given residuals). `None` when the Jacobian there is not finite or the
 /// constraints cannot be eliminated (the engine's own termination then stands).
@@ -70,13 +71,13 @@ pub(crate) fn measure(
     problem: &dyn Residuals,
     constraints: &Constraints,
     p: &[f64],
+    modules: &[f64],
     objective: Objective,
     epsilon: f64,
     start_cost: f64,
 ) -> Option<Measured> {
     let n = problem.n_points();
-    let modules = crate::engines::loss::norms_of(problem, p);
-    if n == 0 || modules.iter().any(|m| !m.is_finite()) {
+    if n == 0 || modules.len() != n || modules.iter().any(|m| !m.is_finite()) {
         return None;
     }
     let phi = modules.iter().sum::<f64>() / n as f64;
@@ -151,11 +152,10 @@ pub(crate) fn measure(
 /// (NIST's BoxBOD from its first start, b₂ ≈ 40 … 400) has such a column: the data no longer
 /// see it, and the linear model's "gain" along it would be an extrapolation by 10¹⁶.
 fn rounding_columns(h: &Mat<f64>) -> Vec<usize> {
-    let n = h.nrows();
-    let mut seen: Vec<f64> = (0..n).map(|j| h[(j, j)]).filter(|c| *c > 0.0).collect();
-    seen.sort_by(f64::total_cmp);
-    let typical = seen.get(seen.len() / 2).copied().unwrap_or(0.0);
-    (0..n).filter(|&j| h[(j, j)] <= 1e-24 * typical).collect()
+    let typical = crate::engines::coordinates::typical_column(h);
+    (0..h.nrows())
+        .filter(|&j| h[(j, j)] <= 1e-24 * typical)
+        .collect()
 }
 
 /// `gᵀ H⁺ g` over the directions whose Marquardt-scaled curvature is above [`RANK_TOLERANCE`]
