@@ -1,7 +1,8 @@
 //! The house rules of the workspace's code, checked on the tree (issue 45): no function over
 //! 80 lines and no file over 900 lines in any crate's `src/` (tests excluded: `#[cfg(test)]`
 //! modules and `tests.rs` files), no import cycle between the top-level modules of a crate,
-//! `anyhow` and `clap` in the CLI package only.
+//! `anyhow` and `clap` in the CLI package only, and the Python bindings' signatures shown to
+//! `help()` with their defaults.
 //!
 //! Lines are counted from a function's signature to its closing brace, by brace matching on the
 //! text with comments, strings and character literals blanked (so a `{` in a string does not
@@ -447,6 +448,83 @@ fn anyhow_and_clap_only_in_the_cli() {
     }
 }
 
+/// The parameter names of a Python signature's text `(a, b=1, *, c='x')` or of PyO3's
+/// `signature = (a, b=1, *, c="x".to_string())`: each top-level comma-separated item up to its
+/// `=`, the `*` marker kept.
+fn signature_names(sig: &str) -> Vec<String> {
+    let sig = sig.trim();
+    let inner = sig.strip_prefix('(').unwrap_or(sig);
+    let inner = inner.strip_suffix(')').unwrap_or(inner);
+    let (mut names, mut depth, mut item) = (Vec::new(), 0i32, String::new());
+    for ch in inner.chars().chain(std::iter::once(',')) {
+        match ch {
+            '(' | '[' => depth += 1,
+            ')' | ']' => depth -= 1,
+            ',' if depth == 0 => {
+                let name = item.split('=').next().unwrap_or("").trim().to_string();
+                if !name.is_empty() {
+                    names.push(name);
+                }
+                item.clear();
+                continue;
+            }
+            _ => {}
+        }
+        item.push(ch);
+    }
+    names
+}
+
+/// Each `#[pyo3(signature = (…), text_signature = "(…)")]` of the Python bindings: (file:line,
+/// the signature, the text signature or None).
+fn python_signatures() -> Vec<(String, String, Option<String>)> {
+    let mut out = Vec::new();
+    for file in sources(&root().join("ffi/python/src")) {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            let Some(rest) = line.trim().strip_prefix("#[pyo3(signature = ") else {
+                continue;
+            };
+            let (sig, text_sig) = match rest.split_once(", text_signature = \"") {
+                Some((sig, t)) => (sig, Some(t.trim_end_matches("\")]").to_string())),
+                None => (rest.trim_end_matches(")]"), None),
+            };
+            out.push((
+                format!("{}:{}", file.display(), i + 1),
+                sig.to_string(),
+                text_sig,
+            ));
+        }
+    }
+    out
+}
+
+#[test]
+fn every_python_function_shows_its_defaults_to_help() {
+    // PyO3 renders a default it cannot print (`"lm".to_string()`, `Vec::new()`, a constant) as
+    // `...` in help() and inspect.signature; a text signature gives the Python spelling. It must
+    // name the same parameters in the same order as the signature it describes.
+    let found = python_signatures();
+    assert!(
+        found.len() >= 10,
+        "only {} PyO3 signatures found",
+        found.len()
+    );
+    for (at, sig, text_sig) in found {
+        let text_sig =
+            text_sig.unwrap_or_else(|| panic!("{at}: a signature without text_signature"));
+        assert_eq!(
+            signature_names(&sig),
+            signature_names(&text_sig),
+            "{at}: the text signature names other parameters than the signature"
+        );
+        assert!(
+            !text_sig.contains("::") && !text_sig.contains("to_string") && !text_sig.contains('"'),
+            "{at}: the text signature is not Python: {text_sig}"
+        );
+    }
+}
+
 // The checker itself: each rule must be able to fail.
 
 #[test]
@@ -494,4 +572,19 @@ fn the_checker_finds_a_cycle() {
         vec!["a", "c", "g", "h"],
     ];
     assert_eq!(referenced(text, &me), want);
+}
+
+#[test]
+fn the_checker_reads_both_spellings_of_a_signature() {
+    let rust = r#"(data, machine=None, *, engine="lm".to_string(), add=Vec::new(), t=f(1, 2))"#;
+    let python = "(data, machine=None, *, engine='lm', add=(), t=3)";
+    assert_eq!(
+        signature_names(rust),
+        ["data", "machine", "*", "engine", "add", "t"]
+    );
+    assert_eq!(signature_names(rust), signature_names(python));
+    assert_ne!(
+        signature_names(rust),
+        signature_names("(data, *, engine='lm', add=(), t=3)")
+    );
 }

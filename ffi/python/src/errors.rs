@@ -214,12 +214,12 @@ pub fn to_py(py: Python<'_>, e: Error) -> PyErr {
     };
     let mut message = context.clone();
     message.push(inner.to_string());
-    let err = PyErr::from_type(class, message.join(": "));
+    let err = PyErr::from_type(class, pythonic(&message.join(": ")));
     let value = err.value(py);
     let set = || -> PyResult<()> {
-        value.setattr("file", at.file)?;
+        value.setattr("file", at.file.as_deref().map(pythonic))?;
         value.setattr("line", at.line)?;
-        value.setattr("field", at.field)?;
+        value.setattr("field", at.field.as_deref().map(pythonic))?;
         value.setattr("kind", kind)?;
         value.setattr("context", context)?;
         Ok(())
@@ -228,6 +228,73 @@ pub fn to_py(py: Python<'_>, e: Error) -> PyErr {
         Ok(()) => err,
         Err(e) => e,
     }
+}
+
+/// The CLI's options that volver's messages name, and the Python argument each stands for
+/// (a switch as `name=True`): the library's messages are the CLI's.
+const ARGUMENTS: [(&str, &str); 39] = [
+    ("--accept", "accept=True"),
+    ("--add", "add"),
+    ("--criterion", "criterion"),
+    ("--data", "data"),
+    ("--decimals", "decimals"),
+    ("--effect", "effects"),
+    ("--force", "force=True"),
+    ("--geodesic-acceleration", "geodesic_acceleration=True"),
+    ("--grid", "grid"),
+    ("--hold", "hold"),
+    ("--import", "import_profile"),
+    ("--machine", "machine"),
+    ("--magnitude", "magnitudes"),
+    ("--max-evaluations", "max_evaluations"),
+    ("--max-iterations", "max_iterations"),
+    ("--max-u-um", "max_u_um"),
+    ("--model", "model"),
+    ("--monte-carlo", "monte_carlo"),
+    ("--noise", "noise"),
+    ("--objective", "objective"),
+    ("--out", "out"),
+    ("--per-axis", "per_axis"),
+    ("--plan", "plan"),
+    ("--plan-file", "plan_file"),
+    ("--points", "points"),
+    ("--prior", "priors"),
+    ("--repeats", "repeats"),
+    ("--results", "results"),
+    ("--reversal-tolerance-um", "reversal_tolerance_um"),
+    ("--rotary-step", "rotary_step_deg"),
+    ("--seed", "seed"),
+    ("--solver", "engine"),
+    ("--step", "step_mm"),
+    ("--strategy", "strategy"),
+    ("--subloops", "subloops"),
+    ("--tool-axis", "tool_axis"),
+    ("--tool-offset", "tool_offset_mm"),
+    ("--tool-reflector", "tool_reflector"),
+    ("--top", "top"),
+];
+
+/// `text` with each CLI option of [`ARGUMENTS`] spelt as its Python argument (`--max-iterations`
+/// → `max_iterations`, `--accept` → `accept=True`); other text, options without a Python
+/// argument among them, unchanged.
+pub fn pythonic(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find("--") {
+        out.push_str(&rest[..at]);
+        let tail = &rest[at..];
+        let len = 2 + tail[2..]
+            .find(|c: char| !(c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-'))
+            .unwrap_or(tail.len() - 2);
+        let option = &tail[..len];
+        match ARGUMENTS.iter().find(|(cli, _)| *cli == option) {
+            Some((_, python)) => out.push_str(python),
+            None => out.push_str(option),
+        }
+        rest = &tail[len..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Runs volver's work `f` with the GIL released; its error becomes the Python exception.

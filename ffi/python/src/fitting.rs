@@ -140,7 +140,7 @@ fn run_identify(
 /// NotSolvedError or ImplausibleError (`accept=True` keeps it, as `--accept`), the report in
 /// the exception's `result`; `out` writes the results file (JSON) of a fit that may be used.
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, *, engine="lm".to_string(), objective="phi".to_string(), noise=None, priors=Vec::new(), strategy="one".to_string(), subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=false, add=Vec::new(), accept=false, out=None, import_profile=None, plan_file=None))]
+#[pyo3(signature = (data, machine=None, model=None, *, engine="lm".to_string(), objective="phi".to_string(), noise=None, priors=Vec::new(), strategy="one".to_string(), subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=false, add=Vec::new(), accept=false, out=None, import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, engine='lm', objective='phi', noise=None, priors=(), strategy='one', subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=False, add=(), accept=False, out=None, import_profile=None, plan_file=None)")]
 #[allow(clippy::too_many_arguments)]
 fn identify<'py>(
     py: Python<'py>,
@@ -204,7 +204,7 @@ fn identify<'py>(
 /// candidates (`candidates`: a list of dicts with `id`, `description`, `delta_bic`, `emm_um`,
 /// `size` and `size_unit` …) best first, at most `top`.
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, *, top=10, noise=None, import_profile=None, plan_file=None))]
+#[pyo3(signature = (data, machine=None, model=None, *, top=10, noise=None, import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, top=10, noise=None, import_profile=None, plan_file=None)")]
 #[allow(clippy::too_many_arguments)]
 fn diagnose<'py>(
     py: Python<'py>,
@@ -281,7 +281,7 @@ fn run_uncertainty(files: &Files, r: &UncertaintyRequest) -> volver::Result<serd
 /// (k = 2) of every parameter and of the tool point over a grid, linearised and, with
 /// `monte_carlo=N`, by N Monte Carlo replicas (seed `seed`).
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=Vec::new(), engine="lm".to_string(), objective="phi".to_string(), import_profile=None, plan_file=None))]
+#[pyo3(signature = (data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=Vec::new(), engine="lm".to_string(), objective="phi".to_string(), import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=(), engine='lm', objective='phi', import_profile=None, plan_file=None)")]
 #[allow(clippy::too_many_arguments)]
 fn uncertainty<'py>(
     py: Python<'py>,

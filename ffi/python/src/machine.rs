@@ -34,7 +34,7 @@ fn presets(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
 /// the embedded machine's default when None): chain, axes with their travel (file units),
 /// reflectors (mm), the model's parameters and their initial values (mm, rad).
 #[pyfunction]
-#[pyo3(signature = (machine=None, model=None))]
+#[pyo3(signature = (machine=None, model=None), text_signature = "(machine=None, model=None)")]
 fn describe(
     py: Python<'_>,
     machine: Option<PathBuf>,
@@ -72,7 +72,7 @@ fn describe(
 /// (N × axes, mm and degrees), the measured points (N × 3, mm, the station's frame), the
 /// reflector ids, the time stamps (s, NaN where absent) and each row's line in the file.
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, import_profile=None, plan_file=None))]
+#[pyo3(signature = (data, machine=None, model=None, import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, import_profile=None, plan_file=None)")]
 fn measurements(
     py: Python<'_>,
     data: PathBuf,
@@ -122,7 +122,7 @@ fn measurements(
 /// as the CLI takes them; writes measurements.csv, truth.json, machine.toml and simulation.json
 /// into `out` and returns the simulation's record (machine and noise error in µm …).
 #[pyfunction]
-#[pyo3(signature = (out, machine=None, plan=None, seed=1, noise=None, magnitudes=Vec::new(), effects=Vec::new(), duration_h=None, truth_model=None))]
+#[pyo3(signature = (out, machine=None, plan=None, seed=1, noise=None, magnitudes=Vec::new(), effects=Vec::new(), duration_h=None, truth_model=None), text_signature = "(out, machine=None, plan=None, seed=1, noise=None, magnitudes=(), effects=(), duration_h=None, truth_model=None)")]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
@@ -178,7 +178,7 @@ fn simulate<'py>(
 /// true errors at the default magnitudes, seed 7, its preset plan (test 4 on the XCFZ grinder)
 /// and the effect it hides; written into `out`; returns the simulation's record.
 #[pyfunction]
-#[pyo3(signature = (out, machine="xcfz"))]
+#[pyo3(signature = (out, machine="xcfz"), text_signature = "(out, machine='xcfz')")]
 fn demo_data<'py>(py: Python<'py>, out: PathBuf, machine: &str) -> PyResult<Bound<'py, PyAny>> {
     let name = machine.to_string();
     let record = detached(py, || {

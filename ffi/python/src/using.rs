@@ -17,6 +17,12 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(compensate_points, m)?)?;
     m.add_function(wrap_pyfunction!(tables, m)?)?;
     m.add_function(wrap_pyfunction!(plan, m)?)?;
+    // The default of `compensate_points(reversal_tolerance_um=…)`, which its text signature
+    // spells as a number: the tests compare the two.
+    m.add(
+        "REVERSAL_TOLERANCE_UM",
+        volver::core::compensate::REVERSAL_TOLERANCE_UM,
+    )?;
     Ok(())
 }
 
@@ -24,7 +30,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 /// of `grid` (a plan preset or grid text, mm and degrees) or of `commands` (N × axes, mm and
 /// degrees); returns `axes`, `commands` and `tool_points_mm` (N × 3) with `tool_offset_mm`.
 #[pyfunction]
-#[pyo3(signature = (results, grid=None, commands=None, tool_offset_mm=None))]
+#[pyo3(signature = (results, grid=None, commands=None, tool_offset_mm=None), text_signature = "(results, grid=None, commands=None, tool_offset_mm=None)")]
 fn predict<'py>(
     py: Python<'py>,
     results: PathBuf,
@@ -179,7 +185,7 @@ fn points_csv(names: &[String], rows: &[Vec<f64>]) -> String {
 /// raises RefusedError unless `force=True`). Returns `csv` (what the CLI writes with `--out`),
 /// `points`, `max_error_um`, `worst_solved_mm`, `worst_written_mm`, `outside` and `notes`.
 #[pyfunction]
-#[pyo3(signature = (results, commands=None, *, points=None, tool_offset_mm=None, tool_reflector=None, hold=None, tool_axis=None, decimals=4, accept=false, max_u_um=25.0, force=false, tolerance_mm=1e-9, tolerance_rad=1e-9, reversal_tolerance_um=volver::core::compensate::REVERSAL_TOLERANCE_UM))]
+#[pyo3(signature = (results, commands=None, *, points=None, tool_offset_mm=None, tool_reflector=None, hold=None, tool_axis=None, decimals=4, accept=false, max_u_um=25.0, force=false, tolerance_mm=1e-9, tolerance_rad=1e-9, reversal_tolerance_um=volver::core::compensate::REVERSAL_TOLERANCE_UM), text_signature = "(results, commands=None, *, points=None, tool_offset_mm=None, tool_reflector=None, hold=None, tool_axis=None, decimals=4, accept=False, max_u_um=25.0, force=False, tolerance_mm=1e-9, tolerance_rad=1e-9, reversal_tolerance_um=1.0)")]
 #[allow(clippy::too_many_arguments)]
 fn compensate_points<'py>(
     py: Python<'py>,
@@ -266,7 +272,7 @@ fn compensate_points<'py>(
 /// (RefusedError unless `force=True`); with `out`, the ISG, Etalon and plain CSV files written
 /// there (`files`).
 #[pyfunction]
-#[pyo3(signature = (results, out=None, *, step_mm=10.0, rotary_step_deg=5.0, tool_offset_mm=None, accept=false, max_u_um=25.0, force=false))]
+#[pyo3(signature = (results, out=None, *, step_mm=10.0, rotary_step_deg=5.0, tool_offset_mm=None, accept=false, max_u_um=25.0, force=false), text_signature = "(results, out=None, *, step_mm=10.0, rotary_step_deg=5.0, tool_offset_mm=None, accept=False, max_u_um=25.0, force=False)")]
 #[allow(clippy::too_many_arguments)]
 fn tables<'py>(
     py: Python<'py>,
@@ -337,7 +343,7 @@ fn tables<'py>(
 /// (criterion i, v or d), its report as a dict and `commands` (N × axes, mm and degrees) and
 /// `reflector_ids` in measuring order; with `out`, the plan file (CSV) written as `--out` writes it.
 #[pyfunction]
-#[pyo3(signature = (machine=None, model=None, *, points=1040, criterion="i".to_string(), noise=None, tool_offset_mm=None, per_axis=None, repeats=8, seed=1, out=None))]
+#[pyo3(signature = (machine=None, model=None, *, points=1040, criterion="i".to_string(), noise=None, tool_offset_mm=None, per_axis=None, repeats=8, seed=1, out=None), text_signature = "(machine=None, model=None, *, points=1040, criterion='i', noise=None, tool_offset_mm=None, per_axis=None, repeats=8, seed=1, out=None)")]
 #[allow(clippy::too_many_arguments)]
 fn plan<'py>(
     py: Python<'py>,

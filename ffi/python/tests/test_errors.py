@@ -71,6 +71,10 @@ def test_a_fit_stopped_on_a_limit_raises_with_its_report(demo):
     with pytest.raises(volver.NotSolvedError) as caught:
         volver.identify(folder / "measurements.csv", max_iterations=1)
     assert caught.value.result["converged"] is False
+    # The message names Python's arguments, not the CLI's options.
+    message = str(caught.value)
+    assert "max_iterations" in message and "accept=True" in message, message
+    assert "--" not in message, message
     # accept=True keeps it, as --accept.
     kept = volver.identify(folder / "measurements.csv", max_iterations=1, accept=True)
     assert kept["converged"] is False
