@@ -85,7 +85,10 @@ fn print(tables: &[Table]) {
         println!("  note: {}", t.note);
     }
     if tables.iter().flat_map(|t| &t.rows).any(|r| !r.converged) {
-        println!("\n  * stopped by a limit, not converged");
+        println!(
+            "\n  * not converged: stopped by a limit, or where the shared check found that one \
+             more step could still lower Φ (the fraction it gives); the figures are those reached"
+        );
     }
 }
 
