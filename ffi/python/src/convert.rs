@@ -3,7 +3,7 @@
 //! degrees) to and from volver's internal ones (mm, rad).
 
 use numpy::ndarray::Array2;
-use numpy::{IntoPyArray, PyReadonlyArray2};
+use numpy::{AllowTypeChange, IntoPyArray, PyArrayLike2, PyReadonlyArray2};
 use pyo3::prelude::*;
 use volver::core::machine::{Commands, Machine};
 
@@ -57,7 +57,64 @@ pub fn commands_of(
             ),
         ));
     }
+    if view.nrows() == 0 {
+        return Err(super::errors::request(py, "commands: no rows".into()));
+    }
+    if let Some(bad) = view.iter().position(|v| !v.is_finite()) {
+        let (row, col) = (bad / axes, bad % axes);
+        return Err(super::errors::request(
+            py,
+            format!("commands[{row}, {col}] is not a finite number (mm or degrees)"),
+        ));
+    }
     Ok(view.rows().into_iter().map(|r| r.to_vec()).collect())
+}
+
+/// Commands as Python passes them: any two-dimensional array-like of numbers (a float or
+/// integer numpy array, nested lists), converted to float64.
+pub type CommandsArg<'py> = PyArrayLike2<'py, f64, AllowTypeChange>;
+
+/// The integer argument `name` as a count: a `RequestError` naming it (its `field`) when it is
+/// negative or beyond the target type.
+pub fn count<T: TryFrom<i64>>(py: Python<'_>, name: &'static str, value: i64) -> PyResult<T> {
+    T::try_from(value).map_err(|_| {
+        let message = if value < 0 {
+            format!("{name} = {value}: expected an integer ≥ 0")
+        } else {
+            format!("{name} = {value}: too large")
+        };
+        super::errors::to_py(
+            py,
+            volver::Error::Core(volver::core::Error::InvalidOption { name, message }),
+        )
+    })
+}
+
+/// [`count`] of an optional argument.
+pub fn count_opt<T: TryFrom<i64>>(
+    py: Python<'_>,
+    name: &'static str,
+    value: Option<i64>,
+) -> PyResult<Option<T>> {
+    value.map(|v| count(py, name, v)).transpose()
+}
+
+/// A list of names as Python passes it: a list (or tuple) of strings, or one string for a
+/// list of one (`add="raise-axis:C"` as `add=["raise-axis:C"]`).
+#[derive(Clone, Debug, Default)]
+pub struct Names(pub Vec<String>);
+
+impl<'a, 'py> FromPyObject<'a, 'py> for Names {
+    type Error = PyErr;
+
+    fn extract(ob: Borrowed<'a, 'py, PyAny>) -> PyResult<Self> {
+        if let Ok(one) = ob.extract::<String>() {
+            return Ok(Names(vec![one]));
+        }
+        ob.extract::<Vec<String>>().map(Names).map_err(|_| {
+            pyo3::exceptions::PyTypeError::new_err("expected a string or a list of strings")
+        })
+    }
 }
 
 /// The axis letters of a machine, chain order.

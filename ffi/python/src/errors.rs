@@ -274,12 +274,29 @@ const ARGUMENTS: [(&str, &str); 39] = [
     ("--top", "top"),
 ];
 
-/// `text` with each CLI option of [`ARGUMENTS`] spelt as its Python argument (`--max-iterations`
+/// Phrases of volver's messages that point to the CLI where Python has its own way, replaced
+/// before the options are: (the CLI's words, Python's).
+const PHRASES: [(&str, &str); 2] = [
+    (
+        "`volver layout --list` names them",
+        "`volver.presets()` names them",
+    ),
+    (
+        "(--points, or --hours × 3600 / --seconds-per-point per station)",
+        "(points)",
+    ),
+];
+
+/// `text` with each phrase of [`PHRASES`] and each CLI option of [`ARGUMENTS`] spelt as its Python argument (`--max-iterations`
 /// → `max_iterations`, `--accept` → `accept=True`); other text, options without a Python
 /// argument among them, unchanged.
 pub fn pythonic(text: &str) -> String {
+    let mut text = text.to_string();
+    for (cli, python) in PHRASES {
+        text = text.replace(cli, python);
+    }
     let mut out = String::with_capacity(text.len());
-    let mut rest = text;
+    let mut rest = text.as_str();
     while let Some(at) = rest.find("--") {
         out.push_str(&rest[..at]);
         let tail = &rest[at..];

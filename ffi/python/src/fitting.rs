@@ -1,7 +1,7 @@
 //! Fitting: `identify`, `diagnose` and `uncertainty`, as the CLI's subcommands of those names
 //! call the library (their `--json` is what Python gets, as plain objects).
 
-use crate::convert::plain;
+use crate::convert::{Names, count, count_opt, plain};
 use crate::errors::{detached, to_py};
 use pyo3::prelude::*;
 use std::path::PathBuf;
@@ -140,7 +140,7 @@ fn run_identify(
 /// NotSolvedError or ImplausibleError (`accept=True` keeps it, as `--accept`), the report in
 /// the exception's `result`; `out` writes the results file (JSON) of a fit that may be used.
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, *, engine="lm".to_string(), objective="phi".to_string(), noise=None, priors=Vec::new(), strategy="one".to_string(), subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=false, add=Vec::new(), accept=false, out=None, import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, engine='lm', objective='phi', noise=None, priors=(), strategy='one', subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=False, add=(), accept=False, out=None, import_profile=None, plan_file=None)")]
+#[pyo3(signature = (data, machine=None, model=None, *, engine="lm".to_string(), objective="phi".to_string(), noise=None, priors=Names::default(), strategy="one".to_string(), subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=false, add=Names::default(), accept=false, out=None, import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, engine='lm', objective='phi', noise=None, priors=(), strategy='one', subloops=1, max_iterations=None, max_evaluations=None, geodesic_acceleration=False, add=(), accept=False, out=None, import_profile=None, plan_file=None)")]
 #[allow(clippy::too_many_arguments)]
 fn identify<'py>(
     py: Python<'py>,
@@ -150,13 +150,13 @@ fn identify<'py>(
     engine: String,
     objective: String,
     noise: Option<String>,
-    priors: Vec<String>,
+    priors: Names,
     strategy: String,
-    subloops: usize,
-    max_iterations: Option<usize>,
-    max_evaluations: Option<usize>,
+    subloops: i64,
+    max_iterations: Option<i64>,
+    max_evaluations: Option<i64>,
     geodesic_acceleration: bool,
-    add: Vec<String>,
+    add: Names,
     accept: bool,
     out: Option<PathBuf>,
     import_profile: Option<PathBuf>,
@@ -173,13 +173,13 @@ fn identify<'py>(
         engine,
         objective,
         noise,
-        priors,
+        priors: priors.0,
         strategy,
-        subloops,
-        max_iterations,
-        max_evaluations,
+        subloops: count(py, "subloops", subloops)?,
+        max_iterations: count_opt(py, "max_iterations", max_iterations)?,
+        max_evaluations: count_opt(py, "max_evaluations", max_evaluations)?,
         geodesic_acceleration,
-        add,
+        add: add.0,
         accept,
         out,
     };
@@ -211,11 +211,12 @@ fn diagnose<'py>(
     data: PathBuf,
     machine: Option<PathBuf>,
     model: Option<PathBuf>,
-    top: usize,
+    top: i64,
     noise: Option<String>,
     import_profile: Option<PathBuf>,
     plan_file: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let top: usize = count(py, "top", top)?;
     let files = Files {
         data,
         machine,
@@ -281,7 +282,7 @@ fn run_uncertainty(files: &Files, r: &UncertaintyRequest) -> volver::Result<serd
 /// (k = 2) of every parameter and of the tool point over a grid, linearised and, with
 /// `monte_carlo=N`, by N Monte Carlo replicas (seed `seed`).
 #[pyfunction]
-#[pyo3(signature = (data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=Vec::new(), engine="lm".to_string(), objective="phi".to_string(), import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=(), engine='lm', objective='phi', import_profile=None, plan_file=None)")]
+#[pyo3(signature = (data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=Names::default(), engine="lm".to_string(), objective="phi".to_string(), import_profile=None, plan_file=None), text_signature = "(data, machine=None, model=None, *, noise=None, monte_carlo=None, seed=1, tool_offset_mm=None, grid=None, priors=(), engine='lm', objective='phi', import_profile=None, plan_file=None)")]
 #[allow(clippy::too_many_arguments)]
 fn uncertainty<'py>(
     py: Python<'py>,
@@ -289,11 +290,11 @@ fn uncertainty<'py>(
     machine: Option<PathBuf>,
     model: Option<PathBuf>,
     noise: Option<String>,
-    monte_carlo: Option<usize>,
-    seed: u64,
+    monte_carlo: Option<i64>,
+    seed: i64,
     tool_offset_mm: Option<[f64; 3]>,
     grid: Option<String>,
-    priors: Vec<String>,
+    priors: Names,
     engine: String,
     objective: String,
     import_profile: Option<PathBuf>,
@@ -308,11 +309,11 @@ fn uncertainty<'py>(
     };
     let request = UncertaintyRequest {
         noise,
-        monte_carlo,
-        seed,
+        monte_carlo: count_opt(py, "monte_carlo", monte_carlo)?,
+        seed: count(py, "seed", seed)?,
         tool: crate::convert::tool_text(tool_offset_mm),
         grid,
-        priors,
+        priors: priors.0,
         engine,
         objective,
     };

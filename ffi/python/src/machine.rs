@@ -1,7 +1,7 @@
 //! Machines, models and data: the embedded machines, a machine and its model described, a
 //! measurement file read, a synthetic test simulated (`volver simulate`), the demo's data.
 
-use crate::convert::{array, axis_names, file_units, plain, points};
+use crate::convert::{Names, array, axis_names, count, file_units, plain, points};
 use crate::errors::detached;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -122,20 +122,22 @@ fn measurements(
 /// as the CLI takes them; writes measurements.csv, truth.json, machine.toml and simulation.json
 /// into `out` and returns the simulation's record (machine and noise error in µm …).
 #[pyfunction]
-#[pyo3(signature = (out, machine=None, plan=None, seed=1, noise=None, magnitudes=Vec::new(), effects=Vec::new(), duration_h=None, truth_model=None), text_signature = "(out, machine=None, plan=None, seed=1, noise=None, magnitudes=(), effects=(), duration_h=None, truth_model=None)")]
+#[pyo3(signature = (out, machine=None, plan=None, seed=1, noise=None, magnitudes=Names::default(), effects=Names::default(), duration_h=None, truth_model=None), text_signature = "(out, machine=None, plan=None, seed=1, noise=None, magnitudes=(), effects=(), duration_h=None, truth_model=None)")]
 #[allow(clippy::too_many_arguments)]
 fn simulate<'py>(
     py: Python<'py>,
     out: PathBuf,
     machine: Option<PathBuf>,
     plan: Option<String>,
-    seed: u64,
+    seed: i64,
     noise: Option<String>,
-    magnitudes: Vec<String>,
-    effects: Vec<String>,
+    magnitudes: Names,
+    effects: Names,
     duration_h: Option<f64>,
     truth_model: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let seed: u64 = count(py, "seed", seed)?;
+    let (magnitudes, effects) = (magnitudes.0, effects.0);
     let record = detached(py, || {
         let (m, preset) = match &machine {
             Some(p) => volver::inputs::machine(Some(p))?,

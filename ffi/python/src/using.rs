@@ -2,9 +2,11 @@
 //! (the corrected commands, behind the U gate), `tables` (the error tables for controls) and
 //! `plan` (an optimal test design), as the CLI's subcommands call the library.
 
-use crate::convert::{array, axis_names, commands_of, file_units, plain, points, tool_text};
+use crate::convert::{
+    CommandsArg, array, axis_names, commands_of, count, count_opt, file_units, plain, points,
+    tool_text,
+};
 use crate::errors::{detached, request};
-use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::path::PathBuf;
@@ -35,7 +37,7 @@ fn predict<'py>(
     py: Python<'py>,
     results: PathBuf,
     grid: Option<String>,
-    commands: Option<PyReadonlyArray2<'py, f64>>,
+    commands: Option<CommandsArg<'py>>,
     tool_offset_mm: Option<[f64; 3]>,
 ) -> PyResult<Bound<'py, PyDict>> {
     if grid.is_some() == commands.is_some() {
@@ -94,6 +96,20 @@ struct CompensateRequest {
     tolerance_mm: f64,
     tolerance_rad: f64,
     reversal_tolerance_um: f64,
+}
+
+/// A `RequestError` naming `name` unless `value` is finite and above zero (or zero, when
+/// `zero` is allowed).
+fn positive(py: Python<'_>, name: &'static str, value: f64, zero: bool) -> PyResult<()> {
+    if value.is_finite() && (value > 0.0 || (zero && value == 0.0)) {
+        return Ok(());
+    }
+    let bound = if zero { "≥ 0" } else { "> 0" };
+    let message = format!("{name} = {value}: expected a finite number {bound}");
+    Err(crate::errors::to_py(
+        py,
+        volver::Error::Core(volver::core::Error::InvalidOption { name, message }),
+    ))
 }
 
 /// The U gate as `volver compensate` applies it: the notes, a refusal unless `force`.
@@ -190,13 +206,13 @@ fn points_csv(names: &[String], rows: &[Vec<f64>]) -> String {
 fn compensate_points<'py>(
     py: Python<'py>,
     results: PathBuf,
-    commands: Option<PyReadonlyArray2<'py, f64>>,
+    commands: Option<CommandsArg<'py>>,
     points: Option<PathBuf>,
     tool_offset_mm: Option<[f64; 3]>,
     tool_reflector: Option<String>,
     hold: Option<String>,
     tool_axis: Option<[f64; 3]>,
-    decimals: usize,
+    decimals: i64,
     accept: bool,
     max_u_um: f64,
     force: bool,
@@ -204,6 +220,10 @@ fn compensate_points<'py>(
     tolerance_rad: f64,
     reversal_tolerance_um: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let decimals: usize = count(py, "decimals", decimals)?;
+    positive(py, "tolerance_mm", tolerance_mm, false)?;
+    positive(py, "tolerance_rad", tolerance_rad, false)?;
+    positive(py, "reversal_tolerance_um", reversal_tolerance_um, true)?;
     if decimals > volver::core::gcode::MAX_DECIMALS {
         let most = volver::core::gcode::MAX_DECIMALS;
         return Err(request(py, format!("decimals {decimals}: 0 … {most}")));
@@ -349,15 +369,19 @@ fn plan<'py>(
     py: Python<'py>,
     machine: Option<PathBuf>,
     model: Option<PathBuf>,
-    points: usize,
+    points: i64,
     criterion: String,
     noise: Option<String>,
     tool_offset_mm: Option<[f64; 3]>,
-    per_axis: Option<usize>,
-    repeats: usize,
-    seed: u64,
+    per_axis: Option<i64>,
+    repeats: i64,
+    seed: i64,
     out: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let points: usize = count(py, "points", points)?;
+    let per_axis: Option<usize> = count_opt(py, "per_axis", per_axis)?;
+    let repeats: usize = count(py, "repeats", repeats)?;
+    let seed: u64 = count(py, "seed", seed)?;
     let tool = tool_text(tool_offset_mm);
     let (planned, noise) = detached(py, || {
         use volver::core::noise::TrackerNoise;

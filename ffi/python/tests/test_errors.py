@@ -94,3 +94,71 @@ def test_compensate_needs_commands_or_a_point_file(fit):
     results, _ = fit
     with pytest.raises(volver.RequestError, match="one of them"):
         volver.compensate_points(results)
+
+
+def test_commands_may_be_integers_or_lists(fit):
+    import numpy as np
+
+    results, _ = fit
+    floats = volver.predict(results, commands=np.array([[700.0, 90.0, 300.0], [0.0, 0.0, 0.0]]))
+    for given in (
+        np.array([[700, 90, 300], [0, 0, 0]]),
+        np.array([[700, 90, 300], [0, 0, 0]], dtype=np.float32),
+        [[700, 90, 300], [0, 0, 0]],
+    ):
+        again = volver.predict(results, commands=given)
+        assert np.array_equal(again["tool_points_mm"], floats["tool_points_mm"])
+
+
+def test_commands_that_are_no_positions_are_refused(fit):
+    import numpy as np
+
+    results, _ = fit
+    with pytest.raises(volver.RequestError, match=r"commands\[1, 2\] is not a finite number"):
+        volver.predict(results, commands=np.array([[0.0, 0.0, 0.0], [1.0, 2.0, np.nan]]))
+    with pytest.raises(volver.RequestError, match="no rows"):
+        volver.predict(results, commands=np.zeros((0, 3)))
+
+
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda data: volver.diagnose(data, top=-1), "top"),
+        (lambda data: volver.identify(data, subloops=-1), "subloops"),
+        (lambda data: volver.identify(data, max_iterations=-3), "max_iterations"),
+        (lambda data: volver.uncertainty(data, monte_carlo=-5), "monte_carlo"),
+        (lambda data: volver.uncertainty(data, seed=-1), "seed"),
+        (lambda data: volver.plan(points=-10), "points"),
+        (lambda data: volver.plan(repeats=-1), "repeats"),
+    ],
+)
+def test_a_negative_count_is_a_request_error_naming_its_argument(demo, call, name):
+    folder, _ = demo
+    with pytest.raises(volver.RequestError) as caught:
+        call(folder / "measurements.csv")
+    assert caught.value.field == name
+    assert f"{name} = -" in str(caught.value) and "≥ 0" in str(caught.value)
+
+
+def test_a_bad_tolerance_is_refused_before_any_work(fit):
+    results, _ = fit
+    for keyword in ("tolerance_mm", "tolerance_rad", "reversal_tolerance_um"):
+        with pytest.raises(volver.RequestError) as caught:
+            volver.compensate_points(results, [[0, 0, 0]], **{keyword: -1.0})
+        assert caught.value.field == keyword
+
+
+def test_one_name_may_stand_for_a_list_of_one(demo, fit):
+    folder, _ = demo
+    _, listed = fit
+    single = volver.identify(folder / "measurements.csv", add="raise-axis:C")
+    assert single["emm_final_um"] == listed["emm_final_um"]
+
+
+def test_messages_point_to_python_not_to_the_cli():
+    with pytest.raises(volver.RequestError) as caught:
+        volver.describe("xcfzz")
+    assert "volver.presets()" in str(caught.value) and "--" not in str(caught.value)
+    with pytest.raises(volver.VolverError) as caught:
+        volver.plan(points=0)
+    assert "(points)" in str(caught.value) and "--" not in str(caught.value)
