@@ -98,6 +98,16 @@ struct CompensateRequest {
     reversal_tolerance_um: f64,
 }
 
+/// The decimals of written commands: 0 … [`volver::core::gcode::MAX_DECIMALS`].
+fn checked_decimals(py: Python<'_>, decimals: i64) -> PyResult<usize> {
+    let decimals: usize = count(py, "decimals", decimals)?;
+    let most = volver::core::gcode::MAX_DECIMALS;
+    if decimals > most {
+        return Err(request(py, format!("decimals {decimals}: 0 … {most}")));
+    }
+    Ok(decimals)
+}
+
 /// A `RequestError` naming `name` unless `value` is finite and above zero (or zero, when
 /// `zero` is allowed).
 fn positive(py: Python<'_>, name: &'static str, value: f64, zero: bool) -> PyResult<()> {
@@ -220,14 +230,10 @@ fn compensate_points<'py>(
     tolerance_rad: f64,
     reversal_tolerance_um: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let decimals: usize = count(py, "decimals", decimals)?;
+    let decimals = checked_decimals(py, decimals)?;
     positive(py, "tolerance_mm", tolerance_mm, false)?;
     positive(py, "tolerance_rad", tolerance_rad, false)?;
     positive(py, "reversal_tolerance_um", reversal_tolerance_um, true)?;
-    if decimals > volver::core::gcode::MAX_DECIMALS {
-        let most = volver::core::gcode::MAX_DECIMALS;
-        return Err(request(py, format!("decimals {decimals}: 0 … {most}")));
-    }
     let r = CompensateRequest {
         results,
         tool: tool_text(tool_offset_mm),
