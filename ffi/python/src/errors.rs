@@ -217,7 +217,12 @@ pub fn to_py(py: Python<'_>, e: Error) -> PyErr {
     let err = PyErr::from_type(class, pythonic(&message.join(": ")));
     let value = err.value(py);
     let set = || -> PyResult<()> {
-        value.setattr("file", at.file.as_deref().map(pythonic))?;
+        // A file named after an option (a spec string's, `--noise`) reads as the argument; a
+        // path stays as it is.
+        let file = at
+            .file
+            .map(|f| if f.starts_with("--") { pythonic(&f) } else { f });
+        value.setattr("file", file)?;
         value.setattr("line", at.line)?;
         value.setattr("field", at.field.as_deref().map(pythonic))?;
         value.setattr("kind", kind)?;
@@ -287,9 +292,11 @@ const PHRASES: [(&str, &str); 2] = [
     ),
 ];
 
-/// `text` with each phrase of [`PHRASES`] and each CLI option of [`ARGUMENTS`] spelt as its Python argument (`--max-iterations`
-/// → `max_iterations`, `--accept` → `accept=True`); other text, options without a Python
-/// argument among them, unchanged.
+/// `text` with each phrase of [`PHRASES`] and each CLI option of [`ARGUMENTS`] spelt as its
+/// Python argument (`--max-iterations` → `max_iterations`, `--accept` → `accept=True`); other
+/// text, options without a Python argument among them, unchanged. An option is a `--` at the
+/// start or after a space, bracket, quote or comma: a `--` inside a path (`runs/a--data.csv`)
+/// is left alone.
 pub fn pythonic(text: &str) -> String {
     let mut text = text.to_string();
     for (cli, python) in PHRASES {
@@ -300,6 +307,12 @@ pub fn pythonic(text: &str) -> String {
     while let Some(at) = rest.find("--") {
         out.push_str(&rest[..at]);
         let tail = &rest[at..];
+        let before = out.chars().last();
+        if before.is_some_and(|c| !(c.is_whitespace() || "([`'\",".contains(c))) {
+            out.push_str("--");
+            rest = &tail[2..];
+            continue;
+        }
         let len = 2 + tail[2..]
             .find(|c: char| !(c.is_ascii_lowercase() || c.is_ascii_digit() || c == '-'))
             .unwrap_or(tail.len() - 2);

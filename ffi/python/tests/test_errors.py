@@ -162,3 +162,11 @@ def test_messages_point_to_python_not_to_the_cli():
     with pytest.raises(volver.VolverError) as caught:
         volver.plan(points=0)
     assert "(points)" in str(caught.value) and "--" not in str(caught.value)
+
+
+def test_a_path_with_two_hyphens_is_kept(tmp_path):
+    missing = tmp_path / "run--data" / "a--model.csv"
+    with pytest.raises(volver.FileError) as caught:
+        volver.identify(missing)
+    assert caught.value.file == str(missing)
+    assert str(missing) in str(caught.value)
