@@ -83,10 +83,7 @@ pub fn count<T: TryFrom<i64>>(py: Python<'_>, name: &'static str, value: i64) ->
         } else {
             format!("{name} = {value}: too large")
         };
-        super::errors::to_py(
-            py,
-            volver::Error::Core(volver::core::Error::InvalidOption { name, message }),
-        )
+        super::errors::invalid(py, name, message)
     })
 }
 

@@ -335,6 +335,11 @@ pub fn detached<T: Send>(
     py.detach(f).map_err(|e| to_py(py, e))
 }
 
+/// A `RequestError` on the argument `name` (its `field`), raised from the bindings themselves.
+pub fn invalid(py: Python<'_>, name: &'static str, message: String) -> PyErr {
+    to_py(py, Error::Core(CoreError::InvalidOption { name, message }))
+}
+
 /// A request error raised from the bindings themselves (an argument of the wrong shape).
 pub fn request(py: Python<'_>, message: String) -> PyErr {
     to_py(py, Error::Request(message))

@@ -116,10 +116,7 @@ fn positive(py: Python<'_>, name: &'static str, value: f64, zero: bool) -> PyRes
     }
     let bound = if zero { "≥ 0" } else { "> 0" };
     let message = format!("{name} = {value}: expected a finite number {bound}");
-    Err(crate::errors::to_py(
-        py,
-        volver::Error::Core(volver::core::Error::InvalidOption { name, message }),
-    ))
+    Err(crate::errors::invalid(py, name, message))
 }
 
 /// The U gate as `volver compensate` applies it: the notes, a refusal unless `force`.
